@@ -1,0 +1,198 @@
+"""Load a :class:`RobotModel` from YAML, with units stated in the file.
+
+Example (``config/paper_arm.yaml``)::
+
+    name: paper_arm
+    convention: modified_dh        # or standard_dh (converted exactly)
+    units: {length: mm, angle: deg}
+    hayati_beta_joints: [3, 4]     # rows whose axis is parallel to the previous one
+    joints:
+      - {name: joint1, alpha: 0, a: 0, d: 99.927, theta: 0, limits: [-180, 180]}
+      ...
+    tool_point: [0, 0, 0]          # in the flange frame
+    base:                          # measurement frame <- robot base
+      known: true
+      xyz: [0, 0, 0]
+      rpy: [0, 0, 0]
+
+For ``standard_dh`` each joint gives its own ``alpha_i, a_i, d_i, theta_i``; the model is
+converted exactly: modified row ``i`` takes ``alpha_{i-1}, a_{i-1}`` of standard row ``i-1``
+and the last row's ``alpha_n, a_n`` move into the tool point (they commute, both about x).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError
+
+__all__ = ["LENGTH_UNITS", "ANGLE_UNITS", "load_robot_model", "robot_model_from_dict"]
+
+LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6}
+ANGLE_UNITS: dict[str, float] = {"rad": 1.0, "deg": float(np.pi / 180.0)}
+_JOINT_KEYS = {"name", "alpha", "a", "d", "theta", "limits"}
+
+
+def _unit(units: dict[str, Any], key: str, table: dict[str, float], where: str) -> float:
+    if key not in units:
+        msg = f"{where}: 'units' must state '{key}' (one of {', '.join(table)})"
+        raise ConfigError(msg)
+    name = str(units[key])
+    if name not in table:
+        msg = f"{where}: unknown {key} unit {name!r} (known: {', '.join(table)})"
+        raise ConfigError(msg)
+    return table[name]
+
+
+def _number(value: object, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        msg = f"{what} must be a number, got {value!r}"
+        raise ConfigError(msg)
+    if not np.isfinite(value):
+        msg = f"{what} must be finite, got {value!r}"
+        raise ConfigError(msg)
+    return float(value)
+
+
+def _vector3(value: object, what: str) -> list[float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        msg = f"{what} must be a list of 3 numbers, got {value!r}"
+        raise ConfigError(msg)
+    return [_number(v, f"{what}[{i}]") for i, v in enumerate(value)]
+
+
+def _rot_x(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def robot_model_from_dict(data: object, *, where: str = "robot config") -> RobotModel:
+    """Build a :class:`RobotModel` from the parsed YAML mapping (see module docstring).
+
+    Raises
+    ------
+    ConfigError
+        Missing fields, unknown units or conventions, malformed numbers.
+    """
+    if not isinstance(data, dict):
+        msg = f"{where}: expected a mapping at top level, got {type(data).__name__}"
+        raise ConfigError(msg)
+    for key in ("name", "convention", "units", "joints"):
+        if key not in data:
+            msg = f"{where}: missing required field '{key}'"
+            raise ConfigError(msg)
+    units = data["units"]
+    if not isinstance(units, dict):
+        msg = f"{where}: 'units' must be a mapping like {{length: mm, angle: deg}}"
+        raise ConfigError(msg)
+    to_m = _unit(units, "length", LENGTH_UNITS, where)
+    to_rad = _unit(units, "angle", ANGLE_UNITS, where)
+    convention = data["convention"]
+    if convention not in ("modified_dh", "standard_dh"):
+        msg = f"{where}: convention must be 'modified_dh' or 'standard_dh', got {convention!r}"
+        raise ConfigError(msg)
+    joints = data["joints"]
+    if not isinstance(joints, list) or not joints:
+        msg = f"{where}: 'joints' must be a non-empty list"
+        raise ConfigError(msg)
+    names: list[str] = []
+    rows: dict[str, list[float]] = {"alpha": [], "a": [], "d": [], "theta": []}
+    limits: list[list[float]] = []
+    for i, joint in enumerate(joints, start=1):
+        if not isinstance(joint, dict):
+            msg = f"{where}: joint {i} must be a mapping"
+            raise ConfigError(msg)
+        unknown = set(joint) - _JOINT_KEYS
+        if unknown:
+            msg = f"{where}: joint {i} has unknown fields {sorted(unknown)}"
+            raise ConfigError(msg)
+        for key in ("name", "alpha", "a", "d"):
+            if key not in joint:
+                msg = f"{where}: joint {i} is missing '{key}'"
+                raise ConfigError(msg)
+        names.append(str(joint["name"]))
+        rows["alpha"].append(_number(joint["alpha"], f"joint {i} alpha") * to_rad)
+        rows["a"].append(_number(joint["a"], f"joint {i} a") * to_m)
+        rows["d"].append(_number(joint["d"], f"joint {i} d") * to_m)
+        rows["theta"].append(_number(joint.get("theta", 0.0), f"joint {i} theta") * to_rad)
+        lim = joint.get("limits", [-360.0 * ANGLE_UNITS["deg"] / to_rad, 360.0 * ANGLE_UNITS["deg"] / to_rad])
+        if not isinstance(lim, (list, tuple)) or len(lim) != 2:
+            msg = f"{where}: joint {i} limits must be [lower, upper]"
+            raise ConfigError(msg)
+        limits.append([_number(lim[0], f"joint {i} limits") * to_rad, _number(lim[1], f"joint {i} limits") * to_rad])
+    if len(set(names)) != len(names):
+        msg = f"{where}: joint names must be unique, got {names}"
+        raise ConfigError(msg)
+    n = len(names)
+    tool = np.array(_vector3(data.get("tool_point", [0.0, 0.0, 0.0]), f"{where}: tool_point")) * to_m
+    alpha = np.array(rows["alpha"])
+    a = np.array(rows["a"])
+    if convention == "standard_dh":
+        # Row i of modified DH carries alpha_{i-1}, a_{i-1} of standard DH; the last
+        # standard row's twist and length become a fixed flange offset folded into the tool.
+        tool = _rot_x(alpha[-1]) @ tool + np.array([a[-1], 0.0, 0.0])
+        alpha = np.concatenate(([0.0], alpha[:-1]))
+        a = np.concatenate(([0.0], a[:-1]))
+    beta_joints = data.get("hayati_beta_joints", [])
+    if not isinstance(beta_joints, list) or any(
+        isinstance(j, bool) or not isinstance(j, int) or not 1 <= j <= n for j in beta_joints
+    ):
+        msg = f"{where}: hayati_beta_joints must list joint numbers 1..{n}, got {beta_joints!r}"
+        raise ConfigError(msg)
+    base = data.get("base", {})
+    if not isinstance(base, dict):
+        msg = f"{where}: 'base' must be a mapping with known, xyz, rpy"
+        raise ConfigError(msg)
+    unknown_base = set(base) - {"known", "xyz", "rpy", "frame_id", "measurement_frame_id"}
+    if unknown_base:
+        msg = f"{where}: base has unknown fields {sorted(unknown_base)}"
+        raise ConfigError(msg)
+    return RobotModel(
+        name=str(data["name"]),
+        joint_names=tuple(names),
+        alpha=alpha,
+        a=a,
+        theta=np.array(rows["theta"]),
+        d=np.array(rows["d"]),
+        beta=np.zeros(n),
+        has_beta=tuple((j + 1) in beta_joints for j in range(n)),
+        joint_limits=np.array(limits),
+        tool_point=tool,
+        base_xyz=np.array(_vector3(base.get("xyz", [0.0, 0.0, 0.0]), f"{where}: base.xyz")) * to_m,
+        base_rpy=np.array(_vector3(base.get("rpy", [0.0, 0.0, 0.0]), f"{where}: base.rpy")) * to_rad,
+        base_known=bool(base.get("known", True)),
+        base_frame_id=str(base.get("frame_id", "base_link")),
+        measurement_frame_id=str(base.get("measurement_frame_id", "laser_tracker")),
+    )
+
+
+def load_robot_model(path: str | Path) -> RobotModel:
+    """Read a robot model YAML file (``yaml.safe_load``) and build the model.
+
+    Parameters
+    ----------
+    path : str or Path
+        YAML file with explicit units.
+
+    Raises
+    ------
+    ConfigError
+        File missing or unreadable, invalid YAML, or invalid content (names the problem).
+    """
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except OSError as err:
+        msg = f"cannot read robot config {file}: {err.strerror}"
+        raise ConfigError(msg) from err
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        msg = f"robot config {file} is not valid YAML: {str(err).splitlines()[0]}"
+        raise ConfigError(msg) from err
+    return robot_model_from_dict(data, where=str(file))
