@@ -28,6 +28,7 @@ __all__ = [
     "ParameterKind",
     "ParameterLayout",
     "RobotModel",
+    "rpy_from_matrix",
     "rpy_to_matrix",
 ]
 
@@ -267,3 +268,12 @@ class RobotModel:
         out[:3, :3] = rpy_to_matrix(self.base_rpy)
         out[:3, 3] = self.base_xyz
         return out
+
+
+def rpy_from_matrix(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Roll, pitch, yaw [rad] of a rotation matrix ``Rz(yaw) Ry(pitch) Rx(roll)``, shape (3,)."""
+    r = np.asarray(rotation, dtype=np.float64)
+    pitch = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
+    roll = float(np.arctan2(r[2, 1], r[2, 2]))
+    yaw = float(np.arctan2(r[1, 0], r[0, 0]))
+    return np.array([roll, pitch, yaw])

@@ -1,0 +1,356 @@
+"""Identification of kinematic parameter errors by regularised Gauss-Newton.
+
+Each iteration linearises the measured points around the current estimate and takes the
+seed's Tikhonov step ``E = (U^T U + Gamma^T Gamma)^-1 U^T dS`` with ``Gamma = lambda I`` on a
+column-scaled Jacobian (metres and radians do not mix unscaled). The penalty acts on the
+whole deviation from the nominal model, so the iteration converges to the minimiser of
+``||S - F(p)||^2 + lambda^2 ||D (p - p_nominal)||^2`` rather than drifting.
+Lambda is chosen at the L-curve corner (default), by GCV, or fixed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.observability import structural_observability
+from robocal_uncertainty.core.regularization import LCurve, lcurve
+from robocal_uncertainty.core.robot_model import RobotModel, rpy_from_matrix
+from robocal_uncertainty.errors import ConfigError, IdentifiabilityError, InputError
+
+__all__ = [
+    "IDENTIFICATION_MESSAGES",
+    "IdentificationResult",
+    "LambdaMethod",
+    "fit_rigid_base",
+    "identify",
+    "residual_stats",
+]
+
+Array = NDArray[np.float64]
+LambdaMethod = Literal["lcurve", "gcv", "fixed"]
+
+IDENTIFICATION_MESSAGES: dict[int, str] = {
+    0: "converged: parameter step below tolerance",
+    1: "stopped: maximum number of iterations reached before the step fell below tolerance",
+}
+_DEGENERATE_RCOND = 1e-10
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Outcome of :func:`identify`. Arrays over parameters follow ``parameter_names``.
+
+    Attributes
+    ----------
+    model : RobotModel
+        The calibrated model (nominal model with the estimate applied).
+    parameter_names : tuple of str, length n_params
+    nominal : ndarray, shape (n_params,) [m, rad]
+        Starting values (the base may come from a rigid fit, see ``base_initialised``).
+    estimate : ndarray, shape (n_params,) [m, rad]
+        Identified values; parameters not estimated keep their nominal value.
+    estimated : ndarray of bool, shape (n_params,)
+        Parameters that were estimated (identifiable candidates).
+    identifiable : ndarray of bool, shape (n_params,)
+        Candidates that position data can identify; same as ``estimated``.
+    candidates : ndarray of bool, shape (n_params,)
+        Parameters that were asked for (the base only when points are in a tracker frame).
+    dependencies : tuple of str
+        Why each candidate is not identifiable (the combination it duplicates).
+    linearized_std : ndarray, shape (n_params,) [m, rad]
+        First-order standard uncertainty of each estimate from the residual scatter
+        (NaN where not estimated); the Monte Carlo gives the full statement.
+    lambda_ : float
+        Regularisation parameter, in units of the column-scaled problem.
+    lambda_method : {"lcurve", "gcv", "fixed"}
+    lcurve : LCurve
+        L-curve and GCV of the final linearisation.
+    column_scale : ndarray, shape (n_params,) [m/m, m/rad]
+        Column norms used to scale the Jacobian (0 where not estimated).
+    singular_values : ndarray, shape (n_estimated,) [m]
+        Of the scaled Jacobian at the solution.
+    condition_number : float
+    residuals : ndarray, shape (n_poses, 3) [m]
+        Measured minus predicted points after calibration.
+    rms_before, max_before, rms_after, max_after : float [m]
+        RMS and maximum of the 3-D point error before (nominal model) and after.
+    iterations : int
+    converged : bool
+    status : int
+        Key of :data:`IDENTIFICATION_MESSAGES`.
+    message : str
+    warnings : tuple of str
+    """
+
+    model: RobotModel
+    parameter_names: tuple[str, ...]
+    nominal: Array
+    estimate: Array
+    estimated: NDArray[np.bool_]
+    identifiable: NDArray[np.bool_]
+    candidates: NDArray[np.bool_]
+    dependencies: tuple[str, ...]
+    linearized_std: Array
+    lambda_: float
+    lambda_method: LambdaMethod
+    lcurve: LCurve
+    column_scale: Array
+    singular_values: Array
+    condition_number: float
+    residuals: Array
+    rms_before: float
+    max_before: float
+    rms_after: float
+    max_after: float
+    iterations: int
+    converged: bool
+    status: int
+    message: str
+    base_initialised: Literal["nominal", "rigid_fit", "identity"]
+    n_poses: int
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def success(self) -> bool:
+        """True when the iteration converged."""
+        return self.status == 0
+
+
+def residual_stats(residuals: Array) -> tuple[float, float]:
+    """RMS and maximum of the 3-D point errors.
+
+    Parameters
+    ----------
+    residuals : ndarray, shape (n_poses, 3) [m]
+
+    Returns
+    -------
+    (rms, max) : tuple of float [m]
+    """
+    norms = np.linalg.norm(residuals, axis=-1)
+    return float(np.sqrt(np.mean(norms**2))), float(norms.max())
+
+
+def fit_rigid_base(base_points: Array, measured: Array) -> tuple[Array, Array]:
+    """Best rigid transform ``measured ~ R @ base_points + t`` (Kabsch/Umeyama, no scale).
+
+    Parameters
+    ----------
+    base_points : ndarray, shape (n, 3) [m]
+        Points predicted in the robot base frame.
+    measured : ndarray, shape (n, 3) [m]
+        The same points measured in the tracker frame.
+
+    Returns
+    -------
+    xyz : ndarray, shape (3,) [m]
+    rpy : ndarray, shape (3,) [rad]
+    """
+    cb = base_points.mean(axis=0)
+    cm = measured.mean(axis=0)
+    h = (base_points - cb).T @ (measured - cm)
+    u, _, vt = np.linalg.svd(h)
+    sign = np.sign(np.linalg.det(vt.T @ u.T))
+    rot = vt.T @ np.diag([1.0, 1.0, sign]) @ u.T
+    return cm - rot @ cb, rpy_from_matrix(rot)
+
+
+def _validate(model: RobotModel, campaign: Campaign, lambda_: object) -> tuple[Campaign, LambdaMethod, float]:
+    if not isinstance(campaign, Campaign):
+        msg = f"campaign must be a Campaign, got {type(campaign).__name__}"
+        raise InputError(msg)
+    campaign = campaign.reorder_joints(model.joint_names)
+    if isinstance(lambda_, str):
+        key = lambda_.lower()
+        if key in ("auto", "lcurve", "l-curve"):
+            return campaign, "lcurve", float("nan")
+        if key == "gcv":
+            return campaign, "gcv", float("nan")
+        try:
+            lambda_ = float(key)
+        except ValueError as err:
+            msg = f"lambda must be 'auto', 'gcv' or a non-negative number, got {lambda_!r}"
+            raise ConfigError(msg) from err
+    if isinstance(lambda_, bool) or not isinstance(lambda_, (int, float)):
+        msg = f"lambda must be 'auto', 'gcv' or a non-negative number, got {lambda_!r}"
+        raise ConfigError(msg)
+    value = float(lambda_)
+    if not np.isfinite(value) or value < 0:
+        msg = f"lambda must be a finite non-negative number, got {value}"
+        raise ConfigError(msg)
+    return campaign, "fixed", value
+
+
+def identify(
+    model: RobotModel,
+    campaign: Campaign,
+    *,
+    lambda_: str | float = "auto",
+    max_iterations: int = 30,
+    step_tolerance: float = 1e-12,
+) -> IdentificationResult:
+    """Identify the parameter errors of `model` from `campaign`.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+        Joint readings [rad] and measured points [m]. When ``campaign.frame == "base"``
+        the base transform is the identity and not estimated; when ``"tracker"`` the
+        six base parameters are estimated too (started from the model's base when known,
+        else from a rigid fit of the nominal predictions).
+    lambda_ : {"auto", "gcv"} or float
+        ``"auto"``: L-curve corner; ``"gcv"``: generalised cross-validation; a number:
+        fixed lambda in the column-scaled units (dimensionless per unit column norm).
+    max_iterations : int
+        Gauss-Newton iteration cap.
+    step_tolerance : float
+        Stop when the scaled step norm falls below this, relative to ``1 + ||x||``.
+
+    Returns
+    -------
+    IdentificationResult
+
+    Raises
+    ------
+    InputError
+        Joint names do not match the model.
+    IdentifiabilityError
+        Fewer equations than identifiable parameters, or a degenerate pose set.
+    ConfigError
+        Invalid lambda.
+    """
+    campaign, method, fixed_lambda = _validate(model, campaign, lambda_)
+    layout = model.layout
+    q = campaign.joint_positions
+    measured = campaign.points
+    p0 = model.parameter_vector()
+    b0 = layout.base_index
+    base_init: Literal["nominal", "rigid_fit", "identity"]
+    candidates = np.ones(layout.size, dtype=bool)
+    if campaign.frame == "base":
+        p0[b0 : b0 + 6] = 0.0
+        candidates[b0 : b0 + 6] = False
+        base_init = "identity"
+    elif model.base_known:
+        base_init = "nominal"
+    else:
+        p_local = p0.copy()
+        p_local[b0 : b0 + 6] = 0.0
+        xyz, rpy = fit_rigid_base(forward_points(layout, p_local, q), measured)
+        p0[b0 : b0 + 3] = xyz
+        p0[b0 + 3 : b0 + 6] = rpy
+        base_init = "rigid_fit"
+
+    obs = structural_observability(model, p0, candidates)
+    est = np.flatnonzero(obs.identifiable)
+    n_eq = 3 * campaign.n_poses
+    if n_eq < est.size:
+        msg = (
+            f"too few poses: {campaign.n_poses} poses give {n_eq} equations for "
+            f"{est.size} identifiable parameters (need at least {int(np.ceil(est.size / 3))} poses)"
+        )
+        raise IdentifiabilityError(msg)
+
+    pred0, jac0 = forward_points_and_jacobian(layout, p0, q)
+    jac0 = jac0.reshape(n_eq, layout.size)[:, est]
+    scale = np.linalg.norm(jac0, axis=0)
+    _, s0, vt0 = np.linalg.svd(jac0 / scale, full_matrices=False)
+    if s0[-1] <= _DEGENERATE_RCOND * s0[0]:
+        weak = layout.names[est[int(np.argmax(np.abs(vt0[-1])))]]
+        msg = (
+            f"degenerate pose set: the {campaign.n_poses} poses identify only "
+            f"{int(np.sum(s0 > _DEGENERATE_RCOND * s0[0]))} of {est.size} identifiable parameters "
+            f"(vary the joints more; weakest direction involves {weak})"
+        )
+        raise IdentifiabilityError(msg)
+    rms_before, max_before = residual_stats(measured - pred0)
+
+    x = np.zeros(est.size)
+    p = p0.copy()
+    status = 1
+    iterations = 0
+    curve: LCurve | None = None
+    lam = fixed_lambda
+    for iterations in range(1, max_iterations + 1):
+        pred, jac = forward_points_and_jacobian(layout, p, q)
+        a_mat = jac.reshape(n_eq, layout.size)[:, est] / scale
+        r = (measured - pred).reshape(n_eq)
+        # Linear model of the total scaled deviation x: r(x') ~ r - A (x' - x).
+        b = r + a_mat @ x
+        u, s, vt = np.linalg.svd(a_mat, full_matrices=False)
+        curve = lcurve(u, s, b)
+        if method == "lcurve":
+            lam = curve.corner_lambda
+        elif method == "gcv":
+            lam = curve.gcv_lambda
+        beta = u.T @ b
+        x_new = vt.T @ (s * beta / (s**2 + lam**2))
+        step = float(np.linalg.norm(x_new - x))
+        x = x_new
+        p = p0.copy()
+        p[est] += x / scale
+        if step <= step_tolerance * (1.0 + float(np.linalg.norm(x))):
+            status = 0
+            break
+    assert curve is not None  # max_iterations >= 1
+
+    pred, jac = forward_points_and_jacobian(layout, p, q)
+    residuals = measured - pred
+    a_mat = jac.reshape(n_eq, layout.size)[:, est] / scale
+    s_final = np.linalg.svd(a_mat, compute_uv=False)
+    rms_after, max_after = residual_stats(residuals)
+    # First-order covariance of the Tikhonov estimate with residual-scatter noise.
+    ata = a_mat.T @ a_mat
+    inv = np.linalg.inv(ata + lam**2 * np.eye(est.size))
+    dof_used = float(np.sum(s_final**2 / (s_final**2 + lam**2)))
+    sigma2 = float(np.sum(residuals**2)) / max(n_eq - dof_used, 1.0)
+    cov_x = sigma2 * inv @ ata @ inv
+    std = np.full(layout.size, np.nan)
+    std[est] = np.sqrt(np.diag(cov_x)) / scale
+    estimated = np.zeros(layout.size, dtype=bool)
+    estimated[est] = True
+    full_scale = np.zeros(layout.size)
+    full_scale[est] = scale
+    warns: list[str] = []
+    cond = float(s_final[0] / s_final[-1])
+    if cond > 1e6:
+        warns.append(f"ill-conditioned pose set: condition number {cond:.3g} of the scaled Jacobian")
+    if status != 0:
+        warns.append(IDENTIFICATION_MESSAGES[status])
+    return IdentificationResult(
+        model=model.with_parameters(p),
+        parameter_names=layout.names,
+        nominal=p0,
+        estimate=p,
+        estimated=estimated,
+        identifiable=estimated.copy(),
+        candidates=candidates,
+        dependencies=obs.dependencies,
+        linearized_std=std,
+        lambda_=float(lam),
+        lambda_method=method,
+        lcurve=curve,
+        column_scale=full_scale,
+        singular_values=s_final,
+        condition_number=cond,
+        residuals=residuals,
+        rms_before=rms_before,
+        max_before=max_before,
+        rms_after=rms_after,
+        max_after=max_after,
+        iterations=iterations,
+        converged=status == 0,
+        status=status,
+        message=IDENTIFICATION_MESSAGES[status],
+        base_initialised=base_init,
+        n_poses=campaign.n_poses,
+        warnings=tuple(warns),
+    )
