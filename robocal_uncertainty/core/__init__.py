@@ -1,0 +1,52 @@
+"""ROS-free numerical core: robot model, kinematics, identification, campaigns, simulation.
+
+Imports numpy, scipy and PyYAML only; a test forbids any ROS import here.
+"""
+
+from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.core.identification import (
+    IdentificationResult,
+    fit_rigid_base,
+    identify,
+    residual_stats,
+)
+from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.observability import Observability, structural_observability
+from robocal_uncertainty.core.regularization import LCurve, lcurve
+from robocal_uncertainty.core.robot_config import load_robot_model, robot_model_from_dict
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
+from robocal_uncertainty.core.simulation import (
+    EncoderNoise,
+    ParameterErrorRanges,
+    SimulatedCampaign,
+    SimulationSettings,
+    TrackerNoise,
+    simulate_campaign,
+    simulate_measurements,
+)
+
+__all__ = [
+    "Campaign",
+    "EncoderNoise",
+    "IdentificationResult",
+    "LCurve",
+    "Observability",
+    "ParameterErrorRanges",
+    "ParameterLayout",
+    "PointFrame",
+    "RobotModel",
+    "SimulatedCampaign",
+    "SimulationSettings",
+    "TrackerNoise",
+    "fit_rigid_base",
+    "forward_points",
+    "forward_points_and_jacobian",
+    "identify",
+    "lcurve",
+    "load_robot_model",
+    "residual_stats",
+    "robot_model_from_dict",
+    "simulate_campaign",
+    "simulate_measurements",
+    "structural_observability",
+]

@@ -1,0 +1,5 @@
+"""pip install for users without ROS; colcon builds through CMakeLists.txt instead."""
+
+from setuptools import setup
+
+setup()
