@@ -1,0 +1,35 @@
+"""Monte Carlo uncertainty of a calibration: sources, batched re-identification, GUM check."""
+
+from robocal_uncertainty.uncertainty.calibration_mc import (
+    CalibrationTrials,
+    CalibrationUncertainty,
+    GumPose,
+    PoseUncertainty,
+    evaluate_uncertainty,
+)
+from robocal_uncertainty.uncertainty.reidentification import (
+    BatchProblem,
+    ChordSolver,
+    reidentify_batch,
+)
+from robocal_uncertainty.uncertainty.sources import (
+    SOURCE_DESCRIPTIONS,
+    SOURCES,
+    UncertaintySettings,
+    parse_sources,
+)
+
+__all__ = [
+    "SOURCES",
+    "SOURCE_DESCRIPTIONS",
+    "BatchProblem",
+    "CalibrationTrials",
+    "CalibrationUncertainty",
+    "ChordSolver",
+    "GumPose",
+    "PoseUncertainty",
+    "UncertaintySettings",
+    "evaluate_uncertainty",
+    "parse_sources",
+    "reidentify_batch",
+]
