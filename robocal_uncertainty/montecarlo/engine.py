@@ -1,0 +1,830 @@
+"""Block-based, reproducible Monte Carlo engine (JCGM 101 §7, adaptive §7.9).
+
+Reproducibility contract
+------------------------
+The trial stream is cut into blocks of ``block_size`` trials. Block ``b`` (0-based)
+draws only from ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(b,)))``,
+which is exactly the ``b``-th child of ``np.random.SeedSequence(seed).spawn(...)``, but
+can be built for any ``b`` without spawning its predecessors (so a worker needs only
+``seed`` and ``b``). Blocks are reassembled in block order, so the model values are
+bit-identical whatever ``chunk_blocks`` and ``workers`` are. ``block_size`` *does*
+change the stream, hence it is recorded in every result.
+
+A trial block is either a plain callable ``trial_block(rng, n) -> (n, n_out)`` (called
+once per block), or a :class:`StagedTrialBlock` with ``draw(rng, n)`` and
+``evaluate(inputs)``: then each block draws its own inputs and the inputs of
+``chunk_blocks`` consecutive blocks are evaluated in one vectorised call. The staged
+form is bit-identical across ``chunk_blocks`` as long as ``evaluate`` computes each
+row from that row alone, which JCGM 101 models (one model value per trial) do.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import warnings
+from collections import deque
+from collections.abc import Callable, Generator, Mapping, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.montecarlo.distributions import Distribution
+from robocal_uncertainty.montecarlo.summary import (
+    MonteCarloIntervalKind,
+    OutputSummary,
+    Summary,
+    check_coverage,
+    coverage_bounds,
+    minimum_trials,
+    numerical_tolerance,
+    summarize,
+)
+
+__all__ = [
+    "AdaptiveReport",
+    "AdaptiveSettings",
+    "DistributionTrials",
+    "ModelOutputError",
+    "MonteCarloResult",
+    "NonFinitePolicy",
+    "ProgressCallback",
+    "StagedTrialBlock",
+    "TrialBlock",
+    "TrialsResult",
+    "block_rng",
+    "monte_carlo",
+    "resolve_inputs",
+    "run_trials",
+]
+
+TrialBlock = Callable[[np.random.Generator, int], ArrayLike]
+"""``trial_block(rng, n) -> array (n, n_out) or (n,)``: n trials, all randomness from rng."""
+
+ProgressCallback = Callable[[int, int | None], None]
+"""``progress(trials_done, trials_target)``; target is None for adaptive runs."""
+
+NonFinitePolicy = Literal["raise", "drop"]
+"""``raise``: a NaN/inf model value is a :class:`ModelOutputError`. ``drop``: trials
+with any non-finite output are discarded, counted in ``n_dropped`` and warned about
+(JCGM 101 forbids silently averaging them, not excluding them openly)."""
+
+DEFAULT_BLOCK_SIZE = 10_000
+_JCGM_MIN_SEQUENCE = 10_000
+
+
+class ModelOutputError(ConfigError):
+    """The model or trial block returned the wrong shape or non-finite values."""
+
+
+@runtime_checkable
+class StagedTrialBlock(Protocol):
+    """A trial block split into per-block sampling and chunk-wide evaluation."""
+
+    def draw(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+        """Draw the inputs of n trials: array whose axis 0 has length n."""
+        ...
+
+    def evaluate(self, inputs: NDArray[np.float64]) -> ArrayLike:
+        """Model values of the given trials: shape (n,) or (n, n_out)."""
+        ...
+
+
+def block_rng(seed: int, block: int) -> np.random.Generator:
+    """Generator of block ``block``: ``default_rng(SeedSequence(seed, spawn_key=(block,)))``."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(block,)))
+
+
+def _check_int(name: str, value: object, minimum: int) -> int:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, np.integer))
+        or value < minimum
+    ):
+        msg = f"{name} must be an integer >= {minimum}, got {value!r}"
+        raise ConfigError(msg)
+    return int(value)
+
+
+@dataclass(frozen=True)
+class AdaptiveSettings:
+    """Settings of the JCGM 101 §7.9 adaptive Monte Carlo procedure.
+
+    Attributes
+    ----------
+    n_dig : int
+        Significant decimal digits of u(y) regarded as meaningful (§7.9.2).
+    tolerance : float, tuple of float, or None
+        Absolute numerical tolerance δ in output units (one value for all outputs or
+        one per output); overrides ``n_dig`` when given.
+    coverage : float
+        Coverage probability p of the monitored interval endpoints.
+    interval : {"probabilistically_symmetric", "shortest"}
+        Which interval's endpoints are monitored.
+    max_trials : int
+        Cap on the trials run; hitting it gives ``converged=False``.
+    sequence_trials : int or None
+        M, trials per sequence; None means max(J, 10^4) with J = ceil(100/(1-p)).
+        Rounded up to whole blocks.
+    """
+
+    n_dig: int = 2
+    tolerance: float | tuple[float, ...] | None = None
+    coverage: float = 0.95
+    interval: MonteCarloIntervalKind = "probabilistically_symmetric"
+    max_trials: int = 10_000_000
+    sequence_trials: int | None = None
+
+    def __post_init__(self) -> None:
+        _check_int("adaptive.n_dig", self.n_dig, 1)
+        check_coverage(self.coverage, "adaptive.coverage")
+        if self.interval not in ("probabilistically_symmetric", "shortest"):
+            msg = (
+                "adaptive.interval must be 'probabilistically_symmetric' or 'shortest', "
+                f"got {self.interval!r}"
+            )
+            raise ConfigError(msg)
+        _check_int("adaptive.max_trials", self.max_trials, 1)
+        if self.sequence_trials is not None:
+            _check_int(
+                "adaptive.sequence_trials", self.sequence_trials, self.min_sequence
+            )
+        if self.tolerance is not None:
+            values = np.atleast_1d(np.asarray(self.tolerance, dtype=np.float64))
+            if values.ndim != 1 or not (
+                np.isfinite(values).all() and (values > 0).all()
+            ):
+                msg = f"adaptive.tolerance must be positive and finite, got {self.tolerance!r}"
+                raise ConfigError(msg)
+
+    @property
+    def min_sequence(self) -> int:
+        """J = ceil(100/(1-p)), the least M for which the interval is meaningful."""
+        return minimum_trials(self.coverage)
+
+    @property
+    def target_sequence(self) -> int:
+        """Requested M before rounding to whole blocks."""
+        if self.sequence_trials is not None:
+            return int(self.sequence_trials)
+        return max(self.min_sequence, _JCGM_MIN_SEQUENCE)
+
+
+@dataclass(frozen=True)
+class AdaptiveReport:
+    """Outcome of an adaptive run.
+
+    Attributes
+    ----------
+    converged : bool
+        Whether 2s <= δ held for every monitored quantity of every output.
+    n_dig : int or None
+        Digits used for δ; None when an absolute tolerance was given.
+    delta : tuple of float, length n_out
+        Numerical tolerance δ used per output, in output units.
+    tolerance_reached : tuple of float, length n_out
+        Largest of 2s(y), 2s(u), 2s(y_low), 2s(y_high) per output, in output units.
+    n_sequences : int
+        h, number of sequences run.
+    sequence_trials : int
+        Trials per sequence (M rounded up to whole blocks).
+    coverage_probability : float
+        p of the monitored interval.
+    interval : {"probabilistically_symmetric", "shortest"}
+        Which interval's endpoints were monitored.
+    max_trials : int
+        The cap in force.
+    """
+
+    converged: bool
+    n_dig: int | None
+    delta: tuple[float, ...]
+    tolerance_reached: tuple[float, ...]
+    n_sequences: int
+    sequence_trials: int
+    coverage_probability: float
+    interval: MonteCarloIntervalKind
+    max_trials: int
+
+
+@dataclass(frozen=True, eq=False)
+class TrialsResult:
+    """Model values of a :func:`run_trials` call and how they were produced.
+
+    Attributes
+    ----------
+    samples : ndarray, shape (n_trials - n_dropped, n_out)
+        Model values in block order (read-only), in the outputs' units.
+    n_trials : int
+        Trials evaluated.
+    seed : int
+        Root seed of the block generators.
+    block_size : int
+        Trials per block (the last block of a fixed-size run may be shorter).
+    n_blocks : int
+        Blocks evaluated.
+    n_dropped : int
+        Trials discarded for non-finite outputs (``nonfinite="drop"``), else 0.
+    adaptive : AdaptiveReport or None
+        Adaptive-procedure outcome; None for a fixed number of trials.
+    """
+
+    samples: NDArray[np.float64]
+    n_trials: int
+    seed: int
+    block_size: int
+    n_blocks: int
+    n_dropped: int
+    adaptive: AdaptiveReport | None
+
+    @property
+    def n_outputs(self) -> int:
+        """Number of output components."""
+        return int(self.samples.shape[1])
+
+    @property
+    def converged(self) -> bool:
+        """True for fixed runs; the adaptive verdict otherwise."""
+        return True if self.adaptive is None else self.adaptive.converged
+
+    def summary(
+        self,
+        coverage: float | None = None,
+        *,
+        bins: int | str = 100,
+        expanded_from: MonteCarloIntervalKind = "probabilistically_symmetric",
+    ) -> Summary:
+        """:func:`summarize` the samples; coverage defaults to the adaptive one, else 0.95."""
+        if coverage is None:
+            coverage = (
+                0.95 if self.adaptive is None else self.adaptive.coverage_probability
+            )
+        return summarize(self.samples, coverage, bins=bins, expanded_from=expanded_from)
+
+
+def _as_outputs(label: str, values: ArrayLike, n: int) -> NDArray[np.float64]:
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim == 1 and array.shape[0] == n:
+        return array[:, np.newaxis]
+    if array.ndim == 2 and array.shape[0] == n and array.shape[1] >= 1:
+        return array
+    msg = (
+        f"{label} output must have shape ({n},) or ({n}, n_out), got {np.shape(values)}"
+    )
+    raise ModelOutputError(msg)
+
+
+def _evaluate_chunk(
+    trial_block: TrialBlock | StagedTrialBlock,
+    seed: int,
+    first_block: int,
+    sizes: tuple[int, ...],
+) -> list[NDArray[np.float64]]:
+    """Model values of blocks ``first_block, first_block + 1, ...`` with the given sizes."""
+    blocks = range(first_block, first_block + len(sizes))
+    if isinstance(trial_block, StagedTrialBlock):
+        draws = [trial_block.draw(block_rng(seed, b), n) for b, n in zip(blocks, sizes)]
+        for draw, n in zip(draws, sizes):
+            if np.shape(draw)[:1] != (n,):
+                msg = f"draw output must have {n} rows, got shape {np.shape(draw)}"
+                raise ModelOutputError(msg)
+        total = sum(sizes)
+        values = _as_outputs(
+            "model", trial_block.evaluate(np.concatenate(draws)), total
+        )
+        return np.split(values, np.cumsum(sizes)[:-1])
+    return [
+        _as_outputs("trial_block", trial_block(block_rng(seed, b), n), n)
+        for b, n in zip(blocks, sizes)
+    ]
+
+
+def _iter_blocks(
+    trial_block: TrialBlock | StagedTrialBlock,
+    seed: int,
+    sizes: Callable[[int], int],
+    n_blocks: int,
+    chunk_blocks: int,
+    workers: int,
+    mp_context: str | None,
+) -> Generator[NDArray[np.float64], None, None]:
+    """Yield each block's model values in block order, evaluating chunks lazily."""
+    chunks = (
+        (
+            start,
+            tuple(sizes(b) for b in range(start, min(start + chunk_blocks, n_blocks))),
+        )
+        for start in range(0, n_blocks, chunk_blocks)
+    )
+    if workers == 1:
+        for start, chunk in chunks:
+            yield from _evaluate_chunk(trial_block, seed, start, chunk)
+        return
+    context = None if mp_context is None else multiprocessing.get_context(mp_context)
+    executor = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+    pending: deque[Future[list[NDArray[np.float64]]]] = deque()
+    try:
+        # A bounded look-ahead keeps memory flat and lets an adaptive run stop early.
+        for start, chunk in chunks:
+            pending.append(
+                executor.submit(_evaluate_chunk, trial_block, seed, start, chunk)
+            )
+            if len(pending) >= 2 * workers:
+                yield from pending.popleft().result()
+        while pending:
+            yield from pending.popleft().result()
+    finally:
+        executor.shutdown(wait=True, cancel_futures=True)
+
+
+class _Collector:
+    """Checks each block for non-finite values and applies the policy."""
+
+    def __init__(self, policy: NonFinitePolicy) -> None:
+        self.policy = policy
+        self.n_outputs: int | None = None
+        self.n_dropped = 0
+
+    def accept(self, block: int, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        if self.n_outputs is None:
+            self.n_outputs = values.shape[1]
+        elif values.shape[1] != self.n_outputs:
+            msg = (
+                f"model output of block {block} has {values.shape[1]} components, "
+                f"earlier blocks had {self.n_outputs}"
+            )
+            raise ModelOutputError(msg)
+        finite_rows = np.isfinite(values).all(axis=1)
+        if finite_rows.all():
+            return values
+        bad = int(values.shape[0] - finite_rows.sum())
+        if self.policy == "raise":
+            msg = (
+                f"model returned non-finite values in {bad} of {values.shape[0]} trials of "
+                f"block {block}; they must not be averaged (use nonfinite='drop' to discard)"
+            )
+            raise ModelOutputError(msg)
+        self.n_dropped += bad
+        return values[finite_rows]
+
+
+def _check_common(
+    seed: int, block_size: int, chunk_blocks: int, workers: int, nonfinite: str
+) -> None:
+    _check_int("seed", seed, 0)
+    _check_int("block_size", block_size, 1)
+    _check_int("chunk_blocks", chunk_blocks, 1)
+    _check_int("workers", workers, 1)
+    if nonfinite not in ("raise", "drop"):
+        msg = f"nonfinite must be 'raise' or 'drop', got {nonfinite!r}"
+        raise ConfigError(msg)
+
+
+def _sequence_stats(
+    values: NDArray[np.float64], settings: AdaptiveSettings
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(count, mean, M2) of one sequence, shape (3, n_out), and its (y, u, y_low, y_high)."""
+    mean = values.mean(axis=0)
+    m2 = ((values - mean) ** 2).sum(axis=0)
+    low, high = coverage_bounds(
+        np.sort(values, axis=0), settings.coverage, settings.interval
+    )
+    std = np.sqrt(m2 / (values.shape[0] - 1))
+    moments = np.stack([np.full_like(mean, values.shape[0]), mean, m2])
+    return moments, np.stack([mean, std, low, high])
+
+
+def _pooled_std(moments: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """Standard deviation (ddof=1) of all sequences from their (count, mean, M2)."""
+    stacked = np.stack(moments)  # (h, 3, n_out)
+    counts, means, m2 = stacked[:, 0], stacked[:, 1], stacked[:, 2]
+    total = counts.sum(axis=0)
+    grand = (counts * means).sum(axis=0) / total
+    # Chan et al. pooling avoids re-reducing all h×M values after every sequence.
+    pooled = m2.sum(axis=0) + (counts * (means - grand) ** 2).sum(axis=0)
+    return np.asarray(np.sqrt(pooled / (total - 1)), dtype=np.float64)
+
+
+def _deltas(
+    settings: AdaptiveSettings, u: NDArray[np.float64], n_outputs: int
+) -> NDArray[np.float64]:
+    if settings.tolerance is None:
+        return np.array([numerical_tolerance(float(v), settings.n_dig) for v in u])
+    given = np.atleast_1d(np.asarray(settings.tolerance, dtype=np.float64))
+    if given.shape[0] == 1:
+        return np.full(n_outputs, given[0])
+    if given.shape[0] != n_outputs:
+        msg = f"adaptive.tolerance must have 1 or {n_outputs} values, got {given.shape[0]}"
+        raise ConfigError(msg)
+    return given
+
+
+def run_trials(
+    trial_block: TrialBlock | StagedTrialBlock,
+    *,
+    seed: int,
+    n_trials: int | None = None,
+    adaptive: AdaptiveSettings | None = None,
+    block_size: int = DEFAULT_BLOCK_SIZE,
+    chunk_blocks: int = 1,
+    workers: int = 1,
+    progress: ProgressCallback | None = None,
+    nonfinite: NonFinitePolicy = "raise",
+    mp_context: str | None = None,
+) -> TrialsResult:
+    """Evaluate Monte Carlo trials block by block, reproducibly (see module docstring).
+
+    Parameters
+    ----------
+    trial_block : callable or StagedTrialBlock
+        ``trial_block(rng, n)`` returning n model values, shape (n,) or (n, n_out); all
+        randomness must come from ``rng``. Must be picklable when ``workers > 1``.
+    seed : int
+        Root seed (>= 0) of the per-block generators.
+    n_trials : int, optional
+        Fixed number of trials (>= 1); the last block holds the remainder.
+        Exactly one of ``n_trials`` and ``adaptive`` must be given.
+    adaptive : AdaptiveSettings, optional
+        Run the JCGM 101 §7.9 adaptive procedure instead.
+    block_size : int
+        Trials per block; part of the random stream, so recorded in the result.
+    chunk_blocks : int
+        Blocks per task (and per vectorised ``evaluate`` of a staged block): a
+        memory/overhead knob that never changes the result.
+    workers : int
+        Processes (1 = in this process); never changes the result.
+    progress : callable, optional
+        ``progress(trials_done, trials_target_or_None)`` after each chunk.
+    nonfinite : {"raise", "drop"}
+        Policy for NaN/inf model values (see :data:`NonFinitePolicy`).
+    mp_context : str, optional
+        Multiprocessing start method for the workers; None is the platform default.
+
+    Returns
+    -------
+    TrialsResult
+        Model values (n_trials, n_out) and run metadata.
+    """
+    _check_common(seed, block_size, chunk_blocks, workers, nonfinite)
+    if (n_trials is None) == (adaptive is None):
+        msg = "give exactly one of n_trials and adaptive, got " + (
+            "both" if adaptive is not None else "neither"
+        )
+        raise ConfigError(msg)
+    if not callable(trial_block) and not isinstance(trial_block, StagedTrialBlock):
+        msg = f"trial_block must be callable or have draw/evaluate, got {type(trial_block)}"
+        raise ConfigError(msg)
+    if (
+        mp_context is not None
+        and mp_context not in multiprocessing.get_all_start_methods()
+    ):
+        msg = (
+            f"mp_context must be one of {multiprocessing.get_all_start_methods()}, "
+            f"got {mp_context!r}"
+        )
+        raise ConfigError(msg)
+    collector = _Collector(nonfinite)
+    if adaptive is None:
+        total = _check_int("n_trials", n_trials, 1)
+        n_blocks = math.ceil(total / block_size)
+        last = total - (n_blocks - 1) * block_size
+        blocks: list[NDArray[np.float64]] = []
+        stream = _iter_blocks(
+            trial_block,
+            seed,
+            lambda b: last if b == n_blocks - 1 else block_size,
+            n_blocks,
+            chunk_blocks,
+            workers,
+            mp_context,
+        )
+        done = 0
+        try:
+            for b, values in enumerate(stream):
+                blocks.append(collector.accept(b, values))
+                done += values.shape[0]
+                if progress is not None and (
+                    (b + 1) % chunk_blocks == 0 or b == n_blocks - 1
+                ):
+                    progress(done, total)
+        finally:
+            stream.close()
+        samples = np.concatenate(blocks)
+        samples.setflags(write=False)
+        _warn_dropped(collector.n_dropped, total)
+        return TrialsResult(
+            samples, total, seed, block_size, n_blocks, collector.n_dropped, None
+        )
+    return _run_adaptive(
+        trial_block,
+        adaptive,
+        seed,
+        block_size,
+        chunk_blocks,
+        workers,
+        progress,
+        collector,
+        mp_context,
+    )
+
+
+def _warn_dropped(n_dropped: int, n_trials: int) -> None:
+    if n_dropped:
+        warnings.warn(
+            f"dropped {n_dropped} of {n_trials} trials with non-finite model values",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+
+
+def _run_adaptive(
+    trial_block: TrialBlock | StagedTrialBlock,
+    settings: AdaptiveSettings,
+    seed: int,
+    block_size: int,
+    chunk_blocks: int,
+    workers: int,
+    progress: ProgressCallback | None,
+    collector: _Collector,
+    mp_context: str | None,
+) -> TrialsResult:
+    """JCGM 101 §7.9.4 steps: sequences of M trials until 2s <= δ everywhere."""
+    blocks_per_sequence = math.ceil(settings.target_sequence / block_size)
+    sequence_trials = blocks_per_sequence * block_size
+    max_sequences = settings.max_trials // sequence_trials
+    if max_sequences < 2:
+        msg = (
+            f"adaptive.max_trials must allow 2 sequences of {sequence_trials} trials, "
+            f"got {settings.max_trials}"
+        )
+        raise ConfigError(msg)
+    n_blocks = max_sequences * blocks_per_sequence
+    stream = _iter_blocks(
+        trial_block,
+        seed,
+        lambda _b: block_size,
+        n_blocks,
+        chunk_blocks,
+        workers,
+        mp_context,
+    )
+    sequences: list[NDArray[np.float64]] = []
+    moments: list[NDArray[np.float64]] = []
+    monitored: list[NDArray[np.float64]] = []
+    current: list[NDArray[np.float64]] = []
+    converged = False
+    delta = reached = np.zeros(0)
+    done = 0
+    try:
+        for b, values in enumerate(stream):
+            current.append(collector.accept(b, values))
+            done += values.shape[0]
+            if progress is not None and (b + 1) % chunk_blocks == 0:
+                progress(done, None)
+            if (b + 1) % blocks_per_sequence:
+                continue
+            sequence = np.concatenate(current)
+            current = []
+            sequences.append(sequence)
+            seq_moments, seq_monitored = _sequence_stats(sequence, settings)
+            moments.append(seq_moments)
+            monitored.append(seq_monitored)
+            h = len(sequences)
+            if h < 2:
+                continue
+            spread = np.stack(monitored).std(axis=0, ddof=1) / math.sqrt(
+                h
+            )  # (4, n_out)
+            reached = 2.0 * spread.max(axis=0)
+            delta = _deltas(settings, _pooled_std(moments), sequence.shape[1])
+            if bool((reached <= delta).all()):
+                converged = True
+                break
+    finally:
+        stream.close()
+    samples = np.concatenate(sequences)
+    samples.setflags(write=False)
+    n_run = len(sequences) * sequence_trials
+    _warn_dropped(collector.n_dropped, n_run)
+    report = AdaptiveReport(
+        converged=converged,
+        n_dig=None if settings.tolerance is not None else settings.n_dig,
+        delta=tuple(float(v) for v in delta),
+        tolerance_reached=tuple(float(v) for v in reached),
+        n_sequences=len(sequences),
+        sequence_trials=sequence_trials,
+        coverage_probability=settings.coverage,
+        interval=settings.interval,
+        max_trials=settings.max_trials,
+    )
+    return TrialsResult(
+        samples,
+        n_run,
+        seed,
+        block_size,
+        len(sequences) * blocks_per_sequence,
+        collector.n_dropped,
+        report,
+    )
+
+
+@dataclass(frozen=True)
+class DistributionTrials:
+    """Staged trial block of a JCGM 101 model with independent input distributions.
+
+    ``draw`` samples every input in order from the block's generator and stacks the
+    components into columns; ``evaluate`` calls the vectorised model.
+
+    Attributes
+    ----------
+    model : callable
+        ``model(x)`` with x of shape (n, n_columns), returning (n,) or (n, n_out).
+    distributions : tuple of Distribution
+        Inputs, in column order; a size-k input fills k consecutive columns.
+    """
+
+    model: Callable[[NDArray[np.float64]], ArrayLike]
+    distributions: tuple[Distribution, ...]
+
+    @property
+    def n_columns(self) -> int:
+        """Total number of scalar input components."""
+        return sum(d.size for d in self.distributions)
+
+    def draw(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+        """Input values of n trials, shape (n, n_columns)."""
+        columns = [
+            np.reshape(d.sample(rng, n), (n, d.size)) for d in self.distributions
+        ]
+        return np.concatenate(columns, axis=1)
+
+    def evaluate(self, inputs: NDArray[np.float64]) -> ArrayLike:
+        """Model values, shape (n,) or (n, n_out)."""
+        return self.model(inputs)
+
+    def __call__(self, rng: np.random.Generator, n: int) -> ArrayLike:
+        return self.evaluate(self.draw(rng, n))
+
+
+def resolve_inputs(
+    inputs: Sequence[Distribution] | Mapping[str, Distribution],
+) -> tuple[tuple[str, ...], tuple[Distribution, ...], tuple[str, ...]]:
+    """Names, distributions and per-column labels (``name[i]`` for vector inputs)."""
+    if isinstance(inputs, Mapping):
+        names = tuple(str(k) for k in inputs)
+        distributions = tuple(inputs.values())
+    else:
+        distributions = tuple(inputs)
+        names = tuple(f"x{i}" for i in range(len(distributions)))
+    if not distributions:
+        msg = "inputs must hold at least one distribution, got none"
+        raise ConfigError(msg)
+    for name, dist in zip(names, distributions):
+        if not isinstance(dist, Distribution):
+            msg = f"input {name!r} must be a Distribution, got {type(dist).__name__}"
+            raise ConfigError(msg)
+    columns: list[str] = []
+    for name, dist in zip(names, distributions):
+        columns.extend(
+            [name] if dist.size == 1 else [f"{name}[{i}]" for i in range(dist.size)]
+        )
+    return names, distributions, tuple(columns)
+
+
+@dataclass(frozen=True, eq=False)
+class MonteCarloResult:
+    """JCGM 101 propagation of distributions through a model.
+
+    Attributes
+    ----------
+    outputs : tuple of OutputSummary, length n_out
+        Estimate, u, intervals, expanded uncertainty and histogram per output.
+    covariance : ndarray, shape (n_out, n_out)
+        Covariance (ddof=1) of the outputs, in products of their units.
+    coverage_probability : float
+        p of every interval.
+    samples : ndarray, shape (M, n_out), or None
+        Model values (read-only), None when ``keep_samples=False``.
+    input_names : tuple of str
+        Input names (mapping keys, or ``x0, x1, ...``).
+    input_columns : tuple of str
+        Label of each model-input column (``name[i]`` for vector inputs).
+    n_trials : int
+        Trials evaluated.
+    seed : int
+        Root seed.
+    block_size : int
+        Trials per block.
+    n_dropped : int
+        Trials dropped for non-finite outputs.
+    adaptive : AdaptiveReport or None
+        Adaptive-procedure outcome, None for a fixed number of trials.
+    """
+
+    outputs: tuple[OutputSummary, ...]
+    covariance: NDArray[np.float64]
+    coverage_probability: float
+    samples: NDArray[np.float64] | None
+    input_names: tuple[str, ...]
+    input_columns: tuple[str, ...]
+    n_trials: int
+    seed: int
+    block_size: int
+    n_dropped: int
+    adaptive: AdaptiveReport | None
+
+    @property
+    def converged(self) -> bool:
+        """True for fixed runs; the adaptive verdict otherwise."""
+        return True if self.adaptive is None else self.adaptive.converged
+
+
+def monte_carlo(
+    model: Callable[[NDArray[np.float64]], ArrayLike],
+    inputs: Sequence[Distribution] | Mapping[str, Distribution],
+    *,
+    seed: int,
+    trials: int | None = None,
+    adaptive: AdaptiveSettings | None = None,
+    coverage: float = 0.95,
+    block_size: int = DEFAULT_BLOCK_SIZE,
+    chunk_blocks: int = 1,
+    workers: int = 1,
+    progress: ProgressCallback | None = None,
+    keep_samples: bool = True,
+    bins: int | str = 100,
+    expanded_from: MonteCarloIntervalKind = "probabilistically_symmetric",
+    nonfinite: NonFinitePolicy = "raise",
+    mp_context: str | None = None,
+) -> MonteCarloResult:
+    """Propagate input distributions through a vectorised model (JCGM 101 §7).
+
+    Parameters
+    ----------
+    model : callable
+        ``model(x)``, x of shape (n, n_columns) in input units, returning (n,) or
+        (n, n_out) in output units; row i must depend on x[i] only. Picklable
+        (e.g. a module-level function) when ``workers > 1``.
+    inputs : sequence of Distribution or mapping of str to Distribution
+        Independent inputs, in column order; vector inputs fill consecutive columns.
+    seed : int
+        Root seed (>= 0).
+    trials : int, optional
+        Fixed number of trials; exactly one of ``trials`` and ``adaptive``.
+    adaptive : AdaptiveSettings, optional
+        JCGM 101 §7.9 adaptive procedure; its coverage must equal ``coverage``.
+    coverage : float
+        Coverage probability p.
+    block_size, chunk_blocks, workers, progress, nonfinite, mp_context
+        As for :func:`run_trials`.
+    keep_samples : bool
+        Keep the raw model values in the result.
+    bins : int or str
+        Histogram bins.
+    expanded_from : {"probabilistically_symmetric", "shortest"}
+        Interval defining the expanded uncertainty.
+
+    Returns
+    -------
+    MonteCarloResult
+    """
+    p = check_coverage(coverage)
+    if trials is not None:
+        _check_int("trials", trials, 1)
+    if adaptive is not None and adaptive.coverage != p:
+        msg = f"adaptive.coverage must equal coverage ({p}), got {adaptive.coverage}"
+        raise ConfigError(msg)
+    if not callable(model):
+        msg = f"model must be callable, got {type(model).__name__}"
+        raise ConfigError(msg)
+    names, distributions, columns = resolve_inputs(inputs)
+    run = run_trials(
+        DistributionTrials(model, distributions),
+        seed=seed,
+        n_trials=trials,
+        adaptive=adaptive,
+        block_size=block_size,
+        chunk_blocks=chunk_blocks,
+        workers=workers,
+        progress=progress,
+        nonfinite=nonfinite,
+        mp_context=mp_context,
+    )
+    summary = run.summary(p, bins=bins, expanded_from=expanded_from)
+    return MonteCarloResult(
+        outputs=summary.outputs,
+        covariance=summary.covariance,
+        coverage_probability=p,
+        samples=run.samples if keep_samples else None,
+        input_names=names,
+        input_columns=columns,
+        n_trials=run.n_trials,
+        seed=run.seed,
+        block_size=run.block_size,
+        n_dropped=run.n_dropped,
+        adaptive=run.adaptive,
+    )
