@@ -1,0 +1,491 @@
+"""Command line: ``robocal-uncertainty <command>`` (also ``python -m robocal_uncertainty``).
+
+Every command is a thin shell over the library: it parses arguments, calls the same
+functions the tests and the ROS nodes call, and prints. A :class:`CalibError` ends the
+command with its one-line message on stderr and exit status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.errors import CalibError, ConfigError, InputError
+
+__all__ = ["PAPER_TEST_JOINTS_DEG", "main"]
+
+PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
+"""The robot seed's test configuration (Table 2), degrees."""
+
+DEMO_SOURCES = ("tracker", "encoder", "lambda", "n_poses", "pose_choice")
+
+
+def _robot_path(name: str) -> Path:
+    """A robot YAML path, or the name of a shipped model (``paper_arm``, ``ur10``)."""
+    path = Path(name)
+    if path.exists() or path.suffix in (".yaml", ".yml"):
+        return path
+    shipped = resources.files("robocal_uncertainty") / "data" / f"{name}.yaml"
+    if shipped.is_file():
+        return Path(str(shipped))
+    msg = f"robot config {name!r} is neither a file nor a shipped model (paper_arm, ur10)"
+    raise ConfigError(msg)
+
+
+def _load_robot(name: str, *, base_known: bool | None = None) -> Any:
+    from robocal_uncertainty.core import load_robot_model
+
+    model = load_robot_model(_robot_path(name))
+    if base_known is not None:
+        model = replace(model, base_known=base_known)
+    return model
+
+
+def _parse_joint_values(values: Sequence[str], n_joints: int, *, degrees: bool, what: str) -> NDArray[np.float64]:
+    try:
+        numbers = [float(v) for item in values for v in item.replace(",", " ").split()]
+    except ValueError as err:
+        msg = f"{what}: not a number ({err})"
+        raise InputError(msg) from err
+    if not numbers or len(numbers) % n_joints:
+        msg = f"{what} must have {n_joints} values per configuration, got {len(numbers)}"
+        raise ConfigError(msg)
+    q = np.array(numbers).reshape(-1, n_joints)
+    if not np.isfinite(q).all():
+        msg = f"{what} contain NaN or inf"
+        raise InputError(msg)
+    return np.radians(q) if degrees else q
+
+
+def _read_joints_file(path: str, n_joints: int, *, degrees: bool) -> NDArray[np.float64]:
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as err:
+        msg = f"cannot read joints file {path}: {err.strerror}"
+        raise InputError(msg) from err
+    rows = [
+        line.replace(";", ",").replace(",", " ").split()
+        for line in text.splitlines()
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    try:
+        q = np.array([[float(v) for v in row] for row in rows if not row[0][0].isalpha()])
+    except ValueError as err:
+        msg = f"joints file {path}: not a number ({err})"
+        raise InputError(msg) from err
+    if q.ndim != 2 or q.shape[1] != n_joints:
+        msg = f"joints file {path} must have {n_joints} numbers per row, got shape {q.shape}"
+        raise ConfigError(msg)
+    if not np.isfinite(q).all():
+        msg = f"joints file {path} contains NaN or inf"
+        raise InputError(msg)
+    return np.radians(q) if degrees else q
+
+
+def _trials(text: str) -> int | str:
+    if text == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError as err:
+        msg = f"--trials must be a positive integer or 'auto', got {text!r}"
+        raise ConfigError(msg) from err
+    if value <= 0:
+        msg = f"--trials must be a positive integer or 'auto', got {text!r}"
+        raise ConfigError(msg)
+    return value
+
+
+def _progress_bar(enabled: bool, label: str) -> tuple[Callable[[int, int | None], None] | None, Callable[[], None]]:
+    if not enabled:
+        return None, lambda: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=None, unit="trial", desc=label, file=sys.stderr, leave=False, dynamic_ncols=True)
+
+    def update(done: int, target: int | None) -> None:
+        if target is not None and bar.total != target:
+            bar.total = target
+        bar.update(done - bar.n)
+
+    return update, bar.close
+
+
+def _print_calibration(result: Any) -> None:
+    print(f"Calibration of {result.model.name}: {result.n_poses} poses, "
+          f"{int(result.estimated.sum())} parameters identified")
+    print(f"  lambda = {result.lambda_:.4g} ({result.lambda_method}), condition number "
+          f"{result.condition_number:.3g}, {result.iterations} iterations, {result.message}")
+    print(f"  residual RMS {result.rms_before * 1e3:.4f} mm -> {result.rms_after * 1e3:.4f} mm, "
+          f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm")
+    print("  parameter            nominal        estimate   1st-order std")
+    kinds = result.model.layout.kinds
+    for i, name in enumerate(result.parameter_names):
+        if not result.estimated[i]:
+            continue
+        if kinds[i] == "length":
+            print(f"  {name:<16} {result.nominal[i] * 1e3:12.4f} mm {result.estimate[i] * 1e3:12.4f} mm "
+                  f"{result.linearized_std[i] * 1e6:9.2f} um")
+        else:
+            print(f"  {name:<16} {np.degrees(result.nominal[i]):12.5f} deg {np.degrees(result.estimate[i]):11.5f} deg "
+                  f"{np.degrees(result.linearized_std[i]) * 1e3:8.3f} mdeg")
+    if result.dependencies:
+        print("  not identifiable from position data (kept at nominal):")
+        for dep in result.dependencies:
+            print(f"    {dep}")
+    for warning in result.warnings:
+        print(f"  warning: {warning}")
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.bagio import write_campaign
+    from robocal_uncertainty.core import EncoderNoise, SimulationSettings, TrackerNoise, simulate_campaign
+
+    model = _load_robot(args.robot)
+    settings = SimulationSettings(
+        n_poses=args.poses,
+        frame=args.frame,
+        tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
+        encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
+    )
+    sim = simulate_campaign(model, settings, seed=args.seed)
+    out = Path(args.out)
+    write_campaign(out, sim.campaign, overwrite=args.force)
+    truth = out.with_suffix(".truth.json")
+    truth.write_text(
+        json.dumps(
+            {
+                "format": "robocal_uncertainty/simulation_truth/1",
+                "units": {"length": "m", "angle": "rad"},
+                "robot": model.name,
+                "seed": args.seed,
+                "frame": args.frame,
+                "parameter_names": list(model.layout.names),
+                "true_parameters": sim.true_model.parameter_vector().tolist(),
+                "nominal_parameters": model.parameter_vector().tolist(),
+                "true_joint_positions_rad": sim.true_joint_positions.tolist(),
+                "true_points_m": sim.true_points.tolist(),
+                "tracker_noise_a_m": settings.tracker_noise.a,
+                "tracker_noise_b_m_per_m": settings.tracker_noise.b,
+                "encoder_noise_half_width_rad": settings.encoder_noise.half_width,
+            },
+            indent=1,
+        )
+        + "\n",
+        encoding="utf-8",
+    )
+    print(f"wrote {out} ({sim.campaign.n_poses} poses, points in the {args.frame} frame) and truth {truth}")
+    return 0
+
+
+def _cmd_import_csv(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.bagio import write_campaign
+    from robocal_uncertainty.importers import read_tracker_csv
+
+    campaign = read_tracker_csv(
+        args.csv, length_unit=args.length_unit, angle_unit=args.angle_unit, skip_invalid=args.skip_invalid
+    )
+    write_campaign(args.out, campaign, overwrite=args.force)
+    skipped = campaign.metadata.get("skipped_rows") or []
+    print(f"wrote {args.out}: {campaign.n_poses} poses, joints {', '.join(campaign.joint_names)}, "
+          f"points in the {campaign.frame} frame ({campaign.frame_id})"
+          + (f", {len(skipped)} invalid rows skipped" if skipped else ""))
+    return 0
+
+
+def _campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
+    from robocal_uncertainty.bagio import read_campaign
+
+    campaign = read_campaign(args.campaign)
+    model = _load_robot(args.robot)
+    if campaign.frame == "tracker" and not model.base_known:
+        return campaign, model
+    return campaign, model
+
+
+def _lambda_arg(text: str) -> str | float:
+    if text in ("auto", "gcv", "lcurve"):
+        return text
+    try:
+        return float(text)
+    except ValueError as err:
+        msg = f"--lambda must be 'auto', 'gcv' or a number, got {text!r}"
+        raise ConfigError(msg) from err
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.core import identify
+    from robocal_uncertainty.core.calibration_file import write_calibration
+
+    campaign, model = _campaign_and_robot(args)
+    result = identify(model, campaign, lambda_=_lambda_arg(args.lambda_))
+    _print_calibration(result)
+    if args.json:
+        write_calibration(args.json, result, robot=str(args.robot))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _cmd_fk(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.core import forward_points
+    from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration
+
+    model = _load_robot(args.robot)
+    if args.calibration:
+        model = apply_calibration(model, read_calibration(args.calibration))
+    if args.joints_file:
+        q = _read_joints_file(args.joints_file, model.n_joints, degrees=args.degrees)
+    elif args.joints:
+        q = _parse_joint_values(args.joints, model.n_joints, degrees=args.degrees, what="--joints")
+    else:
+        raise ConfigError("give --joints or --joints-file")
+    p = model.parameter_vector()
+    in_world = model.base_known and (np.any(model.base_xyz != 0) or np.any(model.base_rpy != 0))
+    b0 = model.layout.base_index
+    p_base = p.copy()
+    p_base[b0 : b0 + 6] = 0.0
+    base_points = forward_points(model.layout, p_base, q)
+    world_points = forward_points(model.layout, p, q)
+    has_world = bool(args.calibration and not np.allclose(p[b0 : b0 + 6], 0.0)) or in_world
+    source = "calibrated" if args.calibration else "nominal"
+    print(f"# tool point of the {source} {model.name} model, mm")
+    header = "x_base y_base z_base" + (f" x_{model.measurement_frame_id} y z" if has_world else "")
+    print("# " + header)
+    for i in range(q.shape[0]):
+        row = " ".join(f"{v * 1e3:.6f}" for v in base_points[i])
+        if has_world:
+            row += " " + " ".join(f"{v * 1e3:.6f}" for v in world_points[i])
+        print(row)
+    if args.json:
+        out = {
+            "units": {"length": "m", "angle": "rad"},
+            "model": source,
+            "robot": model.name,
+            "joint_names": list(model.joint_names),
+            "joint_positions_rad": q.tolist(),
+            "points_base_m": base_points.tolist(),
+            "base_frame_id": model.base_frame_id,
+        }
+        if has_world:
+            out["points_measurement_frame_m"] = world_points.tolist()
+            out["measurement_frame_id"] = model.measurement_frame_id
+        Path(args.json).write_text(json.dumps(out, indent=2) + "\n", encoding="utf-8")
+    return 0
+
+
+def _uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Sequence[str]) -> Any:
+    from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+    from robocal_uncertainty.uncertainty import UncertaintySettings
+
+    return UncertaintySettings(
+        sources=tuple(sources),
+        tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
+        encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
+        lambda_range=None if args.lambda_range is None else (args.lambda_range[0], args.lambda_range[1]),
+        min_poses=args.min_poses,
+        subset_size=args.subset_size,
+    )
+
+
+def run_evaluation(
+    model: Any,
+    campaign: Any,
+    test_joints: NDArray[np.float64],
+    *,
+    sources: Sequence[str],
+    args: argparse.Namespace,
+    out_dir: Path,
+    label: str,
+) -> Any:
+    """Calibrate, run the Monte Carlo, the per-source budget and the report: shared by
+    ``evaluate``, ``demo`` and ``replay`` so they give the same numbers."""
+    from robocal_uncertainty.core import identify
+    from robocal_uncertainty.report import format_table2, write_report
+    from robocal_uncertainty.uncertainty import evaluate_uncertainty, parse_sources
+
+    sources = parse_sources(list(sources))
+    settings = _uncertainty_settings(args, campaign, sources)
+    calibration = identify(model, campaign, lambda_=_lambda_arg(args.lambda_))
+    _print_calibration(calibration)
+    trials = _trials(args.trials)
+    update, close = _progress_bar(not args.no_progress, label)
+    start = time.perf_counter()
+    try:
+        result = evaluate_uncertainty(
+            model,
+            campaign,
+            test_joints,
+            settings=settings,
+            calibration=calibration,
+            trials=trials,
+            coverage=args.coverage,
+            seed=args.seed,
+            max_trials=args.max_trials,
+            workers=args.workers,
+            progress=update,
+        )
+    finally:
+        close()
+    elapsed = time.perf_counter() - start
+    budget = {}
+    if args.budget and len(sources) > 1:
+        for source in sources:
+            budget[source] = evaluate_uncertainty(
+                model,
+                campaign,
+                test_joints,
+                settings=replace(settings, sources=(source,)),
+                calibration=calibration,
+                trials=args.budget_trials,
+                coverage=args.coverage,
+                seed=args.seed,
+                workers=args.workers,
+            )
+    print()
+    print(format_table2(result))
+    print(f"{result.n_trials} trials in {elapsed:.1f} s ({result.n_trials / elapsed:.0f} trials/s)")
+    path = write_report(out_dir, result, robot_name=model.name, budget=budget or None)
+    print(f"report written to {path}")
+    return result
+
+
+def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> None:
+    p.add_argument("--trials", default=trials_default, help="number of Monte Carlo trials, or 'auto' for the JCGM 101 adaptive procedure (default %(default)s)")
+    p.add_argument("--max-trials", type=int, default=2_000_000, help="cap of the adaptive procedure (default %(default)s)")
+    p.add_argument("--coverage", type=float, default=0.95, help="coverage probability p (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
+    p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
+    p.add_argument("--lambda-range", type=float, nargs=2, metavar=("LOW", "HIGH"), help="range of lambda for the 'lambda' source (default lambda*/5 .. 5 lambda*)")
+    p.add_argument("--min-poses", type=int, help="smallest pose count of the 'n_poses' source")
+    p.add_argument("--subset-size", type=int, help="pose count of the 'pose_choice' source")
+    p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker error half-width a per coordinate, um (default %(default)s, uniform)")
+    p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="distance-proportional part b of the MPE a + b L, um/m (default %(default)s)")
+    p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder error half-width, deg (default %(default)s, uniform)")
+    p.add_argument("--workers", type=int, default=1, help="worker processes (never changes the result)")
+    p.add_argument("--budget", action=argparse.BooleanOptionalAction, default=True, help="also run each source alone (uncertainty budget)")
+    p.add_argument("--budget-trials", type=int, default=2000, help="trials per source of the budget (default %(default)s)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    campaign, model = _campaign_and_robot(args)
+    if args.test_joints_file:
+        test_q = _read_joints_file(args.test_joints_file, model.n_joints, degrees=args.degrees)
+    elif args.test_joints:
+        test_q = _parse_joint_values(args.test_joints, model.n_joints, degrees=args.degrees, what="--test-joints")
+    else:
+        raise ConfigError("give --test-joints or --test-joints-file")
+    from robocal_uncertainty.uncertainty import parse_sources
+
+    run_evaluation(model, campaign, test_q, sources=parse_sources(args.sources), args=args, out_dir=Path(args.out), label="evaluate")
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.core import SimulationSettings, simulate_campaign
+
+    model = _load_robot("paper_arm")
+    sim = simulate_campaign(model, SimulationSettings(n_poses=53), seed=args.seed)
+    print("Demo: the seed's arm (Table 1), a simulated 53-pose campaign with tracker noise +-5 um and")
+    print("encoder noise +-0.005 deg (uniform), evaluated at the seed's test joints")
+    print(f"({', '.join(f'{v:g}' for v in PAPER_TEST_JOINTS_DEG)}) deg. Sources: {', '.join(DEMO_SOURCES)}.")
+    print()
+    test_q = np.radians(np.array(PAPER_TEST_JOINTS_DEG))[None, :]
+    result = run_evaluation(model, sim.campaign, test_q, sources=DEMO_SOURCES, args=args, out_dir=Path(args.out), label="demo")
+    from robocal_uncertainty.core import forward_points
+
+    truth = forward_points(model.layout, sim.true_model.parameter_vector(), test_q)[0]
+    inside = [result.poses[0].axes[i].probabilistically_symmetric.contains(float(truth[i])) for i in range(3)]
+    print("simulated truth at the test joints: (" + ", ".join(f"{v * 1e3:.4f}" for v in truth) + ") mm; "
+          f"inside the 95 % intervals (x, y, z): {inside}")
+    return 0
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="robocal-uncertainty",
+        description="Robot arm calibration from laser-tracker points and its Monte Carlo uncertainty (JCGM 101).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("demo", help="the main job on the embedded default: seed's arm, simulated 53-pose campaign, Table 2 and report")
+    p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
+    _add_uncertainty_args(p, trials_default="20000")
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("simulate", help="write a simulated campaign MCAP (truth in a sidecar .truth.json)")
+    p.add_argument("--robot", default="paper_arm", help="robot YAML or shipped model name (default %(default)s)")
+    p.add_argument("--out", required=True, help="campaign .mcap to write")
+    p.add_argument("--poses", type=int, default=53)
+    p.add_argument("--frame", choices=("base", "tracker"), default="base", help="points in the robot base frame or in a tracker frame with an unknown base")
+    p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker error half-width a, um (uniform)")
+    p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m")
+    p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder error half-width, deg (uniform)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("import-csv", help="convert a tracker CSV export into a campaign MCAP")
+    p.add_argument("csv")
+    p.add_argument("--out", required=True)
+    p.add_argument("--length-unit", help="unit of length columns whose header states none (m, mm, um)")
+    p.add_argument("--angle-unit", help="unit of joint columns whose header states none (rad, deg)")
+    p.add_argument("--skip-invalid", action="store_true", help="drop invalid rows instead of failing")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=_cmd_import_csv)
+
+    p = sub.add_parser("calibrate", help="identify the parameter errors from a campaign")
+    p.add_argument("campaign")
+    p.add_argument("--robot", required=True)
+    p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
+    p.add_argument("--json", help="write the result here (SI units)")
+    p.set_defaults(func=_cmd_calibrate)
+
+    p = sub.add_parser("fk", help="tool positions of the nominal or calibrated model")
+    p.add_argument("--robot", required=True)
+    p.add_argument("--calibration", help="calibration JSON from 'calibrate --json'")
+    p.add_argument("--joints", nargs="+", help="joint values, n_joints per configuration")
+    p.add_argument("--joints-file", help="CSV/whitespace file, one configuration per row")
+    p.add_argument("--degrees", action="store_true", help="joint values are in degrees (default radians)")
+    p.add_argument("--json")
+    p.set_defaults(func=_cmd_fk)
+
+    p = sub.add_parser("evaluate", help="Monte Carlo uncertainty of the calibrated tool position")
+    p.add_argument("campaign")
+    p.add_argument("--robot", required=True)
+    p.add_argument("--test-joints", nargs="+", help="joint values of the test configurations")
+    p.add_argument("--test-joints-file")
+    p.add_argument("--degrees", action="store_true")
+    p.add_argument("--sources", default="tracker,encoder", help="comma list of tracker, encoder, lambda, n_poses, pose_choice, residual, or all")
+    p.add_argument("--out", default="robocal_report")
+    _add_uncertainty_args(p, trials_default="auto")
+    p.set_defaults(func=_cmd_evaluate)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit status."""
+    parser = _build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except CalibError as err:
+        print(f"robocal-uncertainty {args.command}: error: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"robocal-uncertainty {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""A calibration result as JSON: what ``calibrate --json`` writes and ``fk --calibration`` reads."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError
+
+__all__ = ["CALIBRATION_FORMAT", "apply_calibration", "calibration_to_dict", "read_calibration", "write_calibration"]
+
+CALIBRATION_FORMAT = "robocal_uncertainty/calibration/1"
+
+
+def _finite_or_none(values: NDArray[np.float64]) -> list[float | None]:
+    return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=np.float64)]
+
+
+def calibration_to_dict(result: IdentificationResult, *, robot: str) -> dict[str, Any]:
+    """JSON-ready description of a calibration, SI units stated."""
+    kinds = result.model.layout.kinds
+    return {
+        "format": CALIBRATION_FORMAT,
+        "units": {"length": "m", "angle": "rad"},
+        "robot": robot,
+        "model_name": result.model.name,
+        "parameters": [
+            {
+                "name": name,
+                "unit": "m" if kinds[i] == "length" else "rad",
+                "nominal": float(result.nominal[i]),
+                "estimate": float(result.estimate[i]),
+                "estimated": bool(result.estimated[i]),
+                "linearized_std": _finite_or_none(result.linearized_std[i : i + 1])[0],
+            }
+            for i, name in enumerate(result.parameter_names)
+        ],
+        "not_identifiable": list(result.dependencies),
+        "lambda": result.lambda_,
+        "lambda_method": result.lambda_method,
+        "condition_number": result.condition_number,
+        "residual_rms_before_m": result.rms_before,
+        "residual_max_before_m": result.max_before,
+        "residual_rms_after_m": result.rms_after,
+        "residual_max_after_m": result.max_after,
+        "n_poses": result.n_poses,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        "message": result.message,
+        "base_initialised": result.base_initialised,
+        "warnings": list(result.warnings),
+    }
+
+
+def write_calibration(path: str | Path, result: IdentificationResult, *, robot: str) -> None:
+    """Write :func:`calibration_to_dict` to `path`."""
+    Path(path).write_text(json.dumps(calibration_to_dict(result, robot=robot), indent=2) + "\n", encoding="utf-8")
+
+
+def read_calibration(path: str | Path) -> dict[str, Any]:
+    """Read and check a calibration JSON file.
+
+    Raises
+    ------
+    ConfigError
+        Missing file, invalid JSON or not a calibration file.
+    """
+    file = Path(path)
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except OSError as err:
+        msg = f"cannot read calibration {file}: {err.strerror}"
+        raise ConfigError(msg) from err
+    except json.JSONDecodeError as err:
+        msg = f"calibration {file} is not valid JSON: {err.msg} (line {err.lineno})"
+        raise ConfigError(msg) from err
+    if not isinstance(data, dict) or data.get("format") != CALIBRATION_FORMAT:
+        msg = f"{file} is not a robocal_uncertainty calibration (format {CALIBRATION_FORMAT})"
+        raise ConfigError(msg)
+    return data
+
+
+def apply_calibration(model: RobotModel, data: dict[str, Any]) -> RobotModel:
+    """Return `model` with the estimated parameters of a calibration file applied by name.
+
+    Raises
+    ------
+    ConfigError
+        The calibration names parameters the model does not have.
+    """
+    p = model.parameter_vector()
+    names = model.layout.names
+    for entry in data.get("parameters", []):
+        name = entry.get("name")
+        if name not in names:
+            msg = f"calibration parameter {name!r} does not exist in robot model {model.name!r}"
+            raise ConfigError(msg)
+        p[names.index(name)] = float(entry["estimate"])
+    return model.with_parameters(p)
