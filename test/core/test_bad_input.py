@@ -1,0 +1,291 @@
+"""Every input error surfaces as a one-line CalibError subclass whose message names the problem."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import identify
+from robocal_uncertainty.core.robot_config import (
+    load_robot_model,
+    robot_model_from_dict,
+)
+from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
+from robocal_uncertainty.errors import (
+    CalibError,
+    ConfigError,
+    IdentifiabilityError,
+    InputError,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+PAPER_YAML = REPO / "config" / "paper_arm.yaml"
+JOINTS = ("joint1", "joint2", "joint3", "joint4", "joint5", "joint6")
+
+
+def one_line(excinfo: pytest.ExceptionInfo) -> str:
+    """The message, asserted to be a single non-empty line and a CalibError."""
+    assert isinstance(excinfo.value, CalibError)
+    msg = str(excinfo.value)
+    assert msg and "\n" not in msg and "\r" not in msg, repr(msg)
+    return msg
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_robot_model(PAPER_YAML)
+
+
+@pytest.fixture(scope="module")
+def campaign(model):
+    return simulate_campaign(model, SimulationSettings(), seed=1).campaign
+
+
+@pytest.fixture()
+def paper_dict() -> dict:
+    return yaml.safe_load(PAPER_YAML.read_text(encoding="utf-8"))
+
+
+# --- campaign construction ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_joints(bad: float) -> None:
+    q = np.zeros((5, 6))
+    q[2, 3] = bad
+    with pytest.raises(
+        InputError,
+        match=r"^joint_positions contains NaN or inf \(first at pose index 2\)$",
+    ) as exc:
+        Campaign(JOINTS, q, np.zeros((5, 3)))
+    one_line(exc)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_points(bad: float) -> None:
+    p = np.zeros((5, 3))
+    p[4, 1] = bad
+    with pytest.raises(
+        InputError, match=r"^points contains NaN or inf \(first at pose index 4\)$"
+    ) as exc:
+        Campaign(JOINTS, np.zeros((5, 6)), p)
+    one_line(exc)
+
+
+def test_wrong_joint_count_in_campaign() -> None:
+    with pytest.raises(
+        InputError, match=r"joint_positions must have shape \(n, 6\), got \(5, 5\)"
+    ) as exc:
+        Campaign(JOINTS, np.zeros((5, 5)), np.zeros((5, 3)))
+    one_line(exc)
+
+
+def test_points_count_mismatch() -> None:
+    with pytest.raises(
+        InputError, match=r"points must have shape \(5, 3\), got \(4, 3\)"
+    ) as exc:
+        Campaign(JOINTS, np.zeros((5, 6)), np.zeros((4, 3)))
+    one_line(exc)
+
+
+def test_duplicate_joint_names() -> None:
+    with pytest.raises(
+        InputError, match=r"joint_names must be unique and non-empty"
+    ) as exc:
+        Campaign(("a", "a"), np.zeros((1, 2)), np.zeros((1, 3)))
+    one_line(exc)
+
+
+# --- identification ------------------------------------------------------------------------
+
+
+def test_wrong_joint_names(model, campaign: Campaign) -> None:
+    renamed = Campaign(
+        tuple(f"j{i}" for i in range(6)), campaign.joint_positions, campaign.points
+    )
+    with pytest.raises(
+        InputError,
+        match=r"campaign joints \['j0'.*do not match the robot's \['joint1'.*missing",
+    ) as exc:
+        identify(model, renamed)
+    one_line(exc)
+
+
+def test_wrong_joint_count_in_identify(model, campaign: Campaign) -> None:
+    five = Campaign(JOINTS[:5], campaign.joint_positions[:, :5], campaign.points)
+    with pytest.raises(
+        InputError, match=r"do not match the robot's .*missing \['joint6'\]"
+    ) as exc:
+        identify(model, five)
+    one_line(exc)
+
+
+def test_permuted_joint_names_are_accepted(model, campaign: Campaign) -> None:
+    """Not an error: columns are matched by name (guards the mismatch test above)."""
+    order = [5, 3, 1, 0, 2, 4]
+    shuffled = Campaign(
+        tuple(JOINTS[i] for i in order),
+        campaign.joint_positions[:, order],
+        campaign.points,
+    )
+    a = identify(model, shuffled, lambda_=0.0)
+    b = identify(model, campaign, lambda_=0.0)
+    np.testing.assert_allclose(a.estimate, b.estimate, rtol=0, atol=1e-12)
+
+
+def test_too_few_poses(model, campaign: Campaign) -> None:
+    with pytest.raises(
+        IdentifiabilityError,
+        match=r"^too few poses: 5 poses give 15 equations for 23 identifiable parameters \(need at least 8 poses\)$",
+    ) as exc:
+        identify(model, campaign.subset(slice(0, 5)))
+    one_line(exc)
+
+
+def test_degenerate_pose_set(model, campaign: Campaign) -> None:
+    same = Campaign(
+        JOINTS,
+        np.repeat(campaign.joint_positions[:1], 53, axis=0),
+        np.repeat(campaign.points[:1], 53, axis=0),
+    )
+    with pytest.raises(
+        IdentifiabilityError,
+        match=r"^degenerate pose set: the 53 poses identify only 3 of 23",
+    ) as exc:
+        identify(model, same)
+    one_line(exc)
+
+
+@pytest.mark.parametrize(
+    ("lam", "pattern"),
+    [
+        (
+            "banana",
+            r"lambda must be 'auto', 'gcv' or a non-negative number, got 'banana'",
+        ),
+        (-1, r"lambda must be a finite non-negative number, got -1\.0"),
+        ("-1", r"lambda must be a finite non-negative number, got -1\.0"),
+        (float("nan"), r"lambda must be a finite non-negative number, got nan"),
+        (None, r"lambda must be 'auto', 'gcv' or a non-negative number, got None"),
+        (True, r"lambda must be 'auto', 'gcv' or a non-negative number, got True"),
+    ],
+)
+def test_invalid_lambda(model, campaign: Campaign, lam: object, pattern: str) -> None:
+    with pytest.raises(ConfigError, match=pattern) as exc:
+        identify(model, campaign, lambda_=lam)
+    one_line(exc)
+
+
+# --- robot configuration ----------------------------------------------------------------
+
+
+def write(tmp_path: Path, data: object) -> Path:
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return path
+
+
+def test_unknown_length_unit(tmp_path: Path, paper_dict: dict) -> None:
+    paper_dict["units"] = {"length": "inch", "angle": "deg"}
+    with pytest.raises(
+        ConfigError, match=r"unknown length unit 'inch' \(known: m, mm, um, µm\)"
+    ) as exc:
+        load_robot_model(write(tmp_path, paper_dict))
+    one_line(exc)
+
+
+def test_unknown_angle_unit_and_missing_unit(paper_dict: dict) -> None:
+    bad = copy.deepcopy(paper_dict)
+    bad["units"] = {"length": "mm", "angle": "grad"}
+    with pytest.raises(
+        ConfigError, match=r"unknown angle unit 'grad' \(known: rad, deg\)"
+    ) as exc:
+        robot_model_from_dict(bad)
+    one_line(exc)
+    bad["units"] = {"length": "mm"}
+    with pytest.raises(ConfigError, match=r"'units' must state 'angle'") as exc:
+        robot_model_from_dict(bad)
+    one_line(exc)
+
+
+def test_missing_joints(tmp_path: Path, paper_dict: dict) -> None:
+    del paper_dict["joints"]
+    path = write(tmp_path, paper_dict)
+    with pytest.raises(
+        ConfigError, match=r"robot\.yaml: missing required field 'joints'$"
+    ) as exc:
+        load_robot_model(path)
+    one_line(exc)
+
+
+def test_joint_without_d(tmp_path: Path, paper_dict: dict) -> None:
+    del paper_dict["joints"][1]["d"]
+    with pytest.raises(ConfigError, match=r"joint 2 is missing 'd'$") as exc:
+        load_robot_model(write(tmp_path, paper_dict))
+    one_line(exc)
+
+
+def test_unknown_joint_field_and_convention(paper_dict: dict) -> None:
+    bad = copy.deepcopy(paper_dict)
+    bad["joints"][0]["offset"] = 1.0
+    with pytest.raises(
+        ConfigError, match=r"joint 1 has unknown fields \['offset'\]"
+    ) as exc:
+        robot_model_from_dict(bad)
+    one_line(exc)
+    bad = copy.deepcopy(paper_dict)
+    bad["convention"] = "dh"
+    with pytest.raises(
+        ConfigError,
+        match=r"convention must be 'modified_dh' or 'standard_dh', got 'dh'",
+    ) as exc:
+        robot_model_from_dict(bad)
+    one_line(exc)
+
+
+def test_malformed_yaml(tmp_path: Path) -> None:
+    path = tmp_path / "broken.yaml"
+    path.write_text(
+        "name: x\nconvention: modified_dh\nunits: {length: mm, angle: deg\njoints: []\n"
+    )
+    with pytest.raises(ConfigError, match=r"broken\.yaml is not valid YAML: ") as exc:
+        load_robot_model(path)
+    one_line(exc)
+
+
+def test_yaml_that_is_not_a_mapping(tmp_path: Path) -> None:
+    path = tmp_path / "list.yaml"
+    path.write_text("- 1\n- 2\n")
+    with pytest.raises(
+        ConfigError, match=r"expected a mapping at top level, got list"
+    ) as exc:
+        load_robot_model(path)
+    one_line(exc)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(
+        ConfigError,
+        match=r"cannot read robot config .*nope\.yaml: No such file or directory",
+    ) as exc:
+        load_robot_model(tmp_path / "nope.yaml")
+    one_line(exc)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=UnicodeDecodeError,
+    reason="robot_config.load_robot_model catches only OSError around read_text(encoding='utf-8'); "
+    "a non-UTF-8 file escapes as a bare UnicodeDecodeError instead of ConfigError",
+)
+def test_non_utf8_file(tmp_path: Path) -> None:
+    path = tmp_path / "binary.yaml"
+    path.write_bytes(b"\xff\xfe\x00not yaml at all")
+    with pytest.raises(ConfigError, match=r"binary\.yaml") as exc:
+        load_robot_model(path)
+    one_line(exc)
