@@ -289,3 +289,15 @@ def test_non_utf8_file(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"binary\.yaml") as exc:
         load_robot_model(path)
     one_line(exc)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=ConfigError,
+    reason="identification._validate checks isinstance(lambda_, (int, float)); numpy integers "
+    "are rejected with 'got np.int64(0)' although 0 is a valid non-negative lambda",
+)
+def test_numpy_integer_lambda_is_accepted(model, campaign: Campaign) -> None:
+    a = identify(model, campaign, lambda_=np.int64(0))
+    b = identify(model, campaign, lambda_=0.0)
+    np.testing.assert_array_equal(a.estimate, b.estimate)
