@@ -10,6 +10,7 @@ Lambda is chosen at the L-curve corner (default), by GCV, or fixed.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -177,7 +178,7 @@ def _validate(model: RobotModel, campaign: Campaign, lambda_: object) -> tuple[C
         except ValueError as err:
             msg = f"lambda must be 'auto', 'gcv' or a non-negative number, got {lambda_!r}"
             raise ConfigError(msg) from err
-    if isinstance(lambda_, bool) or not isinstance(lambda_, (int, float)):
+    if isinstance(lambda_, (bool, np.bool_)) or not isinstance(lambda_, numbers.Real):
         msg = f"lambda must be 'auto', 'gcv' or a non-negative number, got {lambda_!r}"
         raise ConfigError(msg)
     value = float(lambda_)

@@ -190,9 +190,15 @@ def load_robot_model(path: str | Path) -> RobotModel:
     except OSError as err:
         msg = f"cannot read robot config {file}: {err.strerror}"
         raise ConfigError(msg) from err
+    except UnicodeDecodeError as err:
+        msg = f"robot config {file} is not UTF-8 text (byte {err.start})"
+        raise ConfigError(msg) from err
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        msg = f"robot config {file} is not valid YAML: {str(err).splitlines()[0]}"
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        msg = f"robot config {file} is not valid YAML{where}: {problem}"
         raise ConfigError(msg) from err
     return robot_model_from_dict(data, where=str(file))

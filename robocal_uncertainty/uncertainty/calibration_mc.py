@@ -48,6 +48,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 _GUM_SOURCES = frozenset(("tracker", "encoder", "residual"))
+_SUB_BATCH = 256
 
 
 @dataclass(frozen=True)
@@ -182,7 +183,6 @@ class CalibrationTrials:
     subset_size: int
     settings: UncertaintySettings
     solver: ChordSolver | None = None
-    chunk_trials: int = 1000
 
     def __call__(self, rng: np.random.Generator, n: int) -> Array:
         """Model values of n trials, shape (n, 3 n_test + k)."""
@@ -227,8 +227,10 @@ class CalibrationTrials:
 
         k = self.x_hat.size
         out = np.empty((n, 3 * n_test + k))
-        for lo_i in range(0, n, self.chunk_trials):
-            sl = slice(lo_i, min(n, lo_i + self.chunk_trials))
+        # A fixed sub-batch: BLAS rounding may depend on the number of rows, so the split of
+        # a block must never depend on a user setting.
+        for lo_i in range(0, n, _SUB_BATCH):
+            sl = slice(lo_i, min(n, lo_i + _SUB_BATCH))
             t = sl.stop - sl.start
             if boot is not None:
                 base_pts = self.fitted[None] + self.residual_scale * self.residuals[boot[sl]]
@@ -378,7 +380,7 @@ def evaluate_uncertainty(
     n_dig: int = 2,
     max_trials: int = 2_000_000,
     block_size: int = 10_000,
-    chunk_trials: int = 1000,
+    chunk_blocks: int = 1,
     workers: int = 1,
     progress: Callable[[int, int | None], None] | None = None,
 ) -> CalibrationUncertainty:
@@ -410,8 +412,9 @@ def evaluate_uncertainty(
         Cap of the adaptive procedure.
     block_size : int
         Trials per independent random stream (part of the result's identity).
-    chunk_trials : int
-        Trials re-identified at once (memory bound; never changes the result).
+    chunk_blocks : int
+        Blocks evaluated per task (never changes the result). Memory is bounded by a
+        fixed sub-batch of trials re-identified at once.
     workers : int
         Processes (never changes the result).
     progress : callable, optional
@@ -428,9 +431,6 @@ def evaluate_uncertainty(
     """
     settings = settings or UncertaintySettings()
     test_q, n_trials = _validate_inputs(model, test_joint_positions, coverage, trials)
-    if isinstance(chunk_trials, bool) or not isinstance(chunk_trials, int) or chunk_trials < 1:
-        msg = f"chunk_trials must be a positive integer, got {chunk_trials!r}"
-        raise ConfigError(msg)
     campaign = campaign.reorder_joints(model.joint_names)
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_)
@@ -496,7 +496,6 @@ def evaluate_uncertainty(
         solver=None
         if settings.jacobian == "exact"
         else ChordSolver.at(problem, calibration.estimate, campaign.joint_positions),
-        chunk_trials=chunk_trials,
     )
     adaptive = None
     if n_trials is None:
@@ -507,6 +506,7 @@ def evaluate_uncertainty(
         n_trials=n_trials,
         adaptive=adaptive,
         block_size=block_size,
+        chunk_blocks=chunk_blocks,
         workers=workers,
         progress=progress,
     )

@@ -277,12 +277,6 @@ def test_missing_file(tmp_path: Path) -> None:
     one_line(exc)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=UnicodeDecodeError,
-    reason="robot_config.load_robot_model catches only OSError around read_text(encoding='utf-8'); "
-    "a non-UTF-8 file escapes as a bare UnicodeDecodeError instead of ConfigError",
-)
 def test_non_utf8_file(tmp_path: Path) -> None:
     path = tmp_path / "binary.yaml"
     path.write_bytes(b"\xff\xfe\x00not yaml at all")
@@ -291,12 +285,6 @@ def test_non_utf8_file(tmp_path: Path) -> None:
     one_line(exc)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ConfigError,
-    reason="identification._validate checks isinstance(lambda_, (int, float)); numpy integers "
-    "are rejected with 'got np.int64(0)' although 0 is a valid non-negative lambda",
-)
 def test_numpy_integer_lambda_is_accepted(model, campaign: Campaign) -> None:
     a = identify(model, campaign, lambda_=np.int64(0))
     b = identify(model, campaign, lambda_=0.0)

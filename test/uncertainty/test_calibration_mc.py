@@ -1,0 +1,196 @@
+"""Calibration Monte Carlo: reproducibility, agreement with independent solvers and the GUM,
+and one-line errors for bad settings."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from robocal_uncertainty.core import (
+    Campaign,
+    SimulationSettings,
+    forward_points,
+    identify,
+    load_robot_model,
+    simulate_campaign,
+)
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty import (
+    BatchProblem,
+    ChordSolver,
+    UncertaintySettings,
+    evaluate_uncertainty,
+    parse_sources,
+)
+
+TEST_JOINTS = np.radians([-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451])
+
+
+@pytest.fixture(scope="module")
+def paper():
+    model = load_robot_model("config/paper_arm.yaml")
+    sim = simulate_campaign(model, SimulationSettings(), seed=11)
+    return model, sim
+
+
+def test_same_seed_same_result_whatever_chunk_and_workers(paper) -> None:
+    model, sim = paper
+    settings = UncertaintySettings(sources=("tracker", "encoder", "n_poses", "lambda"))
+    runs = [
+        evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=settings, trials=1200,
+                             seed=5, block_size=500, chunk_blocks=chunk, workers=workers)
+        for chunk, workers in ((1, 1), (3, 1), (2, 2))
+    ]
+    for other in runs[1:]:
+        np.testing.assert_array_equal(runs[0].samples, other.samples)
+    different = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=settings, trials=1200,
+                                     seed=6, block_size=500)
+    assert not np.array_equal(different.samples, runs[0].samples)
+
+
+def test_chord_solver_matches_exact_gauss_newton(paper) -> None:
+    model, sim = paper
+    results = {
+        jac: evaluate_uncertainty(model, sim.campaign, TEST_JOINTS,
+                                  settings=UncertaintySettings(sources=("tracker", "encoder", "pose_choice"), jacobian=jac),
+                                  trials=400, seed=3)
+        for jac in ("frozen", "exact")
+    }
+    diff = np.abs(results["frozen"].samples[:, :3] - results["exact"].samples[:, :3]).max()
+    u = np.sqrt(np.diag(results["exact"].poses[0].covariance))
+    # The chord fixed point differs from Gauss-Newton's by (J_t - J*)^T r: second order,
+    # here ~1e-8 m against u ~ 2e-5 m. Allow 1e-3 u.
+    assert diff < 1e-3 * u.min()
+
+
+def test_batched_reidentification_matches_scipy_least_squares(paper) -> None:
+    """Independent reference: scipy's least_squares on each perturbed campaign (lambda = 0)."""
+    model, sim = paper
+    cal = identify(model, sim.campaign, lambda_=0.0)
+    est = np.flatnonzero(cal.estimated)
+    scale = cal.column_scale[est]
+    problem = BatchProblem(model.layout, cal.nominal, est, scale)
+    rng = np.random.default_rng(0)
+    n_trials = 3
+    q = sim.campaign.joint_positions[None] + rng.uniform(-1e-4, 1e-4, (n_trials, *sim.campaign.joint_positions.shape))
+    pts = sim.campaign.points[None] + rng.uniform(-5e-6, 5e-6, (n_trials, sim.campaign.n_poses, 3))
+    x_hat = (cal.estimate[est] - cal.nominal[est]) * scale
+    solver = ChordSolver.at(problem, cal.estimate, sim.campaign.joint_positions)
+    x, _ = solver.solve(q, pts, None, np.zeros(n_trials), x_hat)
+    batch_params = problem.parameters(x)
+    for t in range(n_trials):
+        def resid(p_est, t=t):
+            p = cal.nominal.copy()
+            p[est] = p_est
+            return (forward_points(model.layout, p, q[t]) - pts[t]).ravel()
+
+        ref = least_squares(resid, cal.estimate[est], x_scale=1.0 / scale, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        p_ref = cal.nominal.copy()
+        p_ref[est] = ref.x
+        y_ref = forward_points(model.layout, p_ref, TEST_JOINTS[None])
+        y_batch = forward_points(model.layout, batch_params[t], TEST_JOINTS[None])
+        assert np.abs(y_ref - y_batch).max() < 1e-8
+
+
+def test_gum_agrees_with_monte_carlo_for_noise_sources(paper) -> None:
+    model, sim = paper
+    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(), trials=20000, seed=2)
+    pose = result.poses[0]
+    u_mc = np.sqrt(np.diag(pose.covariance))
+    assert pose.gum.applicable
+    # The model is nearly linear at micrometre perturbations: first order should match the
+    # Monte Carlo within its sampling error (~1/sqrt(2M) = 0.5 %) plus a margin: 3 %.
+    np.testing.assert_allclose(pose.gum.standard_uncertainty, u_mc, rtol=0.03)
+    # The mean moves by far less than u from the calibrated prediction.
+    assert np.all(np.abs(pose.mean - pose.gum.estimate) < 0.05 * u_mc)
+
+
+def test_nonsmooth_sources_mark_gum_not_applicable(paper) -> None:
+    model, sim = paper
+    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(sources=("pose_choice",)), trials=300, seed=2)
+    assert not result.poses[0].gum.applicable
+    assert not any(result.poses[0].gum.validated)
+
+
+def test_fewer_equations_give_larger_uncertainty(paper) -> None:
+    model, sim = paper
+    full = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=3000, seed=1)
+    small = sim.campaign.subset(slice(0, 15))
+    few = evaluate_uncertainty(model, small, TEST_JOINTS, trials=3000, seed=1)
+    assert np.all(np.diag(few.poses[0].covariance) > np.diag(full.poses[0].covariance))
+
+
+def test_positions_are_in_the_identified_base_frame_for_tracker_campaigns() -> None:
+    """Tracker data cannot separate the base from joint 1's geometry: the base frame is the
+    identified one (joint 1 nominal). The truth, seen from that frame, must be covered."""
+    from robocal_uncertainty.core.robot_model import rpy_to_matrix
+
+    model = dataclasses.replace(load_robot_model("config/paper_arm.yaml"), base_known=False)
+    sim = simulate_campaign(model, SimulationSettings(frame="tracker"), seed=4)
+    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1)
+    truth_world = forward_points(model.layout, sim.true_model.parameter_vector(), TEST_JOINTS[None])[0]
+    b0 = model.layout.base_index
+    base = result.calibration.estimate[b0 : b0 + 6]
+    truth_base = rpy_to_matrix(base[3:]).T @ (truth_world - base[:3])
+    u = np.sqrt(np.diag(result.poses[0].covariance))
+    assert np.all(np.abs(result.poses[0].mean - truth_base) < 5 * u)
+    # Seen from the true base frame instead, the unobservable joint-1 errors show up.
+    p_true = sim.true_model.parameter_vector()
+    p_true[b0:] = 0.0
+    naive = forward_points(model.layout, p_true, TEST_JOINTS[None])[0]
+    assert np.any(np.abs(result.poses[0].mean - naive) > 5 * u)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"trials": 0}, "trials must be a positive integer"),
+        ({"trials": -5}, "trials must be a positive integer"),
+        ({"coverage": 1.0}, r"coverage probability must be in \(0, 1\)"),
+        ({"coverage": 0.0}, r"coverage probability must be in \(0, 1\)"),
+        ({"test_joint_positions": np.zeros(5)}, "test joints must have 6 values"),
+        ({"settings": UncertaintySettings(sources=("lambda",), lambda_range=(10.0, 20.0))}, "excludes the calibration's optimum"),
+        ({"settings": UncertaintySettings(sources=("pose_choice",), subset_size=2)}, "subset_size = 2 must lie between"),
+    ],
+)
+def test_bad_settings_give_one_line_errors(paper, kwargs, match) -> None:
+    model, sim = paper
+    call = {"test_joint_positions": TEST_JOINTS, "trials": 100, **kwargs}
+    with pytest.raises(ConfigError, match=match) as info:
+        evaluate_uncertainty(model, sim.campaign, call.pop("test_joint_positions"), **call)
+    assert "\n" not in str(info.value)
+
+
+def test_unknown_source_names_are_refused() -> None:
+    with pytest.raises(ConfigError, match="unknown uncertainty source"):
+        parse_sources("tracker,thermal")
+    with pytest.raises(ConfigError, match="unknown uncertainty source"):
+        UncertaintySettings(sources=("magic",))
+    assert parse_sources("all") == ("tracker", "encoder", "lambda", "n_poses", "pose_choice", "residual")
+
+
+def test_residual_source_reflects_real_robot_scatter() -> None:
+    """Residual scatter on the real UR10 dwarfs tracker noise; the residual source must show it."""
+    from pathlib import Path
+
+    from robocal_uncertainty.importers import read_tracker_csv
+
+    csv = Path("test/data/ur10_laser_tracker/measurements_iso_cubes.csv")
+    campaign = read_tracker_csv(csv)
+    model = load_robot_model("config/ur10.yaml")
+    train = campaign.subset(np.random.default_rng(0).permutation(campaign.n_poses)[:53])
+    test_q = train.joint_positions[0]
+    settings_noise = UncertaintySettings(sources=("tracker", "encoder"))
+    settings_resid = UncertaintySettings(sources=("residual",))
+    noise = evaluate_uncertainty(model, train, test_q, settings=settings_noise, trials=500, seed=0)
+    resid = evaluate_uncertainty(model, train, test_q, settings=settings_resid, trials=500, seed=0)
+    u_noise = np.sqrt(np.trace(noise.poses[0].covariance))
+    u_resid = np.sqrt(np.trace(resid.poses[0].covariance))
+    rms_after = noise.calibration.rms_after
+    # Model inadequacy: the prediction scatter is at least the residual RMS, and far above
+    # what tracker and encoder noise alone explain.
+    assert u_resid > 0.9 * rms_after
+    assert u_resid > 3 * u_noise
