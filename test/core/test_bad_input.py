@@ -253,7 +253,7 @@ def test_malformed_yaml(tmp_path: Path) -> None:
     path.write_text(
         "name: x\nconvention: modified_dh\nunits: {length: mm, angle: deg\njoints: []\n"
     )
-    with pytest.raises(ConfigError, match=r"broken\.yaml is not valid YAML: ") as exc:
+    with pytest.raises(ConfigError, match=r"broken\.yaml is not valid YAML at line \d+, column \d+: ") as exc:
         load_robot_model(path)
     one_line(exc)
 
