@@ -164,7 +164,7 @@ class ChordSolver:
         *,
         initial_prediction: Array | None = None,
         max_iterations: int = 6,
-        relative_tolerance: float = 1e-4,
+        relative_tolerance: float = 1e-3,
     ) -> tuple[Array, int]:
         """Solve T regularised identifications.
 
@@ -184,8 +184,9 @@ class ChordSolver:
         max_iterations : int
         relative_tolerance : float
             Stop when every trial's step is below this fraction of its first step. The
-            chord iteration contracts by ~1e-4 per step here, so the error left is about
-            1e-8 of the trial's deviation from the calibration.
+            chord iteration contracts by ~1e-4 per step here, so two steps usually suffice
+            and the error left is ~1e-8 of the trial's deviation (about 1e-12 m on the
+            seed's case, measured against a 14-digit solution).
 
         Returns
         -------
