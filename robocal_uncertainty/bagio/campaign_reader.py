@@ -1,0 +1,352 @@
+"""Read a campaign from an MCAP file or a rosbag2 directory.
+
+Accepted inputs:
+
+* a single ``.mcap`` file written by
+  :class:`~robocal_uncertainty.bagio.campaign_mcap.CampaignRecorder` (with the
+  ``robocal_campaign`` metadata record), also when truncated by a crash;
+* any other single MCAP file with ROS 2 CDR messages (e.g. ``ros2 bag record -s mcap``);
+* a rosbag2 directory (``metadata.yaml`` with ``.mcap`` or ``.db3`` storage).
+
+Poses are built from the point messages (``geometry_msgs/msg/PointStamped``), in the order
+they are read (file order for a single MCAP file, log-time order for a rosbag2 directory).
+Each point is paired with the ``sensor_msgs/msg/JointState`` message of identical header
+stamp, or, with ``stamp_tolerance_ns > 0`` and no exact match, the nearest one within the
+tolerance (see :mod:`~robocal_uncertainty.bagio.pairing`). Unpaired points are dropped with
+a warning; unpaired joint states are ignored. Joint positions are mapped by
+``JointState.name``, so the joint order may differ between messages.
+
+Without the metadata record the frame comes from the points' ``header.frame_id``: ``"base"``
+when it equals `base_frame_id`, ``"tracker"`` otherwise.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.bagio.campaign_format import (
+    JOINT_TOPIC,
+    METADATA_NAME,
+    POINT_STD_TOPIC,
+    POINT_TOPIC,
+    CampaignHeader,
+    parse_header,
+)
+from robocal_uncertainty.bagio.mcap_stream import McapContents, RawMessage, is_mcap, read_mcap_file
+from robocal_uncertainty.bagio.pairing import pair_by_stamp
+from robocal_uncertainty.bagio.ros_messages import (
+    DECODE_ERRORS,
+    JOINT_STATE,
+    POINT_STAMPED,
+    VECTOR3_STAMPED,
+    JointReading,
+    VectorReading,
+    decode_joint_state,
+    decode_vector_stamped,
+)
+from robocal_uncertainty.bagio.rosbag2_dir import is_rosbag2_dir, read_rosbag2_dir
+from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.errors import BagError, CampaignError, InputError
+
+__all__ = ["read_campaign"]
+
+
+def _load(path: Path, topics: tuple[str, ...]) -> tuple[McapContents, str]:
+    if not path.exists():
+        msg = f"campaign file not found: {path}"
+        raise CampaignError(msg)
+    try:
+        if is_rosbag2_dir(path):
+            return read_rosbag2_dir(path, topics), "rosbag2"
+        if path.is_file() and is_mcap(path):
+            return read_mcap_file(path), "mcap"
+    except OSError as err:
+        msg = f"cannot read campaign {path}: {err.strerror or err}"
+        raise CampaignError(msg) from err
+    msg = f"not a campaign: {path} is neither an MCAP file nor a rosbag2 directory"
+    raise CampaignError(msg)
+
+
+def _topic_messages(
+    contents: McapContents, topic: str, typename: str, path: Path, *, required: bool
+) -> list[RawMessage]:
+    channels = {c for c in contents.channels if c.topic == topic}
+    if not channels:
+        if not required:
+            return []
+        known = sorted({c.topic for c in contents.channels})
+        msg = f"{path}: topic {topic} not found (topics: {known})"
+        raise BagError(msg)
+    for channel in channels:
+        if channel.schema_name != typename:
+            msg = f"{path}: topic {topic} has type {channel.schema_name!r}, expected {typename}"
+            raise BagError(msg)
+        if channel.message_encoding != "cdr":
+            msg = f"{path}: topic {topic} has encoding {channel.message_encoding!r}, expected 'cdr'"
+            raise BagError(msg)
+    return [m for m in contents.messages if m.channel.topic == topic]
+
+
+def _decode_joints(raw: list[RawMessage], path: Path) -> list[JointReading]:
+    readings = []
+    for index, message in enumerate(raw):
+        try:
+            reading = decode_joint_state(message.data)
+        except DECODE_ERRORS as err:
+            msg = f"{path}: cannot decode {JOINT_STATE} #{index} on {message.channel.topic}: {err}"
+            raise BagError(msg) from err
+        if not np.isfinite(reading.positions).all():
+            topic = message.channel.topic
+            msg = f"{path}: NaN or inf in {topic} message at stamp {reading.stamp_ns} ns"
+            raise BagError(msg)
+        readings.append(reading)
+    return readings
+
+
+def _decode_vectors(raw: list[RawMessage], typename: str, path: Path) -> list[VectorReading]:
+    readings = []
+    for index, message in enumerate(raw):
+        try:
+            reading = decode_vector_stamped(message.data, typename)
+        except DECODE_ERRORS as err:
+            msg = f"{path}: cannot decode {typename} #{index} on {message.channel.topic}: {err}"
+            raise BagError(msg) from err
+        if not np.isfinite(reading.xyz).all():
+            topic = message.channel.topic
+            msg = f"{path}: NaN or inf in {topic} message at stamp {reading.stamp_ns} ns"
+            raise BagError(msg)
+        readings.append(reading)
+    return readings
+
+
+def _joint_matrix(
+    readings: list[JointReading], names: tuple[str, ...] | None, topic: str, path: Path
+) -> tuple[tuple[str, ...], NDArray[np.float64]]:
+    """Return joint names and positions (n_msgs, n_joints) [rad], mapped by name."""
+    reference = names if names is not None else readings[0].names
+    column = {name: j for j, name in enumerate(reference)}
+    positions = np.empty((len(readings), len(reference)), dtype=np.float64)
+    for i, reading in enumerate(readings):
+        if len(set(reading.names)) != len(reading.names) or set(reading.names) != set(reference):
+            msg = (
+                f"{path}: JointState messages on {topic} have differing joint names: "
+                f"{list(reference)} vs {list(reading.names)} at stamp {reading.stamp_ns} ns"
+            )
+            raise BagError(msg)
+        positions[i, [column[n] for n in reading.names]] = reading.positions
+    return reference, positions
+
+
+def _unique_stamps(stamps: NDArray[np.int64], topic: str, path: Path) -> None:
+    values, counts = np.unique(stamps, return_counts=True)
+    if (counts > 1).any():
+        msg = f"{path}: several {topic} messages share the stamp {int(values[counts > 1][0])} ns"
+        raise BagError(msg)
+
+
+def _frame(
+    points: list[VectorReading], header: CampaignHeader | None, base_frame_id: str, path: Path
+) -> tuple[PointFrame, str]:
+    frame_ids = sorted({p.frame_id for p in points})
+    if header is not None:
+        if frame_ids != [header.frame_id]:
+            msg = f"{path}: frame ids {frame_ids} differ from the campaign's {header.frame_id!r}"
+            raise BagError(msg)
+        return header.frame, header.frame_id
+    if len(frame_ids) != 1:
+        msg = f"{path}: points are given in several frames {frame_ids}"
+        raise BagError(msg)
+    if not frame_ids[0]:
+        msg = f"{path}: PointStamped header.frame_id is empty, the points' frame is unknown"
+        raise BagError(msg)
+    return ("base" if frame_ids[0] == base_frame_id else "tracker"), frame_ids[0]
+
+
+def _point_std(
+    std_readings: list[VectorReading], stamps: NDArray[np.int64], topic: str, path: Path
+) -> NDArray[np.float64] | None:
+    if not std_readings:
+        return None
+    by_stamp = {r.stamp_ns: r.xyz for r in std_readings}
+    if len(by_stamp) != len(std_readings):
+        _unique_stamps(np.array([r.stamp_ns for r in std_readings], dtype=np.int64), topic, path)
+    missing = [int(s) for s in stamps if int(s) not in by_stamp]
+    if missing:
+        msg = f"{path}: no {topic} message for the point at stamp {missing[0]} ns"
+        raise BagError(msg)
+    return np.array([by_stamp[int(s)] for s in stamps], dtype=np.float64).reshape(-1, 3)
+
+
+def _decode_all(
+    contents: McapContents, topics: tuple[str, str, str], path: Path
+) -> tuple[list[JointReading], list[VectorReading], list[VectorReading]]:
+    """Decode joint states, points and point std; raise when no pose can be formed."""
+    joint_topic, point_topic, std_topic = topics
+    if contents.truncated and not contents.messages:
+        raise BagError(_early(path))
+    joints = _decode_joints(
+        _topic_messages(contents, joint_topic, JOINT_STATE, path, required=True), path
+    )
+    raw_points = _topic_messages(contents, point_topic, POINT_STAMPED, path, required=True)
+    points = _decode_vectors(raw_points, POINT_STAMPED, path)
+    raw_stds = _topic_messages(contents, std_topic, VECTOR3_STAMPED, path, required=False)
+    stds = _decode_vectors(raw_stds, VECTOR3_STAMPED, path)
+    if (not joints or not points) and contents.truncated:
+        raise BagError(_early(path))
+    if not joints or not points:
+        msg = (
+            f"{path}: no pose found ({len(joints)} {joint_topic} and "
+            f"{len(points)} {point_topic} messages)"
+        )
+        raise BagError(msg)
+    return joints, points, stds
+
+
+def _early(path: Path) -> str:
+    return f"{path} is truncated before its first complete pose (writer stopped early)"
+
+
+def _pair(
+    joints: list[JointReading],
+    point_stamps: NDArray[np.int64],
+    tolerance_ns: int,
+    topics: tuple[str, str, str],
+    path: Path,
+    *,
+    truncated: bool,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Pair points with joint states; warn about dropped points and truncation."""
+    joint_topic, point_topic, _ = topics
+    joint_stamps = np.array([r.stamp_ns for r in joints], dtype=np.int64)
+    _unique_stamps(joint_stamps, joint_topic, path)
+    _unique_stamps(point_stamps, point_topic, path)
+    point_index, joint_index = pair_by_stamp(joint_stamps, point_stamps, tolerance_ns)
+    if point_index.size == 0 and truncated:
+        raise BagError(_early(path))
+    if point_index.size == 0:
+        msg = (
+            f"{path}: no pose found: no {point_topic} message has a {joint_topic} message "
+            f"within {tolerance_ns} ns of its stamp"
+        )
+        raise BagError(msg)
+    dropped = point_stamps.size - point_index.size
+    if dropped:
+        warnings.warn(
+            f"{path}: {dropped} of {point_stamps.size} points on {point_topic} have no "
+            f"{joint_topic} message within {tolerance_ns} ns and were dropped",
+            stacklevel=3,
+        )
+    if truncated:
+        warnings.warn(
+            f"{path} is truncated (writer stopped before the footer); recovered "
+            f"{point_index.size} poses up to the last complete record",
+            stacklevel=3,
+        )
+    return point_index, joint_index
+
+
+def read_campaign(
+    path: str | Path,
+    *,
+    base_frame_id: str = "base_link",
+    joint_topic: str | None = None,
+    point_topic: str | None = None,
+    point_std_topic: str | None = None,
+    stamp_tolerance_ns: int = 0,
+) -> Campaign:
+    """Read a campaign from an MCAP file or a rosbag2 directory.
+
+    Parameters
+    ----------
+    path : str or Path
+        A single ``.mcap`` file or a rosbag2 directory.
+    base_frame_id : str
+        Without a campaign metadata record, points whose ``header.frame_id`` equals this are
+        taken as in the robot base frame (``frame="base"``), others as ``"tracker"``.
+    joint_topic, point_topic, point_std_topic : str, optional
+        Topic names; default: those in the metadata record, else ``/joint_states``,
+        ``/tracker/point`` and ``/tracker/point_std``.
+    stamp_tolerance_ns : int
+        Largest stamp difference [ns] accepted when a point has no joint state with the same
+        stamp (default 0: exact match only).
+
+    Returns
+    -------
+    Campaign
+        Joint positions [rad], points [m], optional point_std [m], stamps_ns [ns] (None when
+        the writer synthesised them) and metadata (the stored dict, or provenance for files
+        without a metadata record).
+
+    Raises
+    ------
+    CampaignError
+        If the path is missing or is not an MCAP file or rosbag2 directory.
+    BagError
+        Missing topics, wrong message types or encodings, undecodable messages, NaN, differing
+        joint names, repeated stamps or no pose at all.
+
+    Warns
+    -----
+    UserWarning
+        When the file was truncated (recovered up to the last complete record) or when
+        points without a matching joint state were dropped.
+    """
+    path = Path(path)
+    wanted = (
+        joint_topic or JOINT_TOPIC,
+        point_topic or POINT_TOPIC,
+        point_std_topic or POINT_STD_TOPIC,
+    )
+    contents, source = _load(path, wanted)
+    record = contents.metadata.get(METADATA_NAME)
+    header = None if record is None else parse_header(record, str(path))
+    if header is not None:
+        wanted = (
+            joint_topic or header.joint_topic,
+            point_topic or header.point_topic,
+            point_std_topic or header.point_std_topic,
+        )
+    joint_topic, point_topic, point_std_topic = wanted
+    joints, points, stds = _decode_all(contents, wanted, path)
+    names, positions = _joint_matrix(
+        joints, header.joint_names if header else None, joint_topic, path
+    )
+    point_stamps = np.array([r.stamp_ns for r in points], dtype=np.int64)
+    point_index, joint_index = _pair(
+        joints, point_stamps, stamp_tolerance_ns, wanted, path, truncated=contents.truncated
+    )
+    dropped = len(points) - point_index.size
+    kept = [points[i] for i in point_index]
+    stamps = point_stamps[point_index]
+    frame, frame_id = _frame(kept, header, base_frame_id, path)
+    if header is not None:
+        metadata = dict(header.metadata)
+    else:
+        metadata = {
+            "source_file": path.name,
+            "source_format": source,
+            "joint_topic": joint_topic,
+            "point_topic": point_topic,
+            "stamp_tolerance_ns": stamp_tolerance_ns,
+            "points_dropped": dropped,
+        }
+    try:
+        return Campaign(
+            joint_names=names,
+            joint_positions=positions[joint_index],
+            points=np.array([p.xyz for p in kept], dtype=np.float64),
+            frame=frame,
+            frame_id=frame_id,
+            point_std=_point_std(stds, stamps, point_std_topic, path),
+            stamps_ns=None if header is not None and header.stamps_synthetic else stamps,
+            metadata=metadata,
+        )
+    except InputError as err:
+        if isinstance(err, CampaignError):
+            raise
+        msg = f"{path}: {err}"
+        raise BagError(msg) from err
