@@ -1,0 +1,356 @@
+"""Import a laser-tracker measurement table (CSV) as a :class:`Campaign`.
+
+Profiles
+--------
+``ipa``
+    The "ipa-robot-accuracy" UR10 dataset (Landgraf et al. 2021): semicolon separator,
+    decimal comma, joint columns ``shoulder_pan_joint`` ... ``wrist_3_joint`` in rad,
+    ``measurement_x/y/z`` and ``measurement_std_x/y/z`` in mm, points in the tracker frame
+    (``frame="tracker"``, ``frame_id="laser_tracker"``). Its ``Timestamp`` column is mangled
+    by a spreadsheet (``2,02103E+13``) and is not used.
+``generic``
+    Comma- or semicolon-separated (semicolon: a comma inside a number is a decimal comma),
+    one header row. Units are written in the header, ``name[unit]`` or ``name(unit)``, or
+    given by `length_unit` / `angle_unit`; a column with no unit anywhere is an error.
+    Columns: ``x``, ``y``, ``z`` (optionally prefixed ``point_``/``measurement_``) for the
+    point; ``std_x`` or ``x_std`` (same prefixes) for its standard deviation; joint columns
+    are those named in `joint_columns`, else every column whose name contains ``joint`` or
+    is ``q<digits>``, in file order. Other columns are ignored (listed in the metadata).
+``auto`` (default)
+    ``ipa`` when the header has all its joint and measurement columns, else ``generic``.
+
+Units: lengths m, mm, um (also µm); angles rad, deg. Lengths are converted exactly from
+their decimal text (see :mod:`~robocal_uncertainty.importers.units`).
+
+Metadata of the campaign: ``source_file``, ``source_format`` ("csv"), ``profile``,
+``source_rows`` (0-based index of every kept pose among the non-blank rows after the
+header, as ``pandas.read_csv`` numbers them), ``skipped_rows`` (same numbering), ``units``
+(per column used) and ``ignored_columns``. Error messages name the file line and data row.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.errors import CampaignError, InputError
+from robocal_uncertainty.importers.units import (
+    ANGLE_UNITS,
+    LENGTH_UNITS,
+    UnitKind,
+    canonical_unit,
+    to_si,
+)
+
+__all__ = ["IPA_JOINTS", "Profile", "read_tracker_csv"]
+
+Profile = Literal["auto", "ipa", "generic"]
+
+IPA_JOINTS: tuple[str, ...] = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+_IPA_POINT = ("measurement_x", "measurement_y", "measurement_z")
+_IPA_STD = ("measurement_std_x", "measurement_std_y", "measurement_std_z")
+_IPA_FRAME_ID = "laser_tracker"
+
+_HEADER_CELL = re.compile(
+    r"^\s*(?P<name>[^\[\(]*?)\s*(?:[\[\(]\s*(?P<unit>[^\]\)]*?)\s*[\]\)])?\s*$"
+)
+_PREFIX = r"(?:(?:point|measurement|meas|tracker)_)?"
+_POINT_NAME = re.compile(rf"^{_PREFIX}(?P<axis>[xyz])$", re.IGNORECASE)
+_STD_NAME = re.compile(rf"^{_PREFIX}(?:std_(?P<a>[xyz])|(?P<b>[xyz])_std)$", re.IGNORECASE)
+_JOINT_NAME = re.compile(r"^(?:q\d+|.*joint.*)$", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class _Column:
+    """A used column: its index, role (joint/point/std), axis or joint name, and unit."""
+
+    index: int
+    name: str
+    role: Literal["joint", "point", "std"]
+    key: str
+    unit: str
+
+
+def _split_header(cell: str) -> tuple[str, str | None]:
+    match = _HEADER_CELL.match(cell)
+    if match is None:
+        return cell.strip(), None
+    unit = match.group("unit")
+    return match.group("name"), (unit if unit else None)
+
+
+def _resolve_unit(
+    path: Path, name: str, stated: str | None, given: str | None, kind: UnitKind
+) -> str:
+    supported = ", ".join(LENGTH_UNITS if kind == "length" else ANGLE_UNITS)
+    argument = "length_unit" if kind == "length" else "angle_unit"
+    if stated is None and given is None:
+        msg = (
+            f"{path}: column {name!r} has no unit; write it in the header as "
+            f"'{name}[unit]' or pass {argument} (supported: {supported})"
+        )
+        raise InputError(msg)
+    units = [canonical_unit(u, kind) for u in (stated, given) if u is not None]
+    if None in units:
+        bad = stated if stated is not None and canonical_unit(stated, kind) is None else given
+        msg = (
+            f"{path}: column {name!r} has unsupported {kind} unit {bad!r} (supported: {supported})"
+        )
+        raise InputError(msg)
+    if len(set(units)) > 1:
+        msg = f"{path}: column {name!r} states unit {stated!r} but {argument}={given!r} was passed"
+        raise InputError(msg)
+    return str(units[0])
+
+
+def _ipa_columns(
+    path: Path, header: list[str], length_unit: str | None, angle_unit: str | None
+) -> list[_Column]:
+    checks: tuple[tuple[str | None, str, UnitKind], ...] = (
+        (length_unit, "mm", "length"),
+        (angle_unit, "rad", "angle"),
+    )
+    for given, fixed, kind in checks:
+        if given is not None and canonical_unit(given, kind) != fixed:
+            msg = f"{path}: the ipa profile has {kind}s in {fixed}, got {kind}_unit={given!r}"
+            raise InputError(msg)
+    position = {cell.strip(): i for i, cell in enumerate(header)}
+    missing = [n for n in IPA_JOINTS + _IPA_POINT + _IPA_STD if n not in position]
+    if missing:
+        msg = f"{path}: not in the ipa format, columns {missing} are missing"
+        raise InputError(msg)
+    columns = [_Column(position[n], n, "joint", n, "rad") for n in IPA_JOINTS]
+    columns += [_Column(position[n], n, "point", n[-1], "mm") for n in _IPA_POINT]
+    columns += [_Column(position[n], n, "std", n[-1], "mm") for n in _IPA_STD]
+    return columns
+
+
+def _generic_columns(
+    path: Path,
+    header: list[str],
+    length_unit: str | None,
+    angle_unit: str | None,
+    joint_columns: tuple[str, ...] | None,
+) -> tuple[list[_Column], list[str]]:
+    columns: list[_Column] = []
+    ignored: list[str] = []
+    for index, cell in enumerate(header):
+        name, stated = _split_header(cell)
+        point, std = _POINT_NAME.match(name), _STD_NAME.match(name)
+        is_joint = (
+            name in joint_columns if joint_columns is not None else bool(_JOINT_NAME.match(name))
+        )
+        if is_joint:
+            unit = _resolve_unit(path, name, stated, angle_unit, "angle")
+            columns.append(_Column(index, name, "joint", name, unit))
+        elif point is not None:
+            unit = _resolve_unit(path, name, stated, length_unit, "length")
+            columns.append(_Column(index, name, "point", point.group("axis").lower(), unit))
+        elif std is not None:
+            unit = _resolve_unit(path, name, stated, length_unit, "length")
+            axis = (std.group("a") or std.group("b")).lower()
+            columns.append(_Column(index, name, "std", axis, unit))
+        else:
+            ignored.append(cell.strip())
+    joints = [c for c in columns if c.role == "joint"]
+    if joint_columns is not None and len(joints) != len(joint_columns):
+        found = {c.name for c in joints}
+        absent = [n for n in joint_columns if n not in found]
+        msg = f"{path}: joint columns {absent} not in the header"
+        raise InputError(msg)
+    if not joints:
+        msg = (
+            f"{path}: no joint column found (names containing 'joint' or q1, q2, ...; "
+            "or pass joint_columns)"
+        )
+        raise InputError(msg)
+    for role, needed in (("point", True), ("std", False)):
+        axes = sorted(c.key for c in columns if c.role == role)
+        if axes != ["x", "y", "z"] and (needed or axes):
+            msg = f"{path}: {role} columns must be exactly one each of x, y, z, found {axes}"
+            raise InputError(msg)
+    names = [c.name for c in joints]
+    if len(set(names)) != len(names):
+        msg = f"{path}: joint column names repeat: {names}"
+        raise InputError(msg)
+    return columns, ignored
+
+
+def _read_rows(path: Path) -> tuple[str, list[list[str]], list[int]]:
+    """Return the separator, the rows (header first) and each row's line number."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError as err:
+        msg = f"tracker CSV file not found: {path}"
+        raise CampaignError(msg) from err
+    except (OSError, UnicodeDecodeError) as err:
+        msg = f"cannot read tracker CSV {path}: {err}"
+        raise CampaignError(msg) from err
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    if not first:
+        msg = f"tracker CSV {path} is empty"
+        raise InputError(msg)
+    separator = ";" if ";" in first else ","
+    reader = csv.reader(text.splitlines(), delimiter=separator)
+    rows, lines = [], []
+    for row in reader:
+        if any(field.strip() for field in row):
+            rows.append(row)
+            lines.append(reader.line_num)
+    return separator, rows, lines
+
+
+def read_tracker_csv(
+    path: str | Path,
+    *,
+    profile: Profile = "auto",
+    length_unit: str | None = None,
+    angle_unit: str | None = None,
+    skip_invalid: bool = False,
+    joint_columns: tuple[str, ...] | list[str] | None = None,
+    frame: PointFrame | None = None,
+    frame_id: str | None = None,
+) -> Campaign:
+    """Read a tracker CSV into a campaign with joint positions [rad] and points [m].
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    profile : {"auto", "ipa", "generic"}
+        File layout (see the module documentation).
+    length_unit, angle_unit : str, optional
+        Units of columns whose header states none (``generic``), or a check of the fixed
+        units (``ipa``: mm and rad). A header unit different from the argument is an error.
+    skip_invalid : bool
+        Drop rows with empty, non-numeric, NaN/inf or negative-std values, or a wrong field
+        count (listed in ``metadata["skipped_rows"]``) instead of raising.
+    joint_columns : sequence of str, optional
+        ``generic``: names (without unit) of the joint columns, in the wanted order.
+    frame, frame_id : optional
+        Frame of the points; ``ipa``: ``"tracker"``/``"laser_tracker"`` (fixed);
+        ``generic``: default ``"tracker"`` and ``"tracker"`` (``"base_link"`` for base).
+
+    Returns
+    -------
+    Campaign
+        joint_positions (n, n_joints) [rad], points (n, 3) [m], point_std (n, 3) [m] when the
+        file has std columns, no stamps.
+
+    Raises
+    ------
+    CampaignError
+        The file is missing or unreadable.
+    InputError
+        Unknown profile, missing columns, a column without (or with an unsupported) unit, or
+        an invalid row (unless `skip_invalid`).
+    """
+    path = Path(path)
+    if profile not in ("auto", "ipa", "generic"):
+        msg = f"unknown tracker CSV profile {profile!r} (expected 'auto', 'ipa' or 'generic')"
+        raise InputError(msg)
+    separator, rows, lines = _read_rows(path)
+    header = rows[0]
+    cells = {cell.strip() for cell in header}
+    if profile == "auto":
+        profile = "ipa" if set(IPA_JOINTS + _IPA_POINT + _IPA_STD) <= cells else "generic"
+    if profile == "ipa":
+        columns = _ipa_columns(path, header, length_unit, angle_unit)
+        used = {c.index for c in columns}
+        ignored = [cell.strip() for i, cell in enumerate(header) if i not in used]
+        if (frame or "tracker") != "tracker" or (frame_id or _IPA_FRAME_ID) != _IPA_FRAME_ID:
+            msg = (
+                f"{path}: the ipa profile is in frame 'tracker'/{_IPA_FRAME_ID!r}, "
+                f"got {frame!r}/{frame_id!r}"
+            )
+            raise InputError(msg)
+        frame, frame_id = "tracker", _IPA_FRAME_ID
+    else:
+        names = None if joint_columns is None else tuple(joint_columns)
+        columns, ignored = _generic_columns(path, header, length_unit, angle_unit, names)
+        if names is not None:
+            order = {n: i for i, n in enumerate(names)}
+            columns.sort(key=lambda c: (c.role != "joint", order.get(c.name, 0)))
+        frame = frame or "tracker"
+        frame_id = frame_id or ("base_link" if frame == "base" else "tracker")
+    joints = [c for c in columns if c.role == "joint"]
+    axes = {c.role + c.key: c for c in columns if c.role != "joint"}
+    has_std = "stdx" in axes
+    q_rows, p_rows, s_rows, kept, skipped = [], [], [], [], []
+    for data_row, (row, line) in enumerate(zip(rows[1:], lines[1:], strict=True)):
+        try:
+            values = _parse_row(row, header, columns, separator)
+        except ValueError as err:
+            if not skip_invalid:
+                msg = f"{path}: line {line} (data row {data_row}): {err}"
+                raise InputError(msg) from None
+            skipped.append(data_row)
+            continue
+        q_rows.append([values[c.index] for c in joints])
+        p_rows.append([values[axes["point" + a].index] for a in "xyz"])
+        if has_std:
+            s_rows.append([values[axes["std" + a].index] for a in "xyz"])
+        kept.append(data_row)
+    if not kept:
+        msg = f"{path}: no valid data row ({len(skipped)} skipped)"
+        raise InputError(msg)
+    metadata: dict[str, object] = {
+        "source_file": path.name,
+        "source_format": "csv",
+        "profile": profile,
+        "source_rows": kept,
+        "skipped_rows": skipped,
+        "units": {c.name: c.unit for c in columns},
+        "ignored_columns": ignored,
+    }
+    return Campaign(
+        joint_names=tuple(c.name for c in joints),
+        joint_positions=np.array(q_rows, dtype=np.float64),
+        points=np.array(p_rows, dtype=np.float64),
+        frame=frame,
+        frame_id=frame_id,
+        point_std=np.array(s_rows, dtype=np.float64) if has_std else None,
+        metadata=metadata,
+    )
+
+
+def _parse_row(
+    row: list[str], header: list[str], columns: list[_Column], separator: str
+) -> dict[int, float]:
+    """Return SI values by column index; ValueError names the bad column."""
+    while len(row) > len(header) and not row[-1].strip():
+        row = row[:-1]
+    if len(row) != len(header):
+        msg = f"has {len(row)} fields, the header has {len(header)}"
+        raise ValueError(msg)
+    values: dict[int, float] = {}
+    for column in columns:
+        text = row[column.index].strip()
+        if separator == ";":
+            text = text.replace(",", ".")
+        if not text:
+            msg = f"column {column.name!r} is empty"
+            raise ValueError(msg)
+        try:
+            value = to_si(text, column.unit)
+        except ValueError as err:
+            msg = f"column {column.name!r}: {err}"
+            raise ValueError(msg) from None
+        if column.role == "std" and value < 0:
+            msg = f"column {column.name!r}: negative standard deviation {text!r}"
+            raise ValueError(msg)
+        values[column.index] = value
+    return values
