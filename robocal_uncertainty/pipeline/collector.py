@@ -1,0 +1,573 @@
+"""Static-pose detection: turn joint-state and tracker-point streams into calibration samples.
+
+The arm is *static* at time ``t`` when, over the window ``[t - window_s, t]``,
+
+* at least two joint states arrived, a joint state at or before the window start exists
+  (the window is covered), and the peak-to-peak range of every joint is at most
+  ``joint_motion_threshold`` [rad], and
+* the peak-to-peak range of every coordinate of the tracker points is at most
+  ``tracker_scatter_threshold`` [m] (a window with fewer than two points, e.g. during a
+  beam dropout, does not veto: the joints alone decide).
+
+A *dwell* starts at the window start of the first static window and ends at the first
+message whose window is not static. When it ends, the collector emits ONE
+:class:`~robocal_uncertainty.pipeline.sample.CalibrationSample` averaging the data of
+``[start + guard_s, end - guard_s]``; the guards drop the tail of the arrival and the
+start of the departure, where the arm moves by less than the thresholds. :meth:`flush`
+(end of the stream) and :meth:`capture_now` emit the current dwell at once (no trailing
+guard); a dwell is emitted at most once.
+
+Time is message time (header stamps, int ns), never the wall clock, so a replay behaves
+exactly like the live run. Bad messages are dropped and counted per cause (see
+:data:`DROP_CAUSES`); the collector keeps running.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.pipeline.sample import CalibrationSample
+
+__all__ = [
+    "DROP_CAUSES",
+    "CollectorSettings",
+    "LogCallback",
+    "StaticPoseCollector",
+    "samples_to_campaign",
+]
+
+LogCallback = Callable[[str, str], None]
+"""``log(cause, message)``: one-line report of a dropped message or rejected dwell."""
+
+DROP_CAUSES: tuple[str, ...] = (
+    "nan",
+    "unknown_joint",
+    "missing_joint",
+    "duplicate_joint",
+    "length_mismatch",
+    "wrong_frame",
+    "backwards_time",
+)
+"""Why a message is dropped: NaN/inf values; a joint name the collector does not know; a
+configured joint absent; a joint name given twice; names and positions (or a point) of
+the wrong length; a point in another frame than the tracker frame; a stamp not after the
+previous accepted one of the same stream."""
+
+_NS_PER_S = 1_000_000_000
+
+
+def _seconds_to_ns(name: str, value: float, *, positive: bool) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        msg = f"{name} must be a finite number of seconds, got {value!r}"
+        raise ConfigError(msg)
+    if value < 0 or (positive and value == 0):
+        msg = f"{name} must be {'> 0' if positive else '>= 0'} s, got {value}"
+        raise ConfigError(msg)
+    return round(value * _NS_PER_S)
+
+
+@dataclass(frozen=True)
+class CollectorSettings:
+    """Tuning of :class:`StaticPoseCollector` (everything except names and frame).
+
+    Parameters
+    ----------
+    window_s : float [s]
+        Length of the sliding window that decides whether the arm is static.
+    joint_motion_threshold : float [rad]
+        Largest peak-to-peak range of any joint over a static window.
+    tracker_scatter_threshold : float [m]
+        Largest peak-to-peak range of any tracker coordinate over a static window.
+    min_points : int
+        Fewest tracker points a dwell must average to give a sample (at least 2).
+    guard_s : float [s]
+        Data dropped at each end of a dwell before averaging.
+    max_average_s : float [s]
+        Longest span averaged: a longer dwell is averaged over its first `max_average_s`
+        after the guard (bounds the memory of an arm parked for hours).
+    log_throttle_s : float [s]
+        At most one ``log`` call per cause per this much message time.
+    ignore_extra_joints : bool
+        Accept joint states carrying joints beyond the configured ones (e.g. a gripper)
+        and ignore those; when False such messages are dropped as ``unknown_joint``.
+    """
+
+    window_s: float = 0.5
+    joint_motion_threshold: float = 5e-4
+    tracker_scatter_threshold: float = 1e-4
+    min_points: int = 10
+    guard_s: float = 0.1
+    max_average_s: float = 30.0
+    log_throttle_s: float = 5.0
+    ignore_extra_joints: bool = False
+
+    def __post_init__(self) -> None:
+        _seconds_to_ns("window_s", self.window_s, positive=True)
+        _seconds_to_ns("guard_s", self.guard_s, positive=False)
+        _seconds_to_ns("max_average_s", self.max_average_s, positive=True)
+        _seconds_to_ns("log_throttle_s", self.log_throttle_s, positive=False)
+        for name in ("joint_motion_threshold", "tracker_scatter_threshold"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+                msg = f"{name} must be a positive number, got {value!r}"
+                raise ConfigError(msg)
+            if not np.isfinite(value):
+                msg = f"{name} must be finite, got {value!r}"
+                raise ConfigError(msg)
+        if isinstance(self.min_points, bool) or not isinstance(self.min_points, int) or self.min_points < 2:
+            msg = f"min_points must be an integer >= 2, got {self.min_points!r}"
+            raise ConfigError(msg)
+
+
+class _Series:
+    """Growing time series: increasing int stamps [ns] and rows of values, array backed."""
+
+    def __init__(self, width: int) -> None:
+        self._t = np.empty(256, dtype=np.int64)
+        self._v = np.empty((256, width), dtype=np.float64)
+        self._lo = 0
+        self._hi = 0
+
+    def __len__(self) -> int:
+        return self._hi - self._lo
+
+    @property
+    def stamps(self) -> NDArray[np.int64]:
+        """Stamps, shape (n,) [ns] (a view)."""
+        return self._t[self._lo : self._hi]
+
+    @property
+    def values(self) -> NDArray[np.float64]:
+        """Values, shape (n, width) (a view)."""
+        return self._v[self._lo : self._hi]
+
+    def append(self, stamp: int, value: NDArray[np.float64]) -> None:
+        if self._hi == self._t.size:
+            n = len(self)
+            if n * 2 > self._t.size:
+                self._t = np.concatenate([self._t, np.empty_like(self._t)])
+                self._v = np.concatenate([self._v, np.empty_like(self._v)])
+            self._t[:n] = self._t[self._lo : self._hi]
+            self._v[:n] = self._v[self._lo : self._hi]
+            self._lo, self._hi = 0, n
+        self._t[self._hi] = stamp
+        self._v[self._hi] = value
+        self._hi += 1
+
+    def index(self, stamp: int, side: Literal["left", "right"] = "left") -> int:
+        """Position of `stamp` in the stamps (numpy ``searchsorted`` semantics)."""
+        return int(np.searchsorted(self.stamps, stamp, side=side))
+
+    def drop_front(self, count: int) -> None:
+        self._lo += count
+
+    def delete(self, start: int, stop: int) -> None:
+        """Remove rows start..stop-1 (relative to the current first row)."""
+        n = len(self)
+        keep = n - stop
+        a, b = self._lo + start, self._lo + stop
+        self._t[a : a + keep] = self._t[b : self._hi].copy()
+        self._v[a : a + keep] = self._v[b : self._hi].copy()
+        self._hi = a + keep
+
+    def clear(self) -> None:
+        self._lo = self._hi = 0
+
+
+class StaticPoseCollector:
+    """Detect static dwells of the arm and emit one averaged sample per dwell.
+
+    Parameters
+    ----------
+    joint_names : sequence of str, length n_joints
+        Joints to average, in the order of the emitted samples.
+    tracker_frame_id : str
+        ``header.frame_id`` expected on tracker points; others are dropped (``wrong_frame``).
+    window_s, joint_motion_threshold, tracker_scatter_threshold, min_points, guard_s,
+    max_average_s, log_throttle_s, ignore_extra_joints
+        See :class:`CollectorSettings` (same defaults, same units).
+    log : callable, optional
+        ``log(cause, message)`` called for dropped messages and rejected dwells, at most
+        once per cause per `log_throttle_s` of message time.
+
+    Raises
+    ------
+    ConfigError
+        Bad settings, empty or repeated joint names, empty frame id.
+
+    Notes
+    -----
+    ``add_joint_state``, ``add_tracker_point``, ``capture_now`` and ``flush`` return the
+    sample they complete, or None. Not thread-safe: call from one thread (one ROS
+    callback group).
+    """
+
+    def __init__(
+        self,
+        joint_names: Sequence[str],
+        *,
+        tracker_frame_id: str,
+        window_s: float = 0.5,
+        joint_motion_threshold: float = 5e-4,
+        tracker_scatter_threshold: float = 1e-4,
+        min_points: int = 10,
+        guard_s: float = 0.1,
+        max_average_s: float = 30.0,
+        log_throttle_s: float = 5.0,
+        ignore_extra_joints: bool = False,
+        log: LogCallback | None = None,
+    ) -> None:
+        names = tuple(str(n) for n in joint_names)
+        if not names or len(set(names)) != len(names) or not all(names):
+            msg = f"joint_names must be unique, non-empty strings, got {list(names)}"
+            raise ConfigError(msg)
+        if not isinstance(tracker_frame_id, str) or not tracker_frame_id:
+            msg = f"tracker_frame_id must be a non-empty string, got {tracker_frame_id!r}"
+            raise ConfigError(msg)
+        self.settings = CollectorSettings(
+            window_s=window_s,
+            joint_motion_threshold=joint_motion_threshold,
+            tracker_scatter_threshold=tracker_scatter_threshold,
+            min_points=min_points,
+            guard_s=guard_s,
+            max_average_s=max_average_s,
+            log_throttle_s=log_throttle_s,
+            ignore_extra_joints=ignore_extra_joints,
+        )
+        self.joint_names = names
+        self.tracker_frame_id = tracker_frame_id
+        self._column = {name: j for j, name in enumerate(names)}
+        self._window_ns = _seconds_to_ns("window_s", window_s, positive=True)
+        self._guard_ns = _seconds_to_ns("guard_s", guard_s, positive=False)
+        self._throttle_ns = _seconds_to_ns("log_throttle_s", log_throttle_s, positive=False)
+        self._max_average_ns = _seconds_to_ns("max_average_s", max_average_s, positive=True)
+        self._log = log
+        self._dropped = dict.fromkeys(DROP_CAUSES, 0)
+        self._last_logged: dict[str, int] = {}
+        self.rejected_dwells = 0
+        """Dwells that ended with too few joint states or tracker points to average."""
+        self._joints = _Series(len(names))
+        self._points = _Series(3)
+        self._last_joint: int | None = None
+        self._last_point: int | None = None
+        self._now: int | None = None
+        self._dwell_start: int | None = None
+        self._captured = False
+
+    @classmethod
+    def from_settings(
+        cls,
+        joint_names: Sequence[str],
+        tracker_frame_id: str,
+        settings: CollectorSettings,
+        *,
+        log: LogCallback | None = None,
+    ) -> StaticPoseCollector:
+        """Build a collector from a :class:`CollectorSettings`."""
+        return cls(
+            joint_names,
+            tracker_frame_id=tracker_frame_id,
+            window_s=settings.window_s,
+            joint_motion_threshold=settings.joint_motion_threshold,
+            tracker_scatter_threshold=settings.tracker_scatter_threshold,
+            min_points=settings.min_points,
+            guard_s=settings.guard_s,
+            max_average_s=settings.max_average_s,
+            log_throttle_s=settings.log_throttle_s,
+            ignore_extra_joints=settings.ignore_extra_joints,
+            log=log,
+        )
+
+    # -- state -----------------------------------------------------------------------------
+
+    @property
+    def dropped(self) -> dict[str, int]:
+        """Dropped messages per cause (every cause of :data:`DROP_CAUSES`, zeros included)."""
+        return dict(self._dropped)
+
+    @property
+    def is_static(self) -> bool:
+        """True while the arm is in a detected static dwell."""
+        return self._dwell_start is not None
+
+    # -- input -----------------------------------------------------------------------------
+
+    def add_joint_state(self, stamp_ns: int, names: Sequence[str], positions: ArrayLike) -> CalibrationSample | None:
+        """Take one ``sensor_msgs/JointState``.
+
+        Parameters
+        ----------
+        stamp_ns : int
+            Header stamp [ns since the epoch].
+        names : sequence of str
+            Joint names of the message.
+        positions : array_like, shape (len(names),) [rad]
+            Joint positions in the order of `names`.
+
+        Returns
+        -------
+        CalibrationSample or None
+            The sample of a dwell this message ended, if any.
+        """
+        stamp = int(stamp_ns)
+        if self._last_joint is not None and stamp <= self._last_joint:
+            return self._drop(
+                "backwards_time", stamp, f"joint state stamp {stamp} ns is not after {self._last_joint} ns"
+            )
+        names = tuple(str(n) for n in names)
+        values = np.asarray(positions, dtype=np.float64).reshape(-1)
+        if values.size != len(names):
+            return self._drop(
+                "length_mismatch", stamp, f"joint state has {len(names)} names but {values.size} positions"
+            )
+        if len(set(names)) != len(names):
+            return self._drop("duplicate_joint", stamp, f"joint state repeats a joint name: {list(names)}")
+        unknown = [n for n in names if n not in self._column]
+        if unknown and not self.settings.ignore_extra_joints:
+            return self._drop("unknown_joint", stamp, f"joint state has unknown joints {unknown}")
+        index = {name: i for i, name in enumerate(names)}
+        missing = [n for n in self.joint_names if n not in index]
+        if missing:
+            return self._drop("missing_joint", stamp, f"joint state lacks joints {missing}")
+        q = values[[index[n] for n in self.joint_names]]
+        if not np.isfinite(q).all():
+            return self._drop("nan", stamp, f"joint state has NaN or inf positions {q.tolist()}")
+        self._last_joint = stamp
+        self._joints.append(stamp, q)
+        return self._update(stamp)
+
+    def add_tracker_point(self, stamp_ns: int, frame_id: str, xyz: ArrayLike) -> CalibrationSample | None:
+        """Take one ``geometry_msgs/PointStamped`` from the tracker.
+
+        Parameters
+        ----------
+        stamp_ns : int
+            Header stamp [ns since the epoch].
+        frame_id : str
+            Header frame id; must be the configured tracker frame.
+        xyz : array_like, shape (3,) [m]
+            Measured point.
+
+        Returns
+        -------
+        CalibrationSample or None
+            The sample of a dwell this message ended, if any.
+        """
+        stamp = int(stamp_ns)
+        if self._last_point is not None and stamp <= self._last_point:
+            return self._drop(
+                "backwards_time", stamp, f"tracker point stamp {stamp} ns is not after {self._last_point} ns"
+            )
+        if frame_id != self.tracker_frame_id:
+            return self._drop(
+                "wrong_frame", stamp, f"tracker point in frame {frame_id!r}, expected {self.tracker_frame_id!r}"
+            )
+        point = np.array(xyz, dtype=np.float64).reshape(-1)
+        if point.size != 3:
+            return self._drop("length_mismatch", stamp, f"tracker point has {point.size} coordinates, expected 3")
+        if not np.isfinite(point).all():
+            return self._drop("nan", stamp, f"tracker point has NaN or inf coordinates {point.tolist()}")
+        self._last_point = stamp
+        self._points.append(stamp, point)
+        return self._update(stamp)
+
+    def capture_now(self) -> CalibrationSample | None:
+        """Emit the current dwell now (data up to the latest message, no trailing guard).
+
+        Returns
+        -------
+        CalibrationSample or None
+            None when the arm is not static, the dwell was already emitted, or it holds
+            too few data (logged as ``not_static``, ``already_captured``, ``rejected_dwell``).
+        """
+        if self._dwell_start is None or self._now is None:
+            self._report("not_static", self._now or 0, "capture requested while the arm is not static")
+            return None
+        if self._captured:
+            self._report("already_captured", self._now, "this dwell was already captured")
+            return None
+        self._captured = True
+        return self._average(self._dwell_start + self._guard_ns, self._now)
+
+    def flush(self) -> CalibrationSample | None:
+        """End of the stream: emit the current dwell if any and clear the buffers.
+
+        Stamp monotonicity is still checked against the messages before the flush.
+        """
+        sample = None
+        if self._dwell_start is not None and not self._captured and self._now is not None:
+            sample = self._average(self._dwell_start + self._guard_ns, self._now)
+        self._dwell_start = None
+        self._captured = False
+        self._joints.clear()
+        self._points.clear()
+        return sample
+
+    # -- internals -------------------------------------------------------------------------
+
+    def _report(self, cause: str, stamp: int, message: str) -> None:
+        if self._log is None:
+            return
+        last = self._last_logged.get(cause)
+        if last is not None and stamp - last < self._throttle_ns:
+            return
+        self._last_logged[cause] = stamp
+        self._log(cause, message)
+
+    def _drop(self, cause: str, stamp: int, message: str) -> CalibrationSample | None:
+        """Count, report (throttled) and drop a message; always None (no sample)."""
+        self._dropped[cause] += 1
+        when = stamp if self._now is None else max(stamp, self._now)
+        self._report(cause, when, f"dropped: {message} ({self._dropped[cause]} dropped for {cause})")
+        return None
+
+    def _window_static(self, now: int) -> bool:
+        lo = now - self._window_ns
+        joints, points = self._joints, self._points
+        if not len(joints) or joints.stamps[0] > lo:
+            return False  # the window is not covered by joint states yet
+        i0 = joints.index(lo)
+        if len(joints) - i0 < 2:
+            return False
+        q = joints.values[i0:]
+        if float(np.max(q.max(axis=0) - q.min(axis=0))) > self.settings.joint_motion_threshold:
+            return False
+        k0 = points.index(lo)
+        if len(points) - k0 >= 2:
+            x = points.values[k0:]
+            if float(np.max(x.max(axis=0) - x.min(axis=0))) > self.settings.tracker_scatter_threshold:
+                return False
+        return True
+
+    def _prune(self, now: int) -> None:
+        """Drop data no window can need: keep one joint state at or before the window start."""
+        lo = now - self._window_ns
+        i = self._joints.index(lo, "right") - 1
+        if i > 0:
+            self._joints.drop_front(i)
+        self._points.drop_front(self._points.index(lo))
+
+    def _prune_dwell(self, now: int) -> None:
+        """Inside a dwell, drop data between the averaged span and the last window."""
+        assert self._dwell_start is not None
+        keep_until = self._dwell_start - 1
+        if not self._captured:
+            keep_until = self._dwell_start + self._guard_ns + self._max_average_ns
+        keep_from = now - self._window_ns - self._guard_ns
+        for series in (self._joints, self._points):
+            i0, i1 = series.index(keep_until, "right"), series.index(keep_from)
+            # Amortised: only compact once the unneeded middle is as large as the rest.
+            if i1 - i0 >= max(256, len(series) // 2):
+                series.delete(i0, i1)
+
+    def _update(self, stamp: int) -> CalibrationSample | None:
+        now = stamp if self._now is None else max(self._now, stamp)
+        self._now = now
+        static = self._window_static(now)
+        if self._dwell_start is None:
+            if static:
+                self._dwell_start = now - self._window_ns
+                self._captured = False
+            else:
+                self._prune(now)
+            return None
+        if static:
+            self._prune_dwell(now)
+            return None
+        start, captured = self._dwell_start, self._captured
+        self._dwell_start = None
+        self._captured = False
+        sample = None if captured else self._average(start + self._guard_ns, now - self._guard_ns)
+        self._prune(now)
+        return sample
+
+    def _average(self, t0: int, t1: int) -> CalibrationSample | None:
+        """Average the data stamped in [t0, min(t1, t0 + max_average)] (None if too few)."""
+        t1 = min(t1, t0 + self._max_average_ns)
+        joints, points = self._joints, self._points
+        i0, i1 = joints.index(t0), joints.index(t1, "right")
+        k0, k1 = points.index(t0), points.index(t1, "right")
+        n_joint, n_point = i1 - i0, k1 - k0
+        if n_joint < 2 or n_point < self.settings.min_points:
+            self.rejected_dwells += 1
+            self._report(
+                "rejected_dwell",
+                t1,
+                f"static dwell [{t0}, {t1}] ns has {n_joint} joint states and {n_point} tracker "
+                f"points (need 2 and {self.settings.min_points}); no sample",
+            )
+            return None
+        q = joints.values[i0:i1]
+        x = points.values[k0:k1]
+        first = int(min(joints.stamps[i0], points.stamps[k0]))
+        last = int(max(joints.stamps[i1 - 1], points.stamps[k1 - 1]))
+        return CalibrationSample(
+            stamp_ns=first + (last - first) // 2,
+            frame_id=self.tracker_frame_id,
+            joint_names=self.joint_names,
+            joint_positions=q.mean(axis=0),
+            joint_position_std=q.std(axis=0, ddof=1),
+            point=x.mean(axis=0),
+            point_covariance=np.cov(x, rowvar=False, ddof=1) / n_point,
+            joint_state_count=n_joint,
+            tracker_point_count=n_point,
+        )
+
+
+def samples_to_campaign(
+    samples: Sequence[CalibrationSample],
+    *,
+    frame: PointFrame,
+    metadata: dict[str, object] | None = None,
+) -> Campaign:
+    """Stack samples into a :class:`~robocal_uncertainty.core.campaign.Campaign`.
+
+    Parameters
+    ----------
+    samples : sequence of CalibrationSample
+        All with the same joint names (same order) and frame id.
+    frame : {"base", "tracker"}
+        Whether the points are in the robot base frame or the tracker frame.
+    metadata : dict, optional
+        Campaign metadata.
+
+    Returns
+    -------
+    Campaign
+        ``joint_positions`` (n, n_joints) [rad] and ``points`` (n, 3) [m] are the sample
+        means; ``point_std`` (n, 3) [m] is the square root of the diagonal of each sample's
+        ``point_covariance``, i.e. the standard uncertainty of the MEAN point (not the
+        scatter of single tracker readings); ``stamps_ns`` are the sample stamps.
+
+    Raises
+    ------
+    InputError
+        No samples, or samples with differing joint names or frame ids.
+    """
+    if not samples:
+        raise InputError("no calibration samples to build a campaign from")
+    first = samples[0]
+    for i, sample in enumerate(samples):
+        if sample.joint_names != first.joint_names:
+            msg = f"sample {i} has joints {list(sample.joint_names)}, sample 0 {list(first.joint_names)}"
+            raise InputError(msg)
+        if sample.frame_id != first.frame_id:
+            msg = f"sample {i} is in frame {sample.frame_id!r}, sample 0 in {first.frame_id!r}"
+            raise InputError(msg)
+    return Campaign(
+        joint_names=first.joint_names,
+        joint_positions=np.array([s.joint_positions for s in samples]),
+        points=np.array([s.point for s in samples]),
+        frame=frame,
+        frame_id=first.frame_id,
+        point_std=np.array([s.point_std for s in samples]),
+        stamps_ns=np.array([s.stamp_ns for s in samples], dtype=np.int64),
+        metadata=dict(metadata or {}),
+    )
