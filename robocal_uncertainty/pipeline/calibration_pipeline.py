@@ -1,0 +1,407 @@
+"""Samples in, calibration and uncertainty out: the state a calibration node holds.
+
+:class:`CalibrationPipeline` accumulates calibration samples into a campaign (optionally
+recorded to a campaign MCAP file pose by pose, so a crash loses nothing, and resumed from
+that file on restart), identifies the parameters and evaluates the Monte Carlo
+uncertainty. :func:`evaluate_campaign` is the single place that calls
+:func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty` from
+:class:`EvaluationOptions`; the command line ``evaluate`` uses it too, so a replay and an
+``evaluate`` of the same campaign agree bit for bit.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal_uncertainty.bagio.campaign_mcap import CampaignRecorder, read_campaign
+from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
+from robocal_uncertainty.pipeline.sample import CalibrationSample
+from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+
+__all__ = ["CalibrationPipeline", "EvaluationOptions", "evaluate_campaign"]
+
+Array = NDArray[np.float64]
+Progress = Callable[[int, int | None], None]
+
+
+@dataclass(frozen=True)
+class EvaluationOptions:
+    """Everything that determines a calibration and its uncertainty result.
+
+    Parameters
+    ----------
+    lambda_ : {"auto", "gcv"} or float
+        Lambda method of the identification (see
+        :func:`~robocal_uncertainty.core.identification.identify`).
+    uncertainty : UncertaintySettings
+        Sources and noise models of the Monte Carlo.
+    test_joints : ndarray, shape (n_test, n_joints) [rad], optional
+        Configurations at which the tool position uncertainty is evaluated; required by
+        :func:`evaluate_campaign`.
+    trials : int or "auto"
+        Number of Monte Carlo trials, or the adaptive procedure.
+    seed : int
+        Root seed of the Monte Carlo.
+    coverage : float
+        Coverage probability p in (0, 1).
+    n_dig, max_trials, block_size : int
+        Adaptive-procedure digits, its trial cap, and trials per random stream (see
+        :func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty`).
+    """
+
+    lambda_: str | float = "auto"
+    uncertainty: UncertaintySettings = field(default_factory=UncertaintySettings)
+    test_joints: Array | None = None
+    trials: int | str = 10_000
+    seed: int = 0
+    coverage: float = 0.95
+    n_dig: int = 2
+    max_trials: int = 2_000_000
+    block_size: int = 10_000
+
+    def __post_init__(self) -> None:
+        if self.test_joints is not None:
+            q = np.array(self.test_joints, dtype=np.float64)
+            if q.ndim == 1:
+                q = q[None, :]
+            if q.ndim != 2 or not np.isfinite(q).all():
+                msg = f"test_joints must be finite, shape (n_test, n_joints), got shape {q.shape}"
+                raise ConfigError(msg)
+            q.setflags(write=False)
+            object.__setattr__(self, "test_joints", q)
+
+
+def evaluate_campaign(
+    model: RobotModel,
+    campaign: Campaign,
+    options: EvaluationOptions,
+    *,
+    calibration: IdentificationResult | None = None,
+    workers: int = 1,
+    progress: Progress | None = None,
+) -> CalibrationUncertainty:
+    """Monte Carlo uncertainty of `campaign` as set by `options` (the one shared call).
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+    options : EvaluationOptions
+        Must have ``test_joints``.
+    calibration : IdentificationResult, optional
+        ``identify(model, campaign, lambda_=options.lambda_)`` if already computed; it is
+        computed the same way when omitted, so the result does not depend on it.
+    workers, progress
+        Passed through; they never change the result.
+
+    Raises
+    ------
+    ConfigError
+        No test joints, or invalid options.
+    """
+    if options.test_joints is None:
+        raise ConfigError("no test joint configurations given for the uncertainty evaluation")
+    return evaluate_uncertainty(
+        model,
+        campaign,
+        options.test_joints,
+        settings=options.uncertainty,
+        calibration=calibration,
+        lambda_=options.lambda_,
+        trials=options.trials,
+        coverage=options.coverage,
+        seed=options.seed,
+        n_dig=options.n_dig,
+        max_trials=options.max_trials,
+        block_size=options.block_size,
+        workers=workers,
+        progress=progress,
+    )
+
+
+class CalibrationPipeline:
+    """Accumulate calibration samples; calibrate and evaluate on demand.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model; samples must carry exactly its joints (any order).
+    lambda_ : {"auto", "gcv"} or float
+        Lambda method of the identification.
+    min_samples : int, optional
+        Fewest samples :meth:`calibrate` accepts; None leaves the check to the
+        identification (enough equations for the identifiable parameters).
+    uncertainty : UncertaintySettings, optional
+        Monte Carlo sources and noise models (defaults: tracker and encoder).
+    test_joints : array_like, shape (n_test, n_joints) [rad], optional
+        Configurations for :meth:`evaluate`.
+    trials, seed, coverage, n_dig, max_trials, block_size
+        See :class:`EvaluationOptions`.
+    campaign_path : str or Path, optional
+        Campaign MCAP file recording every sample as it is added (flushed and fsynced per
+        pose). If it exists, the pipeline resumes from it: its poses are read (a file
+        truncated by a crash is recovered up to its last complete pose), rewritten to a
+        fresh file that replaces it, and new samples are appended there.
+    fsync : bool
+        fsync the campaign file after each sample (survives power loss).
+    metadata : dict, optional
+        Metadata of a new campaign file.
+
+    Raises
+    ------
+    ConfigError
+        Invalid options.
+    CampaignError, BagError
+        The campaign file cannot be read, written or does not fit the model.
+
+    Notes
+    -----
+    Frame of the campaign: ``"base"`` when the samples' frame id is the model's
+    ``base_frame_id``, ``"tracker"`` otherwise (the base transform is then identified).
+    Resuming replaces the file with :func:`os.replace` while the new recorder writes to
+    it (POSIX semantics).
+    """
+
+    def __init__(
+        self,
+        model: RobotModel,
+        *,
+        lambda_: str | float = "auto",
+        min_samples: int | None = None,
+        uncertainty: UncertaintySettings | None = None,
+        test_joints: ArrayLike | None = None,
+        trials: int | str = 10_000,
+        seed: int = 0,
+        coverage: float = 0.95,
+        n_dig: int = 2,
+        max_trials: int = 2_000_000,
+        block_size: int = 10_000,
+        campaign_path: str | Path | None = None,
+        fsync: bool = True,
+        metadata: dict[str, object] | None = None,
+    ) -> None:
+        if min_samples is not None and (
+            isinstance(min_samples, bool) or not isinstance(min_samples, int) or min_samples < 1
+        ):
+            msg = f"min_samples must be a positive integer, got {min_samples!r}"
+            raise ConfigError(msg)
+        self.model = model
+        self.min_samples = min_samples
+        self.options = EvaluationOptions(
+            lambda_=lambda_,
+            uncertainty=uncertainty or UncertaintySettings(),
+            test_joints=None if test_joints is None else np.asarray(test_joints, dtype=np.float64),
+            trials=trials,
+            seed=seed,
+            coverage=coverage,
+            n_dig=n_dig,
+            max_trials=max_trials,
+            block_size=block_size,
+        )
+        self.campaign_path = None if campaign_path is None else Path(campaign_path)
+        self.resume_warnings: tuple[str, ...] = ()
+        """Warnings raised while reading the resumed campaign file (e.g. truncation)."""
+        self._fsync = fsync
+        self._metadata: dict[str, object] = dict(
+            metadata or {"source": "robocal_uncertainty calibration pipeline", "robot": model.name}
+        )
+        self._frame_id: str | None = None
+        self._stamps: list[int] = []
+        self._joints: list[Array] = []
+        self._points: list[Array] = []
+        self._point_std: list[Array] = []
+        self._with_std = True
+        self._recorder: CampaignRecorder | None = None
+        self._closed = False
+        self._calibration: IdentificationResult | None = None
+        if self.campaign_path is not None and self.campaign_path.exists():
+            self._resume(self.campaign_path)
+
+    # -- state -----------------------------------------------------------------------------
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples in the campaign (resumed ones included)."""
+        return len(self._stamps)
+
+    @property
+    def ready(self) -> bool:
+        """True when :meth:`calibrate` has enough samples to try."""
+        return self.n_samples >= max(1, self.min_samples or 1)
+
+    @property
+    def frame(self) -> PointFrame:
+        """Frame of the campaign's points (see the class notes)."""
+        return "base" if self._frame_id == self.model.base_frame_id else "tracker"
+
+    @property
+    def campaign(self) -> Campaign | None:
+        """The campaign so far (model joint order), None before the first sample."""
+        if not self._stamps or self._frame_id is None:
+            return None
+        return Campaign(
+            joint_names=self.model.joint_names,
+            joint_positions=np.array(self._joints),
+            points=np.array(self._points),
+            frame=self.frame,
+            frame_id=self._frame_id,
+            point_std=np.array(self._point_std) if self._with_std else None,
+            stamps_ns=np.array(self._stamps, dtype=np.int64),
+            metadata=dict(self._metadata),
+        )
+
+    # -- input -----------------------------------------------------------------------------
+
+    def add_sample(self, sample: CalibrationSample) -> None:
+        """Append one sample (and record it to the campaign file first, when there is one).
+
+        Raises
+        ------
+        InputError
+            Joints other than the model's, another frame id than earlier samples, or a
+            stamp already in the campaign.
+        CampaignError
+            The campaign file cannot be written, or the pipeline was closed.
+        """
+        if self._closed:
+            msg = f"calibration pipeline recording to {self.campaign_path} is closed"
+            raise CampaignError(msg)
+        names = self.model.joint_names
+        if set(sample.joint_names) != set(names):
+            msg = f"sample joints {list(sample.joint_names)} differ from the model's {list(names)}"
+            raise InputError(msg)
+        if self._frame_id is not None and sample.frame_id != self._frame_id:
+            msg = f"sample in frame {sample.frame_id!r}, the campaign is in {self._frame_id!r}"
+            raise InputError(msg)
+        if sample.stamp_ns in self._stamps:
+            msg = f"a sample with stamp {sample.stamp_ns} ns is already in the campaign"
+            raise InputError(msg)
+        order = [sample.joint_names.index(n) for n in names]
+        q = np.array(sample.joint_positions[order])
+        std = np.array(sample.point_std)
+        if self.campaign_path is not None:
+            if self._recorder is None:
+                self._recorder = self._open_recorder(self.campaign_path, sample.frame_id)
+            self._recorder.append(sample.stamp_ns, q, sample.point, std if self._with_std else None)
+        self._frame_id = sample.frame_id
+        self._stamps.append(sample.stamp_ns)
+        self._joints.append(q)
+        self._points.append(np.array(sample.point))
+        self._point_std.append(std)
+        self._calibration = None
+
+    # -- results ---------------------------------------------------------------------------
+
+    def calibrate(self) -> IdentificationResult:
+        """Identify the parameters from the samples so far (cached until the next sample).
+
+        Raises
+        ------
+        IdentifiabilityError
+            Fewer samples than `min_samples`, or too few/degenerate poses to identify.
+        """
+        campaign = self.campaign
+        if campaign is None or not self.ready:
+            need = max(1, self.min_samples or 1)
+            msg = f"only {self.n_samples} calibration samples, need at least {need}"
+            raise IdentifiabilityError(msg)
+        if self._calibration is None:
+            self._calibration = identify(self.model, campaign, lambda_=self.options.lambda_)
+        return self._calibration
+
+    def evaluate(self, *, workers: int = 1, progress: Progress | None = None) -> CalibrationUncertainty:
+        """Monte Carlo uncertainty of the current calibration via :func:`evaluate_campaign`.
+
+        Raises
+        ------
+        IdentifiabilityError
+            See :meth:`calibrate`.
+        ConfigError
+            No test joints configured, or invalid options.
+        """
+        calibration = self.calibrate()
+        campaign = self.campaign
+        assert campaign is not None  # calibrate() checked
+        return evaluate_campaign(
+            self.model,
+            campaign,
+            self.options,
+            calibration=calibration,
+            workers=workers,
+            progress=progress,
+        )
+
+    # -- campaign file ---------------------------------------------------------------------
+
+    def _open_recorder(self, path: Path, frame_id: str, *, overwrite: bool = False) -> CampaignRecorder:
+        frame: PointFrame = "base" if frame_id == self.model.base_frame_id else "tracker"
+        return CampaignRecorder(
+            path,
+            joint_names=self.model.joint_names,
+            frame=frame,
+            frame_id=frame_id,
+            metadata=self._metadata,
+            overwrite=overwrite,
+            fsync=self._fsync,
+        )
+
+    def _resume(self, path: Path) -> None:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            campaign = read_campaign(path)
+        self.resume_warnings = tuple(str(w.message) for w in caught)
+        campaign = campaign.reorder_joints(self.model.joint_names)
+        if campaign.stamps_ns is None:
+            msg = f"cannot resume campaign {path}: it has no pose stamps"
+            raise InputError(msg)
+        self._metadata = dict(campaign.metadata)
+        self._frame_id = campaign.frame_id
+        self._with_std = campaign.point_std is not None
+        temporary = path.with_name(path.name + ".resume")
+        recorder = self._open_recorder(temporary, campaign.frame_id, overwrite=True)
+        try:
+            for i in range(campaign.n_poses):
+                std = None if campaign.point_std is None else campaign.point_std[i]
+                recorder.append(int(campaign.stamps_ns[i]), campaign.joint_positions[i], campaign.points[i], std)
+                self._stamps.append(int(campaign.stamps_ns[i]))
+                self._joints.append(np.array(campaign.joint_positions[i]))
+                self._points.append(np.array(campaign.points[i]))
+                if std is not None:
+                    self._point_std.append(np.array(std))
+            os.replace(temporary, path)
+        except BaseException:
+            recorder.close()
+            temporary.unlink(missing_ok=True)
+            raise
+        self._recorder = recorder
+
+    def close(self) -> None:
+        """Finish the campaign file (if any); calibrate and evaluate still work, adding does not."""
+        if self._recorder is not None:
+            self._recorder.close()
+            self._recorder = None
+        self._closed = self.campaign_path is not None
+
+    def __enter__(self) -> CalibrationPipeline:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
