@@ -68,7 +68,14 @@ def baseline_rate(model, campaign, calibration, settings, n_trials: int, seed: i
 def engine_rate(model, campaign, calibration, settings, n_trials: int, seed: int, workers: int) -> tuple[float, object]:
     start = time.perf_counter()
     result = evaluate_uncertainty(
-        model, campaign, TEST_JOINTS, settings=settings, calibration=calibration, trials=n_trials, seed=seed, workers=workers
+        model,
+        campaign,
+        TEST_JOINTS,
+        settings=settings,
+        calibration=calibration,
+        trials=n_trials,
+        seed=seed,
+        workers=workers,
     )
     return n_trials / (time.perf_counter() - start), result
 
@@ -92,8 +99,10 @@ def main() -> int:
     u = np.sqrt(np.diag(result.poses[0].covariance)) * 1e6
     print(f"campaign: 53 poses, {int(calibration.estimated.sum())} parameters, sources tracker+encoder")
     print(f"baseline (scipy least_squares per trial): {base:10.1f} trials/s  ({args.baseline_trials} trials)")
-    print(f"engine (batched re-identification):       {rate:10.1f} trials/s  ({args.trials} trials, "
-          f"{args.trials / rate:.1f} s, workers={args.workers})")
+    print(
+        f"engine (batched re-identification):       {rate:10.1f} trials/s  ({args.trials} trials, "
+        f"{args.trials / rate:.1f} s, workers={args.workers})"
+    )
     print(f"speed-up engine / baseline: {rate / base:.0f}x")
     print(f"u(x, y, z) at the seed's test joints: {u[0]:.2f}, {u[1]:.2f}, {u[2]:.2f} um")
     if args.million:

@@ -15,10 +15,10 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
+import argparse
+import json
+import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from importlib import resources
@@ -130,23 +130,33 @@ def _progress_bar(enabled: bool, label: str) -> tuple[Callable[[int, int | None]
 
 
 def _print_calibration(result: Any) -> None:
-    print(f"Calibration of {result.model.name}: {result.n_poses} poses, "
-          f"{int(result.estimated.sum())} parameters identified")
-    print(f"  lambda = {result.lambda_:.4g} ({result.lambda_method}), condition number "
-          f"{result.condition_number:.3g}, {result.iterations} iterations, {result.message}")
-    print(f"  residual RMS {result.rms_before * 1e3:.4f} mm -> {result.rms_after * 1e3:.4f} mm, "
-          f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm")
+    print(
+        f"Calibration of {result.model.name}: {result.n_poses} poses, "
+        f"{int(result.estimated.sum())} parameters identified"
+    )
+    print(
+        f"  lambda = {result.lambda_:.4g} ({result.lambda_method}), condition number "
+        f"{result.condition_number:.3g}, {result.iterations} iterations, {result.message}"
+    )
+    print(
+        f"  residual RMS {result.rms_before * 1e3:.4f} mm -> {result.rms_after * 1e3:.4f} mm, "
+        f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm"
+    )
     print("  parameter            nominal        estimate   1st-order std")
     kinds = result.model.layout.kinds
     for i, name in enumerate(result.parameter_names):
         if not result.estimated[i]:
             continue
         if kinds[i] == "length":
-            print(f"  {name:<16} {result.nominal[i] * 1e3:12.4f} mm {result.estimate[i] * 1e3:12.4f} mm "
-                  f"{result.linearized_std[i] * 1e6:9.2f} um")
+            print(
+                f"  {name:<16} {result.nominal[i] * 1e3:12.4f} mm {result.estimate[i] * 1e3:12.4f} mm "
+                f"{result.linearized_std[i] * 1e6:9.2f} um"
+            )
         else:
-            print(f"  {name:<16} {np.degrees(result.nominal[i]):12.5f} deg {np.degrees(result.estimate[i]):11.5f} deg "
-                  f"{np.degrees(result.linearized_std[i]) * 1e3:8.3f} mdeg")
+            print(
+                f"  {name:<16} {np.degrees(result.nominal[i]):12.5f} deg {np.degrees(result.estimate[i]):11.5f} deg "
+                f"{np.degrees(result.linearized_std[i]) * 1e3:8.3f} mdeg"
+            )
     if result.dependencies:
         print("  not identifiable from position data (kept at nominal):")
         for dep in result.dependencies:
@@ -205,9 +215,11 @@ def _cmd_import_csv(args: argparse.Namespace) -> int:
     )
     write_campaign(args.out, campaign, overwrite=args.force)
     skipped = campaign.metadata.get("skipped_rows") or []
-    print(f"wrote {args.out}: {campaign.n_poses} poses, joints {', '.join(campaign.joint_names)}, "
-          f"points in the {campaign.frame} frame ({campaign.frame_id})"
-          + (f", {len(skipped)} invalid rows skipped" if skipped else ""))
+    print(
+        f"wrote {args.out}: {campaign.n_poses} poses, joints {', '.join(campaign.joint_names)}, "
+        f"points in the {campaign.frame} frame ({campaign.frame_id})"
+        + (f", {len(skipped)} invalid rows skipped" if skipped else "")
+    )
     return 0
 
 
@@ -368,20 +380,54 @@ def run_evaluation(
 
 
 def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> None:
-    p.add_argument("--trials", default=trials_default, help="number of Monte Carlo trials, or 'auto' for the JCGM 101 adaptive procedure (default %(default)s)")
-    p.add_argument("--max-trials", type=int, default=2_000_000, help="cap of the adaptive procedure (default %(default)s)")
+    p.add_argument(
+        "--trials",
+        default=trials_default,
+        help="number of Monte Carlo trials, or 'auto' for the JCGM 101 adaptive procedure (default %(default)s)",
+    )
+    p.add_argument(
+        "--max-trials", type=int, default=2_000_000, help="cap of the adaptive procedure (default %(default)s)"
+    )
     p.add_argument("--coverage", type=float, default=0.95, help="coverage probability p (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
     p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
-    p.add_argument("--lambda-range", type=float, nargs=2, metavar=("LOW", "HIGH"), help="range of lambda for the 'lambda' source (default lambda*/5 .. 5 lambda*)")
+    p.add_argument(
+        "--lambda-range",
+        type=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        help="range of lambda for the 'lambda' source (default lambda*/5 .. 5 lambda*)",
+    )
     p.add_argument("--min-poses", type=int, help="smallest pose count of the 'n_poses' source")
     p.add_argument("--subset-size", type=int, help="pose count of the 'pose_choice' source")
-    p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker error half-width a per coordinate, um (default %(default)s, uniform)")
-    p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="distance-proportional part b of the MPE a + b L, um/m (default %(default)s)")
-    p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder error half-width, deg (default %(default)s, uniform)")
+    p.add_argument(
+        "--tracker-noise-um",
+        type=float,
+        default=5.0,
+        help="tracker error half-width a per coordinate, um (default %(default)s, uniform)",
+    )
+    p.add_argument(
+        "--tracker-noise-um-per-m",
+        type=float,
+        default=0.0,
+        help="distance-proportional part b of the MPE a + b L, um/m (default %(default)s)",
+    )
+    p.add_argument(
+        "--encoder-noise-deg",
+        type=float,
+        default=0.005,
+        help="encoder error half-width, deg (default %(default)s, uniform)",
+    )
     p.add_argument("--workers", type=int, default=1, help="worker processes (never changes the result)")
-    p.add_argument("--budget", action=argparse.BooleanOptionalAction, default=True, help="also run each source alone (uncertainty budget)")
-    p.add_argument("--budget-trials", type=int, default=2000, help="trials per source of the budget (default %(default)s)")
+    p.add_argument(
+        "--budget",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run each source alone (uncertainty budget)",
+    )
+    p.add_argument(
+        "--budget-trials", type=int, default=2000, help="trials per source of the budget (default %(default)s)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -395,7 +441,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise ConfigError("give --test-joints or --test-joints-file")
     from robocal_uncertainty.uncertainty import parse_sources
 
-    run_evaluation(model, campaign, test_q, sources=parse_sources(args.sources), args=args, out_dir=Path(args.out), label="evaluate")
+    run_evaluation(
+        model,
+        campaign,
+        test_q,
+        sources=parse_sources(args.sources),
+        args=args,
+        out_dir=Path(args.out),
+        label="evaluate",
+    )
     return 0
 
 
@@ -409,13 +463,17 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"({', '.join(f'{v:g}' for v in PAPER_TEST_JOINTS_DEG)}) deg. Sources: {', '.join(DEMO_SOURCES)}.")
     print()
     test_q = np.radians(np.array(PAPER_TEST_JOINTS_DEG))[None, :]
-    result = run_evaluation(model, sim.campaign, test_q, sources=DEMO_SOURCES, args=args, out_dir=Path(args.out), label="demo")
+    result = run_evaluation(
+        model, sim.campaign, test_q, sources=DEMO_SOURCES, args=args, out_dir=Path(args.out), label="demo"
+    )
     from robocal_uncertainty.core import forward_points
 
     truth = forward_points(model.layout, sim.true_model.parameter_vector(), test_q)[0]
     inside = [result.poses[0].axes[i].probabilistically_symmetric.contains(float(truth[i])) for i in range(3)]
-    print("simulated truth at the test joints: (" + ", ".join(f"{v * 1e3:.4f}" for v in truth) + ") mm; "
-          f"inside the 95 % intervals (x, y, z): {inside}")
+    print(
+        "simulated truth at the test joints: (" + ", ".join(f"{v * 1e3:.4f}" for v in truth) + ") mm; "
+        f"inside the 95 % intervals (x, y, z): {inside}"
+    )
     return 0
 
 
@@ -426,7 +484,9 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("demo", help="the main job on the embedded default: seed's arm, simulated 53-pose campaign, Table 2 and report")
+    p = sub.add_parser(
+        "demo", help="the main job on the embedded default: seed's arm, simulated 53-pose campaign, Table 2 and report"
+    )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     _add_uncertainty_args(p, trials_default="20000")
     p.set_defaults(func=_cmd_demo)
@@ -435,7 +495,12 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", default="paper_arm", help="robot YAML or shipped model name (default %(default)s)")
     p.add_argument("--out", required=True, help="campaign .mcap to write")
     p.add_argument("--poses", type=int, default=53)
-    p.add_argument("--frame", choices=("base", "tracker"), default="base", help="points in the robot base frame or in a tracker frame with an unknown base")
+    p.add_argument(
+        "--frame",
+        choices=("base", "tracker"),
+        default="base",
+        help="points in the robot base frame or in a tracker frame with an unknown base",
+    )
     p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker error half-width a, um (uniform)")
     p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m")
     p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder error half-width, deg (uniform)")
@@ -474,7 +539,11 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--test-joints", nargs="+", help="joint values of the test configurations")
     p.add_argument("--test-joints-file")
     p.add_argument("--degrees", action="store_true")
-    p.add_argument("--sources", default="tracker,encoder", help="comma list of tracker, encoder, lambda, n_poses, pose_choice, residual, or all")
+    p.add_argument(
+        "--sources",
+        default="tracker,encoder",
+        help="comma list of tracker, encoder, lambda, n_poses, pose_choice, residual, or all",
+    )
     p.add_argument("--out", default="robocal_report")
     _add_uncertainty_args(p, trials_default="auto")
     p.set_defaults(func=_cmd_evaluate)

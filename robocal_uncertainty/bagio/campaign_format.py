@@ -143,10 +143,7 @@ def parse_header(record: dict[str, str], where: str) -> CampaignHeader:
         raise BagError(msg)
     version = content.get("format_version")
     if version != FORMAT_VERSION:
-        msg = (
-            f"{where}: campaign format version {version!r} is not supported "
-            f"(expected {FORMAT_VERSION})"
-        )
+        msg = f"{where}: campaign format version {version!r} is not supported (expected {FORMAT_VERSION})"
         raise BagError(msg)
     if content.get("units") != UNITS:
         msg = f"{where}: campaign units {content.get('units')!r} differ from {UNITS!r}"

@@ -146,9 +146,7 @@ class CampaignRecorder:
             msg = f"cannot create campaign file {self.path}: {err.strerror or err}"
             raise CampaignError(msg) from err
         self._chunked = _CHUNKED
-        self._writer: Writer | None = Writer(
-            self._stream, compression=CompressionType.NONE, use_chunking=self._chunked
-        )
+        self._writer: Writer | None = Writer(self._stream, compression=CompressionType.NONE, use_chunking=self._chunked)
         try:
             self._writer.start(profile="ros2", library=_LIBRARY)
             self._writer.add_metadata(METADATA_NAME, record)
@@ -163,9 +161,7 @@ class CampaignRecorder:
     def _channel(self, topic: str, typename: str) -> int:
         assert self._writer is not None
         schema = message_schema(typename)
-        schema_id = self._writer.register_schema(
-            schema.name, schema.encoding, schema.text.encode("utf-8")
-        )
+        schema_id = self._writer.register_schema(schema.name, schema.encoding, schema.text.encode("utf-8"))
         metadata = {"offered_qos_profiles": "", "topic_type_hash": schema.rihs01}
         return self._writer.register_channel(topic, "cdr", schema_id, metadata)
 
@@ -235,9 +231,7 @@ class CampaignRecorder:
             if std is not None:
                 self._std_channel = self._channel(POINT_STD_TOPIC, VECTOR3_STAMPED)
         sequence = self.n_poses
-        self._writer.add_message(
-            self._joint_channel, stamp, encode_joint_state(stamp, self._names, q), stamp, sequence
-        )
+        self._writer.add_message(self._joint_channel, stamp, encode_joint_state(stamp, self._names, q), stamp, sequence)
         if std is not None:
             self._writer.add_message(
                 self._std_channel,

@@ -188,9 +188,7 @@ def _decode_all(
     joint_topic, point_topic, std_topic = topics
     if contents.truncated and not contents.messages:
         raise BagError(_early(path))
-    joints = _decode_joints(
-        _topic_messages(contents, joint_topic, JOINT_STATE, path, required=True), path
-    )
+    joints = _decode_joints(_topic_messages(contents, joint_topic, JOINT_STATE, path, required=True), path)
     raw_points = _topic_messages(contents, point_topic, POINT_STAMPED, path, required=True)
     points = _decode_vectors(raw_points, POINT_STAMPED, path)
     raw_stds = _topic_messages(contents, std_topic, VECTOR3_STAMPED, path, required=False)
@@ -198,10 +196,7 @@ def _decode_all(
     if (not joints or not points) and contents.truncated:
         raise BagError(_early(path))
     if not joints or not points:
-        msg = (
-            f"{path}: no pose found ({len(joints)} {joint_topic} and "
-            f"{len(points)} {point_topic} messages)"
-        )
+        msg = f"{path}: no pose found ({len(joints)} {joint_topic} and {len(points)} {point_topic} messages)"
         raise BagError(msg)
     return joints, points, stds
 
@@ -312,9 +307,7 @@ def read_campaign(
         )
     joint_topic, point_topic, point_std_topic = wanted
     joints, points, stds = _decode_all(contents, wanted, path)
-    names, positions = _joint_matrix(
-        joints, header.joint_names if header else None, joint_topic, path
-    )
+    names, positions = _joint_matrix(joints, header.joint_names if header else None, joint_topic, path)
     point_stamps = np.array([r.stamp_ns for r in points], dtype=np.int64)
     point_index, joint_index = _pair(
         joints, point_stamps, stamp_tolerance_ns, wanted, path, truncated=contents.truncated

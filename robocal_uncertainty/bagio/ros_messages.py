@@ -157,9 +157,7 @@ def _header(stamp_ns: int, frame_id: str) -> Msg:
     return store.types["std_msgs/msg/Header"](stamp=time, frame_id=frame_id)
 
 
-def encode_joint_state(
-    stamp_ns: int, names: tuple[str, ...], positions: NDArray[np.float64]
-) -> bytes:
+def encode_joint_state(stamp_ns: int, names: tuple[str, ...], positions: NDArray[np.float64]) -> bytes:
     """Serialise a ``JointState`` (positions only, empty velocity and effort) to CDR.
 
     Parameters
@@ -186,9 +184,7 @@ def encode_joint_state(
 def encode_point_stamped(stamp_ns: int, frame_id: str, xyz: NDArray[np.float64]) -> bytes:
     """Serialise a ``PointStamped`` to CDR; `xyz` is shape (3,) [m]."""
     store = ros_typestore()
-    point = store.types["geometry_msgs/msg/Point"](
-        x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])
-    )
+    point = store.types["geometry_msgs/msg/Point"](x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
     message = store.types[POINT_STAMPED](header=_header(stamp_ns, frame_id), point=point)
     return bytes(store.serialize_cdr(message, POINT_STAMPED))
 
@@ -196,9 +192,7 @@ def encode_point_stamped(stamp_ns: int, frame_id: str, xyz: NDArray[np.float64])
 def encode_vector3_stamped(stamp_ns: int, frame_id: str, xyz: NDArray[np.float64]) -> bytes:
     """Serialise a ``Vector3Stamped`` to CDR; `xyz` is shape (3,) [m]."""
     store = ros_typestore()
-    vector = store.types["geometry_msgs/msg/Vector3"](
-        x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])
-    )
+    vector = store.types["geometry_msgs/msg/Vector3"](x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
     message = store.types[VECTOR3_STAMPED](header=_header(stamp_ns, frame_id), vector=vector)
     return bytes(store.serialize_cdr(message, VECTOR3_STAMPED))
 

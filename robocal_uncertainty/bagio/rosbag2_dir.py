@@ -49,9 +49,7 @@ def read_rosbag2_dir(path: Path, topics: tuple[str, ...]) -> McapContents:
             wanted = [c for c in reader.connections if c.topic in topics]
             messages = tuple(
                 RawMessage(_channel(connection), int(stamp), bytes(data))
-                for connection, stamp, data in (
-                    reader.messages(connections=wanted) if wanted else ()
-                )
+                for connection, stamp, data in (reader.messages(connections=wanted) if wanted else ())
             )
     except (AnyReaderError, ReaderError, OSError, ValueError, KeyError) as err:
         msg = f"cannot read rosbag2 directory {path}: {type(err).__name__}: {err}"

@@ -20,9 +20,7 @@ unknown and identified with the kinematic parameters."""
 
 def _finite_array(name: str, value: object, shape: tuple[int | None, ...]) -> NDArray[np.float64]:
     array = np.asarray(value, dtype=np.float64)
-    if array.ndim != len(shape) or any(
-        want is not None and got != want for got, want in zip(array.shape, shape)
-    ):
+    if array.ndim != len(shape) or any(want is not None and got != want for got, want in zip(array.shape, shape)):
         expected = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
         msg = f"{name} must have shape {expected}, got {array.shape}"
         raise InputError(msg)

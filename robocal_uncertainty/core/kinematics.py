@@ -34,9 +34,7 @@ def _cross(u: Array, v: Array) -> Array:
     )
 
 
-def _prepare(
-    layout: ParameterLayout, params: Array, joint_positions: Array
-) -> tuple[Array, Array, tuple[int, ...]]:
+def _prepare(layout: ParameterLayout, params: Array, joint_positions: Array) -> tuple[Array, Array, tuple[int, ...]]:
     params = np.asarray(params, dtype=np.float64)
     q = np.asarray(joint_positions, dtype=np.float64)
     if params.shape[-1:] != (layout.size,):

@@ -100,9 +100,7 @@ def structural_observability(
             continue
         coef, *_ = np.linalg.lstsq(jac[:, kept], jac[:, k], rcond=None)
         big = np.argsort(-np.abs(coef))
-        terms = [
-            f"{coef[i]:+.4g} * {names[kept[i]]}" for i in big[:4] if abs(coef[i]) > 1e-6 * np.abs(coef).max()
-        ]
+        terms = [f"{coef[i]:+.4g} * {names[kept[i]]}" for i in big[:4] if abs(coef[i]) > 1e-6 * np.abs(coef).max()]
         deps.append(f"{names[k]} = " + " ".join(terms).lstrip("+ "))
     return Observability(
         candidates=np.asarray(candidates, dtype=bool).copy(),

@@ -59,9 +59,7 @@ class LCurve:
         return float(self.lambdas[self.gcv_index])
 
 
-def tikhonov_solve(
-    u: Array, s: Array, vt: Array, b: Array, lam: float
-) -> Array:
+def tikhonov_solve(u: Array, s: Array, vt: Array, b: Array, lam: float) -> Array:
     """Solve ``min ||b - A x||^2 + lam^2 ||x||^2`` from the thin SVD of ``A``.
 
     Parameters

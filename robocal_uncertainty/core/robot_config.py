@@ -31,7 +31,7 @@ import yaml
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 
-__all__ = ["LENGTH_UNITS", "ANGLE_UNITS", "load_robot_model", "robot_model_from_dict"]
+__all__ = ["ANGLE_UNITS", "LENGTH_UNITS", "load_robot_model", "robot_model_from_dict"]
 
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6}
 ANGLE_UNITS: dict[str, float] = {"rad": 1.0, "deg": float(np.pi / 180.0)}

@@ -159,9 +159,7 @@ class SimulatedCampaign:
     seed: int | None
 
 
-def draw_true_parameters(
-    model: RobotModel, errors: ParameterErrorRanges, *, rng: np.random.Generator
-) -> Array:
+def draw_true_parameters(model: RobotModel, errors: ParameterErrorRanges, *, rng: np.random.Generator) -> Array:
     """Nominal parameter vector plus uniform errors on every joint and tool parameter.
 
     Returns
@@ -180,9 +178,7 @@ def draw_true_parameters(
     return p
 
 
-def draw_joint_positions(
-    model: RobotModel, n_poses: int, *, rng: np.random.Generator, margin: float = 0.0
-) -> Array:
+def draw_joint_positions(model: RobotModel, n_poses: int, *, rng: np.random.Generator, margin: float = 0.0) -> Array:
     """Joint configurations uniform inside the limits shrunk by `margin`, shape (n, n_joints) [rad]."""
     lo = model.joint_limits[:, 0] + margin
     hi = model.joint_limits[:, 1] - margin

@@ -64,9 +64,7 @@ _IPA_POINT = ("measurement_x", "measurement_y", "measurement_z")
 _IPA_STD = ("measurement_std_x", "measurement_std_y", "measurement_std_z")
 _IPA_FRAME_ID = "laser_tracker"
 
-_HEADER_CELL = re.compile(
-    r"^\s*(?P<name>[^\[\(]*?)\s*(?:[\[\(]\s*(?P<unit>[^\]\)]*?)\s*[\]\)])?\s*$"
-)
+_HEADER_CELL = re.compile(r"^\s*(?P<name>[^\[\(]*?)\s*(?:[\[\(]\s*(?P<unit>[^\]\)]*?)\s*[\]\)])?\s*$")
 _PREFIX = r"(?:(?:point|measurement|meas|tracker)_)?"
 _POINT_NAME = re.compile(rf"^{_PREFIX}(?P<axis>[xyz])$", re.IGNORECASE)
 _STD_NAME = re.compile(rf"^{_PREFIX}(?:std_(?P<a>[xyz])|(?P<b>[xyz])_std)$", re.IGNORECASE)
@@ -92,9 +90,7 @@ def _split_header(cell: str) -> tuple[str, str | None]:
     return match.group("name"), (unit if unit else None)
 
 
-def _resolve_unit(
-    path: Path, name: str, stated: str | None, given: str | None, kind: UnitKind
-) -> str:
+def _resolve_unit(path: Path, name: str, stated: str | None, given: str | None, kind: UnitKind) -> str:
     supported = ", ".join(LENGTH_UNITS if kind == "length" else ANGLE_UNITS)
     argument = "length_unit" if kind == "length" else "angle_unit"
     if stated is None and given is None:
@@ -106,9 +102,7 @@ def _resolve_unit(
     units = [canonical_unit(u, kind) for u in (stated, given) if u is not None]
     if None in units:
         bad = stated if stated is not None and canonical_unit(stated, kind) is None else given
-        msg = (
-            f"{path}: column {name!r} has unsupported {kind} unit {bad!r} (supported: {supported})"
-        )
+        msg = f"{path}: column {name!r} has unsupported {kind} unit {bad!r} (supported: {supported})"
         raise InputError(msg)
     if len(set(units)) > 1:
         msg = f"{path}: column {name!r} states unit {stated!r} but {argument}={given!r} was passed"
@@ -116,9 +110,7 @@ def _resolve_unit(
     return str(units[0])
 
 
-def _ipa_columns(
-    path: Path, header: list[str], length_unit: str | None, angle_unit: str | None
-) -> list[_Column]:
+def _ipa_columns(path: Path, header: list[str], length_unit: str | None, angle_unit: str | None) -> list[_Column]:
     checks: tuple[tuple[str | None, str, UnitKind], ...] = (
         (length_unit, "mm", "length"),
         (angle_unit, "rad", "angle"),
@@ -150,9 +142,7 @@ def _generic_columns(
     for index, cell in enumerate(header):
         name, stated = _split_header(cell)
         point, std = _POINT_NAME.match(name), _STD_NAME.match(name)
-        is_joint = (
-            name in joint_columns if joint_columns is not None else bool(_JOINT_NAME.match(name))
-        )
+        is_joint = name in joint_columns if joint_columns is not None else bool(_JOINT_NAME.match(name))
         if is_joint:
             unit = _resolve_unit(path, name, stated, angle_unit, "angle")
             columns.append(_Column(index, name, "joint", name, unit))
@@ -172,10 +162,7 @@ def _generic_columns(
         msg = f"{path}: joint columns {absent} not in the header"
         raise InputError(msg)
     if not joints:
-        msg = (
-            f"{path}: no joint column found (names containing 'joint' or q1, q2, ...; "
-            "or pass joint_columns)"
-        )
+        msg = f"{path}: no joint column found (names containing 'joint' or q1, q2, ...; or pass joint_columns)"
         raise InputError(msg)
     for role, needed in (("point", True), ("std", False)):
         axes = sorted(c.key for c in columns if c.role == role)
@@ -272,10 +259,7 @@ def read_tracker_csv(
         used = {c.index for c in columns}
         ignored = [cell.strip() for i, cell in enumerate(header) if i not in used]
         if (frame or "tracker") != "tracker" or (frame_id or _IPA_FRAME_ID) != _IPA_FRAME_ID:
-            msg = (
-                f"{path}: the ipa profile is in frame 'tracker'/{_IPA_FRAME_ID!r}, "
-                f"got {frame!r}/{frame_id!r}"
-            )
+            msg = f"{path}: the ipa profile is in frame 'tracker'/{_IPA_FRAME_ID!r}, got {frame!r}/{frame_id!r}"
             raise InputError(msg)
         frame, frame_id = "tracker", _IPA_FRAME_ID
     else:
@@ -327,9 +311,7 @@ def read_tracker_csv(
     )
 
 
-def _parse_row(
-    row: list[str], header: list[str], columns: list[_Column], separator: str
-) -> dict[int, float]:
+def _parse_row(row: list[str], header: list[str], columns: list[_Column], separator: str) -> dict[int, float]:
     """Return SI values by column index; ValueError names the bad column."""
     while len(row) > len(header) and not row[-1].strip():
         row = row[:-1]

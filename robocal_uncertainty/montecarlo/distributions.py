@@ -196,10 +196,7 @@ class Triangular(_Scalar):
         if self.mode is not None:
             _finite("Triangular.mode", self.mode)
             if not self.low <= self.mode <= self.high:
-                msg = (
-                    f"Triangular.mode must lie in [{self.low!r}, {self.high!r}], "
-                    f"got {self.mode!r}"
-                )
+                msg = f"Triangular.mode must lie in [{self.low!r}, {self.high!r}], got {self.mode!r}"
                 raise ConfigError(msg)
 
     @property
@@ -326,9 +323,7 @@ class CurvilinearTrapezoid(_Scalar):
 
     def __post_init__(self) -> None:
         _check_limits("CurvilinearTrapezoid", self.low, self.high)
-        d = _finite(
-            "CurvilinearTrapezoid.half_width_of_limits", self.half_width_of_limits
-        )
+        d = _finite("CurvilinearTrapezoid.half_width_of_limits", self.half_width_of_limits)
         if not 0 <= d <= 0.5 * (self.high - self.low):
             msg = (
                 "CurvilinearTrapezoid.half_width_of_limits must lie in "

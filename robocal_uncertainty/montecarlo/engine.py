@@ -100,11 +100,7 @@ def block_rng(seed: int, block: int) -> np.random.Generator:
 
 
 def _check_int(name: str, value: object, minimum: int) -> int:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, np.integer))
-        or value < minimum
-    ):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
         msg = f"{name} must be an integer >= {minimum}, got {value!r}"
         raise ConfigError(msg)
     return int(value)
@@ -143,21 +139,14 @@ class AdaptiveSettings:
         _check_int("adaptive.n_dig", self.n_dig, 1)
         check_coverage(self.coverage, "adaptive.coverage")
         if self.interval not in ("probabilistically_symmetric", "shortest"):
-            msg = (
-                "adaptive.interval must be 'probabilistically_symmetric' or 'shortest', "
-                f"got {self.interval!r}"
-            )
+            msg = f"adaptive.interval must be 'probabilistically_symmetric' or 'shortest', got {self.interval!r}"
             raise ConfigError(msg)
         _check_int("adaptive.max_trials", self.max_trials, 1)
         if self.sequence_trials is not None:
-            _check_int(
-                "adaptive.sequence_trials", self.sequence_trials, self.min_sequence
-            )
+            _check_int("adaptive.sequence_trials", self.sequence_trials, self.min_sequence)
         if self.tolerance is not None:
             values = np.atleast_1d(np.asarray(self.tolerance, dtype=np.float64))
-            if values.ndim != 1 or not (
-                np.isfinite(values).all() and (values > 0).all()
-            ):
+            if values.ndim != 1 or not (np.isfinite(values).all() and (values > 0).all()):
                 msg = f"adaptive.tolerance must be positive and finite, got {self.tolerance!r}"
                 raise ConfigError(msg)
 
@@ -260,9 +249,7 @@ class TrialsResult:
     ) -> Summary:
         """:func:`summarize` the samples; coverage defaults to the adaptive one, else 0.95."""
         if coverage is None:
-            coverage = (
-                0.95 if self.adaptive is None else self.adaptive.coverage_probability
-            )
+            coverage = 0.95 if self.adaptive is None else self.adaptive.coverage_probability
         return summarize(self.samples, coverage, bins=bins, expanded_from=expanded_from)
 
 
@@ -272,9 +259,7 @@ def _as_outputs(label: str, values: ArrayLike, n: int) -> NDArray[np.float64]:
         return array[:, np.newaxis]
     if array.ndim == 2 and array.shape[0] == n and array.shape[1] >= 1:
         return array
-    msg = (
-        f"{label} output must have shape ({n},) or ({n}, n_out), got {np.shape(values)}"
-    )
+    msg = f"{label} output must have shape ({n},) or ({n}, n_out), got {np.shape(values)}"
     raise ModelOutputError(msg)
 
 
@@ -293,14 +278,9 @@ def _evaluate_chunk(
                 msg = f"draw output must have {n} rows, got shape {np.shape(draw)}"
                 raise ModelOutputError(msg)
         total = sum(sizes)
-        values = _as_outputs(
-            "model", trial_block.evaluate(np.concatenate(draws)), total
-        )
+        values = _as_outputs("model", trial_block.evaluate(np.concatenate(draws)), total)
         return np.split(values, np.cumsum(sizes)[:-1])
-    return [
-        _as_outputs("trial_block", trial_block(block_rng(seed, b), n), n)
-        for b, n in zip(blocks, sizes)
-    ]
+    return [_as_outputs("trial_block", trial_block(block_rng(seed, b), n), n) for b, n in zip(blocks, sizes)]
 
 
 def _iter_blocks(
@@ -330,9 +310,7 @@ def _iter_blocks(
     try:
         # A bounded look-ahead keeps memory flat and lets an adaptive run stop early.
         for start, chunk in chunks:
-            pending.append(
-                executor.submit(_evaluate_chunk, trial_block, seed, start, chunk)
-            )
+            pending.append(executor.submit(_evaluate_chunk, trial_block, seed, start, chunk))
             if len(pending) >= 2 * workers:
                 yield from pending.popleft().result()
         while pending:
@@ -353,10 +331,7 @@ class _Collector:
         if self.n_outputs is None:
             self.n_outputs = values.shape[1]
         elif values.shape[1] != self.n_outputs:
-            msg = (
-                f"model output of block {block} has {values.shape[1]} components, "
-                f"earlier blocks had {self.n_outputs}"
-            )
+            msg = f"model output of block {block} has {values.shape[1]} components, earlier blocks had {self.n_outputs}"
             raise ModelOutputError(msg)
         finite_rows = np.isfinite(values).all(axis=1)
         if finite_rows.all():
@@ -372,9 +347,7 @@ class _Collector:
         return values[finite_rows]
 
 
-def _check_common(
-    seed: int, block_size: int, chunk_blocks: int, workers: int, nonfinite: str
-) -> None:
+def _check_common(seed: int, block_size: int, chunk_blocks: int, workers: int, nonfinite: str) -> None:
     _check_int("seed", seed, 0)
     _check_int("block_size", block_size, 1)
     _check_int("chunk_blocks", chunk_blocks, 1)
@@ -390,9 +363,7 @@ def _sequence_stats(
     """(count, mean, M2) of one sequence, shape (3, n_out), and its (y, u, y_low, y_high)."""
     mean = values.mean(axis=0)
     m2 = ((values - mean) ** 2).sum(axis=0)
-    low, high = coverage_bounds(
-        np.sort(values, axis=0), settings.coverage, settings.interval
-    )
+    low, high = coverage_bounds(np.sort(values, axis=0), settings.coverage, settings.interval)
     std = np.sqrt(m2 / (values.shape[0] - 1))
     moments = np.stack([np.full_like(mean, values.shape[0]), mean, m2])
     return moments, np.stack([mean, std, low, high])
@@ -409,9 +380,7 @@ def _pooled_std(moments: list[NDArray[np.float64]]) -> NDArray[np.float64]:
     return np.asarray(np.sqrt(pooled / (total - 1)), dtype=np.float64)
 
 
-def _deltas(
-    settings: AdaptiveSettings, u: NDArray[np.float64], n_outputs: int
-) -> NDArray[np.float64]:
+def _deltas(settings: AdaptiveSettings, u: NDArray[np.float64], n_outputs: int) -> NDArray[np.float64]:
     if settings.tolerance is None:
         return np.array([numerical_tolerance(float(v), settings.n_dig) for v in u])
     given = np.atleast_1d(np.asarray(settings.tolerance, dtype=np.float64))
@@ -471,21 +440,13 @@ def run_trials(
     """
     _check_common(seed, block_size, chunk_blocks, workers, nonfinite)
     if (n_trials is None) == (adaptive is None):
-        msg = "give exactly one of n_trials and adaptive, got " + (
-            "both" if adaptive is not None else "neither"
-        )
+        msg = "give exactly one of n_trials and adaptive, got " + ("both" if adaptive is not None else "neither")
         raise ConfigError(msg)
     if not callable(trial_block) and not isinstance(trial_block, StagedTrialBlock):
         msg = f"trial_block must be callable or have draw/evaluate, got {type(trial_block)}"
         raise ConfigError(msg)
-    if (
-        mp_context is not None
-        and mp_context not in multiprocessing.get_all_start_methods()
-    ):
-        msg = (
-            f"mp_context must be one of {multiprocessing.get_all_start_methods()}, "
-            f"got {mp_context!r}"
-        )
+    if mp_context is not None and mp_context not in multiprocessing.get_all_start_methods():
+        msg = f"mp_context must be one of {multiprocessing.get_all_start_methods()}, got {mp_context!r}"
         raise ConfigError(msg)
     collector = _Collector(nonfinite)
     if adaptive is None:
@@ -507,18 +468,14 @@ def run_trials(
             for b, values in enumerate(stream):
                 blocks.append(collector.accept(b, values))
                 done += values.shape[0]
-                if progress is not None and (
-                    (b + 1) % chunk_blocks == 0 or b == n_blocks - 1
-                ):
+                if progress is not None and ((b + 1) % chunk_blocks == 0 or b == n_blocks - 1):
                     progress(done, total)
         finally:
             stream.close()
         samples = np.concatenate(blocks)
         samples.setflags(write=False)
         _warn_dropped(collector.n_dropped, total)
-        return TrialsResult(
-            samples, total, seed, block_size, n_blocks, collector.n_dropped, None
-        )
+        return TrialsResult(samples, total, seed, block_size, n_blocks, collector.n_dropped, None)
     return _run_adaptive(
         trial_block,
         adaptive,
@@ -557,10 +514,7 @@ def _run_adaptive(
     sequence_trials = blocks_per_sequence * block_size
     max_sequences = settings.max_trials // sequence_trials
     if max_sequences < 2:
-        msg = (
-            f"adaptive.max_trials must allow 2 sequences of {sequence_trials} trials, "
-            f"got {settings.max_trials}"
-        )
+        msg = f"adaptive.max_trials must allow 2 sequences of {sequence_trials} trials, got {settings.max_trials}"
         raise ConfigError(msg)
     n_blocks = max_sequences * blocks_per_sequence
     stream = _iter_blocks(
@@ -596,9 +550,7 @@ def _run_adaptive(
             h = len(sequences)
             if h < 2:
                 continue
-            spread = np.stack(monitored).std(axis=0, ddof=1) / math.sqrt(
-                h
-            )  # (4, n_out)
+            spread = np.stack(monitored).std(axis=0, ddof=1) / math.sqrt(h)  # (4, n_out)
             reached = 2.0 * spread.max(axis=0)
             delta = _deltas(settings, _pooled_std(moments), sequence.shape[1])
             if bool((reached <= delta).all()):
@@ -657,9 +609,7 @@ class DistributionTrials:
 
     def draw(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Input values of n trials, shape (n, n_columns)."""
-        columns = [
-            np.reshape(d.sample(rng, n), (n, d.size)) for d in self.distributions
-        ]
+        columns = [np.reshape(d.sample(rng, n), (n, d.size)) for d in self.distributions]
         return np.concatenate(columns, axis=1)
 
     def evaluate(self, inputs: NDArray[np.float64]) -> ArrayLike:
@@ -689,9 +639,7 @@ def resolve_inputs(
             raise ConfigError(msg)
     columns: list[str] = []
     for name, dist in zip(names, distributions):
-        columns.extend(
-            [name] if dist.size == 1 else [f"{name}[{i}]" for i in range(dist.size)]
-        )
+        columns.extend([name] if dist.size == 1 else [f"{name}[{i}]" for i in range(dist.size)])
     return names, distributions, tuple(columns)
 
 

@@ -89,9 +89,7 @@ class GumResult:
     relative_step: float
 
 
-def _model_values(
-    model: Callable[[NDArray[np.float64]], ArrayLike], x: NDArray[np.float64]
-) -> NDArray[np.float64]:
+def _model_values(model: Callable[[NDArray[np.float64]], ArrayLike], x: NDArray[np.float64]) -> NDArray[np.float64]:
     rows = x.shape[0]
     values = np.asarray(model(x), dtype=np.float64)
     if values.ndim == 1 and values.shape[0] == rows:
@@ -169,15 +167,9 @@ def propagate_gum(
         contributions = (jacobian[j, student] * u_in[student]) ** 4 / dof[student]
         denominator = float(contributions.sum())
         nu = u_c[j] ** 4 / denominator if denominator > 0 else math.inf
-        k = float(
-            stats.norm.ppf(0.5 * (1 + p))
-            if math.isinf(nu)
-            else stats.t.ppf(0.5 * (1 + p), nu)
-        )
+        k = float(stats.norm.ppf(0.5 * (1 + p)) if math.isinf(nu) else stats.t.ppf(0.5 * (1 + p), nu))
         expanded = k * float(u_c[j])
-        interval = CoverageInterval(
-            float(y[j]) - expanded, float(y[j]) + expanded, "gum", p
-        )
+        interval = CoverageInterval(float(y[j]) - expanded, float(y[j]) + expanded, "gum", p)
         outputs.append(GumOutput(float(y[j]), float(u_c[j]), nu, k, expanded, interval))
     for array in (covariance, jacobian, x0, sigma):
         array.setflags(write=False)

@@ -82,9 +82,7 @@ class EllipsoidalRegion:
         return bool(inside) if np.ndim(inside) == 0 else inside
 
 
-def _distances(
-    cholesky: NDArray[np.float64], centred: NDArray[np.float64]
-) -> NDArray[np.float64]:
+def _distances(cholesky: NDArray[np.float64], centred: NDArray[np.float64]) -> NDArray[np.float64]:
     z = linalg.solve_triangular(cholesky, centred.T, lower=True, check_finite=False)
     return np.asarray(np.sqrt((z * z).sum(axis=0)), dtype=np.float64)
 

@@ -94,10 +94,7 @@ class Histogram:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Histogram):
             return NotImplemented
-        return bool(
-            np.array_equal(self.counts, other.counts)
-            and np.array_equal(self.edges, other.edges)
-        )
+        return bool(np.array_equal(self.counts, other.counts) and np.array_equal(self.edges, other.edges))
 
     __hash__ = None  # type: ignore[assignment]  # equal histograms need not hash alike
 
@@ -335,12 +332,8 @@ def summarize(
     stds = np.sqrt(np.diag(covariance))
     outputs = []
     for j in range(n_out):
-        symmetric = CoverageInterval(
-            float(sym_low[j]), float(sym_high[j]), "probabilistically_symmetric", p
-        )
-        shortest = CoverageInterval(
-            float(short_low[j]), float(short_high[j]), "shortest", p
-        )
+        symmetric = CoverageInterval(float(sym_low[j]), float(sym_high[j]), "probabilistically_symmetric", p)
+        shortest = CoverageInterval(float(short_low[j]), float(short_high[j]), "shortest", p)
         chosen = shortest if expanded_from == "shortest" else symmetric
         estimate, u = float(means[j]), float(stds[j])
         expanded = chosen.half_width
@@ -354,9 +347,7 @@ def summarize(
                 expanded_from=expanded_from,
                 expanded_uncertainty=expanded,
                 coverage_factor=expanded / u if u > 0 else None,
-                relative_expanded_uncertainty=expanded / abs(estimate)
-                if estimate != 0
-                else None,
+                relative_expanded_uncertainty=expanded / abs(estimate) if estimate != 0 else None,
                 histogram=Histogram(counts.astype(np.int64), edges.astype(np.float64)),
                 n_trials=m,
             )

@@ -99,6 +99,4 @@ def validate_gum(
         digits = None
     d_low = abs(g.interval.low - mc.low)
     d_high = abs(g.interval.high - mc.high)
-    return GumValidation(
-        output, d_low, d_high, delta, digits, d_low <= delta and d_high <= delta
-    )
+    return GumValidation(output, d_low, d_high, delta, digits, d_low <= delta and d_high <= delta)

@@ -10,7 +10,7 @@ import numpy as np
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 
-__all__ = ["SOURCE_DESCRIPTIONS", "SOURCES", "UncertaintySettings", "parse_sources"]
+__all__ = ["SOURCES", "SOURCE_DESCRIPTIONS", "UncertaintySettings", "parse_sources"]
 
 SOURCE_DESCRIPTIONS: dict[str, str] = {
     "tracker": "laser-tracker noise on every measured point",

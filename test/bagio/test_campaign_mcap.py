@@ -80,9 +80,7 @@ def _pose_messages(
         q = np.array([0.1 * i, -0.2, 0.3 + i], dtype=np.float64)
         out.append(("/joint_states", JOINT_STATE, stamp, encode_joint_state(stamp, names, q)))
         xyz = np.array([1.0 + i, 2.0, 3.0])
-        out.append(
-            ("/tracker/point", POINT_STAMPED, stamp, encode_point_stamped(stamp, frame_id, xyz))
-        )
+        out.append(("/tracker/point", POINT_STAMPED, stamp, encode_point_stamped(stamp, frame_id, xyz)))
     return out
 
 
@@ -167,10 +165,7 @@ def test_plain_mcap_reader_sees_ros2_topics_schemas_and_metadata(tmp_path: Path)
             assert schema.data.decode() == message_schema(name).text
         assert b"float64[] position" in schemas[JOINT_STATE].data
         assert b"MSG: builtin_interfaces/Time" in schemas[POINT_STAMPED].data
-        topics = {
-            c.topic: (schemas_by_id := summary.schemas)[c.schema_id].name
-            for c in summary.channels.values()
-        }
+        topics = {c.topic: (schemas_by_id := summary.schemas)[c.schema_id].name for c in summary.channels.values()}
         assert schemas_by_id
         assert topics == {
             "/joint_states": JOINT_STATE,
@@ -200,9 +195,7 @@ def test_rosbags_reads_the_file_with_its_embedded_definitions(tmp_path: Path) ->
         topics = {c.topic: c.msgtype for c in reader.connections}
         assert topics["/joint_states"] == JOINT_STATE
         joint_messages = [
-            reader.deserialize(raw, c.msgtype)
-            for c, _, raw in reader.messages()
-            if c.topic == "/joint_states"
+            reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/joint_states"
         ]
     assert [list(m.name) for m in joint_messages] == [list(NAMES)] * 3  # type: ignore[attr-defined]
     assert np.array_equal(joint_messages[1].position, campaign.joint_positions[1])  # type: ignore[attr-defined]
@@ -223,9 +216,7 @@ def test_rosbag2_directory_is_read(tmp_path: Path, storage: StoragePlugin) -> No
             writer.write(joints, stamp, encode_joint_state(stamp, names, q))
         for i in (3, 8, 15):  # three tracker points, stamped like a joint state
             stamp = T0 + i * 10_000_000
-            writer.write(
-                points, stamp, encode_point_stamped(stamp, "base_link", np.array([i, 0.5, 1.0]))
-            )
+            writer.write(points, stamp, encode_point_stamped(stamp, "base_link", np.array([i, 0.5, 1.0])))
     campaign = read_campaign(bag)
     assert campaign.joint_names == order  # order of the first JointState message
     campaign = campaign.reorder_joints(NAMES)
@@ -267,9 +258,7 @@ def test_file_of_killed_recorder_is_recovered(tmp_path: Path) -> None:
     campaign = _campaign(5)
     path = tmp_path / "live.mcap"
     crashed = tmp_path / "crashed.mcap"
-    recorder = CampaignRecorder(
-        path, joint_names=NAMES, frame="tracker", frame_id="laser_tracker", metadata={"run": 1}
-    )
+    recorder = CampaignRecorder(path, joint_names=NAMES, frame="tracker", frame_id="laser_tracker", metadata={"run": 1})
     assert campaign.stamps_ns is not None
     assert campaign.point_std is not None
     for i in range(5):

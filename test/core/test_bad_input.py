@@ -70,33 +70,25 @@ def test_non_finite_joints(bad: float) -> None:
 def test_non_finite_points(bad: float) -> None:
     p = np.zeros((5, 3))
     p[4, 1] = bad
-    with pytest.raises(
-        InputError, match=r"^points contains NaN or inf \(first at pose index 4\)$"
-    ) as exc:
+    with pytest.raises(InputError, match=r"^points contains NaN or inf \(first at pose index 4\)$") as exc:
         Campaign(JOINTS, np.zeros((5, 6)), p)
     one_line(exc)
 
 
 def test_wrong_joint_count_in_campaign() -> None:
-    with pytest.raises(
-        InputError, match=r"joint_positions must have shape \(n, 6\), got \(5, 5\)"
-    ) as exc:
+    with pytest.raises(InputError, match=r"joint_positions must have shape \(n, 6\), got \(5, 5\)") as exc:
         Campaign(JOINTS, np.zeros((5, 5)), np.zeros((5, 3)))
     one_line(exc)
 
 
 def test_points_count_mismatch() -> None:
-    with pytest.raises(
-        InputError, match=r"points must have shape \(5, 3\), got \(4, 3\)"
-    ) as exc:
+    with pytest.raises(InputError, match=r"points must have shape \(5, 3\), got \(4, 3\)") as exc:
         Campaign(JOINTS, np.zeros((5, 6)), np.zeros((4, 3)))
     one_line(exc)
 
 
 def test_duplicate_joint_names() -> None:
-    with pytest.raises(
-        InputError, match=r"joint_names must be unique and non-empty"
-    ) as exc:
+    with pytest.raises(InputError, match=r"joint_names must be unique and non-empty") as exc:
         Campaign(("a", "a"), np.zeros((1, 2)), np.zeros((1, 3)))
     one_line(exc)
 
@@ -105,9 +97,7 @@ def test_duplicate_joint_names() -> None:
 
 
 def test_wrong_joint_names(model, campaign: Campaign) -> None:
-    renamed = Campaign(
-        tuple(f"j{i}" for i in range(6)), campaign.joint_positions, campaign.points
-    )
+    renamed = Campaign(tuple(f"j{i}" for i in range(6)), campaign.joint_positions, campaign.points)
     with pytest.raises(
         InputError,
         match=r"campaign joints \['j0'.*do not match the robot's \['joint1'.*missing",
@@ -118,9 +108,7 @@ def test_wrong_joint_names(model, campaign: Campaign) -> None:
 
 def test_wrong_joint_count_in_identify(model, campaign: Campaign) -> None:
     five = Campaign(JOINTS[:5], campaign.joint_positions[:, :5], campaign.points)
-    with pytest.raises(
-        InputError, match=r"do not match the robot's .*missing \['joint6'\]"
-    ) as exc:
+    with pytest.raises(InputError, match=r"do not match the robot's .*missing \['joint6'\]") as exc:
         identify(model, five)
     one_line(exc)
 
@@ -192,9 +180,7 @@ def write(tmp_path: Path, data: object) -> Path:
 
 def test_unknown_length_unit(tmp_path: Path, paper_dict: dict) -> None:
     paper_dict["units"] = {"length": "inch", "angle": "deg"}
-    with pytest.raises(
-        ConfigError, match=r"unknown length unit 'inch' \(known: m, mm, um, µm\)"
-    ) as exc:
+    with pytest.raises(ConfigError, match=r"unknown length unit 'inch' \(known: m, mm, um, µm\)") as exc:
         load_robot_model(write(tmp_path, paper_dict))
     one_line(exc)
 
@@ -202,9 +188,7 @@ def test_unknown_length_unit(tmp_path: Path, paper_dict: dict) -> None:
 def test_unknown_angle_unit_and_missing_unit(paper_dict: dict) -> None:
     bad = copy.deepcopy(paper_dict)
     bad["units"] = {"length": "mm", "angle": "grad"}
-    with pytest.raises(
-        ConfigError, match=r"unknown angle unit 'grad' \(known: rad, deg\)"
-    ) as exc:
+    with pytest.raises(ConfigError, match=r"unknown angle unit 'grad' \(known: rad, deg\)") as exc:
         robot_model_from_dict(bad)
     one_line(exc)
     bad["units"] = {"length": "mm"}
@@ -216,9 +200,7 @@ def test_unknown_angle_unit_and_missing_unit(paper_dict: dict) -> None:
 def test_missing_joints(tmp_path: Path, paper_dict: dict) -> None:
     del paper_dict["joints"]
     path = write(tmp_path, paper_dict)
-    with pytest.raises(
-        ConfigError, match=r"robot\.yaml: missing required field 'joints'$"
-    ) as exc:
+    with pytest.raises(ConfigError, match=r"robot\.yaml: missing required field 'joints'$") as exc:
         load_robot_model(path)
     one_line(exc)
 
@@ -233,9 +215,7 @@ def test_joint_without_d(tmp_path: Path, paper_dict: dict) -> None:
 def test_unknown_joint_field_and_convention(paper_dict: dict) -> None:
     bad = copy.deepcopy(paper_dict)
     bad["joints"][0]["offset"] = 1.0
-    with pytest.raises(
-        ConfigError, match=r"joint 1 has unknown fields \['offset'\]"
-    ) as exc:
+    with pytest.raises(ConfigError, match=r"joint 1 has unknown fields \['offset'\]") as exc:
         robot_model_from_dict(bad)
     one_line(exc)
     bad = copy.deepcopy(paper_dict)
@@ -250,9 +230,7 @@ def test_unknown_joint_field_and_convention(paper_dict: dict) -> None:
 
 def test_malformed_yaml(tmp_path: Path) -> None:
     path = tmp_path / "broken.yaml"
-    path.write_text(
-        "name: x\nconvention: modified_dh\nunits: {length: mm, angle: deg\njoints: []\n"
-    )
+    path.write_text("name: x\nconvention: modified_dh\nunits: {length: mm, angle: deg\njoints: []\n")
     with pytest.raises(ConfigError, match=r"broken\.yaml is not valid YAML at line \d+, column \d+: ") as exc:
         load_robot_model(path)
     one_line(exc)
@@ -261,9 +239,7 @@ def test_malformed_yaml(tmp_path: Path) -> None:
 def test_yaml_that_is_not_a_mapping(tmp_path: Path) -> None:
     path = tmp_path / "list.yaml"
     path.write_text("- 1\n- 2\n")
-    with pytest.raises(
-        ConfigError, match=r"expected a mapping at top level, got list"
-    ) as exc:
+    with pytest.raises(ConfigError, match=r"expected a mapping at top level, got list") as exc:
         load_robot_model(path)
     one_line(exc)
 

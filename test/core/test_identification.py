@@ -53,16 +53,12 @@ def paper_model(frame: str) -> RobotModel:
 @pytest.mark.parametrize("lam", ["auto", "gcv", 0.0], ids=["lcurve", "gcv", "lambda0"])
 @pytest.mark.parametrize("frame", ["base", "tracker"])
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_simulated_53_poses_predict_fresh_poses(
-    seed: int, frame: str, lam: object, record_property
-) -> None:
+def test_simulated_53_poses_predict_fresh_poses(seed: int, frame: str, lam: object, record_property) -> None:
     model = paper_model(frame)
     settings = SimulationSettings(frame=frame)
     assert settings.n_poses == 53
     assert settings.tracker_noise.a == 5e-6
-    assert settings.encoder_noise.half_width == pytest.approx(
-        np.radians(0.005), rel=1e-15
-    )
+    assert settings.encoder_noise.half_width == pytest.approx(np.radians(0.005), rel=1e-15)
     sim = simulate_campaign(model, settings, seed=seed)
     res = identify(model, sim.campaign, lambda_=lam)
     assert res.converged
@@ -73,9 +69,7 @@ def test_simulated_53_poses_predict_fresh_poses(
     true_params = sim.true_model.parameter_vector()
     rng = np.random.default_rng(10_000 + seed)
     q_true = draw_joint_positions(model, 500, rng=rng, margin=settings.joint_margin)
-    readings, measured, _ = simulate_measurements(
-        true_params, model, q_true, settings, rng=rng
-    )
+    readings, measured, _ = simulate_measurements(true_params, model, q_true, settings, rng=rng)
     err_cal = rms(measured - forward_points(model, res.estimate, readings))
     err_true = rms(measured - forward_points(model, true_params, readings))
     # "Nominal": the geometry of the data sheet; in tracker mode with the rigid-fit base the
@@ -117,32 +111,22 @@ def test_structural_observability_tracker_mode() -> None:
     deps = {d.split(" ")[0]: d for d in res.dependencies}
     for field in ("theta", "d", "alpha", "a"):
         key = f"joint1.{field}"
-        assert key in deps, (
-            f"{key} should be reported dependent; got {res.dependencies}"
-        )
+        assert key in deps, f"{key} should be reported dependent; got {res.dependencies}"
         assert "base." in deps[key]
         assert not res.estimated[names.index(key)]
     for key in ("joint3.d", "joint4.d"):
         assert deps[key].startswith(f"{key} = 1 * joint2.d"), deps[key]
         assert not res.estimated[names.index(key)]
     assert res.estimated[names.index("joint2.d")]
-    assert (
-        res.estimated[names.index("joint3.beta")]
-        and res.estimated[names.index("joint4.beta")]
-    )
-    assert all(
-        res.estimated[names.index(f"base.{f}")]
-        for f in ("x", "y", "z", "roll", "pitch", "yaw")
-    )
+    assert res.estimated[names.index("joint3.beta")] and res.estimated[names.index("joint4.beta")]
+    assert all(res.estimated[names.index(f"base.{f}")] for f in ("x", "y", "z", "roll", "pitch", "yaw"))
     np.testing.assert_array_equal(res.identifiable, res.estimated)
     assert res.candidates.all()
     # Every candidate is either estimated or explained by exactly one dependency line.
     assert sorted(deps) == sorted(n for n, e in zip(names, res.estimated) if not e)
     # Parameters left out keep their nominal values exactly.
     not_est = ~res.estimated
-    np.testing.assert_array_equal(
-        res.estimate[not_est], model.parameter_vector()[not_est]
-    )
+    np.testing.assert_array_equal(res.estimate[not_est], model.parameter_vector()[not_est])
     np.testing.assert_array_equal(res.estimate[not_est], res.nominal[not_est])
     assert np.isnan(res.linearized_std[not_est]).all()
     assert np.isfinite(res.linearized_std[res.estimated]).all()
@@ -184,9 +168,7 @@ def noise_free(frame: str) -> SimulationSettings:
 
 @pytest.mark.parametrize("lam", ["auto", "gcv", 0.0], ids=["lcurve", "gcv", "lambda0"])
 @pytest.mark.parametrize("frame", ["base", "tracker"])
-def test_noise_free_data_recover_identifiable_parameters(
-    frame: str, lam: object
-) -> None:
+def test_noise_free_data_recover_identifiable_parameters(frame: str, lam: object) -> None:
     """Truth = nominal + errors on the identifiable parameters: recovered to round-off."""
     model = paper_model(frame)
     settings = noise_free(frame)
@@ -200,9 +182,7 @@ def test_noise_free_data_recover_identifiable_parameters(
     fixed = ~obs.identifiable & candidates
     truth[fixed] = nominal[fixed]
     q = sim.true_joint_positions
-    campaign = Campaign(
-        model.joint_names, q, forward_points(model, truth, q), frame=frame
-    )
+    campaign = Campaign(model.joint_names, q, forward_points(model, truth, q), frame=frame)
     assert np.max(np.abs(campaign.points - forward_points(model, nominal, q))) > 5e-4
 
     res = identify(model, campaign, lambda_=lam)
@@ -210,17 +190,11 @@ def test_noise_free_data_recover_identifiable_parameters(
     np.testing.assert_array_equal(res.estimated, obs.identifiable)
     assert res.rms_after < 1e-9
     assert rms(res.residuals) < 1e-9
-    q_new = draw_joint_positions(
-        model, 500, rng=np.random.default_rng(99), margin=settings.joint_margin
-    )
-    pred_err = np.abs(
-        forward_points(model, truth, q_new) - forward_points(model, res.estimate, q_new)
-    )
+    q_new = draw_joint_positions(model, 500, rng=np.random.default_rng(99), margin=settings.joint_margin)
+    pred_err = np.abs(forward_points(model, truth, q_new) - forward_points(model, res.estimate, q_new))
     assert pred_err.max() < 1e-8
     # Locally unique: the identified parameters are the true ones.
-    np.testing.assert_allclose(
-        res.estimate, truth, rtol=0, atol=1e-7 if lam != 0.0 else 1e-12
-    )
+    np.testing.assert_allclose(res.estimate, truth, rtol=0, atol=1e-7 if lam != 0.0 else 1e-12)
 
 
 def test_noise_free_errors_on_every_parameter_leave_only_a_micrometre_floor() -> None:
@@ -252,17 +226,13 @@ def shaw(n: int) -> tuple[np.ndarray, np.ndarray]:
     return a, x
 
 
-def error_ratios(
-    a: np.ndarray, x: np.ndarray, noise: float, seed: int
-) -> tuple[float, float, float]:
+def error_ratios(a: np.ndarray, x: np.ndarray, noise: float, seed: int) -> tuple[float, float, float]:
     """Solution error at the corner, at GCV and at lambda = 0, each over the grid's best."""
     rng = np.random.default_rng(seed)
     b = a @ x + noise * rng.standard_normal(a.shape[0])
     u, s, vt = np.linalg.svd(a, full_matrices=False)
     curve = lcurve(u, s, b)
-    errs = np.array(
-        [np.linalg.norm(tikhonov_solve(u, s, vt, b, lam) - x) for lam in curve.lambdas]
-    )
+    errs = np.array([np.linalg.norm(tikhonov_solve(u, s, vt, b, lam) - x) for lam in curve.lambdas])
     best = float(errs.min())
 
     def err(lam: float) -> float:
@@ -275,9 +245,7 @@ def test_lcurve_corner_on_shaw() -> None:
     a, x = shaw(64)
     for seed in range(10):
         corner, _, zero = error_ratios(a, x, 1e-4, seed)
-        assert corner < 10.0, (
-            f"seed {seed}: corner error {corner:.3g}x the best on the grid"
-        )
+        assert corner < 10.0, f"seed {seed}: corner error {corner:.3g}x the best on the grid"
         assert zero > 1e6
 
 
@@ -320,22 +288,14 @@ def test_lcurve_quantities_match_explicit_tikhonov_solves() -> None:
         lam = curve.lambdas[k]
         aug = np.vstack((a, lam * np.eye(8)))
         x_ref, *_ = np.linalg.lstsq(aug, np.concatenate((b, np.zeros(8))), rcond=None)
-        np.testing.assert_allclose(
-            tikhonov_solve(u, s, vt, b, lam), x_ref, rtol=1e-7, atol=1e-9
-        )
-        np.testing.assert_allclose(
-            curve.residual_norms[k], np.linalg.norm(b - a @ x_ref), rtol=1e-7
-        )
-        np.testing.assert_allclose(
-            curve.solution_norms[k], np.linalg.norm(x_ref), rtol=1e-7
-        )
+        np.testing.assert_allclose(tikhonov_solve(u, s, vt, b, lam), x_ref, rtol=1e-7, atol=1e-9)
+        np.testing.assert_allclose(curve.residual_norms[k], np.linalg.norm(b - a @ x_ref), rtol=1e-7)
+        np.testing.assert_allclose(curve.solution_norms[k], np.linalg.norm(x_ref), rtol=1e-7)
         influence = a @ np.linalg.solve(a.T @ a + lam**2 * np.eye(8), a.T)
         gcv_ref = np.sum((b - influence @ b) ** 2) / (40 - np.trace(influence)) ** 2
         np.testing.assert_allclose(curve.gcv[k], gcv_ref, rtol=1e-6)
     assert curve.gcv_index == int(np.argmin(curve.gcv))
-    assert curve.corner_index == int(
-        np.flatnonzero(curve.curvature >= 0.99 * curve.curvature.max())[0]
-    )
+    assert curve.corner_index == int(np.flatnonzero(curve.curvature >= 0.99 * curve.curvature.max())[0])
 
 
 # --- real UR10 laser-tracker data -----------------------------------------------------------
@@ -362,10 +322,7 @@ def parse_ipa_csv(path: Path) -> Campaign:
         return float(text.replace(",", "."))
 
     q = np.array([[num(r[col[j]]) for j in UR10_JOINTS] for r in body])
-    pts = (
-        np.array([[num(r[col[f"measurement_{c}"]]) for c in "xyz"] for r in body])
-        * 1e-3
-    )
+    pts = np.array([[num(r[col[f"measurement_{c}"]]) for c in "xyz"] for r in body]) * 1e-3
     return Campaign(UR10_JOINTS, q, pts, frame="tracker", frame_id="laser_tracker")
 
 
@@ -378,9 +335,7 @@ def ur10_campaign() -> Campaign:
         if (folder / UR10_CSV).is_file():
             break
     else:
-        pytest.skip(
-            f"UR10 tracker data ({UR10_CSV}) found neither in test/data/ur10_laser_tracker nor ../shared/data"
-        )
+        pytest.skip(f"UR10 tracker data ({UR10_CSV}) found neither in test/data/ur10_laser_tracker nor ../shared/data")
     reference = parse_ipa_csv(folder / UR10_CSV)
     try:
         from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
@@ -389,17 +344,13 @@ def ur10_campaign() -> Campaign:
     campaign = read_tracker_csv(folder / UR10_CSV)
     assert campaign.frame == "tracker"
     assert campaign.joint_names == UR10_JOINTS
-    np.testing.assert_allclose(
-        campaign.joint_positions, reference.joint_positions, rtol=0, atol=1e-15
-    )
+    np.testing.assert_allclose(campaign.joint_positions, reference.joint_positions, rtol=0, atol=1e-15)
     np.testing.assert_allclose(campaign.points, reference.points, rtol=0, atol=1e-12)
     return campaign
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_ur10_real_data_validation(
-    ur10_campaign: Campaign, seed: int, record_property
-) -> None:
+def test_ur10_real_data_validation(ur10_campaign: Campaign, seed: int, record_property) -> None:
     campaign = ur10_campaign
     assert campaign.n_poses > 500
     model = load_robot_model(UR10_YAML)

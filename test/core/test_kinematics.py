@@ -147,21 +147,9 @@ def pinocchio_points(pin, model: RobotModel, q: np.ndarray) -> np.ndarray:
     parent = 0
     for i in range(model.n_joints):
         beta = model.beta[i] if model.has_beta[i] else 0.0
-        before = (
-            base_matrix(model.base_xyz, model.base_rpy)
-            if i == 0
-            else trans(z=model.d[i - 1])
-        )
-        placement = (
-            before
-            @ rot_x(model.alpha[i])
-            @ trans(x=model.a[i])
-            @ rot_y(beta)
-            @ rot_z(model.theta[i])
-        )
-        parent = pmodel.addJoint(
-            parent, pin.JointModelRZ(), se3(placement), f"j{i + 1}"
-        )
+        before = base_matrix(model.base_xyz, model.base_rpy) if i == 0 else trans(z=model.d[i - 1])
+        placement = before @ rot_x(model.alpha[i]) @ trans(x=model.a[i]) @ rot_y(beta) @ rot_z(model.theta[i])
+        parent = pmodel.addJoint(parent, pin.JointModelRZ(), se3(placement), f"j{i + 1}")
     final = se3(trans(z=model.d[-1]) @ trans(*model.tool_point))
     data = pmodel.createData()
     out = np.empty((q.shape[0], 3))
@@ -173,9 +161,7 @@ def pinocchio_points(pin, model: RobotModel, q: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("path", [PAPER_YAML, UR10_YAML], ids=["paper_arm", "ur10"])
 @pytest.mark.parametrize("beta", [True, False], ids=["beta", "no_beta"])
-def test_forward_points_match_pinocchio(
-    path: Path, beta: bool, record_property
-) -> None:
+def test_forward_points_match_pinocchio(path: Path, beta: bool, record_property) -> None:
     pin = pytest.importorskip("pinocchio")
     rng = np.random.default_rng(2024 + 7 * beta + len(path.name))
     nominal = load_robot_model(path)
@@ -185,9 +171,7 @@ def test_forward_points_match_pinocchio(
         assert sum(model.has_beta) == (2 if beta else 0)
         if beta:
             assert np.all(np.abs(model.beta[list(model.has_beta)]) > 0)
-        q = rng.uniform(
-            nominal.joint_limits[:, 0], nominal.joint_limits[:, 1], (30, model.n_joints)
-        )
+        q = rng.uniform(nominal.joint_limits[:, 0], nominal.joint_limits[:, 1], (30, model.n_joints))
         got = forward_points(model, model.parameter_vector(), q)
         want = pinocchio_points(pin, model, q)
         worst = max(worst, float(np.max(np.linalg.norm(got - want, axis=1))))
@@ -207,10 +191,7 @@ def test_ur10_standard_dh_conversion_is_exact() -> None:
     raw = yaml.safe_load(UR10_YAML.read_text(encoding="utf-8"))
     assert raw["convention"] == "standard_dh"
     assert raw["units"] == {"length": "m", "angle": "rad"}
-    rows = [
-        (float(j["alpha"]), float(j["a"]), float(j["d"]), float(j.get("theta", 0.0)))
-        for j in raw["joints"]
-    ]
+    rows = [(float(j["alpha"]), float(j["a"]), float(j["d"]), float(j.get("theta", 0.0))) for j in raw["joints"]]
     tool = np.array(raw["tool_point"], dtype=float)
     model = load_robot_model(UR10_YAML)
     # The UR10 nominal geometry is public: a2 = -0.612, a3 = -0.5723, d1 = 0.1273.
@@ -244,9 +225,7 @@ def test_jacobian_matches_central_differences(path: Path, record_property) -> No
     p = model.parameter_vector()
     names = model.layout.names
     assert p.shape == (model.layout.size,) == (len(names),)
-    q = rng.uniform(
-        model.joint_limits[:, 0], model.joint_limits[:, 1], (25, model.n_joints)
-    )
+    q = rng.uniform(model.joint_limits[:, 0], model.joint_limits[:, 1], (25, model.n_joints))
     points, jac = forward_points_and_jacobian(model, p, q)
     assert points.shape == (25, 3)
     assert jac.shape == (25, 3, p.size)
@@ -256,9 +235,7 @@ def test_jacobian_matches_central_differences(path: Path, record_property) -> No
     for k in range(p.size):
         dp = np.zeros(p.size)
         dp[k] = h
-        fd = (forward_points(model, p + dp, q) - forward_points(model, p - dp, q)) / (
-            2 * h
-        )
+        fd = (forward_points(model, p + dp, q) - forward_points(model, p - dp, q)) / (2 * h)
         scale = float(np.max(np.abs(fd)))
         assert scale > 1e-3, f"{names[k]} does not move the point at all"
         rel = float(np.max(np.abs(jac[..., k] - fd))) / scale
@@ -273,9 +250,7 @@ def test_batched_shapes_equal_per_trial_calls(path: Path) -> None:
     rng = np.random.default_rng(3)
     nominal = load_robot_model(path)
     n_trials, n_poses = 4, 7
-    params = np.stack(
-        [perturbed(nominal, rng, beta=True).parameter_vector() for _ in range(n_trials)]
-    )
+    params = np.stack([perturbed(nominal, rng, beta=True).parameter_vector() for _ in range(n_trials)])
     n_params = nominal.layout.size
     assert params.shape == (n_trials, n_params)
     q = rng.uniform(-np.pi, np.pi, (n_poses, 6))
@@ -307,9 +282,7 @@ def test_shape_errors_are_reported() -> None:
     p = model.parameter_vector()
     with pytest.raises(ValueError, match=r"params must have shape \(\.\.\., 35\)"):
         forward_points(model, p[:-1], np.zeros((2, 6)))
-    with pytest.raises(
-        ValueError, match=r"joint_positions must have shape \(\.\.\., n_poses, 6\)"
-    ):
+    with pytest.raises(ValueError, match=r"joint_positions must have shape \(\.\.\., n_poses, 6\)"):
         forward_points(model, p, np.zeros(6))
     with pytest.raises(ValueError, match=r"joint_positions must have shape"):
         forward_points_and_jacobian(model, p, np.zeros((3, 5)))

@@ -97,17 +97,12 @@ def import_report() -> dict:
 
 
 def test_guard_refuses_ros(import_report: dict) -> None:
-    assert import_report["guard_ok"], (
-        "the meta_path finder did not refuse 'import rclpy'"
-    )
+    assert import_report["guard_ok"], "the meta_path finder did not refuse 'import rclpy'"
 
 
 def test_no_module_attempts_a_ros_import(import_report: dict) -> None:
     attempts = import_report["attempts"]
-    detail = "\n".join(
-        f"{m}: {[a['name'] for a in lst]}\n{lst[0]['stack']}"
-        for m, lst in attempts.items()
-    )
+    detail = "\n".join(f"{m}: {[a['name'] for a in lst]}\n{lst[0]['stack']}" for m, lst in attempts.items())
     assert not attempts, f"ROS imports outside nodes/:\n{detail}"
 
 
@@ -127,26 +122,12 @@ def ros_imports_in(source: str, filename: str = "<src>") -> list[str]:
             names = [alias.name for alias in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             names = [node.module]
-        elif (
-            isinstance(node, ast.Call)
-            and node.args
-            and isinstance(node.args[0], ast.Constant)
-        ):
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant):
             func = node.func
-            called = (
-                func.attr
-                if isinstance(func, ast.Attribute)
-                else getattr(func, "id", "")
-            )
-            if called in ("import_module", "__import__") and isinstance(
-                node.args[0].value, str
-            ):
+            called = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
+            if called in ("import_module", "__import__") and isinstance(node.args[0].value, str):
                 names = [node.args[0].value]
-        found += [
-            f"{n} (line {node.lineno})"
-            for n in names
-            if FORBIDDEN.match(n.split(".")[0])
-        ]
+        found += [f"{n} (line {node.lineno})" for n in names if FORBIDDEN.match(n.split(".")[0])]
     return found
 
 

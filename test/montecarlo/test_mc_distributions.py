@@ -51,19 +51,13 @@ def test_sample_moments_match_analytic(dist: Distribution, kurtosis: float) -> N
 
 def test_analytic_values_of_jcgm101_formulas() -> None:
     # Exact closed forms, compared at round-off level.
-    assert Rectangular(-1.0, 1.0).standard_uncertainty == pytest.approx(
-        1 / math.sqrt(3)
-    )
-    assert Arcsine(-2.0, 2.0).standard_uncertainty == pytest.approx(
-        2.0 / math.sqrt(2.0)
-    )
+    assert Rectangular(-1.0, 1.0).standard_uncertainty == pytest.approx(1 / math.sqrt(3))
+    assert Arcsine(-2.0, 2.0).standard_uncertainty == pytest.approx(2.0 / math.sqrt(2.0))
     trap = CurvilinearTrapezoid(-1.0, 1.0, 0.5)
     assert trap.standard_uncertainty == pytest.approx(math.sqrt(4 / 12 + 0.25 / 9))
     assert Triangular(0.0, 6.0, 1.0).expectation == pytest.approx(7 / 3)
     assert StudentT(0.0, 1.0, 2.0).standard_uncertainty == math.inf
-    assert StudentT(0.0, 2.0, 6.0).standard_uncertainty == pytest.approx(
-        2 * math.sqrt(1.5)
-    )
+    assert StudentT(0.0, 2.0, 6.0).standard_uncertainty == pytest.approx(2 * math.sqrt(1.5))
 
 
 def test_curvilinear_trapezoid_shape() -> None:
@@ -89,13 +83,9 @@ def test_correlated_normal_covariance() -> None:
     dist = CorrelatedNormal([1.0, -2.0, 0.0], cov)
     x = dist.sample(np.random.default_rng(5), M)
     assert x.shape == (M, 3) and dist.size == 3
-    np.testing.assert_allclose(
-        x.mean(axis=0), [1.0, -2.0, 0.0], atol=5 * 2 / math.sqrt(M)
-    )
+    np.testing.assert_allclose(x.mean(axis=0), [1.0, -2.0, 0.0], atol=5 * 2 / math.sqrt(M))
     # se of a covariance element <= sqrt(var_i var_j (1+ρ²)/M) <= 4 sqrt(2/M) = 8.9e-3.
-    np.testing.assert_allclose(
-        np.cov(x, rowvar=False), cov, atol=5 * 4 * math.sqrt(2 / M)
-    )
+    np.testing.assert_allclose(np.cov(x, rowvar=False), cov, atol=5 * 4 * math.sqrt(2 / M))
     np.testing.assert_allclose(dist.standard_uncertainty, np.sqrt(np.diag(cov)))
 
 
@@ -104,9 +94,7 @@ def test_correlated_normal_singular_uses_eigh() -> None:
     dist = CorrelatedNormal([0.0, 0.0], [[1.0, 2.0], [2.0, 4.0]])
     x = dist.sample(np.random.default_rng(0), 1000)
     np.testing.assert_allclose(x[:, 1], 2 * x[:, 0], atol=1e-12)
-    np.testing.assert_allclose(
-        dist.factor @ dist.factor.T, dist.covariance(), atol=1e-12
-    )
+    np.testing.assert_allclose(dist.factor @ dist.factor.T, dist.covariance(), atol=1e-12)
 
 
 def test_empirical_resamples_rows() -> None:

@@ -67,16 +67,12 @@ def test_bit_identical_across_chunking_and_workers() -> None:
     reference = monte_carlo(two_outputs, INPUTS, **kwargs)
     assert reference.n_trials == 25_003 and reference.samples is not None
     for chunk_blocks, workers in [(3, 1), (7, 1), (1, 2), (2, 2)]:
-        other = monte_carlo(
-            two_outputs, INPUTS, chunk_blocks=chunk_blocks, workers=workers, **kwargs
-        )
+        other = monte_carlo(two_outputs, INPUTS, chunk_blocks=chunk_blocks, workers=workers, **kwargs)
         assert other.samples is not None
         np.testing.assert_array_equal(other.samples, reference.samples)
         assert other.outputs == reference.outputs  # estimates, intervals, histograms
         np.testing.assert_array_equal(other.covariance, reference.covariance)
-    different = monte_carlo(
-        two_outputs, INPUTS, seed=2025, trials=25_003, block_size=4_000
-    )
+    different = monte_carlo(two_outputs, INPUTS, seed=2025, trials=25_003, block_size=4_000)
     assert different.samples is not None
     assert not np.array_equal(different.samples, reference.samples)
 
@@ -85,30 +81,22 @@ def test_staged_evaluation_equals_per_block_calls() -> None:
     # Vectorising the model over a chunk of blocks must not change a row-wise model.
     staged = DistributionTrials(two_outputs, tuple(INPUTS))
     a = run_trials(staged, seed=9, n_trials=12_345, block_size=1_000, chunk_blocks=5)
-    b = run_trials(
-        lambda rng, n: staged(rng, n), seed=9, n_trials=12_345, block_size=1_000
-    )
+    b = run_trials(lambda rng, n: staged(rng, n), seed=9, n_trials=12_345, block_size=1_000)
     np.testing.assert_array_equal(a.samples, b.samples)
 
 
 def test_custom_trial_block_with_workers() -> None:
     trials = LeastSquaresTrials()
     one = run_trials(trials, seed=1, n_trials=20_000, block_size=3_000)
-    two = run_trials(
-        trials, seed=1, n_trials=20_000, block_size=3_000, workers=2, chunk_blocks=2
-    )
+    two = run_trials(trials, seed=1, n_trials=20_000, block_size=3_000, workers=2, chunk_blocks=2)
     np.testing.assert_array_equal(one.samples, two.samples)
     assert one.samples.shape == (20_000, 3) and one.n_blocks == 7 and one.converged
     summary = one.summary()
     # OLS: parameter covariance σ² (AᵀA)⁻¹ exactly; 20k trials estimate it to ~1 %
     # (se of a variance is sqrt(2/M) = 1 %), so 5 % is a safe but discriminating bound.
     expected = 0.01**2 * np.linalg.inv(trials.design.T @ trials.design)
-    np.testing.assert_allclose(
-        np.diag(summary.covariance), np.diag(expected), rtol=0.05
-    )
-    np.testing.assert_allclose(
-        [o.estimate for o in summary.outputs], trials.truth, atol=0.01
-    )
+    np.testing.assert_allclose(np.diag(summary.covariance), np.diag(expected), rtol=0.05)
+    np.testing.assert_allclose([o.estimate for o in summary.outputs], trials.truth, atol=0.01)
 
 
 def test_progress_reports_every_chunk() -> None:
@@ -182,9 +170,7 @@ def test_adaptive_absolute_tolerance_vector_output() -> None:
 
 def test_nonfinite_outputs_raise_or_drop() -> None:
     inputs = [Normal(0.0, 1.0), Normal(0.0, 1.0)]
-    with pytest.raises(
-        ConfigError, match=r"non-finite values in \d+ of 10000 trials of block 0"
-    ):
+    with pytest.raises(ConfigError, match=r"non-finite values in \d+ of 10000 trials of block 0"):
         monte_carlo(nan_model, inputs, seed=1, trials=10_000)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -199,13 +185,9 @@ def test_nonfinite_outputs_raise_or_drop() -> None:
 
 
 def test_wrong_output_shape() -> None:
-    with pytest.raises(
-        ModelOutputError, match=r"model output must have shape \(1000,\)"
-    ):
+    with pytest.raises(ModelOutputError, match=r"model output must have shape \(1000,\)"):
         monte_carlo(lambda x: x[:-1, 0], [Normal(0.0, 1.0)], seed=0, trials=1_000)
-    with pytest.raises(
-        ConfigError, match=r"trial_block output must have shape \(10,\)"
-    ):
+    with pytest.raises(ConfigError, match=r"trial_block output must have shape \(10,\)"):
         run_trials(lambda rng, n: rng.random((n, 2, 2)), seed=0, n_trials=10)
 
 
@@ -259,18 +241,14 @@ def test_bad_adaptive_settings(factory: object, match: str) -> None:
 def test_bad_seed_and_inputs() -> None:
     with pytest.raises(ConfigError, match="seed must be an integer >= 0, got -1"):
         monte_carlo(sum_model, [Normal(0.0, 1.0)], seed=-1, trials=10)
-    with pytest.raises(
-        ConfigError, match="input 'a' must be a Distribution, got float"
-    ):
+    with pytest.raises(ConfigError, match="input 'a' must be a Distribution, got float"):
         monte_carlo(sum_model, {"a": 1.0}, seed=0, trials=10)  # type: ignore[dict-item]
     with pytest.raises(ConfigError, match="inputs must hold at least one distribution"):
         monte_carlo(sum_model, [], seed=0, trials=10)
 
 
 def test_result_records_run_metadata() -> None:
-    result = monte_carlo(
-        sum_model, {"a": Normal(0.0, 1.0)}, seed=77, trials=3_000, keep_samples=False
-    )
+    result = monte_carlo(sum_model, {"a": Normal(0.0, 1.0)}, seed=77, trials=3_000, keep_samples=False)
     assert (result.seed, result.block_size, result.n_trials) == (77, 10_000, 3_000)
     assert result.samples is None and result.adaptive is None
     assert result.input_names == ("a",) and result.input_columns == ("a",)

@@ -56,18 +56,14 @@ def test_gum_nonlinear_sensitivities() -> None:
 
 def test_gum_welch_satterthwaite() -> None:
     # u_c² = 1 + 1 = 2; ν_eff = u_c⁴ / (1⁴/4) = 16; k = t_16(0.975) = 2.1199.
-    gum = propagate_gum(
-        lambda x: x.sum(axis=1), [StudentT(0.0, 1.0, 4.0), Normal(0.0, 1.0)]
-    )
+    gum = propagate_gum(lambda x: x.sum(axis=1), [StudentT(0.0, 1.0, 4.0), Normal(0.0, 1.0)])
     g = gum.outputs[0]
     assert g.standard_uncertainty == pytest.approx(math.sqrt(2.0))
     assert g.effective_dof == pytest.approx(16.0)
     assert g.coverage_factor == pytest.approx(stats.t.ppf(0.975, 16))
     assert g.coverage_factor == pytest.approx(2.1199, abs=1e-4)
     normal = propagate_gum(lambda x: x.sum(axis=1), [Normal(0.0, 1.0)] * 2).outputs[0]
-    assert math.isinf(normal.effective_dof) and normal.coverage_factor == pytest.approx(
-        1.959964
-    )
+    assert math.isinf(normal.effective_dof) and normal.coverage_factor == pytest.approx(1.959964)
 
 
 def test_gum_errors() -> None:
@@ -76,9 +72,7 @@ def test_gum_errors() -> None:
     with pytest.raises(ConfigError, match=r"model output must have shape \(5,\)"):
         propagate_gum(lambda x: x[:-1], [Normal(0.0, 1.0)] * 2)
     with pytest.raises(ConfigError, match="model returned 1 non-finite values"):
-        propagate_gum(
-            lambda x: np.where(x[:, 0] == 0, np.nan, x[:, 0]), [Normal(0.0, 1.0)]
-        )
+        propagate_gum(lambda x: np.where(x[:, 0] == 0, np.nan, x[:, 0]), [Normal(0.0, 1.0)])
 
 
 def test_validation_requires_matching_runs() -> None:
@@ -108,24 +102,16 @@ def test_coverage_region_of_correlated_normal() -> None:
     minor = np.array([1.0, -1.0]) / math.sqrt(2.0) * math.sqrt(0.2)
     major = np.array([1.0, 1.0]) / math.sqrt(2.0) * math.sqrt(1.8)
     centre = np.array([1.0, -1.0])
-    assert region.contains(centre + 2.2 * minor) and not region.contains(
-        centre + 2.7 * minor
-    )
-    assert region.contains(centre + 2.2 * major) and not region.contains(
-        centre + 2.7 * major
-    )
+    assert region.contains(centre + 2.2 * minor) and not region.contains(centre + 2.7 * minor)
+    assert region.contains(centre + 2.2 * major) and not region.contains(centre + 2.7 * major)
     np.testing.assert_allclose(region.mahalanobis(centre + 2.0 * major), 2.0, atol=0.01)
 
 
 def test_coverage_region_rejects_singular_covariance() -> None:
     x = np.random.default_rng(0).normal(size=(5_000, 1))
     samples = np.hstack([x, 2.0 * x])
-    with pytest.raises(
-        InputError, match=r"covariance of samples is singular \(rank 1 of 2\)"
-    ):
+    with pytest.raises(InputError, match=r"covariance of samples is singular \(rank 1 of 2\)"):
         coverage_region(samples)
-    region = coverage_region(
-        np.hstack([x, x + 1e-3]) + np.random.default_rng(1).normal(size=(5_000, 2))
-    )
+    region = coverage_region(np.hstack([x, x + 1e-3]) + np.random.default_rng(1).normal(size=(5_000, 2)))
     with pytest.raises(InputError, match=r"points must have shape \(2,\) or \(m, 2\)"):
         region.contains([0.0, 0.0, 0.0])

@@ -31,9 +31,7 @@ def additive(x: np.ndarray) -> np.ndarray:
 def mass_model(x: np.ndarray) -> np.ndarray:
     """JCGM 101 9.3: δm = (m_R,c + δm_R,c)(1 + (ρ_a - ρ_a0)(1/ρ_W - 1/ρ_R)) - m_nom [mg]."""
     m_rc, dm_rc, rho_a, rho_w, rho_r = x.T
-    return (m_rc + dm_rc) * (
-        1.0 + (rho_a - 1.2) * (1.0 / rho_w - 1.0 / rho_r)
-    ) - 100_000.0
+    return (m_rc + dm_rc) * (1.0 + (rho_a - 1.2) * (1.0 / rho_w - 1.0 / rho_r)) - 100_000.0
 
 
 MASS_INPUTS = {
@@ -49,9 +47,7 @@ def irwin_hall_quantile(p: float, n: int) -> float:
     """Exact quantile of the sum of n standard uniforms (independent reference)."""
 
     def cdf(s: float) -> float:
-        terms = (
-            (-1) ** k * math.comb(n, k) * (s - k) ** n for k in range(math.floor(s) + 1)
-        )
+        terms = ((-1) ** k * math.comb(n, k) * (s - k) ** n for k in range(math.floor(s) + 1))
         return sum(terms) / math.factorial(n)
 
     return float(brentq(lambda s: cdf(s) - p, 0.0, float(n)))
@@ -64,12 +60,8 @@ def test_9_2_2_four_normal_inputs() -> None:
     # se(y) = 2/1000 = 0.002; se(u) = 2 sqrt(2/4e6) = 0.0014; se(quantile) = 0.0054.
     assert abs(out.estimate) <= 0.01
     assert out.standard_uncertainty == pytest.approx(2.0, abs=0.007)
-    assert out.probabilistically_symmetric.low == pytest.approx(
-        -3.92, abs=0.005 + 0.022
-    )
-    assert out.probabilistically_symmetric.high == pytest.approx(
-        3.92, abs=0.005 + 0.022
-    )
+    assert out.probabilistically_symmetric.low == pytest.approx(-3.92, abs=0.005 + 0.022)
+    assert out.probabilistically_symmetric.high == pytest.approx(3.92, abs=0.005 + 0.022)
     assert out.coverage_factor == pytest.approx(1.96, abs=0.015)
     gum = propagate_gum(additive, inputs)
     g = gum.outputs[0]
@@ -101,9 +93,7 @@ def test_9_2_3_four_rectangular_inputs() -> None:
 
 
 def test_9_2_4_one_dominant_rectangular_input() -> None:
-    inputs = [Rectangular.from_centre(0.0, SQRT3)] * 3 + [
-        Rectangular.from_centre(0.0, 10 * SQRT3)
-    ]
+    inputs = [Rectangular.from_centre(0.0, SQRT3)] * 3 + [Rectangular.from_centre(0.0, 10 * SQRT3)]
     mc = monte_carlo(additive, inputs, seed=924, trials=1_000_000)
     out = mc.outputs[0]
     # Published: u = 10.15, interval ±17.0. se(u) = 0.006, se(quantile) = 0.01.
@@ -111,9 +101,7 @@ def test_9_2_4_one_dominant_rectangular_input() -> None:
     assert out.probabilistically_symmetric.high == pytest.approx(17.0, abs=0.05 + 0.05)
     assert out.probabilistically_symmetric.low == pytest.approx(-17.0, abs=0.05 + 0.05)
     gum = propagate_gum(additive, inputs)
-    assert gum.outputs[0].standard_uncertainty == pytest.approx(
-        math.sqrt(103.0), rel=1e-9
-    )
+    assert gum.outputs[0].standard_uncertainty == pytest.approx(math.sqrt(103.0), rel=1e-9)
     assert gum.outputs[0].interval.high == pytest.approx(19.9, abs=0.05)
     check = validate_gum(gum, mc, n_dig=2)
     # u = 10 × 10^0 so δ = 0.5, while the GUM interval is ~2.9 too wide at each end.
@@ -122,9 +110,7 @@ def test_9_2_4_one_dominant_rectangular_input() -> None:
 
 
 def test_9_3_mass_calibration() -> None:
-    mc = monte_carlo(
-        mass_model, MASS_INPUTS, seed=93, trials=2_000_000, keep_samples=False
-    )
+    mc = monte_carlo(mass_model, MASS_INPUTS, seed=93, trials=2_000_000, keep_samples=False)
     out = mc.outputs[0]
     # Reference from a 10^7-trial run: y = 1.2340 mg, u = 0.0755 mg, shortest
     # [1.0844, 1.3835] mg. Spread over 8 seeds at 10^6 trials: se(y) = 6e-5,

@@ -45,20 +45,14 @@ def test_rectangular_output_exact_quantiles() -> None:
 
 def test_symmetric_output_intervals_agree() -> None:
     # Sum of two R(-1, 1): triangular on [-2, 2] with exact 2.5 % point -2 + sqrt(0.2).
-    out = monte_carlo(pair_sum, [Rectangular(-1.0, 1.0)] * 2, seed=2, trials=M).outputs[
-        0
-    ]
+    out = monte_carlo(pair_sum, [Rectangular(-1.0, 1.0)] * 2, seed=2, trials=M).outputs[0]
     exact = 2.0 - math.sqrt(0.2)
     # Density at the quantile is sqrt(0.2)/4 = 0.112; se = 1.56e-4/0.112 = 0.0014.
     assert out.probabilistically_symmetric.high == pytest.approx(exact, abs=0.007)
     assert out.probabilistically_symmetric.low == pytest.approx(-exact, abs=0.007)
     # For a symmetric unimodal output the shortest interval is the symmetric one.
-    assert out.shortest.low == pytest.approx(
-        out.probabilistically_symmetric.low, abs=0.01
-    )
-    assert out.shortest.high == pytest.approx(
-        out.probabilistically_symmetric.high, abs=0.01
-    )
+    assert out.shortest.low == pytest.approx(out.probabilistically_symmetric.low, abs=0.01)
+    assert out.shortest.high == pytest.approx(out.probabilistically_symmetric.high, abs=0.01)
 
 
 def test_asymmetric_output_shortest_is_shorter() -> None:
@@ -73,22 +67,15 @@ def test_asymmetric_output_shortest_is_shorter() -> None:
     assert short.high == pytest.approx(math.log(20.0), abs=0.022)
     assert short.width < sym.width - 0.6  # 2.996 versus 3.664
     assert out.expanded_uncertainty == pytest.approx(sym.half_width)
-    assert out.coverage_factor == pytest.approx(
-        sym.half_width / out.standard_uncertainty
-    )
-    assert out.relative_expanded_uncertainty == pytest.approx(
-        sym.half_width / out.estimate
-    )
+    assert out.coverage_factor == pytest.approx(sym.half_width / out.standard_uncertainty)
+    assert out.relative_expanded_uncertainty == pytest.approx(sym.half_width / out.estimate)
 
 
 def test_expanded_from_shortest_and_histogram() -> None:
     x = np.random.default_rng(0).exponential(size=20_000)
     summary = summarize(x, 0.9, bins=25, expanded_from="shortest")
     out = summary.outputs[0]
-    assert (
-        out.interval is out.shortest
-        and out.expanded_uncertainty == out.shortest.half_width
-    )
+    assert out.interval is out.shortest and out.expanded_uncertainty == out.shortest.half_width
     assert out.histogram.counts.sum() == 20_000 and out.histogram.edges.shape == (26,)
     assert out.shortest.coverage_probability == 0.9
     # Exactly q = 18_000 values lie in the discrete JCGM interval [y_(r), y_(r+q)].
@@ -100,9 +87,7 @@ def test_vector_summary_covariance() -> None:
     rng = np.random.default_rng(4)
     samples = rng.multivariate_normal([0.0, 1.0], [[1.0, 0.6], [0.6, 2.0]], size=50_000)
     summary = summarize(samples)
-    np.testing.assert_allclose(
-        summary.covariance, np.cov(samples, rowvar=False), rtol=1e-12
-    )
+    np.testing.assert_allclose(summary.covariance, np.cov(samples, rowvar=False), rtol=1e-12)
     assert len(summary.outputs) == 2 and summary.n_trials == 50_000
     assert summary.correlation[0, 1] == pytest.approx(0.6 / math.sqrt(2.0), abs=0.02)
 

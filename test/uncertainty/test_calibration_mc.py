@@ -10,7 +10,6 @@ import pytest
 from scipy.optimize import least_squares
 
 from robocal_uncertainty.core import (
-    Campaign,
     SimulationSettings,
     forward_points,
     identify,
@@ -40,23 +39,38 @@ def test_same_seed_same_result_whatever_chunk_and_workers(paper) -> None:
     model, sim = paper
     settings = UncertaintySettings(sources=("tracker", "encoder", "n_poses", "lambda"))
     runs = [
-        evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=settings, trials=1200,
-                             seed=5, block_size=500, chunk_blocks=chunk, workers=workers)
+        evaluate_uncertainty(
+            model,
+            sim.campaign,
+            TEST_JOINTS,
+            settings=settings,
+            trials=1200,
+            seed=5,
+            block_size=500,
+            chunk_blocks=chunk,
+            workers=workers,
+        )
         for chunk, workers in ((1, 1), (3, 1), (2, 2))
     ]
     for other in runs[1:]:
         np.testing.assert_array_equal(runs[0].samples, other.samples)
-    different = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=settings, trials=1200,
-                                     seed=6, block_size=500)
+    different = evaluate_uncertainty(
+        model, sim.campaign, TEST_JOINTS, settings=settings, trials=1200, seed=6, block_size=500
+    )
     assert not np.array_equal(different.samples, runs[0].samples)
 
 
 def test_chord_solver_matches_exact_gauss_newton(paper) -> None:
     model, sim = paper
     results = {
-        jac: evaluate_uncertainty(model, sim.campaign, TEST_JOINTS,
-                                  settings=UncertaintySettings(sources=("tracker", "encoder", "pose_choice"), jacobian=jac),
-                                  trials=400, seed=3)
+        jac: evaluate_uncertainty(
+            model,
+            sim.campaign,
+            TEST_JOINTS,
+            settings=UncertaintySettings(sources=("tracker", "encoder", "pose_choice"), jacobian=jac),
+            trials=400,
+            seed=3,
+        )
         for jac in ("frozen", "exact")
     }
     diff = np.abs(results["frozen"].samples[:, :3] - results["exact"].samples[:, :3]).max()
@@ -82,6 +96,7 @@ def test_batched_reidentification_matches_scipy_least_squares(paper) -> None:
     x, _ = solver.solve(q, pts, None, np.zeros(n_trials), x_hat)
     batch_params = problem.parameters(x)
     for t in range(n_trials):
+
         def resid(p_est, t=t):
             p = cal.nominal.copy()
             p[est] = p_est
@@ -97,7 +112,9 @@ def test_batched_reidentification_matches_scipy_least_squares(paper) -> None:
 
 def test_gum_agrees_with_monte_carlo_for_noise_sources(paper) -> None:
     model, sim = paper
-    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(), trials=20000, seed=2)
+    result = evaluate_uncertainty(
+        model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(), trials=20000, seed=2
+    )
     pose = result.poses[0]
     u_mc = np.sqrt(np.diag(pose.covariance))
     assert pose.gum.applicable
@@ -110,7 +127,9 @@ def test_gum_agrees_with_monte_carlo_for_noise_sources(paper) -> None:
 
 def test_nonsmooth_sources_mark_gum_not_applicable(paper) -> None:
     model, sim = paper
-    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(sources=("pose_choice",)), trials=300, seed=2)
+    result = evaluate_uncertainty(
+        model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(sources=("pose_choice",)), trials=300, seed=2
+    )
     assert not result.poses[0].gum.applicable
     assert not any(result.poses[0].gum.validated)
 
@@ -152,8 +171,14 @@ def test_positions_are_in_the_identified_base_frame_for_tracker_campaigns() -> N
         ({"coverage": 1.0}, r"coverage probability must be in \(0, 1\)"),
         ({"coverage": 0.0}, r"coverage probability must be in \(0, 1\)"),
         ({"test_joint_positions": np.zeros(5)}, "test joints must have 6 values"),
-        ({"settings": UncertaintySettings(sources=("lambda",), lambda_range=(10.0, 20.0))}, "excludes the calibration's optimum"),
-        ({"settings": UncertaintySettings(sources=("pose_choice",), subset_size=2)}, "subset_size = 2 must lie between"),
+        (
+            {"settings": UncertaintySettings(sources=("lambda",), lambda_range=(10.0, 20.0))},
+            "excludes the calibration's optimum",
+        ),
+        (
+            {"settings": UncertaintySettings(sources=("pose_choice",), subset_size=2)},
+            "subset_size = 2 must lie between",
+        ),
     ],
 )
 def test_bad_settings_give_one_line_errors(paper, kwargs, match) -> None:
