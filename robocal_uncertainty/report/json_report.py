@@ -1,0 +1,421 @@
+"""Machine-readable uncertainty report (JSON) with every unit stated.
+
+Every number that carries a unit sits under a key ending in its unit: ``_m`` (metre),
+``_m2`` (square metre), ``_rad`` (radian), ``_pct`` (percent). Keys without a suffix are
+dimensionless (coverage factors, probabilities, counts) or, for the calibration
+parameters, in the unit named by the entry's ``unit`` field (``m`` for lengths, ``rad``
+for angles); ``lambda`` is in the column-scaled units of the identification. The
+top-level ``units`` block repeats these rules. NaN and infinities are written as
+``null``, so the file is strict JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.errors import InputError
+from robocal_uncertainty.montecarlo import CoverageInterval, OutputSummary
+from robocal_uncertainty.report.sweeps import Sweep
+from robocal_uncertainty.uncertainty.calibration_mc import (
+    CalibrationUncertainty,
+    PoseUncertainty,
+)
+from robocal_uncertainty.uncertainty.sources import SOURCE_DESCRIPTIONS
+
+__all__ = [
+    "REPORT_FORMAT",
+    "REPORT_FORMAT_VERSION",
+    "UNITS",
+    "calibration_to_dict",
+    "read_report_json",
+    "software_version",
+    "to_json_value",
+    "uncertainty_to_dict",
+    "write_report_json",
+]
+
+REPORT_FORMAT = "robocal_uncertainty.uncertainty_report"
+REPORT_FORMAT_VERSION = 1
+AXES = ("x", "y", "z")
+
+UNITS: dict[str, str] = {
+    "_m": "metre",
+    "_m2": "square metre (covariances of positions)",
+    "_rad": "radian",
+    "_pct": "percent",
+    "_m_per_m": "metre per metre of distance (tracker MPE slope)",
+    "parameters": (
+        "calibration parameter values are in the unit named by each entry's 'unit' field: "
+        "'m' for lengths, 'rad' for angles"
+    ),
+    "lambda": "column-scaled units of the identification (dimensionless)",
+    "no_suffix": "dimensionless (coverage factors, probabilities, counts, flags)",
+}
+
+
+def software_version() -> str:
+    """Installed version of robocal_uncertainty, or ``"unknown"``."""
+    try:
+        return metadata.version("robocal_uncertainty")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def to_json_value(value: object) -> Any:
+    """Convert numpy scalars/arrays, tuples and non-finite floats to strict JSON values.
+
+    Parameters
+    ----------
+    value : object
+        Nested dicts, sequences, numpy arrays (any shape), numbers, str, bool or None.
+
+    Returns
+    -------
+    object
+        The same structure with lists, Python floats/ints and ``None`` for NaN/inf.
+    """
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        f = float(value)
+        return f if math.isfinite(f) else None
+    if isinstance(value, np.ndarray):
+        return to_json_value(value.tolist())
+    if isinstance(value, Mapping):
+        return {str(k): to_json_value(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_json_value(v) for v in value]
+    msg = f"cannot write a {type(value).__name__} to the JSON report: {value!r}"
+    raise InputError(msg)
+
+
+def _interval(interval: CoverageInterval) -> dict[str, Any]:
+    return {
+        "kind": interval.kind,
+        "coverage_probability": interval.coverage_probability,
+        "low_m": interval.low,
+        "high_m": interval.high,
+    }
+
+
+def _axis(name: str, axis: OutputSummary) -> dict[str, Any]:
+    rel = axis.relative_expanded_uncertainty
+    return {
+        "axis": name,
+        "estimate_m": axis.estimate,
+        "standard_uncertainty_m": axis.standard_uncertainty,
+        "expanded_uncertainty_m": axis.expanded_uncertainty,
+        "expanded_from": axis.expanded_from,
+        "coverage_factor": axis.coverage_factor,
+        "relative_expanded_uncertainty_pct": None if rel is None else 100.0 * rel,
+        "intervals": {
+            "probabilistically_symmetric": _interval(axis.probabilistically_symmetric),
+            "shortest": _interval(axis.shortest),
+        },
+    }
+
+
+def _pose(index: int, pose: PoseUncertainty, result: CalibrationUncertainty) -> dict[str, Any]:
+    axes = pose.axes
+    gum = pose.gum
+    out: dict[str, Any] = {
+        "index": index,
+        "joint_positions_rad": pose.joint_positions,
+        "mean_m": pose.mean,
+        "standard_uncertainty_m": [a.standard_uncertainty for a in axes],
+        "covariance_m2": pose.covariance,
+        "expanded_uncertainty_m": [a.expanded_uncertainty for a in axes],
+        "coverage_factor": [a.coverage_factor for a in axes],
+        "coverage_probability": result.coverage_probability,
+        "n_trials": result.n_trials,
+        "converged": result.converged,
+        "adaptive": result.adaptive is not None,
+        "tolerance_reached_m": None,
+        "numerical_tolerance_m": None,
+        "axes": [_axis(n, a) for n, a in zip(AXES, axes)],
+        "gum": {
+            "applicable": gum.applicable,
+            "estimate_m": gum.estimate,
+            "standard_uncertainty_m": gum.standard_uncertainty,
+            "covariance_m2": gum.covariance,
+            "expanded_uncertainty_m": gum.expanded_uncertainty,
+            "coverage_factor": gum.coverage_factor,
+            "validated": list(gum.validated),
+            "d_low_m": gum.d_low,
+            "d_high_m": gum.d_high,
+            "delta_m": gum.delta,
+        },
+        "region": None,
+    }
+    if result.adaptive is not None:
+        cols = slice(3 * index, 3 * index + 3)
+        out["tolerance_reached_m"] = list(result.adaptive.tolerance_reached[cols])
+        out["numerical_tolerance_m"] = list(result.adaptive.delta[cols])
+    if pose.region is not None:
+        region = pose.region
+        out["region"] = {
+            "kind": "hyper-ellipsoid (JCGM 102)",
+            "coverage_probability": region.coverage_probability,
+            "coverage_factor": region.coverage_factor,
+            "normal_coverage_factor": region.normal_coverage_factor,
+            "mean_m": region.mean,
+            "covariance_m2": region.covariance,
+            "n_trials": region.n_trials,
+        }
+    return out
+
+
+def _param_units(calibration: IdentificationResult) -> dict[str, str]:
+    kinds = calibration.model.layout.kinds
+    names = calibration.model.layout.names
+    return {n: ("m" if k == "length" else "rad") for n, k in zip(names, kinds)}
+
+
+def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
+    """Calibration summary of an :class:`IdentificationResult` as JSON-ready values."""
+    units = _param_units(calibration)
+    lc = calibration.lcurve
+    return {
+        "parameters": [
+            {
+                "name": name,
+                "unit": units.get(name, "m"),
+                "nominal": calibration.nominal[i],
+                "estimate": calibration.estimate[i],
+                "error": calibration.estimate[i] - calibration.nominal[i],
+                "candidate": bool(calibration.candidates[i]),
+                "estimated": bool(calibration.estimated[i]),
+                "identifiable": bool(calibration.identifiable[i]),
+                "linearized_std": calibration.linearized_std[i],
+            }
+            for i, name in enumerate(calibration.parameter_names)
+        ],
+        "dependencies": list(calibration.dependencies),
+        "lambda": calibration.lambda_,
+        "lambda_method": calibration.lambda_method,
+        "lcurve_corner_lambda": lc.corner_lambda,
+        "gcv_lambda": lc.gcv_lambda,
+        "rms_before_m": calibration.rms_before,
+        "max_before_m": calibration.max_before,
+        "rms_after_m": calibration.rms_after,
+        "max_after_m": calibration.max_after,
+        "condition_number": calibration.condition_number,
+        "iterations": calibration.iterations,
+        "converged": calibration.converged,
+        "status": calibration.status,
+        "message": calibration.message,
+        "base_initialised": calibration.base_initialised,
+        "n_poses": calibration.n_poses,
+        "warnings": list(calibration.warnings),
+    }
+
+
+def _settings(result: CalibrationUncertainty) -> dict[str, Any]:
+    s = result.settings
+    return {
+        "sources": list(s.sources),
+        "tracker_noise_a_m": s.tracker_noise.a,
+        "tracker_noise_b_m_per_m": s.tracker_noise.b,
+        "tracker_noise_kind": s.tracker_noise.kind,
+        "tracker_xyz_m": list(s.tracker_xyz),
+        "encoder_half_width_rad": s.encoder_noise.half_width,
+        "lambda_range_setting": None if s.lambda_range is None else list(s.lambda_range),
+        "lambda_range_used": None if result.lambda_range is None else list(result.lambda_range),
+        "lambda_star": result.lambda_star,
+        "min_poses": s.min_poses,
+        "subset_size": s.subset_size,
+        "gauss_newton_iterations": s.gauss_newton_iterations,
+        "jacobian": s.jacobian,
+    }
+
+
+def _budget(budget: Mapping[str, CalibrationUncertainty]) -> list[dict[str, Any]]:
+    return [
+        {
+            "source": name,
+            "sources": list(res.settings.sources),
+            "n_trials": res.n_trials,
+            "seed": res.seed,
+            "standard_uncertainty_m": [[a.standard_uncertainty for a in pose.axes] for pose in res.poses],
+        }
+        for name, res in budget.items()
+    ]
+
+
+def _sweeps(sweeps: Sequence[Sweep]) -> list[dict[str, Any]]:
+    return [
+        {
+            "name": sw.name,
+            "xlabel": sw.xlabel,
+            "values": sw.values,
+            "standard_uncertainty_m": sw.standard_uncertainty,
+            "reference": sw.reference,
+            "n_trials": sw.n_trials,
+            "seed": sw.seed,
+        }
+        for sw in sweeps
+    ]
+
+
+def uncertainty_to_dict(
+    result: CalibrationUncertainty,
+    *,
+    robot_name: str,
+    campaign_source: str | None = None,
+    extra_settings: Mapping[str, object] | None = None,
+    budget: Mapping[str, CalibrationUncertainty] | None = None,
+    sweeps: Sequence[Sweep] | None = None,
+) -> dict[str, Any]:
+    """Strict-JSON dictionary of an uncertainty evaluation (format version 1).
+
+    Parameters
+    ----------
+    result : CalibrationUncertainty
+        Output of :func:`~robocal_uncertainty.uncertainty.evaluate_uncertainty`.
+    robot_name : str
+        Name of the robot model.
+    campaign_source : str, optional
+        Where the campaign came from (file path, "simulated seed=1", ...).
+    extra_settings : mapping, optional
+        Further JSON-serialisable settings to record verbatim (e.g. CLI options).
+    budget : mapping of str to CalibrationUncertainty, optional
+        Runs with one source each, for the uncertainty budget.
+    sweeps : sequence of Sweep, optional
+        Uncertainty sweeps (vs lambda, vs number of equations).
+
+    Returns
+    -------
+    dict
+        Only lists, dicts, str, finite floats, ints, bools and None.
+    """
+    names = result.parameter_names
+    units = _param_units(result.calibration)
+    report: dict[str, Any] = {
+        "format": REPORT_FORMAT,
+        "format_version": REPORT_FORMAT_VERSION,
+        "software": {"name": "robocal_uncertainty", "version": software_version()},
+        "units": UNITS,
+        "robot_name": robot_name,
+        "campaign_source": campaign_source,
+        "monte_carlo": {
+            "n_trials": result.n_trials,
+            "seed": result.seed,
+            "block_size": result.block_size,
+            "coverage_probability": result.coverage_probability,
+            "converged": result.converged,
+            "adaptive": None
+            if result.adaptive is None
+            else {
+                "converged": result.adaptive.converged,
+                "n_dig": result.adaptive.n_dig,
+                "n_sequences": result.adaptive.n_sequences,
+                "sequence_trials": result.adaptive.sequence_trials,
+                "max_trials": result.adaptive.max_trials,
+                "interval": result.adaptive.interval,
+            },
+        },
+        "sources": [{"name": s, "description": SOURCE_DESCRIPTIONS.get(s, "")} for s in result.settings.sources],
+        "settings": _settings(result),
+        "extra_settings": dict(extra_settings) if extra_settings else {},
+        "test_configurations": [_pose(i, p, result) for i, p in enumerate(result.poses)],
+        "calibration": calibration_to_dict(result.calibration),
+        "parameters": [
+            {
+                "name": name,
+                "unit": units.get(name, "m"),
+                "estimate": ps.estimate,
+                "standard_uncertainty": ps.standard_uncertainty,
+                "expanded_uncertainty": ps.expanded_uncertainty,
+                "coverage_factor": ps.coverage_factor,
+                "probabilistically_symmetric": [
+                    ps.probabilistically_symmetric.low,
+                    ps.probabilistically_symmetric.high,
+                ],
+                "shortest": [ps.shortest.low, ps.shortest.high],
+            }
+            for name, ps in zip(names, result.parameters)
+        ],
+        "budget": None if budget is None else _budget(budget),
+        "sweeps": None if sweeps is None else _sweeps(sweeps),
+        "warnings": list(result.warnings),
+    }
+    return to_json_value(report)
+
+
+def write_report_json(
+    path: str | Path,
+    result: CalibrationUncertainty,
+    *,
+    robot_name: str,
+    campaign_source: str | None = None,
+    extra_settings: Mapping[str, object] | None = None,
+    budget: Mapping[str, CalibrationUncertainty] | None = None,
+    sweeps: Sequence[Sweep] | None = None,
+) -> Path:
+    """Write :func:`uncertainty_to_dict` to `path` (UTF-8, indented); return the path."""
+    data = uncertainty_to_dict(
+        result,
+        robot_name=robot_name,
+        campaign_source=campaign_source,
+        extra_settings=extra_settings,
+        budget=budget,
+        sweeps=sweeps,
+    )
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(data, indent=2, allow_nan=False, ensure_ascii=False)
+    out.write_text(text + "\n", encoding="utf-8")
+    return out
+
+
+def read_report_json(path: str | Path) -> dict[str, Any]:
+    """Read a report written by :func:`write_report_json`, checking its format.
+
+    Raises
+    ------
+    InputError
+        Missing file, invalid JSON (NaN included), another format, or an unknown version.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as err:
+        msg = f"cannot read uncertainty report {p}: {err}"
+        raise InputError(msg) from err
+
+    def _no_constants(name: str) -> None:
+        msg = f"uncertainty report {p} contains {name}, which strict JSON forbids"
+        raise InputError(msg)
+
+    try:
+        data = json.loads(text, parse_constant=_no_constants)
+    except json.JSONDecodeError as err:
+        msg = f"uncertainty report {p} is not valid JSON: {err}"
+        raise InputError(msg) from err
+    if not isinstance(data, dict) or data.get("format") != REPORT_FORMAT:
+        msg = f"{p} is not a {REPORT_FORMAT} file (format = {data.get('format') if isinstance(data, dict) else None!r})"
+        raise InputError(msg)
+    version = data.get("format_version")
+    if version != REPORT_FORMAT_VERSION:
+        msg = (
+            f"uncertainty report {p} has format_version {version!r}; this software "
+            f"({software_version()}) reads version {REPORT_FORMAT_VERSION}"
+        )
+        raise InputError(msg)
+    for key in ("test_configurations", "calibration", "monte_carlo", "units"):
+        if key not in data:
+            msg = f"uncertainty report {p} lacks the required key {key!r}"
+            raise InputError(msg)
+    return data

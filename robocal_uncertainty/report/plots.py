@@ -1,0 +1,403 @@
+"""Figures of an uncertainty evaluation (seed Figs. 5-11), one PNG per function.
+
+Uses matplotlib's Agg backend and the object API (no pyplot state), so figures can be
+written from worker threads and on machines without a display. Each function writes
+its PNG and returns the path.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator, NullFormatter
+from numpy.typing import ArrayLike, NDArray
+from scipy import stats
+
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.report.table2 import LENGTH_UNITS
+from robocal_uncertainty.uncertainty.calibration_mc import (
+    CalibrationUncertainty,
+)
+
+__all__ = [
+    "plot_axis_histograms",
+    "plot_lcurve",
+    "plot_parameter_distributions",
+    "plot_position_error",
+    "plot_uncertainty_vs",
+]
+
+Array = NDArray[np.float64]
+_DPI = 110
+_AXES = ("x", "y", "z")
+
+
+def _figure(width: float, height: float) -> Figure:
+    fig = Figure(figsize=(width, height), dpi=_DPI)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path: str | Path, *, tight: bool = True) -> Path:
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if tight:
+        fig.tight_layout()
+    fig.savefig(out, format="png")
+    return out
+
+
+def _unit_scale(unit: str) -> float:
+    try:
+        return LENGTH_UNITS[unit]
+    except KeyError as err:
+        msg = f"unit must be one of {', '.join(LENGTH_UNITS)}, got {unit!r}"
+        raise ConfigError(msg) from err
+
+
+def _check_pose(result: CalibrationUncertainty, pose: int) -> None:
+    if not 0 <= pose < len(result.poses):
+        msg = f"pose index {pose} out of range for {len(result.poses)} test configuration(s)"
+        raise ConfigError(msg)
+
+
+def _pose_samples(result: CalibrationUncertainty, pose: int) -> Array:
+    """Monte Carlo positions of one test configuration, shape (n_trials, 3) [m]."""
+    _check_pose(result, pose)
+    return np.asarray(result.samples[:, 3 * pose : 3 * pose + 3], dtype=np.float64)
+
+
+def plot_axis_histograms(
+    result: CalibrationUncertainty,
+    path: str | Path,
+    *,
+    pose: int = 0,
+    unit: str = "mm",
+    bins: int = 60,
+) -> Path:
+    """Per-axis histograms of the tool position (seed Fig. 10).
+
+    Each panel shows the Monte Carlo density, the mean, the probabilistically symmetric
+    and the shortest coverage intervals, and the GUM normal pdf N(y_GUM, u_GUM²).
+
+    Parameters
+    ----------
+    result : CalibrationUncertainty
+    path : str or Path
+        PNG file to write.
+    pose : int
+        Test configuration index.
+    unit : {"mm", "m", "µm", "um"}
+        Display unit of the positions.
+    bins : int
+        Histogram bins.
+
+    Returns
+    -------
+    Path
+    """
+    s = _unit_scale(unit)
+    samples = _pose_samples(result, pose) * s
+    p = result.poses[pose]
+    fig = _figure(12.0, 3.8)
+    for j, name in enumerate(_AXES):
+        ax = fig.add_subplot(1, 3, j + 1)
+        col = samples[:, j]
+        ax.hist(
+            col,
+            bins=bins,
+            density=True,
+            histtype="stepfilled",
+            color="0.75",
+            ec="0.5",
+            label="Monte Carlo",
+        )
+        summary = p.axes[j]
+        ax.axvline(summary.estimate * s, color="k", lw=1.5, label="mean")
+        sym = summary.probabilistically_symmetric
+        ax.axvline(sym.low * s, color="tab:blue", ls="--", lw=1.2, label="prob. symmetric")
+        ax.axvline(sym.high * s, color="tab:blue", ls="--", lw=1.2)
+        sh = summary.shortest
+        ax.axvline(sh.low * s, color="tab:orange", ls=":", lw=1.5, label="shortest")
+        ax.axvline(sh.high * s, color="tab:orange", ls=":", lw=1.5)
+        u_gum = float(p.gum.standard_uncertainty[j]) * s
+        if u_gum > 0:
+            lo, hi = ax.get_xlim()
+            grid = np.linspace(lo, hi, 400)
+            pdf = stats.norm.pdf(grid, float(p.gum.estimate[j]) * s, u_gum)
+            ax.plot(grid, pdf, color="tab:red", lw=1.3, label="GUM normal")
+            ax.set_xlim(lo, hi)
+        ax.ticklabel_format(axis="x", useOffset=False)
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.set_xlabel(f"{name} / {unit}")
+        ax.set_ylabel(f"density / {unit}⁻¹")
+        ax.set_title(f"{name}: u = {summary.standard_uncertainty * s:.3g} {unit}")
+        if j == 0:
+            ax.legend(fontsize=7, loc="upper left")
+    pct = 100 * result.coverage_probability
+    fig.suptitle(
+        f"Tool position, test configuration {pose + 1}: {result.n_trials} trials, p = {pct:g} %",
+        fontsize=10,
+    )
+    return _save(fig, path)
+
+
+def plot_lcurve(calibration: IdentificationResult, path: str | Path) -> Path:
+    """L-curve with the corner, the GCV minimum and the chosen lambda marked.
+
+    Parameters
+    ----------
+    calibration : IdentificationResult
+        Its ``lcurve`` (of the final linearisation) and ``lambda_``.
+    path : str or Path
+        PNG file to write.
+
+    Returns
+    -------
+    Path
+    """
+    lc = calibration.lcurve
+    lams = np.asarray(lc.lambdas, dtype=np.float64)
+    rho = np.asarray(lc.residual_norms, dtype=np.float64) * 1e6
+    eta = np.asarray(lc.solution_norms, dtype=np.float64)
+    gcv = np.asarray(lc.gcv, dtype=np.float64)
+    ok = (rho > 0) & (eta > 0) & np.isfinite(rho) & np.isfinite(eta)
+    if not ok.any():
+        msg = "the calibration's L-curve has no positive finite points to plot"
+        raise InputError(msg)
+    lam = calibration.lambda_
+    chosen = int(np.argmin(np.abs(np.log(np.maximum(lams, 1e-300)) - math.log(max(lam, 1e-300)))))
+    fig = _figure(11.0, 4.2)
+    ax = fig.add_subplot(1, 2, 1)
+    ax.loglog(rho[ok], eta[ok], color="k", lw=1.2)
+    marks = (
+        (lc.corner_index, "o", "tab:blue", f"corner λ = {lc.corner_lambda:.3g}"),
+        (lc.gcv_index, "s", "tab:green", f"GCV λ = {lc.gcv_lambda:.3g}"),
+        (chosen, "*", "tab:red", f"chosen λ = {lam:.3g} ({calibration.lambda_method})"),
+    )
+    for idx, marker, color, label in marks:
+        if ok[idx]:
+            ax.loglog(
+                rho[idx],
+                eta[idx],
+                marker,
+                color=color,
+                ms=9,
+                mfc="none",
+                mew=1.8,
+                label=label,
+            )
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_minor_formatter(NullFormatter())
+    ax.set_xlabel("residual norm ‖b − A x_λ‖ / µm")
+    ax.set_ylabel("solution norm ‖x_λ‖ (scaled)")
+    ax.set_title("L-curve")
+    ax.legend(fontsize=8)
+    ax2 = fig.add_subplot(1, 2, 2)
+    good = np.isfinite(gcv) & (gcv > 0) & (lams > 0)
+    if good.any():
+        ax2.loglog(lams[good], gcv[good], color="k", lw=1.2)
+        if good[lc.gcv_index]:
+            ax2.loglog(
+                lams[lc.gcv_index],
+                gcv[lc.gcv_index],
+                "s",
+                color="tab:green",
+                mfc="none",
+                ms=9,
+                mew=1.8,
+                label="GCV minimum",
+            )
+    if lam > 0:
+        ax2.axvline(lam, color="tab:red", ls="--", label="chosen λ")
+    if lc.corner_lambda > 0:
+        ax2.axvline(lc.corner_lambda, color="tab:blue", ls=":", label="L-curve corner")
+    ax2.set_xlabel("λ (scaled units)")
+    ax2.set_ylabel("GCV(λ)")
+    ax2.set_title("Generalised cross-validation")
+    ax2.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_parameter_distributions(
+    result: CalibrationUncertainty,
+    path: str | Path,
+    *,
+    bins: int = 40,
+    columns: int = 6,
+) -> Path:
+    """Grid of histograms of the identified parameter errors (seed Fig. 5).
+
+    Each panel is the Monte Carlo distribution of ``p − p_nominal`` for one estimated
+    parameter, in µm for lengths and mdeg for angles, with the calibration's estimate
+    marked.
+
+    Parameters
+    ----------
+    result : CalibrationUncertainty
+    path : str or Path
+        PNG file to write.
+    bins : int
+        Histogram bins per panel.
+    columns : int
+        Panels per row.
+
+    Returns
+    -------
+    Path
+    """
+    cal = result.calibration
+    names = result.parameter_names
+    k = len(names)
+    if k == 0:
+        msg = "the result has no estimated parameters to plot"
+        raise InputError(msg)
+    index = {n: i for i, n in enumerate(cal.parameter_names)}
+    kinds = dict(zip(cal.model.layout.names, cal.model.layout.kinds))
+    n_test = len(result.poses)
+    values = np.asarray(result.samples[:, 3 * n_test : 3 * n_test + k], dtype=np.float64)
+    cols = max(1, min(columns, k))
+    rows = math.ceil(k / cols)
+    fig = _figure(2.3 * cols, 2.0 * rows + 0.4)
+    for j, name in enumerate(names):
+        i = index[name]
+        if kinds.get(name, "length") == "angle":
+            scale, unit = 1e3 * 180.0 / math.pi, "mdeg"
+        else:
+            scale, unit = 1e6, "µm"
+        err = (values[:, j] - cal.nominal[i]) * scale
+        ax: Axes = fig.add_subplot(rows, cols, j + 1)
+        ax.hist(err, bins=bins, histtype="stepfilled", color="0.7", ec="0.4", lw=0.5)
+        ax.axvline((cal.estimate[i] - cal.nominal[i]) * scale, color="tab:red", lw=1.0)
+        ax.set_title(name, fontsize=8)
+        ax.set_xlabel(f"δ / {unit}", fontsize=7)
+        ax.tick_params(labelsize=6)
+        ax.set_yticks([])
+    fig.suptitle(
+        f"Identified parameter errors p − p_nominal ({result.n_trials} trials; red: calibration)",
+        fontsize=9,
+    )
+    # tight_layout costs seconds on a grid this size; fixed margins do as well.
+    fig.subplots_adjust(
+        left=0.02,
+        right=0.98,
+        bottom=0.7 / fig.get_figheight(),
+        top=1 - 0.75 / fig.get_figheight(),
+        wspace=0.12,
+        hspace=0.75,
+    )
+    return _save(fig, path, tight=False)
+
+
+def plot_position_error(
+    result: CalibrationUncertainty,
+    path: str | Path,
+    *,
+    pose: int = 0,
+    bins: int = 60,
+) -> Path:
+    """Distribution of the position error |position − mean| in µm (seed Fig. 11).
+
+    Parameters
+    ----------
+    result : CalibrationUncertainty
+    path : str or Path
+        PNG file to write.
+    pose : int
+        Test configuration index.
+    bins : int
+        Histogram bins.
+
+    Returns
+    -------
+    Path
+    """
+    samples = _pose_samples(result, pose)
+    dist = np.linalg.norm(samples - result.poses[pose].mean, axis=1) * 1e6
+    p = result.coverage_probability
+    q = float(np.quantile(dist, p))
+    fig = _figure(6.5, 4.2)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.hist(dist, bins=bins, histtype="stepfilled", color="0.7", ec="0.4")
+    ax.axvline(
+        float(np.median(dist)),
+        color="k",
+        lw=1.2,
+        label=f"median {np.median(dist):.3g} µm",
+    )
+    ax.axvline(q, color="tab:red", ls="--", lw=1.2, label=f"{100 * p:g} % quantile {q:.3g} µm")
+    ax.set_xlabel("position error |p − p̄| / µm")
+    ax.set_ylabel("trials")
+    ax.set_title(f"Position error, test configuration {pose + 1} ({result.n_trials} trials)")
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_uncertainty_vs(
+    values: ArrayLike,
+    u_xyz: ArrayLike,
+    xlabel: str,
+    path: str | Path,
+    *,
+    unit: str = "µm",
+    reference: float | None = None,
+    log_x: bool = False,
+    title: str | None = None,
+) -> Path:
+    """Standard uncertainty per axis against a swept setting (seed Figs. 7-9).
+
+    Parameters
+    ----------
+    values : array_like, shape (n_points,)
+        The swept setting (lambda, number of equations, ...).
+    u_xyz : array_like, shape (n_points, 3) [m]
+        u(x), u(y), u(z) at each point.
+    xlabel : str
+        Label of `values`, with its unit.
+    path : str or Path
+        PNG file to write.
+    unit : {"µm", "um", "mm", "m"}
+        Display unit of the uncertainties.
+    reference : float, optional
+        Setting to mark with a vertical line (e.g. the calibration's lambda).
+    log_x : bool
+        Logarithmic x axis.
+    title : str, optional
+
+    Returns
+    -------
+    Path
+    """
+    s = _unit_scale(unit)
+    x = np.asarray(values, dtype=np.float64).reshape(-1)
+    u = np.asarray(u_xyz, dtype=np.float64)
+    if u.shape != (x.size, 3):
+        msg = f"u_xyz must have shape ({x.size}, 3) to match values, got {u.shape}"
+        raise InputError(msg)
+    order = np.argsort(x)
+    x, u = x[order], u[order] * s
+    fig = _figure(6.8, 4.2)
+    ax = fig.add_subplot(1, 1, 1)
+    for j, (name, color) in enumerate(zip(_AXES, ("tab:blue", "tab:orange", "tab:green"))):
+        ax.plot(x, u[:, j], "o-", color=color, ms=4, label=f"u({name})")
+    ax.plot(x, np.linalg.norm(u, axis=1), "s--", color="k", ms=4, label="u_pos = ‖u‖")
+    if reference is not None and math.isfinite(reference):
+        ax.axvline(reference, color="tab:red", ls=":", label="reference")
+    if log_x:
+        ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"standard uncertainty / {unit}")
+    ax.set_title(title or f"Uncertainty vs {xlabel}")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)

@@ -1,0 +1,227 @@
+"""Uncertainty of the tool position as one setting varies (seed Figs. 7-9).
+
+Each point is a small Monte Carlo run (a few hundred trials by default): the curves show
+trends, not uncertainty statements. Every point uses the same root seed, so differences
+between points come from the setting, not from the random stream.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+
+__all__ = ["DEFAULT_SWEEP_TRIALS", "Sweep", "sweep_equations", "sweep_lambda"]
+
+Array = NDArray[np.float64]
+DEFAULT_SWEEP_TRIALS = 300
+
+
+@dataclass(frozen=True, eq=False)
+class Sweep:
+    """A named uncertainty curve, for reports and plots.
+
+    Attributes
+    ----------
+    name : str
+        Short identifier, e.g. ``"lambda"`` or ``"equations"``.
+    xlabel : str
+        Axis label of `values`, with its unit.
+    values : ndarray, shape (n_points,)
+        The swept setting (lambda in scaled units, or a number of equations).
+    standard_uncertainty : ndarray, shape (n_points, 3) [m]
+        u(x), u(y), u(z) at each point.
+    reference : float or None
+        Value to mark (the calibration's lambda, or the campaign's equation count).
+    log_x : bool
+        Plot `values` on a logarithmic axis.
+    n_trials : int or None
+        Trials per point.
+    seed : int or None
+        Root seed of every point.
+    """
+
+    name: str
+    xlabel: str
+    values: Array
+    standard_uncertainty: Array
+    reference: float | None = None
+    log_x: bool = False
+    n_trials: int | None = None
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        values = np.asarray(self.values, dtype=np.float64).reshape(-1)
+        u = np.asarray(self.standard_uncertainty, dtype=np.float64)
+        if u.shape != (values.size, 3):
+            msg = f"sweep {self.name!r}: standard_uncertainty must have shape ({values.size}, 3), got {u.shape}"
+            raise ConfigError(msg)
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "standard_uncertainty", u)
+
+
+def _check_pose(pose: int, test_joints: ArrayLike) -> None:
+    n_test = 1 if np.ndim(test_joints) == 1 else int(np.shape(test_joints)[0])
+    if not 0 <= pose < n_test:
+        msg = f"pose index {pose} out of range for {n_test} test configuration(s)"
+        raise ConfigError(msg)
+
+
+def _check_points(name: str, values: ArrayLike) -> Array:
+    arr = np.asarray(values, dtype=np.float64).reshape(-1)
+    if arr.size == 0 or not np.isfinite(arr).all():
+        msg = f"{name} must be a non-empty sequence of finite numbers, got {values!r}"
+        raise ConfigError(msg)
+    return arr
+
+
+def sweep_lambda(
+    model: RobotModel,
+    campaign: Campaign,
+    calibration: IdentificationResult | None,
+    test_joints: ArrayLike,
+    lambdas: ArrayLike,
+    *,
+    trials: int = DEFAULT_SWEEP_TRIALS,
+    seed: int = 0,
+    settings: UncertaintySettings | None = None,
+    pose: int = 0,
+) -> Array:
+    """Standard uncertainty of the tool position with lambda fixed at each value (Fig. 7).
+
+    At each lambda the campaign is re-identified with ``identify(model, campaign,
+    lambda_=value)`` and that calibration is passed to ``evaluate_uncertainty``. The
+    ``lambda`` source is dropped from `settings` (lambda is the swept, fixed value).
+
+    Parameters
+    ----------
+    model : RobotModel
+    campaign : Campaign
+    calibration : IdentificationResult or None
+        The reference calibration; reused (not re-identified) where a point's lambda
+        equals its lambda.
+    test_joints : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
+    lambdas : array_like, shape (n_points,) [-]
+        Lambdas in the column-scaled units of the identification, each >= 0.
+    trials : int
+        Monte Carlo trials per point.
+    seed : int
+        Root seed used for every point.
+    settings : UncertaintySettings, optional
+        Sources and their models (default: tracker and encoder).
+    pose : int
+        Which test configuration to report.
+
+    Returns
+    -------
+    ndarray, shape (n_points, 3) [m]
+        u(x), u(y), u(z) at each lambda.
+    """
+    lams = _check_points("lambdas", lambdas)
+    if (lams < 0).any():
+        msg = f"lambdas must be >= 0, got {lams.min()}"
+        raise ConfigError(msg)
+    _check_pose(pose, test_joints)
+    settings = settings or UncertaintySettings()
+    sources = tuple(s for s in settings.sources if s != "lambda") or ("tracker",)
+    fixed = dataclasses.replace(settings, sources=sources)
+    out = np.empty((lams.size, 3))
+    for i, lam in enumerate(lams):
+        if calibration is not None and float(lam) == calibration.lambda_:
+            cal = calibration
+        else:
+            cal = identify(model, campaign, lambda_=float(lam))
+        res = evaluate_uncertainty(
+            model,
+            campaign,
+            test_joints,
+            settings=fixed,
+            calibration=cal,
+            trials=trials,
+            seed=seed,
+        )
+        out[i] = [a.standard_uncertainty for a in res.poses[pose].axes]
+    return out
+
+
+def sweep_equations(
+    model: RobotModel,
+    campaign: Campaign,
+    calibration: IdentificationResult | None,
+    test_joints: ArrayLike,
+    pose_counts: Sequence[int] | ArrayLike,
+    *,
+    trials: int = DEFAULT_SWEEP_TRIALS,
+    seed: int = 0,
+    settings: UncertaintySettings | None = None,
+    pose: int = 0,
+) -> Array:
+    """Standard uncertainty when each trial re-identifies from n random poses (Figs. 8-9).
+
+    Each point runs ``evaluate_uncertainty`` with the ``pose_choice`` source at
+    ``subset_size = n`` (3 n equations) on top of the given sources; the ``n_poses``
+    source is dropped, since the number of equations is what is fixed per point.
+
+    Parameters
+    ----------
+    model : RobotModel
+    campaign : Campaign
+    calibration : IdentificationResult or None
+        Calibration of the whole campaign (identified once when None).
+    test_joints : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
+    pose_counts : sequence of int, length n_points
+        Poses per subset, each between ceil(n_identifiable / 3) and the campaign size.
+    trials : int
+        Monte Carlo trials per point.
+    seed : int
+        Root seed used for every point.
+    settings : UncertaintySettings, optional
+        Sources and their models (default: tracker and encoder).
+    pose : int
+        Which test configuration to report.
+
+    Returns
+    -------
+    ndarray, shape (n_points, 3) [m]
+        u(x), u(y), u(z) at each pose count.
+
+    Raises
+    ------
+    ConfigError
+        A pose count that is not an integer, or outside the identifiable range.
+    """
+    counts_f = _check_points("pose_counts", pose_counts)
+    if (counts_f != np.round(counts_f)).any():
+        msg = f"pose_counts must be integers, got {pose_counts!r}"
+        raise ConfigError(msg)
+    _check_pose(pose, test_joints)
+    settings = settings or UncertaintySettings()
+    sources = tuple(s for s in settings.sources if s != "n_poses")
+    if "pose_choice" not in sources:
+        sources = (*sources, "pose_choice")
+    if calibration is None:
+        calibration = identify(model, campaign)
+    out = np.empty((counts_f.size, 3))
+    for i, n in enumerate(counts_f.astype(int)):
+        point = dataclasses.replace(settings, sources=sources, subset_size=int(n))
+        res = evaluate_uncertainty(
+            model,
+            campaign,
+            test_joints,
+            settings=point,
+            calibration=calibration,
+            trials=trials,
+            seed=seed,
+        )
+        out[i] = [a.standard_uncertainty for a in res.poses[pose].axes]
+    return out
