@@ -144,6 +144,7 @@ def _pose(index: int, pose: PoseUncertainty, result: CalibrationUncertainty) -> 
         "adaptive": result.adaptive is not None,
         "tolerance_reached_m": None,
         "numerical_tolerance_m": None,
+        "converged_axes": None,
         "axes": [_axis(n, a) for n, a in zip(AXES, axes)],
         "gum": {
             "applicable": gum.applicable,
@@ -163,6 +164,10 @@ def _pose(index: int, pose: PoseUncertainty, result: CalibrationUncertainty) -> 
         cols = slice(3 * index, 3 * index + 3)
         out["tolerance_reached_m"] = list(result.adaptive.tolerance_reached[cols])
         out["numerical_tolerance_m"] = list(result.adaptive.delta[cols])
+        # The run's verdict covers every output (parameters too); this is per axis here.
+        out["converged_axes"] = [
+            bool(t <= d) for t, d in zip(result.adaptive.tolerance_reached[cols], result.adaptive.delta[cols])
+        ]
     if pose.region is not None:
         region = pose.region
         out["region"] = {
