@@ -24,7 +24,7 @@ def _array(name: str, value: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.fl
     return array
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CalibrationSample:
     """Joint readings and tracker points averaged over one static dwell of the arm.
 
@@ -91,6 +91,23 @@ class CalibrationSample:
                 msg = f"{name} must be a positive integer, got {value!r}"
                 raise InputError(msg)
             object.__setattr__(self, name, int(value))
+
+    def __eq__(self, other: object) -> bool:
+        """Exact equality of every field (arrays element by element)."""
+        if not isinstance(other, CalibrationSample):
+            return NotImplemented
+        return (self.stamp_ns, self.frame_id, self.joint_names, self.joint_state_count, self.tracker_point_count) == (
+            other.stamp_ns,
+            other.frame_id,
+            other.joint_names,
+            other.joint_state_count,
+            other.tracker_point_count,
+        ) and all(
+            np.array_equal(getattr(self, name), getattr(other, name))
+            for name in ("joint_positions", "joint_position_std", "point", "point_covariance")
+        )
+
+    __hash__ = None  # type: ignore[assignment]  # holds arrays: not hashable
 
     @property
     def point_std(self) -> NDArray[np.float64]:
