@@ -330,7 +330,7 @@ def run_evaluation(
     """Calibrate, run the Monte Carlo, the per-source budget and the report: shared by
     ``evaluate``, ``demo`` and ``replay`` so they give the same numbers."""
     from robocal_uncertainty.core import identify
-    from robocal_uncertainty.report import format_table2, write_report
+    from robocal_uncertainty.report import format_budget, format_table2, write_report
     from robocal_uncertainty.uncertainty import evaluate_uncertainty, parse_sources
 
     sources = parse_sources(list(sources))
@@ -373,7 +373,18 @@ def run_evaluation(
             )
     print()
     print(format_table2(result))
+    adaptive = result.adaptive
+    if adaptive is not None:
+        state = "converged" if adaptive.converged else "NOT converged"
+        print(f"adaptive JCGM 101 7.9: {state} at {adaptive.n_dig} significant digits of u, "
+              f"{adaptive.n_sequences} sequences of {adaptive.sequence_trials} trials")
     print(f"{result.n_trials} trials in {elapsed:.1f} s ({result.n_trials / elapsed:.0f} trials/s)")
+    if budget:
+        print()
+        print(f"Uncertainty budget: each source alone, {args.budget_trials} trials each")
+        print(format_budget(budget))
+    for warning in result.warnings:
+        print(f"warning: {warning}")
     path = write_report(out_dir, result, robot_name=model.name, budget=budget or None)
     print(f"report written to {path}")
     return result

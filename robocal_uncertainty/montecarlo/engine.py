@@ -126,6 +126,9 @@ class AdaptiveSettings:
     sequence_trials : int or None
         M, trials per sequence; None means max(J, 10^4) with J = ceil(100/(1-p)).
         Rounded up to whole blocks.
+    monitored : tuple of int or None
+        Output columns whose tolerance decides convergence (the measurand); None means all.
+        Other columns are still summarised and their tolerance reached is reported.
     """
 
     n_dig: int = 2
@@ -134,6 +137,7 @@ class AdaptiveSettings:
     interval: MonteCarloIntervalKind = "probabilistically_symmetric"
     max_trials: int = 10_000_000
     sequence_trials: int | None = None
+    monitored: tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
         _check_int("adaptive.n_dig", self.n_dig, 1)
@@ -144,6 +148,11 @@ class AdaptiveSettings:
         _check_int("adaptive.max_trials", self.max_trials, 1)
         if self.sequence_trials is not None:
             _check_int("adaptive.sequence_trials", self.sequence_trials, self.min_sequence)
+        if self.monitored is not None and (
+            not self.monitored or any(isinstance(i, bool) or not isinstance(i, int) or i < 0 for i in self.monitored)
+        ):
+            msg = f"adaptive.monitored must be non-empty non-negative column indices, got {self.monitored!r}"
+            raise ConfigError(msg)
         if self.tolerance is not None:
             values = np.atleast_1d(np.asarray(self.tolerance, dtype=np.float64))
             if values.ndim != 1 or not (np.isfinite(values).all() and (values > 0).all()):
@@ -553,7 +562,8 @@ def _run_adaptive(
             spread = np.stack(monitored).std(axis=0, ddof=1) / math.sqrt(h)  # (4, n_out)
             reached = 2.0 * spread.max(axis=0)
             delta = _deltas(settings, _pooled_std(moments), sequence.shape[1])
-            if bool((reached <= delta).all()):
+            watched = slice(None) if settings.monitored is None else list(settings.monitored)
+            if bool((reached[watched] <= delta[watched]).all()):
                 converged = True
                 break
     finally:

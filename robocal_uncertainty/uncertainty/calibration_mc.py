@@ -499,7 +499,11 @@ def evaluate_uncertainty(
     )
     adaptive = None
     if n_trials is None:
-        adaptive = AdaptiveSettings(n_dig=n_dig, coverage=coverage, max_trials=max_trials)
+        # The measurand is the tool position: its components decide convergence; the
+        # parameter columns ride along and report the tolerance they reached.
+        adaptive = AdaptiveSettings(
+            n_dig=n_dig, coverage=coverage, max_trials=max_trials, monitored=tuple(range(3 * test_q.shape[0]))
+        )
     result = run_trials(
         trial_block,
         seed=seed,
