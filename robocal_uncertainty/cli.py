@@ -227,10 +227,16 @@ def _campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
     from robocal_uncertainty.bagio import read_campaign
 
     campaign = read_campaign(args.campaign)
-    model = _load_robot(args.robot)
-    if campaign.frame == "tracker" and not model.base_known:
-        return campaign, model
+    model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
     return campaign, model
+
+
+def _test_joints(args: argparse.Namespace, model: Any) -> NDArray[np.float64]:
+    if args.test_joints_file:
+        return _read_joints_file(args.test_joints_file, model.n_joints, degrees=args.degrees)
+    if args.test_joints:
+        return _parse_joint_values(args.test_joints, model.n_joints, degrees=args.degrees, what="--test-joints")
+    raise ConfigError("give --test-joints or --test-joints-file")
 
 
 def _lambda_arg(text: str) -> str | float:
@@ -376,8 +382,10 @@ def run_evaluation(
     adaptive = result.adaptive
     if adaptive is not None:
         state = "converged" if adaptive.converged else "NOT converged"
-        print(f"adaptive JCGM 101 7.9: {state} at {adaptive.n_dig} significant digits of u, "
-              f"{adaptive.n_sequences} sequences of {adaptive.sequence_trials} trials")
+        print(
+            f"adaptive JCGM 101 7.9: {state} at {adaptive.n_dig} significant digits of u, "
+            f"{adaptive.n_sequences} sequences of {adaptive.sequence_trials} trials"
+        )
     print(f"{result.n_trials} trials in {elapsed:.1f} s ({result.n_trials / elapsed:.0f} trials/s)")
     if budget:
         print()
@@ -444,12 +452,7 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     campaign, model = _campaign_and_robot(args)
-    if args.test_joints_file:
-        test_q = _read_joints_file(args.test_joints_file, model.n_joints, degrees=args.degrees)
-    elif args.test_joints:
-        test_q = _parse_joint_values(args.test_joints, model.n_joints, degrees=args.degrees, what="--test-joints")
-    else:
-        raise ConfigError("give --test-joints or --test-joints-file")
+    test_q = _test_joints(args, model)
     from robocal_uncertainty.uncertainty import parse_sources
 
     run_evaluation(
@@ -460,6 +463,50 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         args=args,
         out_dir=Path(args.out),
         label="evaluate",
+    )
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.pipeline import CollectorSettings, replay_bag
+    from robocal_uncertainty.uncertainty import parse_sources
+
+    model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
+    test_q = _test_joints(args, model)
+    logged: list[str] = []
+
+    def log(cause: str, message: str) -> None:
+        logged.append(cause)
+        print(f"replay: dropped ({cause}): {message}", file=sys.stderr)
+
+    replay = replay_bag(
+        args.bag,
+        model,
+        joint_topic=args.joint_topic,
+        point_topic=args.point_topic,
+        tracker_frame_id=args.tracker_frame,
+        collector=CollectorSettings(
+            window_s=args.window_s,
+            joint_motion_threshold=args.joint_motion_threshold_rad,
+            tracker_scatter_threshold=args.tracker_scatter_threshold_m,
+            min_points=args.min_points,
+        ),
+        campaign_path=args.campaign_out,
+        calibrate=False,
+        log=log,
+    )
+    dropped = ", ".join(f"{k}: {v}" for k, v in sorted(replay.dropped.items()) if v) or "none"
+    print(f"replay of {args.bag}: {len(replay.samples)} static poses found; dropped messages: {dropped}")
+    if args.campaign_out:
+        print(f"campaign written to {args.campaign_out}")
+    run_evaluation(
+        model,
+        replay.campaign,
+        test_q,
+        sources=parse_sources(args.sources),
+        args=args,
+        out_dir=Path(args.out),
+        label="replay",
     )
     return 0
 
@@ -533,6 +580,11 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", required=True)
     p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
     p.add_argument("--json", help="write the result here (SI units)")
+    p.add_argument(
+        "--base-unknown",
+        action="store_true",
+        help="identify the base transform even if the robot config says it is known",
+    )
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("fk", help="tool positions of the nominal or calibrated model")
@@ -556,8 +608,41 @@ def _build_parser() -> argparse.ArgumentParser:
         help="comma list of tracker, encoder, lambda, n_poses, pose_choice, residual, or all",
     )
     p.add_argument("--out", default="robocal_report")
+    p.add_argument(
+        "--base-unknown",
+        action="store_true",
+        help="identify the base transform even if the robot config says it is known",
+    )
     _add_uncertainty_args(p, trials_default="auto")
     p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser(
+        "replay", help="replay a raw bag: detect static poses, calibrate, evaluate (same report as evaluate)"
+    )
+    p.add_argument("bag", help="raw recording: .mcap file or rosbag2 directory")
+    p.add_argument("--robot", required=True)
+    p.add_argument("--test-joints", nargs="+")
+    p.add_argument("--test-joints-file")
+    p.add_argument("--degrees", action="store_true")
+    p.add_argument("--sources", default="tracker,encoder")
+    p.add_argument("--out", default="robocal_report")
+    p.add_argument(
+        "--base-unknown",
+        action="store_true",
+        help="identify the base transform even if the robot config says it is known",
+    )
+    p.add_argument("--joint-topic", default="/joint_states")
+    p.add_argument("--point-topic", default="/tracker/point")
+    p.add_argument("--tracker-frame", help="frame_id of valid tracker points (default: the most frequent)")
+    p.add_argument("--window-s", type=float, default=0.5, help="static window length, s (default %(default)s)")
+    p.add_argument("--joint-motion-threshold-rad", type=float, default=5e-4, help="max joint motion in the window, rad")
+    p.add_argument(
+        "--tracker-scatter-threshold-m", type=float, default=1e-4, help="max tracker scatter in the window, m"
+    )
+    p.add_argument("--min-points", type=int, default=10, help="min tracker points per static window")
+    p.add_argument("--campaign-out", help="also write the collected campaign MCAP here")
+    _add_uncertainty_args(p, trials_default="auto")
+    p.set_defaults(func=_cmd_replay)
     return parser
 
 
