@@ -1,0 +1,212 @@
+"""Calibration node: calibration samples -> identified model on ``robocal/calibration``.
+
+Holds the samples of ``robocal/samples`` plus, at start, those already in the campaign
+file (see :mod:`robocal_uncertainty.nodes.common`). Re-identifies the parameters once
+``min_samples`` samples are there and then every ``recalibrate_every`` new samples, and on
+request (``~/calibrate``, ``std_srvs/Trigger``). Each calibration is published as a
+``robocal_uncertainty/CalibrationResult`` (reliable, transient local, depth 1: a late
+subscriber gets the latest) and written to ``calibration_file`` (YAML, SI units stated;
+default ``<campaign>.calibration.yaml`` next to the campaign), replacing it atomically.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Same BLAS policy as the command line (see robocal_uncertainty/cli.py), so the
+# identification gives the command line's numbers. Must precede the numpy import.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_srvs.srv import Trigger
+
+from robocal_uncertainty.bagio.messages import calibration_to_msg, msg_to_sample
+from robocal_uncertainty.core.calibration_file import calibration_to_dict
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.errors import CalibError
+from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
+from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
+from robocal_uncertainty.nodes.common import CauseLogger, SampleStore, campaign_file, load_model, run_node, to_ros
+from robocal_uncertainty.nodes.parameters import ParamSpec, declare_parameters, lambda_text, non_empty, parse_lambda
+from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
+
+__all__ = ["PARAMETERS", "CalibrationNode", "main"]
+
+PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec(
+        "robot_config",
+        "paper_arm",
+        "Robot model: a YAML file or a shipped model name (paper_arm, ur10)",
+        read_only=True,
+        check=non_empty,
+    ),
+    ParamSpec(
+        "base_unknown",
+        False,
+        "Identify the base transform even if the robot config says it is known",
+        read_only=True,
+    ),
+    ParamSpec(
+        "campaign_path",
+        "",
+        "Campaign MCAP written by the collector, read at start (read-only); empty = $ROS_HOME/robocal/campaign.mcap",
+        read_only=True,
+    ),
+    ParamSpec("read_campaign_at_start", True, "Start from the samples already in the campaign file", read_only=True),
+    ParamSpec(
+        "calibration_file",
+        "",
+        "YAML file the latest calibration is written to; empty = <campaign>.calibration.yaml next to the campaign",
+        read_only=True,
+    ),
+    ParamSpec(
+        "lambda",
+        "auto",
+        "Regularisation: 'auto' (L-curve corner), 'gcv', or a fixed lambda in column-scaled units",
+        "dimensionless",
+        check=lambda_text,
+    ),
+    ParamSpec(
+        "min_samples", 10, "Fewest samples before the first automatic calibration", "samples", low=1, high=100_000
+    ),
+    ParamSpec(
+        "recalibrate_every",
+        1,
+        "Re-identify automatically after this many new samples",
+        "samples",
+        low=1,
+        high=100_000,
+    ),
+)
+
+
+class CalibrationNode(Node):
+    """The calibration as a ROS 2 node (see the module docstring)."""
+
+    def __init__(self, *, node_name: str = "calibration_node", **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self._changed = False
+        p = declare_parameters(self, PARAMETERS, on_change=self._note_change)
+        self.robot_config = p["robot_config"]
+        self.model = load_model(self.robot_config, base_unknown=p["base_unknown"])
+        self.store = SampleStore(self.model)
+        self.campaign_path = campaign_file(p["campaign_path"])
+        self.calibration_path = (
+            Path(p["calibration_file"]).expanduser()
+            if p["calibration_file"].strip()
+            else self.campaign_path.with_name(self.campaign_path.stem + ".calibration.yaml")
+        )
+        self._causes = CauseLogger(self, 5.0)
+        self.calibrated_count = 0
+        self.latest: IdentificationResult | None = None
+        if p["read_campaign_at_start"] and self.campaign_path.exists():
+            try:
+                added, notes = self.store.load_campaign_file(self.campaign_path)
+            except CalibError as err:
+                self.get_logger().error(f"cannot read campaign {self.campaign_path}: {err}")
+            else:
+                for note in notes:
+                    self.get_logger().warning(f"campaign {self.campaign_path}: {note}")
+                self.get_logger().info(f"read {added} samples from {self.campaign_path}")
+        self._result_pub = self.create_publisher(CalibrationResultMsg, "robocal/calibration", latched_qos())
+        self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
+        self.create_service(Trigger, "~/calibrate", self._calibrate_service)
+        self.create_timer(0.5, self._after_parameter_change)
+        self._maybe_calibrate()
+
+    def _note_change(self, parameters: list[Parameter]) -> None:
+        """A new lambda re-identifies the same samples (once rclpy has applied it)."""
+        if any(parameter.name == "lambda" for parameter in parameters):
+            self._changed = True
+
+    def _after_parameter_change(self) -> None:
+        if self._changed:
+            self._changed = False
+            if self.latest is not None:
+                self._calibrate(min_samples=None)  # same samples, new lambda
+
+    # -- input -----------------------------------------------------------------------------
+
+    def _on_sample(self, msg: CalibrationSampleMsg) -> None:
+        try:
+            added = self.store.add(msg_to_sample(msg))
+        except CalibError as err:
+            self._causes.warning("bad_sample", f"sample dropped: {err}")
+            return
+        if added:
+            self._maybe_calibrate()
+
+    def _maybe_calibrate(self) -> None:
+        n = len(self.store)
+        min_samples = int(self.get_parameter("min_samples").value)
+        every = int(self.get_parameter("recalibrate_every").value)
+        if n >= min_samples and n - self.calibrated_count >= every:
+            self._calibrate(min_samples=min_samples)
+
+    def _calibrate_service(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        result = self._calibrate(min_samples=None)
+        response.success = result is not None
+        response.message = (
+            f"calibrated from {result.n_poses} samples: residual RMS {result.rms_after * 1e3:.4f} mm"
+            if result is not None
+            else f"calibration failed with {len(self.store)} samples (see the log)"
+        )
+        return response
+
+    # -- calibration -----------------------------------------------------------------------
+
+    def _calibrate(self, *, min_samples: int | None) -> IdentificationResult | None:
+        """Identify from every sample held; publish and write the result."""
+        n = len(self.store)
+        if n == 0:
+            self.get_logger().warning("no samples to calibrate from")
+            return None
+        lambda_ = parse_lambda(str(self.get_parameter("lambda").value))
+        try:
+            result = self.store.pipeline(lambda_=lambda_, min_samples=min_samples).calibrate()
+        except CalibError as err:
+            self.calibrated_count = n  # retry after the next `recalibrate_every` samples
+            self._causes.warning("calibration_failed", f"calibration from {n} samples failed: {err}")
+            return None
+        self.calibrated_count = n
+        self.latest = result
+        stamp = self.get_clock().now().nanoseconds
+        self._result_pub.publish(to_ros(calibration_to_msg(result, stamp_ns=stamp), CalibrationResultMsg))
+        self.get_logger().info(
+            f"calibrated from {n} samples: residual RMS {result.rms_before * 1e3:.4f} -> "
+            f"{result.rms_after * 1e3:.4f} mm, lambda {result.lambda_:.4g} ({result.lambda_method})"
+        )
+        try:
+            self._write(result)
+        except OSError as err:
+            self.get_logger().error(f"cannot write {self.calibration_path}: {err}")
+        return result
+
+    def _write(self, result: IdentificationResult) -> None:
+        data = calibration_to_dict(result, robot=self.robot_config)
+        data["campaign_path"] = str(self.campaign_path)
+        header = (
+            "# Calibrated robot model written by robocal_uncertainty calibration_node.\n"
+            "# Units: lengths in m, angles in rad (each parameter states its unit); residuals in m;\n"
+            "# lambda in the column-scaled units of the identification (dimensionless).\n"
+        )
+        self.calibration_path.parent.mkdir(parents=True, exist_ok=True)
+        temporary = self.calibration_path.with_name(self.calibration_path.name + ".tmp")
+        temporary.write_text(header + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+        os.replace(temporary, self.calibration_path)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """``ros2 run robocal_uncertainty calibration_node``."""
+    return run_node(CalibrationNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

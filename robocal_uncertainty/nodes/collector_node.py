@@ -1,0 +1,352 @@
+"""Collector node: joint states + tracker points -> one calibration sample per static pose.
+
+Subscribes ``/joint_states`` (``sensor_msgs/JointState``) and ``/tracker/point``
+(``geometry_msgs/PointStamped``), both with the sensor-data QoS (remap them in the launch
+file). Messages are merged back into publication order (:mod:`.stream_merge`) and fed to a
+:class:`~robocal_uncertainty.pipeline.collector.StaticPoseCollector`. Each sample is first
+appended to the campaign MCAP (flushed and fsynced per pose; a restart resumes from the
+file, so no sample taken before a crash is lost), then published on ``robocal/samples``.
+
+Bad messages (NaN, unknown or missing joints, wrong frame, stamps going backwards, ...) are
+counted per cause, logged at most once per cause per ``log_throttle_s`` and dropped; the
+counts are on ``robocal/collector_status`` (JSON in a ``std_msgs/String``, transient local).
+
+Services (``std_srvs/Trigger``): ``~/capture_now`` takes the current static pose at once;
+``~/clear`` forgets the data of the current window/dwell (e.g. after the arm was bumped;
+the recorded campaign is never erased by a service); ``~/save_copy`` writes a finished copy
+of the campaign to ``save_copy_path`` (a file, or a directory for a timestamped name; ""
+= timestamped next to the campaign).
+"""
+
+from __future__ import annotations
+
+import os
+
+# Same BLAS policy as the command line (see robocal_uncertainty/cli.py), so every number a
+# node computes is the one the command line computes. Must precede the numpy import.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import json
+import time
+from collections.abc import Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PointStamped
+from rclpy.node import Node
+from rclpy.subscription import Subscription
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from robocal_uncertainty.bagio.messages import sample_to_msg
+from robocal_uncertainty.errors import CalibError
+from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
+from robocal_uncertainty.nodes.common import CauseLogger, campaign_file, load_model, run_node, stamp_ns, to_ros
+from robocal_uncertainty.nodes.parameters import ParamSpec, declare_parameters, non_empty, positive
+from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos, sensor_qos
+from robocal_uncertainty.nodes.stream_merge import StreamMerger
+from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
+from robocal_uncertainty.pipeline.collector import CollectorSettings, StaticPoseCollector
+from robocal_uncertainty.pipeline.sample import CalibrationSample
+
+__all__ = ["PARAMETERS", "CollectorNode", "main"]
+
+_JOINTS, _POINTS = 0, 1
+# rclpy >= 4 (Iron, Jazzy) hands a subscription callback taking two arguments the message
+# info with the DDS source timestamp; Humble's rclpy cannot.
+_HAS_MESSAGE_INFO = hasattr(Subscription, "CallbackType")
+
+PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec(
+        "robot_config",
+        "paper_arm",
+        "Robot model: a YAML file or a shipped model name (paper_arm, ur10); its joints are collected",
+        read_only=True,
+        check=non_empty,
+    ),
+    ParamSpec(
+        "tracker_frame_id",
+        "",
+        "header.frame_id of valid tracker points (others are dropped as wrong_frame); "
+        "empty = the robot model's base frame (tracker reporting base coordinates)",
+        read_only=True,
+    ),
+    ParamSpec(
+        "campaign_path",
+        "",
+        "Campaign MCAP every sample is appended to (resumed when it exists); empty = $ROS_HOME/robocal/campaign.mcap",
+        read_only=True,
+    ),
+    ParamSpec("fsync", True, "fsync the campaign file after every sample (survives power loss)", read_only=True),
+    ParamSpec("window_s", 0.5, "Sliding window deciding whether the arm is static", "s", True, 0.001, 60.0, positive),
+    ParamSpec(
+        "joint_motion_threshold_rad",
+        5e-4,
+        "Largest peak-to-peak joint motion in a static window",
+        "rad",
+        True,
+        1e-9,
+        1.0,
+        positive,
+    ),
+    ParamSpec(
+        "tracker_scatter_threshold_m",
+        1e-4,
+        "Largest peak-to-peak tracker coordinate scatter in a static window",
+        "m",
+        True,
+        1e-9,
+        1.0,
+        positive,
+    ),
+    ParamSpec("min_points", 10, "Fewest tracker points a dwell must average", "", True, 2, 1_000_000),
+    ParamSpec("guard_s", 0.1, "Data dropped at each end of a dwell before averaging", "s", True, 0.0, 60.0),
+    ParamSpec("max_average_s", 30.0, "Longest span of a dwell averaged", "s", True, 0.001, 3600.0, positive),
+    ParamSpec(
+        "ignore_extra_joints",
+        False,
+        "Ignore joints beyond the model's in joint states (else such messages are dropped as unknown_joint)",
+        read_only=True,
+    ),
+    ParamSpec(
+        "log_throttle_s",
+        5.0,
+        "At most one log line per drop cause per this time (message time and wall time)",
+        "s",
+        True,
+        0.0,
+        3600.0,
+    ),
+    ParamSpec(
+        "reorder_window_s",
+        0.05,
+        "Wall time a message waits for the other stream so both are fed in publication order; 0 = arrival order",
+        "s",
+        True,
+        0.0,
+        5.0,
+    ),
+    ParamSpec(
+        "input_queue_depth",
+        100,
+        "Subscription queue of each input (sensor-data QoS); >= rate x longest pause (e.g. an fsync)",
+        "messages",
+        True,
+        1,
+        100_000,
+    ),
+    ParamSpec(
+        "save_copy_path",
+        "",
+        "Destination of ~/save_copy: a file, a directory (timestamped name) or empty (timestamped, next to the "
+        "campaign)",
+    ),
+    ParamSpec("status_period_s", 1.0, "Period of the collector_status update (when changed)", "s", True, 0.05, 3600.0),
+)
+
+
+class CollectorNode(Node):
+    """The collector as a ROS 2 node (see the module docstring)."""
+
+    def __init__(self, *, node_name: str = "collector_node", **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        p = declare_parameters(self, PARAMETERS)
+        self.model = load_model(p["robot_config"])
+        frame_id = p["tracker_frame_id"] or self.model.base_frame_id
+        self._causes = CauseLogger(self, p["log_throttle_s"])
+        settings = CollectorSettings(
+            window_s=p["window_s"],
+            joint_motion_threshold=p["joint_motion_threshold_rad"],
+            tracker_scatter_threshold=p["tracker_scatter_threshold_m"],
+            min_points=p["min_points"],
+            guard_s=p["guard_s"],
+            max_average_s=p["max_average_s"],
+            log_throttle_s=p["log_throttle_s"],
+            ignore_extra_joints=p["ignore_extra_joints"],
+        )
+        self.collector = StaticPoseCollector.from_settings(
+            self.model.joint_names, frame_id, settings, log=self._causes.warning
+        )
+        self.campaign_path = campaign_file(p["campaign_path"])
+        self.campaign_path.parent.mkdir(parents=True, exist_ok=True)
+        self.recorder = CalibrationPipeline(
+            self.model,
+            campaign_path=self.campaign_path,
+            fsync=p["fsync"],
+            metadata={"source": "robocal_uncertainty collector_node", "robot": self.model.name},
+        )
+        for warning in self.recorder.resume_warnings:
+            self.get_logger().warning(f"campaign {self.campaign_path}: {warning}")
+        if self.recorder.n_samples:
+            self.get_logger().info(f"resumed {self.recorder.n_samples} samples from {self.campaign_path}")
+        self.received = {"joint_states": 0, "tracker_points": 0}
+        self.published = 0
+        self.record_failures = 0
+        self._merger = StreamMerger(self._feed, hold_ns=round(p["reorder_window_s"] * 1e9))
+
+        self._sample_pub = self.create_publisher(CalibrationSampleMsg, "robocal/samples", SAMPLE_QOS)
+        self._status_pub = self.create_publisher(String, "robocal/collector_status", latched_qos())
+        depth = p["input_queue_depth"]
+        if _HAS_MESSAGE_INFO:
+            self.create_subscription(JointState, "/joint_states", self._on_joint_state_info, sensor_qos(depth))
+            self.create_subscription(PointStamped, "/tracker/point", self._on_point_info, sensor_qos(depth))
+        else:
+            self.create_subscription(JointState, "/joint_states", self._on_joint_state, sensor_qos(depth))
+            self.create_subscription(PointStamped, "/tracker/point", self._on_point, sensor_qos(depth))
+        self.create_service(Trigger, "~/capture_now", self._capture_now)
+        self.create_service(Trigger, "~/clear", self._clear)
+        self.create_service(Trigger, "~/save_copy", self._save_copy)
+        if self._merger.hold_ns:
+            period = min(max(self._merger.hold_ns / 2e9, 0.005), 0.1)
+            self.create_timer(period, lambda: self._merger.release(time.monotonic_ns()))
+        self._last_status = ""
+        self.create_timer(p["status_period_s"], self._publish_status)
+        self._publish_status()
+        self.get_logger().info(
+            f"collecting joints {list(self.model.joint_names)} and tracker points in frame {frame_id!r}; "
+            f"campaign {self.campaign_path}"
+        )
+
+    # -- input -----------------------------------------------------------------------------
+
+    def _on_joint_state_info(self, msg: JointState, info: dict[str, int]) -> None:
+        self._push(_JOINTS, msg, info.get("source_timestamp", 0))
+
+    def _on_point_info(self, msg: PointStamped, info: dict[str, int]) -> None:
+        self._push(_POINTS, msg, info.get("source_timestamp", 0))
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        self._push(_JOINTS, msg, 0)
+
+    def _on_point(self, msg: PointStamped) -> None:
+        self._push(_POINTS, msg, 0)
+
+    def _push(self, stream: int, msg: Any, source_ns: int) -> None:
+        self.received["joint_states" if stream == _JOINTS else "tracker_points"] += 1
+        arrival = time.monotonic_ns()
+        self._merger.push(stream, source_ns or arrival, arrival, msg)
+
+    def _feed(self, stream: int, msg: Any) -> None:
+        """Hand one message (in publication order) to the collector."""
+        try:
+            if stream == _JOINTS:
+                sample = self.collector.add_joint_state(
+                    stamp_ns(msg.header), list(msg.name), np.asarray(msg.position, dtype=np.float64)
+                )
+            else:
+                point = msg.point
+                sample = self.collector.add_tracker_point(
+                    stamp_ns(msg.header), str(msg.header.frame_id), (point.x, point.y, point.z)
+                )
+        except CalibError as err:  # the collector drops bad input itself; this is a last resort
+            self._causes.warning("internal", f"message dropped: {err}")
+            return
+        if sample is not None:
+            self._take(sample)
+
+    def _take(self, sample: CalibrationSample) -> bool:
+        """Record `sample` to the campaign file, then publish it."""
+        try:
+            self.recorder.add_sample(sample)
+        except CalibError as err:
+            self.record_failures += 1
+            self.get_logger().error(f"sample at {sample.stamp_ns} ns not recorded, not published: {err}")
+            return False
+        self._sample_pub.publish(to_ros(sample_to_msg(sample), CalibrationSampleMsg))
+        self.published += 1
+        point_mm = ", ".join(f"{v * 1e3:.3f}" for v in sample.point)
+        self.get_logger().info(
+            f"sample {self.recorder.n_samples}: point ({point_mm}) mm from {sample.tracker_point_count} points, "
+            f"{sample.joint_state_count} joint states"
+        )
+        self._publish_status()
+        return True
+
+    # -- services --------------------------------------------------------------------------
+
+    def _capture_now(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._merger.drain()
+        static = self.collector.is_static
+        sample = self.collector.capture_now()
+        if sample is None:
+            response.success = False
+            response.message = (
+                "the arm is not static" if not static else "this dwell was already captured or holds too few data"
+            )
+        elif self._take(sample):
+            response.success = True
+            response.message = f"sample {self.recorder.n_samples} taken at {sample.stamp_ns} ns"
+        else:
+            response.success = False
+            response.message = "the sample could not be recorded (see the log)"
+        return response
+
+    def _clear(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._merger.drain()
+        was_static = self.collector.is_static
+        self.collector.flush()  # forget the window and the current dwell, emit nothing
+        response.success = True
+        response.message = "window cleared" + (" (the current static dwell was discarded)" if was_static else "")
+        return response
+
+    def _save_copy(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        from robocal_uncertainty.bagio import write_campaign
+
+        campaign = self.recorder.campaign
+        if campaign is None:
+            response.success = False
+            response.message = "no samples yet"
+            return response
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        name = f"{self.campaign_path.stem}-{stamp}.mcap"
+        target = str(self.get_parameter("save_copy_path").value).strip()
+        destination = self.campaign_path.with_name(name) if not target else Path(target).expanduser()
+        if destination.is_dir():
+            destination = destination / name
+        try:
+            write_campaign(destination, campaign)
+        except CalibError as err:
+            response.success = False
+            response.message = str(err)
+            return response
+        response.success = True
+        response.message = f"wrote {campaign.n_poses} samples to {destination}"
+        return response
+
+    # -- status ----------------------------------------------------------------------------
+
+    def status(self) -> dict[str, Any]:
+        """Counts: samples, messages received and dropped per cause, rejected dwells."""
+        return {
+            "samples": self.recorder.n_samples,
+            "published": self.published,
+            "received": dict(self.received),
+            "dropped": self.collector.dropped,
+            "rejected_dwells": self.collector.rejected_dwells,
+            "record_failures": self.record_failures,
+            "static": self.collector.is_static,
+            "campaign_path": str(self.campaign_path),
+        }
+
+    def _publish_status(self) -> None:
+        text = json.dumps(self.status(), sort_keys=True)
+        if text != self._last_status:
+            self._last_status = text
+            self._status_pub.publish(String(data=text))
+
+    def destroy_node(self) -> None:
+        self.recorder.close()
+        super().destroy_node()
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """``ros2 run robocal_uncertainty collector_node``."""
+    return run_node(CollectorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,466 @@
+"""Uncertainty node: each new calibration -> Monte Carlo (JCGM 101) tool-position uncertainty.
+
+Inputs: ``robocal/calibration`` (the trigger; transient local, so a restarted node gets the
+latest) and the samples, from ``robocal/samples`` plus the campaign file read at start (see
+:mod:`robocal_uncertainty.nodes.common`). A ``CalibrationResult`` of n samples is
+evaluated on the n earliest samples, the campaign the calibration node identified from; the
+node re-identifies it with the calibration's own lambda method and warns if its estimate
+differs from the published one. It waits for samples still in transit.
+
+The evaluation (:meth:`CalibrationPipeline.evaluate`, the call the command line's
+``evaluate``/``replay`` make, so the same settings give the same numbers bit for bit) runs
+in a worker thread: callbacks never block. A newer calibration, or a change of a Monte Carlo
+parameter, supersedes the running evaluation: it is cancelled at its next progress report
+(every ``block_size`` = 10 000 trials) and its result, if any, discarded.
+
+Outputs, all reliable + transient local with one message per test configuration kept (a
+late joiner gets the latest full set):
+
+* ``robocal/uncertainty``: ``robocal_uncertainty/PoseUncertainty``, one per configuration.
+* ``robocal/pose_with_covariance``: ``geometry_msgs/PoseWithCovarianceStamped``, one per
+  configuration, in the robot base frame: position = Monte Carlo mean; orientation = identity
+  and NOT estimated. Covariance (6x6 row-major over x, y, z, rot x, rot y, rot z): the 3x3
+  position covariance [m^2] in the top-left block; the orientation block is diagonal with
+  ``orientation_variance_rad2`` (default 1e6 rad^2, "unknown" by the usual large-variance
+  convention), cross terms 0.
+* ``robocal/uncertainty_status``: ``std_msgs/String`` JSON (state, trials done, target,
+  sample count); progress is also logged every ``progress_period_s``.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Trials are batched into many small matrix products; BLAS threads only add synchronisation
+# there (see robocal_uncertainty/cli.py). Must precede the numpy import; a user's explicit
+# setting wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import json
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import String
+
+from robocal_uncertainty.bagio.messages import msg_to_sample, uncertainty_to_msgs
+from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+from robocal_uncertainty.errors import CalibError, ConfigError
+from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
+from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
+from robocal_uncertainty.msg import PoseUncertainty as PoseUncertaintyMsg
+from robocal_uncertainty.nodes.common import (
+    CauseLogger,
+    SampleStore,
+    campaign_file,
+    load_model,
+    run_node,
+    stamp_ns,
+    to_ros,
+)
+from robocal_uncertainty.nodes.parameters import ParamSpec, declare_parameters, non_empty
+from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
+from robocal_uncertainty.pipeline.sample import CalibrationSample
+from robocal_uncertainty.uncertainty import CalibrationUncertainty, UncertaintySettings, parse_sources
+
+__all__ = ["PARAMETERS", "UncertaintyNode", "main"]
+
+SEED_TEST_JOINTS_DEG = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]
+"""The robot seed's test configuration (Table 2), degrees."""
+
+# Parameters whose change re-runs the latest calibration's evaluation.
+_MONTE_CARLO = frozenset(
+    {
+        "sources",
+        "trials",
+        "max_trials",
+        "n_dig",
+        "seed",
+        "coverage",
+        "tracker_noise_um",
+        "tracker_noise_um_per_m",
+        "encoder_noise_deg",
+        "lambda_range_low",
+        "lambda_range_high",
+        "min_poses",
+        "subset_size",
+        "tracker_xyz_m",
+    }
+)
+
+
+def _sources(value: Any) -> str | None:
+    try:
+        parse_sources(str(value))
+    except ConfigError as err:
+        return str(err)
+    return None
+
+
+def _numbers(value: Any) -> str | None:
+    if not isinstance(value, (list, tuple)) or not value:
+        return "must be a non-empty list of numbers"
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value):
+        return f"must hold finite numbers only, got {list(value)}"
+    return None
+
+
+def _xyz(value: Any) -> str | None:
+    reason = _numbers(value)
+    if reason is None and len(value) != 3:
+        reason = f"must have 3 values (x, y, z), got {len(value)}"
+    return reason
+
+
+PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec(
+        "robot_config",
+        "paper_arm",
+        "Robot model: a YAML file or a shipped model name (paper_arm, ur10)",
+        read_only=True,
+        check=non_empty,
+    ),
+    ParamSpec(
+        "base_unknown",
+        False,
+        "Identify the base transform even if the robot config says it is known (as the calibration node)",
+        read_only=True,
+    ),
+    ParamSpec(
+        "campaign_path",
+        "",
+        "Campaign MCAP written by the collector, read at start (read-only); empty = $ROS_HOME/robocal/campaign.mcap",
+        read_only=True,
+    ),
+    ParamSpec("read_campaign_at_start", True, "Start from the samples already in the campaign file", read_only=True),
+    ParamSpec(
+        "test_joints",
+        SEED_TEST_JOINTS_DEG,
+        "Test joint configurations, n_joints values per configuration, flattened; one result per configuration "
+        "(fixed at start: the output topics keep one message per configuration)",
+        "rad, or deg with test_joints_in_degrees",
+        read_only=True,
+        check=_numbers,
+        dynamic_typing=True,
+    ),
+    ParamSpec("test_joints_in_degrees", True, "test_joints are in degrees (else radians)", read_only=True),
+    ParamSpec(
+        "sources",
+        "tracker,encoder",
+        "Comma list of uncertainty sources: tracker, encoder, lambda, n_poses, pose_choice, residual, or all",
+        check=_sources,
+    ),
+    ParamSpec(
+        "trials", 0, "Monte Carlo trials M; 0 = JCGM 101 7.9 adaptive procedure", "trials", low=0, high=100_000_000
+    ),
+    ParamSpec("max_trials", 2_000_000, "Cap of the adaptive procedure", "trials", low=20_000, high=1_000_000_000),
+    ParamSpec("n_dig", 2, "Significant digits of the adaptive procedure", "digits", low=1, high=4),
+    ParamSpec("seed", 0, "Root seed of the random streams (same seed, same numbers)", low=0, high=2**62),
+    ParamSpec("coverage", 0.95, "Coverage probability p of the intervals", "", low=0.5, high=0.9999),
+    ParamSpec("tracker_noise_um", 5.0, "Tracker error half-width a per coordinate (uniform)", "um", low=0.0, high=1e6),
+    ParamSpec(
+        "tracker_noise_um_per_m",
+        0.0,
+        "Distance-proportional part b of the tracker MPE a + b L",
+        "um/m",
+        low=0.0,
+        high=1e6,
+    ),
+    ParamSpec("encoder_noise_deg", 0.005, "Encoder error half-width (uniform)", "deg", low=0.0, high=10.0),
+    ParamSpec(
+        "lambda_range_low",
+        0.0,
+        "Low end of lambda for the 'lambda' source; 0 and 0 = lambda*/5 .. 5 lambda*",
+        "dimensionless",
+        low=0.0,
+        high=1e12,
+    ),
+    ParamSpec(
+        "lambda_range_high", 0.0, "High end of lambda for the 'lambda' source", "dimensionless", low=0.0, high=1e12
+    ),
+    ParamSpec(
+        "min_poses", 0, "Smallest pose count of the 'n_poses' source; 0 = automatic", "poses", low=0, high=100_000
+    ),
+    ParamSpec("subset_size", 0, "Pose count of the 'pose_choice' source; 0 = automatic", "poses", low=0, high=100_000),
+    ParamSpec(
+        "tracker_xyz_m",
+        [2.0, 0.5, 0.3],
+        "Tracker position in the robot base frame, for MPE distances of base-frame campaigns",
+        "m",
+        check=_xyz,
+        dynamic_typing=True,
+    ),
+    ParamSpec("workers", 1, "Monte Carlo processes (never changes the result)", "processes", True, 1, 256),
+    ParamSpec("progress_period_s", 2.0, "Interval of progress reports", "s", low=0.1, high=3600.0),
+    ParamSpec(
+        "orientation_variance_rad2",
+        1e6,
+        "Variance put on the (not estimated) orientation of pose_with_covariance",
+        "rad^2",
+        low=0.0,
+        high=1e12,
+    ),
+)
+
+
+class _Superseded(Exception):
+    """Raised in the progress callback to abandon a stale evaluation."""
+
+
+@dataclass(frozen=True)
+class _Job:
+    generation: int
+    samples: tuple[CalibrationSample, ...]
+    calibration: CalibrationResultMsg
+    options: dict[str, Any]
+
+
+class UncertaintyNode(Node):
+    """The Monte Carlo evaluation as a ROS 2 node (see the module docstring)."""
+
+    def __init__(self, *, node_name: str = "uncertainty_node", **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self._rerun = False
+        p = declare_parameters(self, PARAMETERS, on_change=self._note_change)
+        self.model = load_model(p["robot_config"], base_unknown=p["base_unknown"])
+        n = self.model.n_joints
+        values = np.array(p["test_joints"], dtype=np.float64)
+        if values.size % n:
+            msg = f"parameter test_joints: {values.size} values are not a multiple of the {n} joints"
+            raise ConfigError(msg)
+        q = values.reshape(-1, n)
+        self.test_joints = np.radians(q) if p["test_joints_in_degrees"] else q
+        self.store = SampleStore(self.model)
+        self.campaign_path = campaign_file(p["campaign_path"])
+        self._causes = CauseLogger(self, 5.0)
+        if p["read_campaign_at_start"] and self.campaign_path.exists():
+            try:
+                added, notes = self.store.load_campaign_file(self.campaign_path)
+            except CalibError as err:
+                self.get_logger().error(f"cannot read campaign {self.campaign_path}: {err}")
+            else:
+                for note in notes:
+                    self.get_logger().warning(f"campaign {self.campaign_path}: {note}")
+                self.get_logger().info(f"read {added} samples from {self.campaign_path}")
+
+        depth = self.test_joints.shape[0]
+        self._uncertainty_pub = self.create_publisher(PoseUncertaintyMsg, "robocal/uncertainty", latched_qos(depth))
+        self._pose_pub = self.create_publisher(
+            PoseWithCovarianceStamped, "robocal/pose_with_covariance", latched_qos(depth)
+        )
+        self._status_pub = self.create_publisher(String, "robocal/uncertainty_status", latched_qos())
+        self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
+        self.create_subscription(CalibrationResultMsg, "robocal/calibration", self._on_calibration, latched_qos())
+
+        self._latest: CalibrationResultMsg | None = None
+        self._waiting = False
+        self._generation = 0
+        self._pending: _Job | None = None
+        self._stop = False
+        self._wake = threading.Condition()
+        self.completed = 0
+        self._worker = threading.Thread(target=self._work, name="robocal_monte_carlo", daemon=True)
+        self._worker.start()
+        self.create_timer(0.25, self._after_parameter_change)
+        self._status({"state": "idle", "samples": len(self.store)})
+        self.get_logger().info(f"evaluating {depth} test configuration(s) of {self.model.name} on each new calibration")
+
+    # -- input -----------------------------------------------------------------------------
+
+    def _on_sample(self, msg: CalibrationSampleMsg) -> None:
+        try:
+            added = self.store.add(msg_to_sample(msg))
+        except CalibError as err:
+            self._causes.warning("bad_sample", f"sample dropped: {err}")
+            return
+        if added and self._waiting:
+            self._submit()
+
+    def _on_calibration(self, msg: CalibrationResultMsg) -> None:
+        self._latest = msg
+        self._submit()
+
+    def _note_change(self, parameters: list[Parameter]) -> None:
+        if any(parameter.name in _MONTE_CARLO for parameter in parameters):
+            self._rerun = True  # applied by rclpy after this returns; re-run from the timer
+
+    def _after_parameter_change(self) -> None:
+        if self._rerun:
+            self._rerun = False
+            if self._latest is not None:
+                self.get_logger().info("Monte Carlo settings changed: re-evaluating the latest calibration")
+                self._submit()
+
+    def _options(self) -> dict[str, Any]:
+        def get(name: str) -> Any:
+            return self.get_parameter(name).value
+
+        low, high = float(get("lambda_range_low")), float(get("lambda_range_high"))
+        settings = UncertaintySettings(
+            sources=parse_sources(str(get("sources"))),
+            tracker_noise=TrackerNoise(a=get("tracker_noise_um") * 1e-6, b=get("tracker_noise_um_per_m") * 1e-6),
+            encoder_noise=EncoderNoise(half_width=float(np.radians(get("encoder_noise_deg")))),
+            lambda_range=None if low == high == 0.0 else (low, high),
+            min_poses=int(get("min_poses")) or None,
+            subset_size=int(get("subset_size")) or None,
+            tracker_xyz=tuple(float(v) for v in get("tracker_xyz_m")),
+        )
+        trials = int(get("trials"))
+        return {
+            "uncertainty": settings,
+            "test_joints": self.test_joints,
+            "trials": trials if trials > 0 else "auto",
+            "seed": int(get("seed")),
+            "coverage": float(get("coverage")),
+            "n_dig": int(get("n_dig")),
+            "max_trials": int(get("max_trials")),
+        }
+
+    def _submit(self) -> None:
+        """Queue the evaluation of the latest calibration (superseding any other)."""
+        msg = self._latest
+        if msg is None:
+            return
+        need = int(msg.sample_count)
+        if len(self.store) < need:
+            if not self._waiting:
+                self.get_logger().info(f"calibration of {need} samples: waiting for samples ({len(self.store)} held)")
+            self._waiting = True
+            self._status({"state": "waiting_for_samples", "samples": len(self.store), "sample_count": need})
+            return
+        self._waiting = False
+        try:
+            options = self._options()
+        except CalibError as err:
+            self.get_logger().error(f"invalid Monte Carlo settings: {err}")
+            return
+        with self._wake:
+            self._generation += 1
+            self._pending = _Job(self._generation, tuple(self.store.first(need)), msg, options)
+            self._wake.notify()
+
+    # -- worker ----------------------------------------------------------------------------
+
+    def _work(self) -> None:
+        while True:
+            with self._wake:
+                while self._pending is None and not self._stop:
+                    self._wake.wait()
+                if self._stop:
+                    return
+                job, self._pending = self._pending, None
+            try:
+                self._run(job)
+            except Exception as err:
+                self.get_logger().error(f"uncertainty evaluation failed: {type(err).__name__}: {err}")
+                self._status({"state": "failed", "error": str(err)})
+
+    def _run(self, job: _Job) -> None:
+        n = len(job.samples)
+        period = float(self.get_parameter("progress_period_s").value)
+        started = time.monotonic()
+        last = [started]
+
+        def progress(done: int, target: int | None) -> None:
+            if self._stop or job.generation != self._generation:
+                raise _Superseded
+            now = time.monotonic()
+            if now - last[0] >= period:
+                last[0] = now
+                of = f"/{target}" if target else " (adaptive)"
+                self.get_logger().info(f"Monte Carlo of the {n}-sample calibration: {done}{of} trials")
+                self._status({"state": "running", "done": done, "target": target, "sample_count": n})
+
+        self._status({"state": "running", "done": 0, "target": job.options["trials"], "sample_count": n})
+        lambda_ = self._lambda_of(job.calibration)
+        pipeline = SampleStore.pipeline_of(self.model, job.samples, lambda_=lambda_, **job.options)
+        try:
+            result = pipeline.evaluate(workers=int(self.get_parameter("workers").value), progress=progress)
+        except _Superseded:
+            self.get_logger().info(f"Monte Carlo of the {n}-sample calibration superseded; abandoned")
+            return
+        except CalibError as err:
+            self._causes.warning("evaluation_failed", f"Monte Carlo of the {n}-sample calibration failed: {err}")
+            self._status({"state": "failed", "sample_count": n, "error": str(err)})
+            return
+        if self._stop or job.generation != self._generation:
+            self.get_logger().info(f"Monte Carlo of the {n}-sample calibration superseded; result discarded")
+            return
+        self._check_same_calibration(result, job.calibration)
+        self._publish(result, job.calibration)
+        self.completed += 1
+        elapsed = time.monotonic() - started
+        u = result.poses[0].axes
+        self.get_logger().info(
+            f"uncertainty of the {n}-sample calibration: {result.n_trials} trials in {elapsed:.1f} s; "
+            f"first configuration u(x, y, z) = (" + ", ".join(f"{a.standard_uncertainty * 1e6:.3f}" for a in u) + ") um"
+        )
+        self._status(
+            {
+                "state": "done",
+                "sample_count": n,
+                "trials": result.n_trials,
+                "converged": result.converged,
+                "elapsed_s": round(elapsed, 3),
+            }
+        )
+
+    @staticmethod
+    def _lambda_of(msg: CalibrationResultMsg) -> str | float:
+        """The calibration node's lambda choice, so the re-identification is the same."""
+        if msg.lambda_method == "fixed":
+            return float(msg.lambda_value)
+        return "gcv" if msg.lambda_method == "gcv" else "auto"
+
+    def _check_same_calibration(self, result: CalibrationUncertainty, msg: CalibrationResultMsg) -> None:
+        mine = np.asarray(result.calibration.estimate, dtype=np.float64)
+        theirs = np.asarray(msg.estimate, dtype=np.float64)
+        if mine.shape != theirs.shape or not np.array_equal(mine, theirs):
+            diff = float(np.max(np.abs(mine - theirs))) if mine.shape == theirs.shape else float("nan")
+            self.get_logger().warning(
+                "the evaluated calibration differs from the published one "
+                f"(max |difference| {diff:.3g}): the samples held differ from the calibration node's"
+            )
+
+    def _publish(self, result: CalibrationUncertainty, msg: CalibrationResultMsg) -> None:
+        stamp = stamp_ns(msg.header)
+        frame_id = self.model.base_frame_id
+        variance = float(self.get_parameter("orientation_variance_rad2").value)
+        for message, pose in zip(uncertainty_to_msgs(result, stamp_ns=stamp, frame_id=frame_id), result.poses):
+            self._uncertainty_pub.publish(to_ros(message, PoseUncertaintyMsg))
+            out = PoseWithCovarianceStamped()
+            out.header.stamp = msg.header.stamp
+            out.header.frame_id = frame_id
+            out.pose.pose.position.x, out.pose.pose.position.y, out.pose.pose.position.z = (float(v) for v in pose.mean)
+            out.pose.pose.orientation.w = 1.0
+            covariance = np.zeros((6, 6))
+            covariance[:3, :3] = pose.covariance
+            covariance[3:, 3:] = np.eye(3) * variance
+            out.pose.covariance = covariance.reshape(-1).tolist()
+            self._pose_pub.publish(out)
+
+    def _status(self, state: dict[str, Any]) -> None:
+        self._status_pub.publish(String(data=json.dumps(state, sort_keys=True)))
+
+    def destroy_node(self) -> None:
+        with self._wake:
+            self._stop = True
+            self._wake.notify()
+        self._worker.join(timeout=10.0)
+        super().destroy_node()
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """``ros2 run robocal_uncertainty uncertainty_node``."""
+    return run_node(UncertaintyNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,180 @@
+"""Calibration and uncertainty nodes: the replayed samples in, a calibration (topic and YAML)
+and an uncertainty bit-identical to the offline evaluation out; parameters validated."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+rclpy = pytest.importorskip("rclpy")
+pytest.importorskip("robocal_uncertainty.msg", reason="robocal_uncertainty is not built with colcon")
+
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nodes_support import BASE_BAG, spin_until
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
+from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
+from robocal_uncertainty.msg import PoseUncertainty as PoseUncertaintyMsg
+from std_srvs.srv import Trigger
+
+from robocal_uncertainty.bagio import write_campaign
+from robocal_uncertainty.bagio.messages import calibration_to_msg, sample_to_msg
+from robocal_uncertainty.core import EncoderNoise, TrackerNoise, identify, load_robot_model
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.nodes.calibration_node import CalibrationNode
+from robocal_uncertainty.nodes.common import robot_config_path, to_ros
+from robocal_uncertainty.nodes.qos import latched_qos
+from robocal_uncertainty.nodes.uncertainty_node import UncertaintyNode
+from robocal_uncertainty.pipeline import CollectorSettings, replay_bag
+from robocal_uncertainty.pipeline.calibration_pipeline import EvaluationOptions, evaluate_campaign
+from robocal_uncertainty.uncertainty import UncertaintySettings
+
+TEST_JOINTS_DEG = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451, 30.0, -180.0, 45.0, 10.0, -20.0, 5.0]
+TRIALS, SEED = 400, 7
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_robot_model(robot_config_path("paper_arm"))
+
+
+@pytest.fixture(scope="module")
+def replay(model):
+    return replay_bag(BASE_BAG, model, collector=CollectorSettings(window_s=0.1, guard_s=0.025), calibrate=False)
+
+
+def _node(cls, context, **params):
+    return cls(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+
+
+def _sample_msgs(replay):
+    return [to_ros(sample_to_msg(s), CalibrationSampleMsg) for s in replay.samples]
+
+
+def test_calibration_node_identifies_and_writes_yaml(ros_context, tmp_path, model, replay) -> None:
+    campaign_path = tmp_path / "campaign.mcap"
+    n = len(replay.samples)
+    node = _node(CalibrationNode, ros_context, campaign_path=str(campaign_path), min_samples=n)
+    try:
+        for msg in _sample_msgs(replay)[: n - 1]:
+            node._on_sample(msg)
+        assert node.latest is None  # fewer than min_samples
+        msgs = _sample_msgs(replay)
+        node._on_sample(msgs[-1])
+        node._on_sample(msgs[-1])  # a duplicate counts once
+        expected = identify(model, replay.campaign)
+        assert node.latest is not None
+        assert node.latest.n_poses == n
+        assert np.array_equal(node.latest.estimate, expected.estimate)
+        data = yaml.safe_load((tmp_path / "campaign.calibration.yaml").read_text())
+        assert data["units"] == {"length": "m", "angle": "rad"}
+        assert data["n_poses"] == n
+        response = node._calibrate_service(Trigger.Request(), Trigger.Response())
+        assert response.success, response.message
+        refused = node.set_parameters([Parameter("lambda", value="sometimes")])[0]
+        assert not refused.successful
+        assert "lambda" in refused.reason
+        assert not node.set_parameters([Parameter("min_samples", value=0)])[0].successful
+        assert node.set_parameters([Parameter("recalibrate_every", value=5)])[0].successful
+    finally:
+        node.destroy_node()
+
+
+def test_calibration_node_starts_from_the_campaign_file(ros_context, tmp_path, model, replay) -> None:
+    campaign_path = tmp_path / "campaign.mcap"
+    write_campaign(campaign_path, replay.campaign)
+    node = _node(CalibrationNode, ros_context, campaign_path=str(campaign_path), min_samples=10)
+    try:
+        assert len(node.store) == len(replay.samples)
+        assert node.latest is not None
+        assert np.array_equal(node.latest.estimate, identify(model, replay.campaign).estimate)
+    finally:
+        node.destroy_node()
+
+
+def test_uncertainty_node_publishes_the_offline_numbers(ros_context, tmp_path, model, replay) -> None:
+    node = _node(
+        UncertaintyNode,
+        ros_context,
+        campaign_path=str(tmp_path / "none.mcap"),
+        test_joints=TEST_JOINTS_DEG,
+        trials=TRIALS,
+        seed=SEED,
+    )
+    peer = rclpy.create_node("listener", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(peer)
+    got: list[PoseUncertaintyMsg] = []
+    poses: list[PoseWithCovarianceStamped] = []
+    peer.create_subscription(PoseUncertaintyMsg, "robocal/uncertainty", got.append, latched_qos(2))
+    peer.create_subscription(PoseWithCovarianceStamped, "robocal/pose_with_covariance", poses.append, latched_qos(2))
+    try:
+        for msg in _sample_msgs(replay):
+            node._on_sample(msg)
+        calibration = identify(model, replay.campaign)
+        node._on_calibration(to_ros(calibration_to_msg(calibration, stamp_ns=1), CalibrationResultMsg))
+        assert spin_until(executor, lambda: len(got) >= 2 and len(poses) >= 2, timeout_s=120.0)
+        # The node's units (um, deg) converted as the command line converts them.
+        settings = UncertaintySettings(
+            tracker_noise=TrackerNoise(a=5.0 * 1e-6, b=0.0 * 1e-6),
+            encoder_noise=EncoderNoise(half_width=float(np.radians(0.005))),
+        )
+        options = EvaluationOptions(
+            uncertainty=settings,
+            test_joints=np.radians(np.reshape(TEST_JOINTS_DEG, (-1, 6))),
+            trials=TRIALS,
+            seed=SEED,
+        )
+        expected = evaluate_campaign(model, replay.campaign, options, calibration=calibration)
+        for msg, pose, pose_msg in zip(got, expected.poses, poses):
+            assert np.array_equal(np.array(msg.covariance), pose.covariance.reshape(-1))
+            assert [msg.mean.x, msg.mean.y, msg.mean.z] == pose.mean.tolist()
+            assert list(msg.standard_uncertainty) == [a.standard_uncertainty for a in pose.axes]
+            assert list(msg.expanded_uncertainty) == [a.expanded_uncertainty for a in pose.axes]
+            assert msg.trials == TRIALS
+            covariance = np.reshape(pose_msg.pose.covariance, (6, 6))
+            assert np.array_equal(covariance[:3, :3], pose.covariance)
+            assert np.all(np.diag(covariance)[3:] == 1e6)
+        assert not node.set_parameters([Parameter("coverage", value=1.5)])[0].successful
+        refused = node.set_parameters([Parameter("sources", value="tracker,telepathy")])[0]
+        assert not refused.successful
+        assert "telepathy" in refused.reason
+        assert not node.set_parameters([Parameter("test_joints", value=[0.0] * 6)])[0].successful  # read-only
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
+
+
+def test_a_newer_calibration_supersedes_the_running_one(ros_context, tmp_path, model, replay) -> None:
+    node = _node(
+        UncertaintyNode,
+        ros_context,
+        campaign_path=str(tmp_path / "none.mcap"),
+        trials=40_000,
+        seed=SEED,
+    )
+    try:
+        for msg in _sample_msgs(replay):
+            node._on_sample(msg)
+        first = identify(model, replay.campaign)
+        node._on_calibration(to_ros(calibration_to_msg(first, stamp_ns=1), CalibrationResultMsg))
+        node.set_parameters([Parameter("trials", value=TRIALS)])
+        node._after_parameter_change()  # what the timer does
+        deadline = time.monotonic() + 120.0
+        while node.completed < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        assert node.completed == 1  # the 40 000-trial run was abandoned, only the newer one finished
+    finally:
+        node.destroy_node()
+
+
+def test_bad_test_joints_stop_the_node_at_start(ros_context, tmp_path) -> None:
+    with pytest.raises(ConfigError, match="multiple"):
+        _node(UncertaintyNode, ros_context, campaign_path=str(tmp_path / "x.mcap"), test_joints=[0.0] * 7)
