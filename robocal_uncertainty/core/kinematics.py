@@ -126,17 +126,18 @@ def _points_in_base(layout: ParameterLayout, p: Array, q: Array, shape: tuple[in
     Keeps the nine rotation entries as separate arrays and updates them with fused
     expressions: fewer temporaries than the component-first stacks used for the Jacobian.
     """
-    x0, x1, x2 = np.ones(shape), np.zeros(shape), np.zeros(shape)
-    y0, y1, y2 = np.zeros(shape), np.ones(shape), np.zeros(shape)
-    z0, z1, z2 = np.zeros(shape), np.zeros(shape), np.ones(shape)
-    o0, o1, o2 = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+    # Start from the parameters' own shape (one entry per trial): until the first joint
+    # angle enters, the chain is the same for every pose and needs no per-pose work.
+    start = p.shape[:-1]
+    x0, x1, x2 = np.ones(start), np.zeros(start), np.zeros(start)
+    y0, y1, y2 = np.zeros(start), np.ones(start), np.zeros(start)
+    z0, z1, z2 = np.zeros(start), np.zeros(start), np.ones(start)
+    o0, o1, o2 = np.zeros(start), np.zeros(start), np.zeros(start)
     for j, idx in enumerate(layout.joint_slices()):
         alpha = p[..., idx["alpha"]]
         ca, sa = np.cos(alpha), np.sin(alpha)
         a = p[..., idx["a"]]
-        o0 += a * x0
-        o1 += a * x1
-        o2 += a * x2
+        o0, o1, o2 = o0 + a * x0, o1 + a * x1, o2 + a * x2
         y0, z0 = ca * y0 + sa * z0, ca * z0 - sa * y0
         y1, z1 = ca * y1 + sa * z1, ca * z1 - sa * y1
         y2, z2 = ca * y2 + sa * z2, ca * z2 - sa * y2
@@ -152,15 +153,13 @@ def _points_in_base(layout: ParameterLayout, p: Array, q: Array, shape: tuple[in
         x1, y1 = ct * x1 + st * y1, ct * y1 - st * x1
         x2, y2 = ct * x2 + st * y2, ct * y2 - st * x2
         d = p[..., idx["d"]]
-        o0 += d * z0
-        o1 += d * z1
-        o2 += d * z2
+        o0, o1, o2 = o0 + d * z0, o1 + d * z1, o2 + d * z2
     t0 = layout.tool_index
     tx, ty, tz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
     return (
-        o0 + tx * x0 + ty * y0 + tz * z0,
-        o1 + tx * x1 + ty * y1 + tz * z1,
-        o2 + tx * x2 + ty * y2 + tz * z2,
+        np.broadcast_to(o0 + tx * x0 + ty * y0 + tz * z0, shape),
+        np.broadcast_to(o1 + tx * x1 + ty * y1 + tz * z1, shape),
+        np.broadcast_to(o2 + tx * x2 + ty * y2 + tz * z2, shape),
     )
 
 
