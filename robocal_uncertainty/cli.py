@@ -377,6 +377,7 @@ def run_evaluation(
                 seed=args.seed,
                 workers=args.workers,
             )
+    sweeps = _sweeps(model, campaign, calibration, test_joints, settings, args) if args.sweeps else None
     print()
     print(format_table2(result))
     adaptive = result.adaptive
@@ -393,9 +394,60 @@ def run_evaluation(
         print(format_budget(budget))
     for warning in result.warnings:
         print(f"warning: {warning}")
-    path = write_report(out_dir, result, robot_name=model.name, budget=budget or None)
+    path = write_report(out_dir, result, robot_name=model.name, budget=budget or None, sweeps=sweeps)
     print(f"report written to {path}")
     return result
+
+
+def _sweeps(
+    model: Any,
+    campaign: Any,
+    calibration: Any,
+    test_joints: NDArray[np.float64],
+    settings: Any,
+    args: argparse.Namespace,
+) -> list[Any]:
+    """Uncertainty against lambda (seed Fig. 7) and against the number of equations (Figs. 8-9)."""
+    from robocal_uncertainty.report import Sweep, sweep_equations, sweep_lambda
+
+    noise = replace(
+        settings,
+        sources=tuple(s for s in settings.sources if s in ("tracker", "encoder", "residual")) or ("tracker", "encoder"),
+    )
+    lam = calibration.lambda_
+    lambdas = np.geomspace(lam / 10.0, lam * 10.0, 9) if lam > 0 else np.geomspace(1e-4, 1e-1, 9)
+    n_est = int(calibration.estimated.sum())
+    lowest = max(int(np.ceil(1.5 * n_est / 3)), int(np.ceil(40 / 3)))
+    counts = np.unique(np.linspace(min(lowest, campaign.n_poses), campaign.n_poses, 8).round().astype(int))
+    trials = args.sweep_trials
+    u_lam = sweep_lambda(
+        model, campaign, calibration, test_joints, lambdas, trials=trials, seed=args.seed, settings=noise
+    )
+    u_eq = sweep_equations(
+        model, campaign, calibration, test_joints, counts, trials=trials, seed=args.seed, settings=noise
+    )
+    return [
+        Sweep(
+            name="lambda",
+            xlabel="lambda (scaled units)",
+            values=lambdas,
+            standard_uncertainty=u_lam,
+            reference=lam,
+            log_x=True,
+            n_trials=trials,
+            seed=args.seed,
+        ),
+        Sweep(
+            name="equations",
+            xlabel="number of equations (3 per pose)",
+            values=3 * counts.astype(float),
+            standard_uncertainty=u_eq,
+            reference=float(3 * campaign.n_poses),
+            log_x=False,
+            n_trials=trials,
+            seed=args.seed,
+        ),
+    ]
 
 
 def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> None:
@@ -447,6 +499,13 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
     p.add_argument(
         "--budget-trials", type=int, default=2000, help="trials per source of the budget (default %(default)s)"
     )
+    p.add_argument(
+        "--sweeps",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="uncertainty against lambda and against the number of equations (report plots)",
+    )
+    p.add_argument("--sweep-trials", type=int, default=300, help="trials per sweep point (default %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
