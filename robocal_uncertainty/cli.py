@@ -21,7 +21,6 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -38,22 +37,10 @@ PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7
 DEMO_SOURCES = ("tracker", "encoder", "lambda", "n_poses", "pose_choice")
 
 
-def _robot_path(name: str) -> Path:
-    """A robot YAML path, or the name of a shipped model (``paper_arm``, ``ur10``)."""
-    path = Path(name)
-    if path.exists() or path.suffix in (".yaml", ".yml"):
-        return path
-    shipped = resources.files("robocal_uncertainty") / "data" / f"{name}.yaml"
-    if shipped.is_file():
-        return Path(str(shipped))
-    msg = f"robot config {name!r} is neither a file nor a shipped model (paper_arm, ur10)"
-    raise ConfigError(msg)
-
-
 def _load_robot(name: str, *, base_known: bool | None = None) -> Any:
-    from robocal_uncertainty.core import load_robot_model
+    from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
 
-    model = load_robot_model(_robot_path(name))
+    model = load_robot_model(resolve_robot_config(name))
     if base_known is not None:
         model = replace(model, base_known=base_known)
     return model

@@ -22,6 +22,7 @@ and the last row's ``alpha_n, a_n`` move into the tool point (they commute, both
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -202,3 +203,21 @@ def load_robot_model(path: str | Path) -> RobotModel:
         msg = f"robot config {file} is not valid YAML{where}: {problem}"
         raise ConfigError(msg) from err
     return robot_model_from_dict(data, where=str(file))
+
+
+def resolve_robot_config(name: str) -> Path:
+    """A robot YAML path, or the name of a shipped model (``paper_arm``, ``ur10``).
+
+    Raises
+    ------
+    ConfigError
+        Neither an existing file nor a shipped model.
+    """
+    path = Path(name).expanduser()
+    if path.exists() or path.suffix in (".yaml", ".yml"):
+        return path
+    shipped = resources.files("robocal_uncertainty") / "data" / f"{name}.yaml"
+    if shipped.is_file():
+        return Path(str(shipped))
+    msg = f"robot config {name!r} is neither a file nor a shipped model (paper_arm, ur10)"
+    raise ConfigError(msg)

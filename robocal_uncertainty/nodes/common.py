@@ -17,7 +17,6 @@ import os
 import sys
 import warnings
 from collections.abc import Callable, Iterable
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +26,9 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from robocal_uncertainty.core import load_robot_model
+from robocal_uncertainty.core.robot_config import resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.errors import CalibError, ConfigError, InputError
+from robocal_uncertainty.errors import CalibError, InputError
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.sample import CalibrationSample
 
@@ -49,21 +49,8 @@ DEFAULT_CAMPAIGN = Path("robocal") / "campaign.mcap"
 
 
 def robot_config_path(name: str) -> Path:
-    """A robot YAML path, or the name of a shipped model (``paper_arm``, ``ur10``).
-
-    Raises
-    ------
-    ConfigError
-        Neither an existing file nor a shipped model.
-    """
-    path = Path(name).expanduser()
-    if path.exists() or path.suffix in (".yaml", ".yml"):
-        return path
-    shipped = resources.files("robocal_uncertainty") / "data" / f"{name}.yaml"
-    if shipped.is_file():
-        return Path(str(shipped))
-    msg = f"robot config {name!r} is neither a file nor a shipped model (paper_arm, ur10)"
-    raise ConfigError(msg)
+    """A robot YAML path, or the name of a shipped model; see :func:`resolve_robot_config`."""
+    return resolve_robot_config(name)
 
 
 def load_model(robot_config: str, *, base_unknown: bool = False) -> RobotModel:
