@@ -9,6 +9,7 @@ components), the analytic ``expectation`` and ``standard_uncertainty`` of JCGM 1
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -75,7 +76,7 @@ def _check_limits(cls: str, low: float, high: float) -> None:
         raise ConfigError(msg)
 
 
-class _Scalar:
+class _Scalar(ABC):
     """Shared helpers for the scalar (size 1) distributions."""
 
     @property
@@ -83,21 +84,21 @@ class _Scalar:
         return 1
 
     @property
+    @abstractmethod
     def expectation(self) -> float:
         """Analytic expectation, in the quantity's unit."""
-        raise NotImplementedError
 
     @property
+    @abstractmethod
     def standard_uncertainty(self) -> float:
         """Analytic standard deviation, in the quantity's unit."""
-        raise NotImplementedError
 
     def mean_vector(self) -> NDArray[np.float64]:
         return np.array([self.expectation], dtype=np.float64)
 
+    @abstractmethod
     def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Draw ``n`` values, shape (n,)."""
-        raise NotImplementedError
 
     def covariance(self) -> NDArray[np.float64]:
         return np.array([[self.standard_uncertainty**2]], dtype=np.float64)
