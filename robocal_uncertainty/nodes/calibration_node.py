@@ -34,32 +34,25 @@ from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.nodes.common import CauseLogger, SampleStore, campaign_file, load_model, run_node, to_ros
-from robocal_uncertainty.nodes.parameters import ParamSpec, declare_parameters, lambda_text, non_empty, parse_lambda
+from robocal_uncertainty.nodes.parameters import (
+    BASE_UNKNOWN,
+    CAMPAIGN_PATH_READ,
+    READ_CAMPAIGN_AT_START,
+    ROBOT_CONFIG,
+    ParamSpec,
+    declare_parameters,
+    lambda_text,
+    parse_lambda,
+)
 from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
 
 __all__ = ["PARAMETERS", "CalibrationNode", "main"]
 
 PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec(
-        "robot_config",
-        "paper_arm",
-        "Robot model: a YAML file or a shipped model name (paper_arm, ur10)",
-        read_only=True,
-        check=non_empty,
-    ),
-    ParamSpec(
-        "base_unknown",
-        False,
-        "Identify the base transform even if the robot config says it is known",
-        read_only=True,
-    ),
-    ParamSpec(
-        "campaign_path",
-        "",
-        "Campaign MCAP written by the collector, read at start (read-only); empty = $ROS_HOME/robocal/campaign.mcap",
-        read_only=True,
-    ),
-    ParamSpec("read_campaign_at_start", True, "Start from the samples already in the campaign file", read_only=True),
+    ROBOT_CONFIG,
+    BASE_UNKNOWN,
+    CAMPAIGN_PATH_READ,
+    READ_CAMPAIGN_AT_START,
     ParamSpec(
         "calibration_file",
         "",

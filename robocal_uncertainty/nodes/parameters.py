@@ -21,6 +21,10 @@ from rclpy.parameter import Parameter
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
+    "BASE_UNKNOWN",
+    "CAMPAIGN_PATH_READ",
+    "READ_CAMPAIGN_AT_START",
+    "ROBOT_CONFIG",
     "Check",
     "ParamSpec",
     "declare_parameters",
@@ -207,3 +211,28 @@ def lambda_text(value: Any) -> str | None:
 def parse_lambda(value: str) -> str | float:
     """The ``lambda_`` argument of the identification for a checked :func:`lambda_text`."""
     return value if value in ("auto", "lcurve", "gcv") else float(value)
+
+
+# Parameters every node shares: one definition, so descriptions and checks cannot drift.
+ROBOT_CONFIG = ParamSpec(
+    "robot_config",
+    "paper_arm",
+    "Robot model: a YAML file or a shipped model name (paper_arm, ur10)",
+    read_only=True,
+    check=non_empty,
+)
+BASE_UNKNOWN = ParamSpec(
+    "base_unknown",
+    False,
+    "Identify the base transform even if the robot config says it is known",
+    read_only=True,
+)
+CAMPAIGN_PATH_READ = ParamSpec(
+    "campaign_path",
+    "",
+    "Campaign MCAP written by the collector, read at start (read-only); empty = $ROS_HOME/robocal/campaign.mcap",
+    read_only=True,
+)
+READ_CAMPAIGN_AT_START = ParamSpec(
+    "read_campaign_at_start", True, "Start from the samples already in the campaign file", read_only=True
+)

@@ -65,7 +65,14 @@ from robocal_uncertainty.nodes.common import (
     stamp_ns,
     to_ros,
 )
-from robocal_uncertainty.nodes.parameters import ParamSpec, declare_parameters, non_empty
+from robocal_uncertainty.nodes.parameters import (
+    BASE_UNKNOWN,
+    CAMPAIGN_PATH_READ,
+    READ_CAMPAIGN_AT_START,
+    ROBOT_CONFIG,
+    ParamSpec,
+    declare_parameters,
+)
 from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
 from robocal_uncertainty.pipeline.sample import CalibrationSample
 from robocal_uncertainty.uncertainty import CalibrationUncertainty, UncertaintySettings, parse_sources
@@ -120,26 +127,10 @@ def _xyz(value: Any) -> str | None:
 
 
 PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec(
-        "robot_config",
-        "paper_arm",
-        "Robot model: a YAML file or a shipped model name (paper_arm, ur10)",
-        read_only=True,
-        check=non_empty,
-    ),
-    ParamSpec(
-        "base_unknown",
-        False,
-        "Identify the base transform even if the robot config says it is known (as the calibration node)",
-        read_only=True,
-    ),
-    ParamSpec(
-        "campaign_path",
-        "",
-        "Campaign MCAP written by the collector, read at start (read-only); empty = $ROS_HOME/robocal/campaign.mcap",
-        read_only=True,
-    ),
-    ParamSpec("read_campaign_at_start", True, "Start from the samples already in the campaign file", read_only=True),
+    ROBOT_CONFIG,
+    BASE_UNKNOWN,
+    CAMPAIGN_PATH_READ,
+    READ_CAMPAIGN_AT_START,
     ParamSpec(
         "test_joints",
         SEED_TEST_JOINTS_DEG,
