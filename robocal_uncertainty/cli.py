@@ -326,6 +326,11 @@ def run_evaluation(
     from robocal_uncertainty.report import format_budget, format_table2, write_report
     from robocal_uncertainty.uncertainty import evaluate_uncertainty, parse_sources
 
+    for option in ("budget_trials", "sweep_trials", "max_trials"):
+        value = getattr(args, option)
+        if value <= 0:
+            msg = f"--{option.replace('_', '-')} must be a positive integer, got {value}"
+            raise ConfigError(msg)
     sources = parse_sources(list(sources))
     settings = _uncertainty_settings(args, campaign, sources)
     calibration = identify(model, campaign, lambda_=_lambda_arg(args.lambda_))

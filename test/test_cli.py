@@ -141,3 +141,34 @@ def test_wrong_test_joint_count_and_missing_file(campaign_file: Path, capsys: py
     assert main(["calibrate", "no_such_campaign.mcap", "--robot", "paper_arm"]) == 1
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "no_such_campaign.mcap" in err
+
+
+def test_bad_calibration_file_and_trial_options(
+    campaign_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A binary file given as calibration JSON (here the campaign MCAP itself).
+    assert main(["fk", "--robot", "paper_arm", "--joints", *JOINTS, "--calibration", str(campaign_file)]) == 1
+    assert "is not UTF-8 JSON text" in capsys.readouterr().err
+    broken = tmp_path / "cal.json"
+    broken.write_text('{"format": "robocal_uncertainty/calibration/1", "parameters": [{"name": "joint1.d"}]}')
+    assert main(["fk", "--robot", "paper_arm", "--joints", *JOINTS, "--calibration", str(broken)]) == 1
+    assert "has no finite 'estimate'" in capsys.readouterr().err
+    argv = [
+        "evaluate",
+        str(campaign_file),
+        "--robot",
+        "paper_arm",
+        "--test-joints",
+        *JOINTS,
+        "--degrees",
+        "--trials",
+        "100",
+        "--out",
+        str(tmp_path / "r"),
+        "--no-progress",
+        "--budget-trials",
+        "0",
+    ]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--budget-trials must be a positive integer" in err

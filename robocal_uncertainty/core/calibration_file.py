@@ -78,6 +78,9 @@ def read_calibration(path: str | Path) -> dict[str, Any]:
     except OSError as err:
         msg = f"cannot read calibration {file}: {err.strerror}"
         raise ConfigError(msg) from err
+    except UnicodeDecodeError as err:
+        msg = f"calibration {file} is not UTF-8 JSON text (byte {err.start})"
+        raise ConfigError(msg) from err
     except json.JSONDecodeError as err:
         msg = f"calibration {file} is not valid JSON: {err.msg} (line {err.lineno})"
         raise ConfigError(msg) from err
@@ -97,10 +100,17 @@ def apply_calibration(model: RobotModel, data: dict[str, Any]) -> RobotModel:
     """
     p = model.parameter_vector()
     names = model.layout.names
-    for entry in data.get("parameters", []):
-        name = entry.get("name")
+    entries = data.get("parameters")
+    if not isinstance(entries, list):
+        raise ConfigError("calibration file has no 'parameters' list")
+    for entry in entries:
+        name = entry.get("name") if isinstance(entry, dict) else None
         if name not in names:
             msg = f"calibration parameter {name!r} does not exist in robot model {model.name!r}"
             raise ConfigError(msg)
-        p[names.index(name)] = float(entry["estimate"])
+        value = entry.get("estimate")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            msg = f"calibration parameter {name!r} has no finite 'estimate', got {value!r}"
+            raise ConfigError(msg)
+        p[names.index(name)] = float(value)
     return model.with_parameters(p)
