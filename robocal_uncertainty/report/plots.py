@@ -135,7 +135,9 @@ def plot_axis_histograms(
             lo, hi = ax.get_xlim()
             grid = np.linspace(lo, hi, 400)
             pdf = stats.norm.pdf(grid, float(p.gum.estimate[j]) * s, u_gum)
-            ax.plot(grid, pdf, color="tab:red", lw=1.3, label="GUM normal")
+            # With non-smooth sources on, the GUM covers only the smooth (noise) sources.
+            label = "GUM normal" if p.gum.applicable else "GUM normal (noise sources only)"
+            ax.plot(grid, pdf, color="tab:red", lw=1.3, label=label)
             ax.set_xlim(lo, hi)
         ax.ticklabel_format(axis="x", useOffset=False)
         ax.xaxis.set_major_locator(MaxNLocator(4))
