@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -21,8 +22,8 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.observability import structural_observability
 from robocal_uncertainty.core.regularization import LCurve, lcurve
-from robocal_uncertainty.core.robot_model import RobotModel, rpy_from_matrix
-from robocal_uncertainty.errors import ConfigError, IdentifiabilityError, InputError
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_from_matrix
+from robocal_uncertainty.errors import ConfigError, ConvergenceError, IdentifiabilityError, InputError
 
 __all__ = [
     "IDENTIFICATION_MESSAGES",
@@ -82,6 +83,12 @@ class IdentificationResult:
     rms_before, max_before, rms_after, max_after : float [m]
         RMS and maximum of the 3-D point error before (nominal model) and after.
     iterations : int
+    penalized : ndarray of bool, shape (n_params,)
+        Estimated parameters whose deviation from the start the Tikhonov term penalises
+        (every estimated kinematic parameter; never the base transform).
+    effective_parameters : float
+        Trace of the influence matrix of the regularised fit (the number of parameters
+        the data effectively determine; the estimated count when lambda is 0).
     converged : bool
     status : int
         Key of :data:`IDENTIFICATION_MESSAGES`.
@@ -115,6 +122,8 @@ class IdentificationResult:
     message: str
     base_initialised: Literal["nominal", "rigid_fit", "identity"]
     n_poses: int
+    penalized: NDArray[np.bool_]
+    effective_parameters: float
     warnings: tuple[str, ...] = field(default=())
 
     @property
@@ -188,13 +197,126 @@ def _validate(model: RobotModel, campaign: Campaign, lambda_: object) -> tuple[C
     return campaign, "fixed", value
 
 
+def _projected_tikhonov(
+    a_mat: Array, b: Array, penalized: NDArray[np.bool_]
+) -> tuple[Array, Array, Array, Array, Array]:
+    """Reduce ``min ||b - A x||^2 + lam^2 ||x_pen||^2`` to standard form.
+
+    The unpenalised columns (the base transform: a nuisance pose of the tracker with no prior)
+    are eliminated by projecting onto the orthogonal complement of their span, which leaves a
+    standard-form Tikhonov problem in the penalised columns alone. Returns the thin SVD
+    ``(u, s, vt)`` of the projected penalised block, the projected right-hand side, and the
+    ``(q_free, a_free)`` needed to back-substitute the free columns.
+    """
+    a_pen = a_mat[:, penalized]
+    a_free = a_mat[:, ~penalized]
+    if a_free.shape[1]:
+        q_free, _ = np.linalg.qr(a_free)
+        a_pen = a_pen - q_free @ (q_free.T @ a_pen)
+        b = b - q_free @ (q_free.T @ b)
+    else:
+        q_free = a_free
+    u, s, vt = np.linalg.svd(a_pen, full_matrices=False)
+    return u, s, vt, b, q_free
+
+
+def _tikhonov_step(
+    a_mat: Array, b: Array, penalized: NDArray[np.bool_], lam: float, svd: tuple[Array, Array, Array]
+) -> Array:
+    """Minimiser of ``||b - A x||^2 + lam^2 ||x_pen||^2`` (free columns solved exactly)."""
+    u, s, vt = svd
+    x = np.zeros(a_mat.shape[1])
+    x[penalized] = vt.T @ (s * (u.T @ b) / (s**2 + lam**2))
+    if (~penalized).any():
+        rest = b - a_mat[:, penalized] @ x[penalized]
+        x[~penalized] = np.linalg.lstsq(a_mat[:, ~penalized], rest, rcond=None)[0]
+    return x
+
+
+@dataclass(frozen=True)
+class _Solution:
+    params: Array
+    x: Array
+    lam: float
+    curve: LCurve
+    iterations: int
+    status: int
+
+
+def _objective(residual: Array, x: Array, penalized: NDArray[np.bool_], lam: float) -> float:
+    return float(residual @ residual + lam**2 * (x[penalized] @ x[penalized]))
+
+
+def _gauss_newton(
+    layout: ParameterLayout,
+    p0: Array,
+    est: NDArray[np.intp],
+    scale: Array,
+    penalized: NDArray[np.bool_],
+    q: Array,
+    measured: Array,
+    method: LambdaMethod,
+    fixed_lambda: float,
+    x_start: Array,
+    max_iterations: int,
+    step_tolerance: float,
+) -> _Solution:
+    """Regularised Gauss-Newton with a backtracking line search on the objective.
+
+    Lambda follows the L-curve (or GCV) of each linearisation while the iterate still moves;
+    once the relative step falls below 1e-6 (or after half the iterations) it is frozen, so
+    the last iterations minimise one fixed objective and the stopping test is meaningful.
+    """
+    n_eq = measured.size
+
+    def state(x: Array) -> tuple[Array, Array, Array]:
+        p = p0.copy()
+        p[est] += x / scale
+        pred, jac = forward_points_and_jacobian(layout, p, q)
+        return p, (measured - pred).reshape(n_eq), jac.reshape(n_eq, layout.size)[:, est] / scale
+
+    x = x_start.copy()
+    p, r, a_mat = state(x)
+    lam = fixed_lambda
+    frozen = method == "fixed"
+    curve: LCurve | None = None
+    status = 1
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        # Linear model of the total scaled deviation x: r(x') ~ r - A (x' - x).
+        b = r + a_mat @ x
+        u, s, vt, b_proj, _ = _projected_tikhonov(a_mat, b, penalized)
+        curve = lcurve(u, s, b_proj)
+        if not frozen:
+            lam = curve.corner_lambda if method == "lcurve" else curve.gcv_lambda
+        step = _tikhonov_step(a_mat, b, penalized, lam, (u, s, vt)) - x
+        current = _objective(r, x, penalized, lam)
+        t = 1.0
+        while True:
+            x_try = x + t * step
+            p_try, r_try, a_try = state(x_try)
+            if _objective(r_try, x_try, penalized, lam) <= current or t < 1e-3:
+                break
+            t *= 0.5
+        x, p, r, a_mat = x_try, p_try, r_try, a_try
+        relative = t * float(np.linalg.norm(step)) / (1.0 + float(np.linalg.norm(x)))
+        if relative <= step_tolerance and frozen:
+            status = 0
+            break
+        if relative <= 1e-6 or iterations >= max_iterations // 2:
+            frozen = True
+    assert curve is not None  # max_iterations >= 1
+    return _Solution(params=p, x=x, lam=float(lam), curve=curve, iterations=iterations, status=status)
+
+
 def identify(
     model: RobotModel,
     campaign: Campaign,
     *,
     lambda_: str | float = "auto",
-    max_iterations: int = 30,
-    step_tolerance: float = 1e-12,
+    max_iterations: int = 40,
+    step_tolerance: float = 1e-10,
+    accept_unconverged: bool = False,
 ) -> IdentificationResult:
     """Identify the parameter errors of `model` from `campaign`.
 
@@ -205,15 +327,19 @@ def identify(
     campaign : Campaign
         Joint readings [rad] and measured points [m]. When ``campaign.frame == "base"``
         the base transform is the identity and not estimated; when ``"tracker"`` the
-        six base parameters are estimated too (started from the model's base when known,
-        else from a rigid fit of the nominal predictions).
+        six base parameters are estimated too. The base then starts from whichever of the
+        model's base (when the model says it is known) and a rigid fit of the nominal
+        predictions to the points fits the data better, and it is not regularised: it is
+        the pose of the tracker, about which the nominal model says nothing.
     lambda_ : {"auto", "gcv"} or float
         ``"auto"``: L-curve corner; ``"gcv"``: generalised cross-validation; a number:
         fixed lambda in the column-scaled units (dimensionless per unit column norm).
     max_iterations : int
         Gauss-Newton iteration cap.
     step_tolerance : float
-        Stop when the scaled step norm falls below this, relative to ``1 + ||x||``.
+        Converged when the scaled step falls below this, relative to ``1 + ||x||``.
+    accept_unconverged : bool
+        Return a result that did not converge (with a warning) instead of raising.
 
     Returns
     -------
@@ -225,30 +351,29 @@ def identify(
         Joint names do not match the model.
     IdentifiabilityError
         Fewer equations than identifiable parameters, or a degenerate pose set.
+    ConvergenceError
+        The iteration did not converge from any starting point (unless
+        `accept_unconverged`).
     ConfigError
         Invalid lambda.
     """
     campaign, method, fixed_lambda = _validate(model, campaign, lambda_)
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
+        msg = f"max_iterations must be a positive integer, got {max_iterations!r}"
+        raise ConfigError(msg)
     layout = model.layout
     q = campaign.joint_positions
     measured = campaign.points
     p0 = model.parameter_vector()
     b0 = layout.base_index
-    base_init: Literal["nominal", "rigid_fit", "identity"]
     candidates = np.ones(layout.size, dtype=bool)
+    base_init: Literal["nominal", "rigid_fit", "identity"]
     if campaign.frame == "base":
         p0[b0 : b0 + 6] = 0.0
         candidates[b0 : b0 + 6] = False
         base_init = "identity"
-    elif model.base_known:
-        base_init = "nominal"
     else:
-        p_local = p0.copy()
-        p_local[b0 : b0 + 6] = 0.0
-        xyz, rpy = fit_rigid_base(forward_points(layout, p_local, q), measured)
-        p0[b0 : b0 + 3] = xyz
-        p0[b0 + 3 : b0 + 6] = rpy
-        base_init = "rigid_fit"
+        p0, base_init = _initial_base(model, p0, q, measured)
 
     obs = structural_observability(model, p0, candidates)
     est = np.flatnonzero(obs.identifiable)
@@ -259,6 +384,7 @@ def identify(
             f"{est.size} identifiable parameters (need at least {int(np.ceil(est.size / 3))} poses)"
         )
         raise IdentifiabilityError(msg)
+    penalized = est < b0  # the base (last six parameters) is never regularised
 
     pred0, jac0 = forward_points_and_jacobian(layout, p0, q)
     jac0 = jac0.reshape(n_eq, layout.size)[:, est]
@@ -274,44 +400,57 @@ def identify(
         raise IdentifiabilityError(msg)
     rms_before, max_before = residual_stats(measured - pred0)
 
-    x = np.zeros(est.size)
-    p = p0.copy()
-    status = 1
-    iterations = 0
-    curve: LCurve | None = None
-    lam = fixed_lambda
-    for iterations in range(1, max_iterations + 1):
-        pred, jac = forward_points_and_jacobian(layout, p, q)
-        a_mat = jac.reshape(n_eq, layout.size)[:, est] / scale
-        r = (measured - pred).reshape(n_eq)
-        # Linear model of the total scaled deviation x: r(x') ~ r - A (x' - x).
-        b = r + a_mat @ x
-        u, s, vt = np.linalg.svd(a_mat, full_matrices=False)
-        curve = lcurve(u, s, b)
-        if method == "lcurve":
-            lam = curve.corner_lambda
-        elif method == "gcv":
-            lam = curve.gcv_lambda
-        beta = u.T @ b
-        x_new = vt.T @ (s * beta / (s**2 + lam**2))
-        step = float(np.linalg.norm(x_new - x))
-        x = x_new
-        p = p0.copy()
-        p[est] += x / scale
-        if step <= step_tolerance * (1.0 + float(np.linalg.norm(x))):
-            status = 0
-            break
-    assert curve is not None  # max_iterations >= 1
+    solve = partial(
+        _gauss_newton,
+        layout,
+        p0,
+        est,
+        scale,
+        penalized,
+        q,
+        measured,
+        method,
+        fixed_lambda,
+        max_iterations=max_iterations,
+        step_tolerance=step_tolerance,
+    )
+    solution = solve(np.zeros(est.size))
+    restarts = 0
+    if solution.status != 0 and campaign.frame != "base":
+        # Restart once with the base re-fitted rigidly to the current kinematic estimate:
+        # a poor start of the base is the usual reason for a slow or wandering iteration.
+        restarts = 1
+        p_kin = solution.params.copy()
+        p_kin[b0 : b0 + 6] = 0.0
+        xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), measured)
+        x_restart = solution.x.copy()
+        base_cols = ~penalized
+        x_restart[base_cols] = (np.concatenate((xyz, rpy)) - p0[b0 : b0 + 6])[est[base_cols] - b0] * scale[base_cols]
+        second = solve(x_restart)
+        if second.status == 0 or _final_rms(layout, second.params, q, measured) < _final_rms(
+            layout, solution.params, q, measured
+        ):
+            solution = second
+    status, lam, p, curve = solution.status, solution.lam, solution.params, solution.curve
 
     pred, jac = forward_points_and_jacobian(layout, p, q)
     residuals = measured - pred
+    rms_after, max_after = residual_stats(residuals)
+    if status != 0 and not accept_unconverged:
+        msg = (
+            f"identification did not converge in {max_iterations} iterations"
+            f"{' (and a restart)' if restarts else ''}: residual RMS {rms_after * 1e3:.4g} mm "
+            f"(before {rms_before * 1e3:.4g} mm); the result would be wrong. Check units, joint names "
+            "and the robot model, or accept it explicitly (--accept-unconverged)"
+        )
+        raise ConvergenceError(msg)
     a_mat = jac.reshape(n_eq, layout.size)[:, est] / scale
     s_final = np.linalg.svd(a_mat, compute_uv=False)
-    rms_after, max_after = residual_stats(residuals)
     # First-order covariance of the Tikhonov estimate with residual-scatter noise.
     ata = a_mat.T @ a_mat
-    inv = np.linalg.inv(ata + lam**2 * np.eye(est.size))
-    dof_used = float(np.sum(s_final**2 / (s_final**2 + lam**2)))
+    reg = lam**2 * np.diag(penalized.astype(np.float64))
+    inv = np.linalg.inv(ata + reg)
+    dof_used = float(np.trace(inv @ ata))
     sigma2 = float(np.sum(residuals**2)) / max(n_eq - dof_used, 1.0)
     cov_x = sigma2 * inv @ ata @ inv
     std = np.full(layout.size, np.nan)
@@ -320,12 +459,14 @@ def identify(
     estimated[est] = True
     full_scale = np.zeros(layout.size)
     full_scale[est] = scale
+    full_penalized = np.zeros(layout.size, dtype=bool)
+    full_penalized[est] = penalized
     warns: list[str] = []
     cond = float(s_final[0] / s_final[-1])
     if cond > 1e6:
         warns.append(f"ill-conditioned pose set: condition number {cond:.3g} of the scaled Jacobian")
     if status != 0:
-        warns.append(IDENTIFICATION_MESSAGES[status])
+        warns.append(IDENTIFICATION_MESSAGES[status] + " (accepted by the caller)")
     return IdentificationResult(
         model=model.with_parameters(p),
         parameter_names=layout.names,
@@ -347,11 +488,35 @@ def identify(
         max_before=max_before,
         rms_after=rms_after,
         max_after=max_after,
-        iterations=iterations,
+        iterations=solution.iterations,
         converged=status == 0,
         status=status,
         message=IDENTIFICATION_MESSAGES[status],
         base_initialised=base_init,
         n_poses=campaign.n_poses,
+        penalized=full_penalized,
+        effective_parameters=dof_used,
         warnings=tuple(warns),
     )
+
+
+def _final_rms(layout: ParameterLayout, params: Array, q: Array, measured: Array) -> float:
+    return residual_stats(measured - forward_points(layout, params, q))[0]
+
+
+def _initial_base(
+    model: RobotModel, p0: Array, q: Array, measured: Array
+) -> tuple[Array, Literal["nominal", "rigid_fit"]]:
+    """Start the base at the model's (when known) or a rigid fit, whichever fits better."""
+    layout = model.layout
+    b0 = layout.base_index
+    p_fit = p0.copy()
+    p_fit[b0 : b0 + 6] = 0.0
+    xyz, rpy = fit_rigid_base(forward_points(layout, p_fit, q), measured)
+    p_fit[b0 : b0 + 3] = xyz
+    p_fit[b0 + 3 : b0 + 6] = rpy
+    if not model.base_known:
+        return p_fit, "rigid_fit"
+    if _final_rms(layout, p0, q, measured) <= _final_rms(layout, p_fit, q, measured):
+        return p0, "nominal"
+    return p_fit, "rigid_fit"
