@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +21,7 @@ from scipy import stats
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
-from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo import (
     AdaptiveReport,
@@ -31,6 +32,7 @@ from robocal_uncertainty.montecarlo import (
     numerical_tolerance,
     run_trials,
 )
+from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy
 from robocal_uncertainty.uncertainty.reidentification import (
     BatchProblem,
     ChordSolver,
@@ -39,6 +41,7 @@ from robocal_uncertainty.uncertainty.reidentification import (
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
+    "OUTPUT_FRAMES",
     "CalibrationTrials",
     "CalibrationUncertainty",
     "GumPose",
@@ -49,6 +52,10 @@ __all__ = [
 Array = NDArray[np.float64]
 _GUM_SOURCES = frozenset(("tracker", "encoder", "residual"))
 _SUB_BATCH = 256
+OutputFrame = Literal["measurement", "base"]
+OUTPUT_FRAMES: tuple[str, ...] = ("measurement", "base")
+"""``measurement``: the frame of the campaign's points (the tracker's, or the base when the
+campaign is in the base frame); ``base``: the robot base frame."""
 
 
 @dataclass(frozen=True)
@@ -94,7 +101,8 @@ class PoseUncertainty:
     ----------
     joint_positions : ndarray, shape (n_joints,) [rad]
     mean : ndarray, shape (3,) [m]
-        Mean of the Monte Carlo tool positions, in the robot base frame.
+        Mean of the Monte Carlo tool positions, in the result's output frame
+        (:attr:`CalibrationUncertainty.frame_id`).
     covariance : ndarray, shape (3, 3) [m^2]
     axes : tuple of OutputSummary, length 3
         Per-axis x, y, z summaries (standard and expanded uncertainty, coverage factor,
@@ -133,11 +141,17 @@ class CalibrationUncertainty:
     block_size : int
     adaptive : AdaptiveReport or None
     samples : ndarray, shape (n_trials, 3 n_test + k)
-        Positions (robot base frame) then parameters, per trial.
+        Positions (output frame) then parameters, per trial.
     lambda_star : float
         Lambda of the calibration (scaled units).
     lambda_range : (float, float) or None
         Range used by the lambda source.
+    frame : {"measurement", "base"}
+        Output frame of every position.
+    frame_id : str
+        Its TF name (the campaign's frame_id, or the model's base frame).
+    model_adequacy : ModelAdequacy
+        Residuals against the stated noise; the residual source draws what is left over.
     warnings : tuple of str
     """
 
@@ -154,6 +168,9 @@ class CalibrationUncertainty:
     samples: Array
     lambda_star: float
     lambda_range: tuple[float, float] | None
+    frame: OutputFrame
+    frame_id: str
+    model_adequacy: ModelAdequacy
     warnings: tuple[str, ...] = field(default=())
 
     @property
@@ -171,12 +188,11 @@ class CalibrationTrials:
     joint_positions: Array
     points: Array
     fitted: Array
-    residuals: Array
-    residual_scale: float
+    model_errors: Array
     distances: Array
     test_joints: Array
-    tool_in_base: bool
-    base_params: Array | None
+    drop_base: bool
+    output_rotation: Array
     lambda_star: float
     lambda_range: tuple[float, float] | None
     min_poses: int
@@ -232,11 +248,13 @@ class CalibrationTrials:
         for lo_i in range(0, n, _SUB_BATCH):
             sl = slice(lo_i, min(n, lo_i + _SUB_BATCH))
             t = sl.stop - sl.start
+            # Every source perturbs the measured points with zero-mean errors, so the trials
+            # stay centred on the calibration.
+            pts = np.array(np.broadcast_to(self.points, (t, n_poses, 3)))
             if boot is not None:
-                base_pts = self.fitted[None] + self.residual_scale * self.residuals[boot[sl]]
-            else:
-                base_pts = np.broadcast_to(self.points, (t, n_poses, 3))
-            pts = base_pts + tracker[sl] if tracker is not None else np.array(base_pts)
+                pts += self.model_errors[boot[sl]]
+            if tracker is not None:
+                pts += tracker[sl]
             q = self.joint_positions[None] + q_noise[sl] if q_noise is not None else self.joint_positions
             w = None if weights is None else weights[sl]
             if self.solver is not None:
@@ -259,26 +277,18 @@ class CalibrationTrials:
                     iterations=self.settings.gauss_newton_iterations,
                 )
             params = self.problem.parameters(x)
-            if self.base_params is not None:
-                # Report positions in the robot base frame: drop the identified base.
+            out[sl, 3 * n_test :] = params[:, self.problem.estimated]
+            if self.drop_base:
+                # Positions in the robot base frame: the identified base does not enter.
                 b0 = self.problem.layout.base_index
                 params[:, b0 : b0 + 6] = 0.0
             qt = self.test_joints[None] + test_noise[sl] if test_noise is not None else self.test_joints
             pos = forward_points(self.problem.layout, params, qt)
             if pred_boot is not None:
-                pos = pos + self.residual_scale * self._residuals_in_base()[pred_boot[sl]]
+                # Row-vector form of R_out e: model errors live in the measurement frame.
+                pos = pos + self.model_errors[pred_boot[sl]] @ self.output_rotation.T
             out[sl, : 3 * n_test] = pos.reshape(t, 3 * n_test)
-            out[sl, 3 * n_test :] = params[:, self.problem.estimated]
         return out
-
-    def _residuals_in_base(self) -> Array:
-        """Residual vectors rotated into the robot base frame, shape (n_poses, 3) [m]."""
-        if self.base_params is None:
-            return self.residuals
-        from robocal_uncertainty.core.robot_model import rpy_to_matrix
-
-        rot = rpy_to_matrix(self.base_params[3:6])
-        return self.residuals @ rot  # row-vector form of R^T e
 
 
 def _validate_inputs(
@@ -312,11 +322,12 @@ def _gum_pose(
     campaign: Campaign,
     settings: UncertaintySettings,
     distances: Array,
-    residual_scale: float,
+    adequacy: ModelAdequacy,
     test_joints: Array,
-    coverage: float,
+    drop_base: bool,
+    output_rotation: Array,
 ) -> list[tuple[Array, Array, bool]]:
-    """First-order covariance of the tool position at each test configuration."""
+    """First-order covariance of the tool position at each test configuration (output frame)."""
     layout = problem.layout
     est = problem.estimated
     sources = set(settings.sources)
@@ -327,7 +338,7 @@ def _gum_pose(
     _, jac = forward_points_and_jacobian(layout, p_hat, q)
     a_mat = jac.reshape(3 * n, layout.size)[:, est] / problem.scale
     lam = calibration.lambda_
-    h = np.linalg.solve(a_mat.T @ a_mat + lam**2 * np.eye(est.size), a_mat.T)  # x = H b
+    h = np.linalg.solve(a_mat.T @ a_mat + lam**2 * np.diag(problem.penalty_mask), a_mat.T)  # x = H b
     cov_b = np.zeros((3 * n, 3 * n))
     if "tracker" in sources:
         cov_b += np.diag(np.repeat(settings.tracker_noise.std(distances) ** 2, 3))
@@ -338,21 +349,19 @@ def _gum_pose(
         blocks = var_q * np.einsum("pij,pkj->pik", jq, jq)
         for i in range(n):
             cov_b[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += blocks[i]
-    res_cov = residual_scale**2 * (calibration.residuals.T @ calibration.residuals) / n
+    model_cov = adequacy.inadequacy_covariance
     if "residual" in sources:
         for i in range(n):
-            cov_b[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += res_cov
+            cov_b[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += model_cov
     cov_x = h @ cov_b @ h.T
     cov_p = cov_x / np.outer(problem.scale, problem.scale)
-    p_base = p_hat.copy()
+    p_out = p_hat.copy()
     b0 = layout.base_index
-    rot = np.eye(3)
-    if campaign.frame == "tracker":
-        from robocal_uncertainty.core.robot_model import rpy_to_matrix
-
-        rot = rpy_to_matrix(p_hat[b0 + 3 : b0 + 6])
-    p_base[b0 : b0 + 6] = 0.0
-    y, gy = forward_points_and_jacobian(layout, p_base, test_joints)
+    if drop_base:
+        p_out[b0 : b0 + 6] = 0.0
+    y, gy = forward_points_and_jacobian(layout, p_out, test_joints)
+    if drop_base:
+        gy[:, :, b0 : b0 + 6] = 0.0
     out = []
     for i in range(test_joints.shape[0]):
         g = gy[i][:, est]
@@ -361,7 +370,7 @@ def _gum_pose(
             gq = gy[i][:, theta_cols]
             cov_y = cov_y + var_q * gq @ gq.T
         if "residual" in sources:
-            cov_y = cov_y + rot.T @ res_cov @ rot
+            cov_y = cov_y + output_rotation @ model_cov @ output_rotation.T
         out.append((y[i], cov_y, applicable))
     return out
 
@@ -383,6 +392,7 @@ def evaluate_uncertainty(
     chunk_blocks: int = 1,
     workers: int = 1,
     progress: Callable[[int, int | None], None] | None = None,
+    frame: str = "measurement",
 ) -> CalibrationUncertainty:
     """Monte Carlo uncertainty of the calibrated tool position at test configurations.
 
@@ -419,6 +429,11 @@ def evaluate_uncertainty(
         Processes (never changes the result).
     progress : callable, optional
         ``progress(done, target_or_None)``.
+    frame : {"measurement", "base"}
+        Frame of the output positions. ``measurement`` (default): the frame of the
+        campaign's points, so results compare directly with measurements; for a
+        tracker-frame campaign the uncertainty of the identified base enters. ``base``: the
+        robot base frame (the identified base does not enter).
 
     Returns
     -------
@@ -430,6 +445,9 @@ def evaluate_uncertainty(
         Bad settings (trials, coverage, test joints, lambda range, pose counts).
     """
     settings = settings or UncertaintySettings()
+    if frame not in OUTPUT_FRAMES:
+        msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
+        raise ConfigError(msg)
     test_q, n_trials = _validate_inputs(model, test_joint_positions, coverage, trials)
     campaign = campaign.reorder_joints(model.joint_names)
     if calibration is None:
@@ -437,12 +455,16 @@ def evaluate_uncertainty(
     layout = model.layout
     est = np.flatnonzero(calibration.estimated)
     scale = calibration.column_scale[est]
-    problem = BatchProblem(layout=layout, start=calibration.nominal, estimated=est, scale=scale)
+    problem = BatchProblem(
+        layout=layout,
+        start=calibration.nominal,
+        estimated=est,
+        scale=scale,
+        penalized=calibration.penalized[est],
+    )
     x_hat = (calibration.estimate[est] - calibration.nominal[est]) * scale
     n_poses = campaign.n_poses
     k = est.size
-    dof = max(3 * n_poses - k, 1)
-    residual_scale = math.sqrt(3 * n_poses / dof)
 
     lam_star = calibration.lambda_
     lambda_range: tuple[float, float] | None = None
@@ -469,12 +491,18 @@ def evaluate_uncertainty(
                 )
                 raise ConfigError(msg)
 
+    b0 = layout.base_index
     if campaign.frame == "tracker":
         distances = np.linalg.norm(campaign.points, axis=1)
-        base_params = calibration.estimate[layout.base_index : layout.base_index + 6].copy()
     else:
         distances = np.linalg.norm(campaign.points - np.asarray(settings.tracker_xyz), axis=1)
-        base_params = None
+    drop_base = frame == "base" and campaign.frame == "tracker"
+    # Model errors live in the measurement frame; R^T takes them into the base frame.
+    output_rotation = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6]).T if drop_base else np.eye(3)
+    frame_id = model.base_frame_id if frame == "base" or campaign.frame == "base" else campaign.frame_id
+    adequacy = assess_model_adequacy(
+        calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
+    )
     fitted = campaign.points - calibration.residuals
     trial_block = CalibrationTrials(
         problem=problem,
@@ -482,12 +510,11 @@ def evaluate_uncertainty(
         joint_positions=campaign.joint_positions,
         points=campaign.points,
         fitted=fitted,
-        residuals=calibration.residuals,
-        residual_scale=residual_scale,
+        model_errors=adequacy.draws,
         distances=distances,
         test_joints=test_q,
-        tool_in_base=campaign.frame == "base",
-        base_params=base_params,
+        drop_base=drop_base,
+        output_rotation=output_rotation,
         lambda_star=lam_star,
         lambda_range=lambda_range,
         min_poses=min_poses,
@@ -516,7 +543,7 @@ def evaluate_uncertainty(
     )
     summary = result.summary(coverage)
     n_test = test_q.shape[0]
-    gum = _gum_pose(calibration, problem, campaign, settings, distances, residual_scale, test_q, coverage)
+    gum = _gum_pose(calibration, problem, campaign, settings, distances, adequacy, test_q, drop_base, output_rotation)
     k_norm = float(stats.norm.ppf(0.5 + coverage / 2.0))
     poses = []
     warns: list[str] = list(calibration.warnings)
@@ -576,5 +603,8 @@ def evaluate_uncertainty(
         samples=result.samples,
         lambda_star=lam_star,
         lambda_range=lambda_range,
+        frame=frame,  # type: ignore[arg-type]
+        frame_id=frame_id,
+        model_adequacy=adequacy,
         warnings=tuple(warns),
     )

@@ -36,12 +36,23 @@ class BatchProblem:
         Indices of the estimated parameters.
     scale : ndarray, shape (k,)
         Column scaling of the estimated parameters.
+    penalized : ndarray of bool, shape (k,), optional
+        Which estimated parameters the Tikhonov term penalises (all but the base, see
+        :func:`robocal_uncertainty.core.identification.identify`); None penalises all.
     """
 
     layout: ParameterLayout
     start: Array
     estimated: NDArray[np.intp]
     scale: Array
+    penalized: NDArray[np.bool_] | None = None
+
+    @property
+    def penalty_mask(self) -> Array:
+        """1.0 for penalised, 0.0 for free estimated parameters, shape (k,)."""
+        if self.penalized is None:
+            return np.ones(self.estimated.size)
+        return np.asarray(self.penalized, dtype=np.float64)
 
     def parameters(self, x: Array) -> Array:
         """Full parameter vectors (T, n_params) from scaled deviations x (T, k)."""
@@ -89,7 +100,7 @@ def reidentify_batch(
     n_trials = points.shape[0]
     k = problem.estimated.size
     x = np.array(np.broadcast_to(x_start, (n_trials, k)), dtype=np.float64)
-    lam2 = (np.asarray(lambdas, dtype=np.float64) ** 2)[:, None, None] * np.eye(k)
+    lam2 = (np.asarray(lambdas, dtype=np.float64) ** 2)[:, None, None] * np.diag(problem.penalty_mask)
     n_eq = 3 * points.shape[1]
     w = None if weights is None else np.repeat(weights, 3, axis=1)[:, :, None]
     done = 0
@@ -124,6 +135,9 @@ class ChordSolver:
     while the normal matrix is factorised once instead of per trial. The exact batched
     Gauss-Newton (:func:`reidentify_batch`) is kept as the reference it is tested against.
 
+    Parameters the Tikhonov term does not penalise (the base) are eliminated by a Schur
+    complement, so one eigen-decomposition still serves every lambda.
+
     Attributes
     ----------
     problem : BatchProblem
@@ -131,9 +145,16 @@ class ChordSolver:
         Column-scaled Jacobian at the calibration.
     pose_normal : ndarray, shape (n_poses, k * k)
         Per-pose contributions ``J_i^T J_i`` to the normal matrix, flattened.
-    eigenvalues : ndarray, shape (k,)
-    eigenvectors : ndarray, shape (k, k)
-        Eigen-decomposition of the full normal matrix ``J^T J``.
+    eigenvalues : ndarray, shape (k_pen,)
+    eigenvectors : ndarray, shape (k_pen, k_pen)
+        Eigen-decomposition of the Schur complement ``G = N_pp - N_pf N_ff^-1 N_fp`` of the
+        normal matrix ``N = J^T J`` on the penalised parameters (``N`` itself when all are).
+    coupling : ndarray, shape (k_pen, k_free)
+        ``N_pf N_ff^-1``.
+    free_inverse : ndarray, shape (k_free, k_free)
+        ``N_ff^-1``.
+    normal : ndarray, shape (k, k)
+        ``N = J^T J``.
     """
 
     problem: BatchProblem
@@ -141,6 +162,9 @@ class ChordSolver:
     pose_normal: Array
     eigenvalues: Array
     eigenvectors: Array
+    coupling: Array
+    free_inverse: Array
+    normal: Array
 
     @classmethod
     def at(cls, problem: BatchProblem, params: Array, joint_positions: Array) -> ChordSolver:
@@ -151,8 +175,27 @@ class ChordSolver:
         per_pose = jac[:, :, problem.estimated] / problem.scale  # (n_poses, 3, k)
         pose_normal = np.einsum("pik,pil->pkl", per_pose, per_pose).reshape(n_poses, k * k)
         a_mat = per_pose.reshape(3 * n_poses, k)
-        evals, evecs = np.linalg.eigh(a_mat.T @ a_mat)
-        return cls(problem, a_mat, pose_normal, evals, evecs)
+        normal = a_mat.T @ a_mat
+        pen = problem.penalty_mask > 0
+        free_inverse = np.linalg.inv(normal[np.ix_(~pen, ~pen)])
+        coupling = normal[np.ix_(pen, ~pen)] @ free_inverse
+        schur = normal[np.ix_(pen, pen)] - coupling @ normal[np.ix_(~pen, pen)]
+        evals, evecs = np.linalg.eigh(schur)
+        return cls(problem, a_mat, pose_normal, evals, evecs, coupling, free_inverse, normal)
+
+    def _step(self, rhs: Array, lam2: Array) -> Array:
+        """Solve ``(N + lam^2 M) step = rhs`` for all trials, M the penalty mask."""
+        pen = self.problem.penalty_mask > 0
+        rhs_p = rhs[:, pen]
+        rhs_f = rhs[:, ~pen]
+        if rhs_f.shape[1]:
+            rhs_p = rhs_p - rhs_f @ self.coupling.T
+        step = np.empty_like(rhs)
+        step_p = ((rhs_p @ self.eigenvectors) / (self.eigenvalues + lam2)) @ self.eigenvectors.T
+        step[:, pen] = step_p
+        if rhs_f.shape[1]:
+            step[:, ~pen] = (rhs_f - step_p @ self.normal[np.ix_(pen, ~pen)]) @ self.free_inverse
+        return step
 
     def solve(
         self,
@@ -198,9 +241,10 @@ class ChordSolver:
         lam2 = np.asarray(lambdas, dtype=np.float64)[:, None] ** 2
         x = np.repeat(x_start[None, :], n_trials, axis=0)
         w_rows = None if weights is None else np.repeat(weights, 3, axis=1)
+        mask = self.problem.penalty_mask
         if weights is not None:
             normal = (weights @ self.pose_normal).reshape(n_trials, k, k)
-            normal += lam2[:, :, None] * np.eye(k)
+            normal += lam2[:, :, None] * np.diag(mask)
         first = None
         done = 0
         for done in range(1, max_iterations + 1):
@@ -211,11 +255,11 @@ class ChordSolver:
             r = (points - pred).reshape(n_trials, 3 * n_poses)
             if w_rows is not None:
                 r *= w_rows
-            rhs = r @ self.jacobian - lam2 * x
+            rhs = r @ self.jacobian - lam2 * (x * mask)
             if weights is not None:
                 step = np.linalg.solve(normal, rhs[..., None])[..., 0]
             else:
-                step = ((rhs @ self.eigenvectors) / (self.eigenvalues + lam2)) @ self.eigenvectors.T
+                step = self._step(rhs, lam2)
             x += step
             size = np.linalg.norm(step, axis=1)
             if first is None:

@@ -149,7 +149,8 @@ def test_positions_are_in_the_identified_base_frame_for_tracker_campaigns() -> N
 
     model = dataclasses.replace(load_robot_model("config/paper_arm.yaml"), base_known=False)
     sim = simulate_campaign(model, SimulationSettings(frame="tracker"), seed=4)
-    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1)
+    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1, frame="base")
+    assert result.frame_id == model.base_frame_id
     truth_world = forward_points(model.layout, sim.true_model.parameter_vector(), TEST_JOINTS[None])[0]
     b0 = model.layout.base_index
     base = result.calibration.estimate[b0 : b0 + 6]
@@ -219,3 +220,20 @@ def test_residual_source_reflects_real_robot_scatter() -> None:
     # what tracker and encoder noise alone explain.
     assert u_resid > 0.9 * rms_after
     assert u_resid > 3 * u_noise
+
+
+def test_positions_default_to_the_measurement_frame_and_carry_the_base_uncertainty() -> None:
+    """By default a tracker campaign's results are in the tracker frame, where the truth is
+    directly comparable with measurements; the identified base adds its uncertainty."""
+    model = dataclasses.replace(load_robot_model("config/paper_arm.yaml"), base_known=False)
+    sim = simulate_campaign(model, SimulationSettings(frame="tracker"), seed=4)
+    meas = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1)
+    base = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1, frame="base")
+    assert meas.frame == "measurement" and meas.frame_id == sim.campaign.frame_id
+    truth_world = forward_points(model.layout, sim.true_model.parameter_vector(), TEST_JOINTS[None])[0]
+    u = np.sqrt(np.diag(meas.poses[0].covariance))
+    assert np.all(np.abs(meas.poses[0].mean - truth_world) < 5 * u)
+    # Same parameters, other frame: the base enters the measurement-frame result only, so its
+    # generalised variance is larger there (rotation-invariant comparison).
+    assert np.linalg.det(meas.poses[0].covariance) > np.linalg.det(base.poses[0].covariance)
+    np.testing.assert_array_equal(meas.samples[:, 3:], base.samples[:, 3:])
