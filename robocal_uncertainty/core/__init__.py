@@ -10,6 +10,7 @@ from robocal_uncertainty.core.identification import (
     identify,
     residual_stats,
 )
+from robocal_uncertainty.core.joint_limits import check_joint_limits
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.observability import Observability, structural_observability
 from robocal_uncertainty.core.regularization import LCurve, lcurve
@@ -38,6 +39,7 @@ __all__ = [
     "SimulatedCampaign",
     "SimulationSettings",
     "TrackerNoise",
+    "check_joint_limits",
     "fit_rigid_base",
     "forward_points",
     "forward_points_and_jacobian",
