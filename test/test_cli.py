@@ -150,7 +150,15 @@ def test_bad_calibration_file_and_trial_options(
     assert main(["fk", "--robot", "paper_arm", "--joints", *JOINTS, "--calibration", str(campaign_file)]) == 1
     assert "is not UTF-8 JSON text" in capsys.readouterr().err
     broken = tmp_path / "cal.json"
-    broken.write_text('{"format": "robocal_uncertainty/calibration/1", "parameters": [{"name": "joint1.d"}]}')
+    broken.write_text(
+        json.dumps(
+            {
+                "format": "robocal_uncertainty/calibration/1",
+                "model_name": "paper_arm",
+                "parameters": [{"name": "joint1.d"}],
+            }
+        )
+    )
     assert main(["fk", "--robot", "paper_arm", "--joints", *JOINTS, "--calibration", str(broken)]) == 1
     assert "has no finite 'estimate'" in capsys.readouterr().err
     argv = [

@@ -31,6 +31,7 @@ def calibration_to_dict(result: IdentificationResult, *, robot: str) -> dict[str
         "units": {"length": "m", "angle": "rad"},
         "robot": robot,
         "model_name": result.model.name,
+        "joint_names": list(result.model.joint_names),
         "parameters": [
             {
                 "name": name,
@@ -90,27 +91,77 @@ def read_calibration(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def apply_calibration(model: RobotModel, data: dict[str, Any]) -> RobotModel:
+def _check_identity(model: RobotModel, data: dict[str, Any], where: str) -> None:
+    """Refuse a calibration identified on another robot (model name, joint names)."""
+    robot = data.get("model_name")
+    if not isinstance(robot, str) or not robot:
+        msg = f"{where} has no 'model_name': cannot tell whether it belongs to robot {model.name!r}"
+        raise ConfigError(msg)
+    if robot != model.name:
+        msg = f"{where} was identified on robot {robot!r} and cannot be applied to robot {model.name!r}"
+        raise ConfigError(msg)
+    joints = data.get("joint_names")
+    if joints is not None and (not isinstance(joints, list) or tuple(joints) != model.joint_names):
+        msg = (
+            f"{where} (robot {robot!r}) has joints {joints!r}, the robot {model.name!r} "
+            f"has {list(model.joint_names)}: identified on another robot configuration"
+        )
+        raise ConfigError(msg)
+
+
+def apply_calibration(model: RobotModel, data: dict[str, Any], *, where: str = "calibration") -> RobotModel:
     """Return `model` with the estimated parameters of a calibration file applied by name.
+
+    The calibration must come from the same robot: its ``model_name`` must equal
+    ``model.name``, its ``joint_names`` (when present; files before they were written lack
+    them) ``model.joint_names``, and it must give exactly the model's parameters.
+
+    Parameters
+    ----------
+    model : RobotModel
+        The nominal model to apply the calibration to.
+    data : dict
+        What :func:`read_calibration` returns.
+    where : str
+        Names the calibration in messages, e.g. ``"calibration cal.json"``.
 
     Raises
     ------
     ConfigError
-        The calibration names parameters the model does not have.
+        The calibration belongs to another robot (model name, joint names or parameter
+        names differ; the message names both robots) or has a non-finite estimate.
     """
+    _check_identity(model, data, where)
+    robot = data["model_name"]
     p = model.parameter_vector()
     names = model.layout.names
     entries = data.get("parameters")
     if not isinstance(entries, list):
-        raise ConfigError("calibration file has no 'parameters' list")
+        msg = f"{where} has no 'parameters' list"
+        raise ConfigError(msg)
+    seen: set[str] = set()
     for entry in entries:
         name = entry.get("name") if isinstance(entry, dict) else None
         if name not in names:
-            msg = f"calibration parameter {name!r} does not exist in robot model {model.name!r}"
+            msg = (
+                f"{where}: parameter {name!r} (robot {robot!r}) does not exist in robot model "
+                f"{model.name!r}: identified on another model layout"
+            )
             raise ConfigError(msg)
+        if name in seen:
+            msg = f"{where}: parameter {name!r} is given twice"
+            raise ConfigError(msg)
+        seen.add(name)
         value = entry.get("estimate")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            msg = f"calibration parameter {name!r} has no finite 'estimate', got {value!r}"
+            msg = f"{where}: parameter {name!r} has no finite 'estimate', got {value!r}"
             raise ConfigError(msg)
         p[names.index(name)] = float(value)
+    missing = [n for n in names if n not in seen]
+    if missing:
+        msg = (
+            f"{where} (robot {robot!r}) lacks parameters {', '.join(missing)} of robot model "
+            f"{model.name!r}: identified on another model layout"
+        )
+        raise ConfigError(msg)
     return model.with_parameters(p)
