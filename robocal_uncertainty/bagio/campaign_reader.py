@@ -52,7 +52,10 @@ from robocal_uncertainty.bagio.rosbag2_dir import is_rosbag2_dir, read_rosbag2_d
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
 from robocal_uncertainty.errors import BagError, CampaignError, InputError
 
-__all__ = ["read_campaign"]
+__all__ = ["READ_WARNINGS_KEY", "read_campaign"]
+
+READ_WARNINGS_KEY = "warnings"
+"""Key of ``Campaign.metadata`` holding the reader's warnings (one-line strings), if any."""
 
 
 def _load(path: Path, topics: tuple[str, ...]) -> tuple[McapContents, str]:
@@ -213,8 +216,10 @@ def _pair(
     path: Path,
     *,
     truncated: bool,
+    notes: list[str],
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Pair points with joint states; warn about dropped points and truncation."""
+    """Pair points with joint states; warn about dropped points and truncation (the
+    messages are also appended to `notes`)."""
     joint_topic, point_topic, _ = topics
     joint_stamps = np.array([r.stamp_ns for r in joints], dtype=np.int64)
     _unique_stamps(joint_stamps, joint_topic, path)
@@ -230,17 +235,17 @@ def _pair(
         raise BagError(msg)
     dropped = point_stamps.size - point_index.size
     if dropped:
-        warnings.warn(
+        notes.append(
             f"{path}: {dropped} of {point_stamps.size} points on {point_topic} have no "
-            f"{joint_topic} message within {tolerance_ns} ns and were dropped",
-            stacklevel=3,
+            f"{joint_topic} message within {tolerance_ns} ns and were dropped"
         )
     if truncated:
-        warnings.warn(
+        notes.append(
             f"{path} is truncated (writer stopped before the footer); recovered "
-            f"{point_index.size} poses up to the last complete record",
-            stacklevel=3,
+            f"{point_index.size} poses up to the last complete record"
         )
+    for note in notes:
+        warnings.warn(note, stacklevel=3)
     return point_index, joint_index
 
 
@@ -274,7 +279,10 @@ def read_campaign(
     Campaign
         Joint positions [rad], points [m], optional point_std [m], stamps_ns [ns] (None when
         the writer synthesised them) and metadata (the stored dict, or provenance for files
-        without a metadata record).
+        without a metadata record). When reading found problems it did not refuse (the file
+        was truncated and recovered, points were dropped), ``metadata["warnings"]``
+        (:data:`READ_WARNINGS_KEY`) lists them as one-line strings; otherwise that key is
+        absent (a stored ``warnings`` entry is not kept: it described an earlier reading).
 
     Raises
     ------
@@ -288,7 +296,8 @@ def read_campaign(
     -----
     UserWarning
         When the file was truncated (recovered up to the last complete record) or when
-        points without a matching joint state were dropped.
+        points without a matching joint state were dropped; the same messages as in
+        ``metadata["warnings"]``.
     """
     path = Path(path)
     wanted = (
@@ -309,8 +318,9 @@ def read_campaign(
     joints, points, stds = _decode_all(contents, wanted, path)
     names, positions = _joint_matrix(joints, header.joint_names if header else None, joint_topic, path)
     point_stamps = np.array([r.stamp_ns for r in points], dtype=np.int64)
+    notes: list[str] = []
     point_index, joint_index = _pair(
-        joints, point_stamps, stamp_tolerance_ns, wanted, path, truncated=contents.truncated
+        joints, point_stamps, stamp_tolerance_ns, wanted, path, truncated=contents.truncated, notes=notes
     )
     dropped = len(points) - point_index.size
     kept = [points[i] for i in point_index]
@@ -327,6 +337,11 @@ def read_campaign(
             "stamp_tolerance_ns": stamp_tolerance_ns,
             "points_dropped": dropped,
         }
+    # Warnings describe this reading of this file: a stored list (a recovered campaign
+    # written back) is replaced, so a complete rewritten file does not claim truncation.
+    metadata.pop(READ_WARNINGS_KEY, None)
+    if notes:
+        metadata[READ_WARNINGS_KEY] = notes
     try:
         return Campaign(
             joint_names=names,

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.bagio.campaign_mcap import CampaignRecorder, read_campaign
+from robocal_uncertainty.bagio.campaign_reader import READ_WARNINGS_KEY
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.robot_model import RobotModel
@@ -367,7 +368,9 @@ class CalibrationPipeline:
         if campaign.stamps_ns is None:
             msg = f"cannot resume campaign {path}: it has no pose stamps"
             raise InputError(msg)
-        self._metadata = dict(campaign.metadata)
+        # The reader's warnings (truncation) are kept in resume_warnings, not re-recorded:
+        # the rewritten file is complete.
+        self._metadata = {k: v for k, v in campaign.metadata.items() if k != READ_WARNINGS_KEY}
         self._frame_id = campaign.frame_id
         self._with_std = campaign.point_std is not None
         temporary = path.with_name(path.name + ".resume")

@@ -270,13 +270,57 @@ def test_file_of_killed_recorder_is_recovered(tmp_path: Path) -> None:
         )
     shutil.copyfile(path, crashed)  # what is on disk when the process dies now
     recorder.close()
-    with pytest.warns(UserWarning, match="truncated"):
+    with pytest.warns(UserWarning, match="truncated") as caught:
         back = read_campaign(crashed)
     assert back.n_poses == 5
     assert _same_bits(back.points, campaign.points)
     assert back.point_std is not None
     assert _same_bits(back.point_std, campaign.point_std)
-    assert back.metadata == {"run": 1}
+    # The recovery is also recorded in the campaign, as the same one-line message.
+    note = (
+        f"{crashed} is truncated (writer stopped before the footer); recovered 5 poses up to the last complete record"
+    )
+    assert back.metadata == {"run": 1, "warnings": [note]}
+    assert [str(w.message) for w in caught] == [note]
+    assert back.subset([0, 1]).metadata["warnings"] == [note]
+    assert back.reorder_joints(NAMES[::-1]).metadata["warnings"] == [note]
+
+
+def test_read_warnings_describe_the_file_read_not_an_earlier_one(tmp_path: Path) -> None:
+    campaign = _campaign(4)
+    path = tmp_path / "campaign.mcap"
+    write_campaign(path, campaign)
+    chopped = tmp_path / "chopped.mcap"
+    chopped.write_bytes(path.read_bytes()[:-300])
+    with pytest.warns(UserWarning, match="is truncated"):
+        recovered = read_campaign(chopped)
+    assert "is truncated" in recovered.metadata["warnings"][0]
+    # Written back, the recovered campaign is a complete file: read without warnings.
+    rewritten = tmp_path / "rewritten.mcap"
+    write_campaign(rewritten, recovered)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = read_campaign(rewritten)
+    assert "warnings" not in again.metadata
+    assert again.metadata == campaign.metadata
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert "warnings" not in read_campaign(path).metadata
+
+
+def test_dropped_points_are_recorded_in_the_metadata(tmp_path: Path) -> None:
+    path = tmp_path / "unpaired.mcap"
+    messages = _pose_messages(3)
+    point = _pose_messages(4)[7]
+    late = T0 + 3_000_005
+    _write_foreign(path, [*messages, (point[0], point[1], late, encode_point_stamped(late, "world", np.ones(3)))])
+    with pytest.warns(UserWarning, match="were dropped"):
+        campaign = read_campaign(path)
+    assert campaign.n_poses == 3
+    assert campaign.metadata["points_dropped"] == 1
+    assert campaign.metadata["warnings"] == [
+        f"{path}: 1 of 4 points on /tracker/point have no /joint_states message within 0 ns and were dropped"
+    ]
 
 
 @pytest.mark.parametrize(

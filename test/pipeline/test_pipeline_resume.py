@@ -46,6 +46,7 @@ def test_crash_mid_campaign_resumes_with_every_written_sample(
     resumed = CalibrationPipeline(paper_arm, campaign_path=crashed)
     assert resumed.n_samples == 12
     assert any("truncated" in w for w in resumed.resume_warnings)
+    assert "warnings" not in resumed.campaign.metadata  # the rewritten file is complete
     _same_campaign(resumed.campaign, before)
     for sample in samples[12:]:
         resumed.add_sample(sample)
