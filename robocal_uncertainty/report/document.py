@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal_uncertainty.core.identification import IdentificationResult
-from robocal_uncertainty.report.json_report import software_version, write_report_json
+from robocal_uncertainty.report.json_report import merge_warnings, software_version, write_report_json
 from robocal_uncertainty.report.plots import (
     plot_axis_histograms,
     plot_lcurve,
@@ -411,6 +411,7 @@ def write_report(
     extra_settings: Mapping[str, object] | None = None,
     title: str | None = None,
     embed_images: bool = True,
+    input_warnings: Sequence[str] = (),
 ) -> Path:
     """Write the full uncertainty report into `directory` (created if needed).
 
@@ -437,12 +438,17 @@ def write_report(
         Document title; default names the robot.
     embed_images : bool
         Embed the PNGs in the HTML (True) or link them by file name.
+    input_warnings : sequence of str
+        Warnings about the input data, e.g. ``campaign.metadata.get("warnings", [])`` of a
+        campaign recovered from a truncated file; listed first in ``report.json``'s
+        ``warnings`` and in the Warnings section of ``report.md``/``report.html``.
 
     Returns
     -------
     Path
         The report directory.
     """
+    warnings = merge_warnings(input_warnings, result.warnings)
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     title = title or f"Calibration uncertainty report: {robot_name}"
@@ -454,6 +460,7 @@ def write_report(
         extra_settings=extra_settings,
         budget=budget,
         sweeps=sweeps,
+        input_warnings=input_warnings,
     )
     figures: list[_Image] = []
     for i in range(len(result.poses)):
@@ -515,7 +522,6 @@ def write_report(
     blocks.append(_Heading(2, "Figures"))
     blocks += figures
     blocks += _settings(result, campaign_source, extra_settings, robot_name)
-    warnings = list(result.warnings)
     blocks.append(_Heading(2, "Warnings"))
     blocks.append(_List(tuple(warnings)) if warnings else _Para("None."))
 

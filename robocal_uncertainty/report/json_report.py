@@ -35,6 +35,7 @@ __all__ = [
     "REPORT_FORMAT_VERSION",
     "UNITS",
     "calibration_to_dict",
+    "merge_warnings",
     "read_report_json",
     "software_version",
     "to_json_value",
@@ -274,6 +275,28 @@ def _sweeps(sweeps: Sequence[Sweep]) -> list[dict[str, Any]]:
     ]
 
 
+def merge_warnings(*groups: Sequence[str]) -> list[str]:
+    """One list of one-line warnings, in order, each message once.
+
+    Raises
+    ------
+    InputError
+        A group is a bare string (pass ``[text]``) or a warning is not a string.
+    """
+    out: list[str] = []
+    for group in groups:
+        if isinstance(group, str):
+            msg = f"warnings must be a sequence of strings, got the string {group!r}"
+            raise InputError(msg)
+        for warning in group:
+            if not isinstance(warning, str):
+                msg = f"warnings must be strings, got {warning!r}"
+                raise InputError(msg)
+            if warning not in out:
+                out.append(warning)
+    return out
+
+
 def uncertainty_to_dict(
     result: CalibrationUncertainty,
     *,
@@ -282,6 +305,7 @@ def uncertainty_to_dict(
     extra_settings: Mapping[str, object] | None = None,
     budget: Mapping[str, CalibrationUncertainty] | None = None,
     sweeps: Sequence[Sweep] | None = None,
+    input_warnings: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Strict-JSON dictionary of an uncertainty evaluation (format version 1).
 
@@ -299,6 +323,10 @@ def uncertainty_to_dict(
         Runs with one source each, for the uncertainty budget.
     sweeps : sequence of Sweep, optional
         Uncertainty sweeps (vs lambda, vs number of equations).
+    input_warnings : sequence of str
+        Warnings about the input data (e.g. the campaign reader's
+        ``campaign.metadata["warnings"]``: a truncated file recovered); listed in
+        ``warnings`` before the evaluation's own.
 
     Returns
     -------
@@ -354,7 +382,7 @@ def uncertainty_to_dict(
         ],
         "budget": None if budget is None else _budget(budget),
         "sweeps": None if sweeps is None else _sweeps(sweeps),
-        "warnings": list(result.warnings),
+        "warnings": merge_warnings(input_warnings, result.warnings),
     }
     return to_json_value(report)
 
@@ -368,6 +396,7 @@ def write_report_json(
     extra_settings: Mapping[str, object] | None = None,
     budget: Mapping[str, CalibrationUncertainty] | None = None,
     sweeps: Sequence[Sweep] | None = None,
+    input_warnings: Sequence[str] = (),
 ) -> Path:
     """Write :func:`uncertainty_to_dict` to `path` (UTF-8, indented); return the path."""
     data = uncertainty_to_dict(
@@ -377,6 +406,7 @@ def write_report_json(
         extra_settings=extra_settings,
         budget=budget,
         sweeps=sweeps,
+        input_warnings=input_warnings,
     )
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
