@@ -211,19 +211,43 @@ def _cmd_import_csv(args: argparse.Namespace) -> int:
 
 
 def _campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
-    from robocal_uncertainty.bagio import read_campaign
+    """Read the campaign (its reader warnings printed as ``warning:`` lines) and the robot;
+    refuse campaign joint readings outside the robot's joint limits."""
+    import warnings
 
-    campaign = read_campaign(args.campaign)
+    from robocal_uncertainty.bagio import read_campaign
+    from robocal_uncertainty.core import check_joint_limits
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        campaign = read_campaign(args.campaign)
+    notes = [str(w) for w in campaign.metadata.get("warnings") or ()]
+    notes += [str(w.message) for w in caught if str(w.message) not in notes]
+    for note in notes:
+        print(f"warning: {note}", file=sys.stderr)
     model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
+    check_joint_limits(
+        model,
+        campaign.reorder_joints(model.joint_names).joint_positions,
+        what=f"{args.campaign}: campaign pose",
+        degrees_hint="the readings look like degrees (import-csv --angle-unit deg?)",
+    )
     return campaign, model
 
 
 def _test_joints(args: argparse.Namespace, model: Any) -> NDArray[np.float64]:
+    from robocal_uncertainty.core import check_joint_limits
+
     if args.test_joints_file:
-        return _read_joints_file(args.test_joints_file, model.n_joints, degrees=args.degrees)
-    if args.test_joints:
-        return _parse_joint_values(args.test_joints, model.n_joints, degrees=args.degrees, what="--test-joints")
-    raise ConfigError("give --test-joints or --test-joints-file")
+        q = _read_joints_file(args.test_joints_file, model.n_joints, degrees=args.degrees)
+        what = f"{args.test_joints_file}: test configuration"
+    elif args.test_joints:
+        q = _parse_joint_values(args.test_joints, model.n_joints, degrees=args.degrees, what="--test-joints")
+        what = "--test-joints configuration"
+    else:
+        raise ConfigError("give --test-joints or --test-joints-file")
+    check_joint_limits(model, q, what=what, degrees_hint=None if args.degrees else "did you mean --degrees?")
+    return q
 
 
 def _lambda_arg(text: str) -> str | float:
@@ -250,18 +274,21 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_fk(args: argparse.Namespace) -> int:
-    from robocal_uncertainty.core import forward_points
+    from robocal_uncertainty.core import check_joint_limits, forward_points
     from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration
 
     model = _load_robot(args.robot)
     if args.calibration:
-        model = apply_calibration(model, read_calibration(args.calibration))
+        model = apply_calibration(model, read_calibration(args.calibration), where=f"calibration {args.calibration}")
     if args.joints_file:
         q = _read_joints_file(args.joints_file, model.n_joints, degrees=args.degrees)
+        what = f"{args.joints_file}: configuration"
     elif args.joints:
         q = _parse_joint_values(args.joints, model.n_joints, degrees=args.degrees, what="--joints")
+        what = "--joints configuration"
     else:
         raise ConfigError("give --joints or --joints-file")
+    check_joint_limits(model, q, what=what, degrees_hint=None if args.degrees else "did you mean --degrees?")
     p = model.parameter_vector()
     in_world = model.base_known and (np.any(model.base_xyz != 0) or np.any(model.base_rpy != 0))
     b0 = model.layout.base_index

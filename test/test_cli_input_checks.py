@@ -1,0 +1,172 @@
+"""Command line input checks: foreign calibrations, joint limits, truncated campaigns.
+
+Each ends in one line on stderr: ``robocal-uncertainty CMD: error: ...`` with exit status 1,
+or ``warning: ...`` when the input is usable.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal_uncertainty.bagio import read_campaign, write_campaign
+from robocal_uncertainty.cli import PAPER_TEST_JOINTS_DEG, main
+from robocal_uncertainty.core import Campaign
+
+JOINTS = [str(v) for v in PAPER_TEST_JOINTS_DEG]
+
+
+@pytest.fixture(scope="module")
+def paper_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("checks") / "c.mcap"
+    assert main(["simulate", "--robot", "paper_arm", "--out", str(path), "--seed", "11"]) == 0
+    return path
+
+
+@pytest.fixture(scope="module")
+def paper_calibration(paper_campaign: Path) -> Path:
+    path = paper_campaign.with_name("cal.json")
+    assert main(["calibrate", str(paper_campaign), "--robot", "paper_arm", "--json", str(path)]) == 0
+    return path
+
+
+def _error(capsys: pytest.CaptureFixture[str], command: str) -> str:
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1, captured.err
+    prefix = f"robocal-uncertainty {command}: error: "
+    assert lines[0].startswith(prefix), lines[0]
+    return lines[0][len(prefix) :]
+
+
+# ------------------------------------------------------------------- foreign calibration
+
+
+def test_fk_refuses_another_robots_calibration(paper_calibration: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    argv = ["fk", "--robot", "ur10", "--calibration", str(paper_calibration), "--joints", "0", "-1", "1", "0", "1", "0"]
+    assert main(argv) == 1
+    msg = _error(capsys, "fk")
+    assert msg == (
+        f"calibration {paper_calibration} was identified on robot 'paper_arm' and cannot be applied to robot 'ur10'"
+    )
+
+
+def test_fk_applies_the_calibration_to_its_own_robot(
+    paper_calibration: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    capsys.readouterr()
+    argv = ["fk", "--robot", "paper_arm", "--calibration", str(paper_calibration), "--joints", *JOINTS, "--degrees"]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    assert "calibrated paper_arm model" in captured.out
+
+
+# ------------------------------------------------------------------------ joint limits
+
+
+def test_fk_degrees_typed_as_radians(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["fk", "--robot", "paper_arm", "--joints", *JOINTS]) == 1
+    msg = _error(capsys, "fk")
+    assert msg.startswith("--joints configuration 1 of 1: joint joint1 = -7.5005 rad (-429.747 deg)")
+    assert "is outside its limits [-175, 175] deg" in msg
+    assert msg.endswith("; did you mean --degrees?")
+
+
+def test_fk_ur10_degrees_typed_as_radians(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["fk", "--robot", "ur10", "--joints", "0", "-90", "90", "0", "90", "0"]) == 1
+    msg = _error(capsys, "fk")
+    assert "joint shoulder_lift_joint = -90 rad" in msg and "[-360, 360] deg" in msg
+    assert msg.endswith("did you mean --degrees?")
+
+
+def test_fk_beyond_limits_in_degrees_has_no_hint(capsys: pytest.CaptureFixture[str]) -> None:
+    joints = list(JOINTS)
+    joints[1] = "-60"  # joint2 of the paper arm: [-265, -95] deg
+    assert main(["fk", "--robot", "paper_arm", "--joints", *joints, "--degrees"]) == 1
+    msg = _error(capsys, "fk")
+    assert msg == (
+        "--joints configuration 1 of 1: joint joint2 = -1.0472 rad (-60 deg) is outside its limits [-265, -95] deg"
+    )
+
+
+def test_fk_joints_file_names_file_and_row(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "q.txt"
+    path.write_text("# deg\n" + " ".join(JOINTS) + "\n" + " ".join([*JOINTS[:5], "200"]) + "\n")
+    assert main(["fk", "--robot", "paper_arm", "--joints-file", str(path), "--degrees"]) == 1
+    msg = _error(capsys, "fk")
+    assert msg.startswith(f"{path}: configuration 2 of 2: joint joint6 = 3.49066 rad (200 deg)")
+
+
+def test_evaluate_refuses_test_joints_beyond_limits(
+    paper_campaign: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "report"
+    argv = ["evaluate", str(paper_campaign), "--robot", "paper_arm", "--test-joints", *JOINTS, "--out", str(out)]
+    assert main([*argv, "--trials", "100", "--no-progress"]) == 1
+    msg = _error(capsys, "evaluate")
+    assert msg.startswith("--test-joints configuration 1 of 1: joint joint1 = -7.5005 rad")
+    assert msg.endswith("did you mean --degrees?")
+    assert not out.exists()  # refused before any Monte Carlo
+
+
+def test_calibrate_refuses_a_campaign_recorded_in_degrees(
+    paper_campaign: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good = read_campaign(paper_campaign)
+    bad = tmp_path / "degrees.mcap"
+    write_campaign(
+        bad,
+        Campaign(
+            joint_names=good.joint_names,
+            joint_positions=np.degrees(good.joint_positions),
+            points=good.points,
+            frame=good.frame,
+            frame_id=good.frame_id,
+        ),
+    )
+    capsys.readouterr()
+    assert main(["calibrate", str(bad), "--robot", "paper_arm"]) == 1
+    msg = _error(capsys, "calibrate")
+    assert msg.startswith(f"{bad}: campaign pose 1 of 53: joint ")
+    assert "deg) is outside its limits [" in msg
+    assert msg.endswith("the readings look like degrees (import-csv --angle-unit deg?)")
+
+
+def test_real_ur10_campaign_is_within_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    campaign = tmp_path / "ur10.mcap"
+    csv = Path("test/data/ur10_laser_tracker/measurements_iso_cubes.csv")
+    assert main(["import-csv", str(csv), "--out", str(campaign)]) == 0
+    assert main(["calibrate", str(campaign), "--robot", "ur10"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+# ------------------------------------------------------------------- truncated campaign
+
+
+def test_truncated_campaign_is_one_warning_line(
+    paper_campaign: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    chopped = tmp_path / "chopped.mcap"
+    chopped.write_bytes(paper_campaign.read_bytes()[:-2000])
+    with pytest.warns(UserWarning, match="is truncated"):
+        n = read_campaign(chopped).n_poses  # the pose count the reader recovers
+    assert 0 < n <= 53
+    capsys.readouterr()
+    assert main(["calibrate", str(chopped), "--robot", "paper_arm"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [
+        f"warning: {chopped} is truncated (writer stopped before the footer); "
+        f"recovered {n} poses up to the last complete record"
+    ]
+    assert "UserWarning" not in captured.err
+    assert f"{n} poses" in captured.out
+
+
+def test_complete_campaign_has_no_warning(paper_campaign: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    assert main(["calibrate", str(paper_campaign), "--robot", "paper_arm"]) == 0
+    assert capsys.readouterr().err == ""
