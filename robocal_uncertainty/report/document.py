@@ -99,10 +99,24 @@ def _summary(result: CalibrationUncertainty) -> list[_Block]:
         big = ", ".join(_um(a.expanded_uncertainty) for a in pose.axes)
         u_pos = _um(float(np.linalg.norm(u)))
         items.append(
-            f"Test configuration {i + 1}: position (x, y, z) = ({pos}) mm; "
+            f"Test configuration {i + 1}: position (x, y, z) in frame `{result.frame_id}` = ({pos}) mm; "
             f"u = ({us}) µm, U = ({big}) µm at p = {100 * result.coverage_probability:g} %; "
             f"u_pos = {u_pos} µm; GUM validated: {gum_verdict(pose)}."
         )
+    ad = result.model_adequacy
+    if ad.adequate:
+        adequacy = (
+            f"Model adequacy: the residuals are consistent with the stated tracker and encoder noise "
+            f"(sum-of-squares test p = {ad.p_value:.3g} >= {ad.significance:g}); the residual source adds nothing."
+        )
+    else:
+        u_m = ", ".join(_um(v) for v in ad.standard_uncertainty)
+        adequacy = (
+            f"Model adequacy: the residuals exceed the stated noise (p = {ad.p_value:.3g} < {ad.significance:g}); "
+            f"model error per axis of the measurement frame u = ({u_m}) µm, carried by the residual "
+            "source when enabled."
+        )
+    items.append(adequacy)
     cal = result.calibration
     conv = "yes" if result.converged else "NO"
     items.append(
@@ -126,7 +140,8 @@ def _table2(result: CalibrationUncertainty) -> list[_Block]:
         blocks.append(_Heading(3, f"Test configuration {i + 1}"))
         blocks.append(
             _Para(
-                f"Joints / deg: ({joints}). {result.n_trials} trials, coverage probability "
+                f"Positions in frame `{result.frame_id}` ({result.frame} frame). Joints / deg: ({joints}). "
+                f"{result.n_trials} trials, coverage probability "
                 f"{100 * result.coverage_probability:g} %, {_INTERVAL_NAMES.get(kind, kind)} "
                 f"interval, seed {result.seed}, sources: {', '.join(result.settings.sources)}. "
                 f"GUM validated: {gum_verdict(pose)}."

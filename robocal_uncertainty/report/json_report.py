@@ -128,12 +128,32 @@ def _axis(name: str, axis: OutputSummary) -> dict[str, Any]:
     }
 
 
+def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
+    ad = result.model_adequacy
+    return {
+        "test": "sum of squared residuals against the stated tracker and encoder noise propagated through "
+        "the fit (Satterthwaite scaled chi-square)",
+        "statistic": ad.chi2,
+        "dof": ad.dof,
+        "p_value": ad.p_value,
+        "significance": ad.significance,
+        "adequate": ad.adequate,
+        "frame": "measurement",
+        "residual_covariance_m2": ad.residual_covariance,
+        "noise_covariance_m2": ad.noise_covariance,
+        "model_error_covariance_m2": ad.inadequacy_covariance,
+        "model_error_standard_uncertainty_m": ad.standard_uncertainty,
+    }
+
+
 def _pose(index: int, pose: PoseUncertainty, result: CalibrationUncertainty) -> dict[str, Any]:
     axes = pose.axes
     gum = pose.gum
     out: dict[str, Any] = {
         "index": index,
         "joint_positions_rad": pose.joint_positions,
+        "frame": result.frame,
+        "frame_id": result.frame_id,
         "mean_m": pose.mean,
         "standard_uncertainty_m": [a.standard_uncertainty for a in axes],
         "covariance_m2": pose.covariance,
@@ -359,6 +379,13 @@ def uncertainty_to_dict(
                 "interval": result.adaptive.interval,
             },
         },
+        "output_frame": {
+            "frame": result.frame,
+            "frame_id": result.frame_id,
+            "description": "frame of every position below: 'measurement' is the frame of the campaign's points, "
+            "'base' the robot base frame",
+        },
+        "model_adequacy": _adequacy(result),
         "sources": [{"name": s, "description": SOURCE_DESCRIPTIONS.get(s, "")} for s in result.settings.sources],
         "settings": _settings(result),
         "extra_settings": dict(extra_settings) if extra_settings else {},
