@@ -152,6 +152,22 @@ def _print_calibration(result: Any) -> None:
         print(f"  warning: {warning}")
 
 
+def _print_adequacy(result: Any) -> None:
+    ad = result.model_adequacy
+    if ad.adequate:
+        print(
+            f"Model adequacy: residuals consistent with the stated tracker and encoder noise "
+            f"(p = {ad.p_value:.3g}); no model error left for the residual source"
+        )
+    else:
+        u = ", ".join(f"{v * 1e6:.1f}" for v in ad.standard_uncertainty)
+        used = "included" if "residual" in result.settings.sources else "NOT included: add --sources ...,residual"
+        print(
+            f"Model adequacy: residuals exceed the stated noise (p = {ad.p_value:.3g}); model error "
+            f"u = ({u}) um per measurement-frame axis, {used}"
+        )
+
+
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from robocal_uncertainty.bagio import write_campaign
     from robocal_uncertainty.core import EncoderNoise, SimulationSettings, TrackerNoise, simulate_campaign
@@ -265,7 +281,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from robocal_uncertainty.core.calibration_file import write_calibration
 
     campaign, model = _campaign_and_robot(args)
-    result = identify(model, campaign, lambda_=_lambda_arg(args.lambda_))
+    result = identify(model, campaign, lambda_=_lambda_arg(args.lambda_), accept_unconverged=args.accept_unconverged)
     _print_calibration(result)
     if args.json:
         write_calibration(args.json, result, robot=str(args.robot))
@@ -360,7 +376,9 @@ def run_evaluation(
             raise ConfigError(msg)
     sources = parse_sources(list(sources))
     settings = _uncertainty_settings(args, campaign, sources)
-    calibration = identify(model, campaign, lambda_=_lambda_arg(args.lambda_))
+    calibration = identify(
+        model, campaign, lambda_=_lambda_arg(args.lambda_), accept_unconverged=args.accept_unconverged
+    )
     _print_calibration(calibration)
     trials = _trials(args.trials)
     update, close = _progress_bar(not args.no_progress, label)
@@ -378,6 +396,7 @@ def run_evaluation(
             max_trials=args.max_trials,
             workers=args.workers,
             progress=update,
+            frame=args.frame,
         )
     finally:
         close()
@@ -395,9 +414,12 @@ def run_evaluation(
                 coverage=args.coverage,
                 seed=args.seed,
                 workers=args.workers,
+                frame=args.frame,
             )
     sweeps = _sweeps(model, campaign, calibration, test_joints, settings, args) if args.sweeps else None
     print()
+    _print_adequacy(result)
+    print(f"Positions in frame {result.frame_id} ({result.frame} frame; --frame base|measurement)")
     print(format_table2(result))
     adaptive = result.adaptive
     if adaptive is not None:
@@ -413,7 +435,14 @@ def run_evaluation(
         print(format_budget(budget))
     for warning in result.warnings:
         print(f"warning: {warning}")
-    path = write_report(out_dir, result, robot_name=model.name, budget=budget or None, sweeps=sweeps)
+    path = write_report(
+        out_dir,
+        result,
+        robot_name=model.name,
+        budget=budget or None,
+        sweeps=sweeps,
+        input_warnings=tuple(campaign.metadata.get("warnings") or ()),
+    )
     print(f"report written to {path}")
     return result
 
@@ -526,6 +555,22 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
     )
     p.add_argument("--sweep-trials", type=int, default=300, help="trials per sweep point (default %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_frame_and_convergence_args(p)
+
+
+def _add_frame_and_convergence_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--frame",
+        choices=("measurement", "base"),
+        default="measurement",
+        help="frame of the output positions: the frame of the campaign's points (default), or the robot base "
+        "frame (for a tracker campaign the base transform's uncertainty then does not enter)",
+    )
+    p.add_argument(
+        "--accept-unconverged",
+        action="store_true",
+        help="use an identification that did not converge instead of stopping with an error",
+    )
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -586,6 +631,60 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         out_dir=Path(args.out),
         label="replay",
     )
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.bagio import read_campaign
+    from robocal_uncertainty.report.validation_report import format_validation, write_validation_report
+    from robocal_uncertainty.uncertainty import parse_sources
+    from robocal_uncertainty.uncertainty.holdout import split_campaign, validate_holdout
+
+    trials = _trials(args.trials)
+    if trials == "auto":
+        raise ConfigError("validate needs a fixed --trials (the adaptive procedure runs per fold in evaluate)")
+    if not 0.0 < args.coverage < 1.0:
+        msg = f"--coverage must lie in (0, 1), got {args.coverage}"
+        raise ConfigError(msg)
+    campaign, model = _campaign_and_robot(args)
+    settings = _uncertainty_settings(args, campaign, parse_sources(args.sources))
+    splits = None
+    validation_campaign = None
+    if args.validation_campaign:
+        validation_campaign = read_campaign(args.validation_campaign)
+    else:
+        chosen = [x is not None for x in (args.train_poses, args.holdout_fraction, args.k_folds)]
+        if sum(chosen) > 1:
+            raise ConfigError("give only one of --train-poses, --holdout-fraction, --k-folds")
+        fraction = args.holdout_fraction if any(chosen) else 0.25
+        splits = split_campaign(
+            campaign.n_poses,
+            n_train=args.train_poses,
+            holdout_fraction=fraction if args.train_poses is None and args.k_folds is None else None,
+            k_folds=args.k_folds,
+            seed=args.seed,
+        )
+    validation = validate_holdout(
+        model,
+        campaign,
+        splits=splits,
+        validation_campaign=validation_campaign,
+        settings=settings,
+        lambda_=_lambda_arg(args.lambda_),
+        trials=int(trials),
+        coverage=args.coverage,
+        seed=args.seed,
+        workers=args.workers,
+        progress=print,
+    )
+    print()
+    print(format_validation(validation))
+    out = write_validation_report(
+        args.out,
+        validation,
+        extra={"campaign": str(args.campaign), "robot": str(args.robot), "trials": int(trials)},
+    )
+    print(f"report written to {out}")
     return 0
 
 
@@ -663,6 +762,11 @@ def _build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="identify the base transform even if the robot config says it is known",
     )
+    p.add_argument(
+        "--accept-unconverged",
+        action="store_true",
+        help="report an identification that did not converge instead of stopping with an error",
+    )
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("fk", help="tool positions of the nominal or calibrated model")
@@ -721,6 +825,31 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--campaign-out", help="also write the collected campaign MCAP here")
     _add_uncertainty_args(p, trials_default="auto")
     p.set_defaults(func=_cmd_replay)
+
+    p = sub.add_parser(
+        "validate",
+        help="prove the uncertainty statement: calibrate on some poses, check the coverage of held-out measurements",
+    )
+    p.add_argument("campaign")
+    p.add_argument("--robot", required=True)
+    split = p.add_argument_group("what is held out (default: --holdout-fraction 0.25)")
+    split.add_argument("--train-poses", type=int, help="calibrate on this many random poses, hold out the rest")
+    split.add_argument("--holdout-fraction", type=float, help="fraction of the poses held out at random")
+    split.add_argument("--k-folds", type=int, help="k-fold cross-validation: every pose held out once")
+    split.add_argument("--validation-campaign", help="a second campaign of the same tracker set-up, held out whole")
+    p.add_argument(
+        "--sources",
+        default="tracker,encoder,residual",
+        help="sources of the statement under test (default %(default)s)",
+    )
+    p.add_argument("--out", default="robocal_validation", help="report directory (default %(default)s)")
+    p.add_argument(
+        "--base-unknown",
+        action="store_true",
+        help="identify the base transform even if the robot config says it is known",
+    )
+    _add_uncertainty_args(p, trials_default="5000")
+    p.set_defaults(func=_cmd_validate)
     return parser
 
 

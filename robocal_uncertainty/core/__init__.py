@@ -22,6 +22,7 @@ from robocal_uncertainty.core.simulation import (
     SimulatedCampaign,
     SimulationSettings,
     TrackerNoise,
+    UnmodelledErrors,
     simulate_campaign,
     simulate_measurements,
 )
@@ -39,6 +40,7 @@ __all__ = [
     "SimulatedCampaign",
     "SimulationSettings",
     "TrackerNoise",
+    "UnmodelledErrors",
     "check_joint_limits",
     "fit_rigid_base",
     "forward_points",

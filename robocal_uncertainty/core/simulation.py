@@ -24,6 +24,7 @@ __all__ = [
     "SimulatedCampaign",
     "SimulationSettings",
     "TrackerNoise",
+    "UnmodelledErrors",
     "draw_joint_positions",
     "draw_true_parameters",
     "simulate_campaign",
@@ -102,6 +103,39 @@ class ParameterErrorRanges:
 
 
 @dataclass(frozen=True)
+class UnmodelledErrors:
+    """Errors the kinematic model cannot represent (a real robot's model inadequacy).
+
+    Parameters
+    ----------
+    gear_amplitude : float [rad]
+        Transmission error of every joint, ``a sin(2 q_j + j)`` (twice per revolution, as a
+        strain-wave gear; phase fixed per joint index j).
+    compliance : float [rad]
+        Gravity sag of joints 2 and 3: ``c cos(q_2)`` and ``c cos(q_2 + q_3)``.
+    """
+
+    gear_amplitude: float = 0.0
+    compliance: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("gear_amplitude", "compliance"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                msg = f"{name} must be finite and >= 0, got {value}"
+                raise ConfigError(msg)
+
+    def deflection(self, joint_positions: Array) -> Array:
+        """Angle the joints really take beyond their readings, same shape as the input [rad]."""
+        q = np.asarray(joint_positions, dtype=np.float64)
+        out = self.gear_amplitude * np.sin(2.0 * q + np.arange(q.shape[-1]))
+        if self.compliance and q.shape[-1] >= 3:
+            out[..., 1] += self.compliance * np.cos(q[..., 1])
+            out[..., 2] += self.compliance * np.cos(q[..., 1] + q[..., 2])
+        return out
+
+
+@dataclass(frozen=True)
 class SimulationSettings:
     """Everything that defines a simulated campaign.
 
@@ -118,6 +152,8 @@ class SimulationSettings:
     tracker_noise, encoder_noise, errors : see their classes.
     joint_margin : float [rad]
         Poses are drawn uniformly inside the joint limits shrunk by this margin.
+    unmodelled : UnmodelledErrors
+        Model inadequacy (none by default).
     """
 
     n_poses: int = 53
@@ -128,6 +164,7 @@ class SimulationSettings:
     encoder_noise: EncoderNoise = field(default_factory=EncoderNoise)
     errors: ParameterErrorRanges = field(default_factory=ParameterErrorRanges)
     joint_margin: float = float(np.radians(5.0))
+    unmodelled: UnmodelledErrors = field(default_factory=UnmodelledErrors)
 
     def __post_init__(self) -> None:
         if isinstance(self.n_poses, bool) or not isinstance(self.n_poses, int) or self.n_poses < 1:
@@ -217,7 +254,8 @@ def simulate_measurements(
         Measured points in the frame of `true_params`' base.
     point_std : ndarray, shape (n, 3) [m]
     """
-    true_points = forward_points(model.layout, true_params, true_joint_positions)
+    deflected = true_joint_positions + settings.unmodelled.deflection(true_joint_positions)
+    true_points = forward_points(model.layout, true_params, deflected)
     if settings.frame == "tracker":
         distance = np.linalg.norm(true_points, axis=-1)
     else:
@@ -284,7 +322,7 @@ def simulate_campaign(
         campaign=campaign,
         true_model=true_model,
         true_joint_positions=q_true,
-        true_points=forward_points(model.layout, true_params, q_true),
+        true_points=forward_points(model.layout, true_params, q_true + settings.unmodelled.deflection(q_true)),
         settings=settings,
         seed=seed,
     )

@@ -337,7 +337,13 @@ def summarize(
         chosen = shortest if expanded_from == "shortest" else symmetric
         estimate, u = float(means[j]), float(stds[j])
         expanded = chosen.half_width
-        counts, edges = np.histogram(values[:, j], bins=bins)
+        column = values[:, j]
+        lo, hi = float(column.min()), float(column.max())
+        if isinstance(bins, int) and hi - lo <= 8 * bins * np.spacing(max(abs(lo), abs(hi), np.finfo(float).tiny)):
+            # A (nearly) constant output, e.g. a source that contributes nothing: one bin.
+            counts, edges = np.histogram(column, bins=1, range=(lo, hi) if hi > lo else (lo - 0.5, lo + 0.5))
+        else:
+            counts, edges = np.histogram(column, bins=bins)
         outputs.append(
             OutputSummary(
                 estimate=estimate,

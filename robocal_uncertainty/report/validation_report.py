@@ -1,0 +1,159 @@
+"""Report of a hold-out validation: JSON, Markdown, console table and the reliability plot."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from robocal_uncertainty.errors import InputError
+from robocal_uncertainty.uncertainty.holdout import HoldoutValidation
+
+__all__ = ["format_validation", "validation_to_dict", "write_validation_report"]
+
+VALIDATION_FORMAT = "robocal_uncertainty/validation/1"
+
+
+def validation_to_dict(validation: HoldoutValidation, *, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Strict-JSON view of a :class:`HoldoutValidation` (SI units, fractions in [0, 1])."""
+    v = validation
+    return {
+        "format": VALIDATION_FORMAT,
+        "units": {"length": "m"},
+        "mode": v.mode,
+        "frame_id": v.frame_id,
+        "sources": list(v.sources),
+        "seed": v.seed,
+        "coverage_probability": v.coverage_probability,
+        "n_held_out": v.n_held_out,
+        "method": (
+            "calibrate and evaluate on the training poses exactly as 'evaluate'; the predictive distribution of "
+            "each held-out measurement is the Monte Carlo distribution of the prediction plus the measurement's "
+            "own tracker noise; intervals are probabilistically symmetric, the 3-D region is JCGM 102's ellipsoid"
+        ),
+        "axes": [
+            {
+                "axis": a.axis,
+                "rms_error_m": a.rms_error,
+                "normalized_error_rms": a.normalized_rms,
+                "inside_fraction": a.inside_fraction,
+            }
+            for a in v.axes
+        ],
+        "region_inside_fraction": v.region_inside_fraction,
+        "reliability": {
+            "stated_coverage": v.levels.tolist(),
+            "observed": {a.axis: a.reliability.tolist() for a in v.axes},
+            "observed_region": v.region_reliability.tolist(),
+        },
+        "folds": [
+            {
+                "n_train": f.n_train,
+                "n_held_out": f.n_held_out,
+                "residual_rms_after_m": f.rms_train_after,
+                "lambda": f.lambda_,
+                "model_adequate": f.model_adequate,
+                "model_error_standard_uncertainty_m": f.model_error_std.tolist(),
+                "n_trials": f.n_trials,
+            }
+            for f in v.folds
+        ],
+        "extra_settings": dict(extra or {}),
+    }
+
+
+def format_validation(validation: HoldoutValidation) -> str:
+    """Console table: per axis RMS error, normalised error RMS and coverage, then reliability."""
+    v = validation
+    p = 100 * v.coverage_probability
+    lines = [
+        f"Hold-out validation ({v.mode}, {len(v.folds)} fold(s), {v.n_held_out} held-out measurements, "
+        f"frame {v.frame_id}, sources {', '.join(v.sources)})",
+        f"{'axis':<6}{'RMS error / um':>16}{'normalised RMS':>16}{f'inside {p:g} % / %':>20}",
+    ]
+    for a in v.axes:
+        lines.append(f"{a.axis:<6}{a.rms_error * 1e6:>16.1f}{a.normalized_rms:>16.3f}{100 * a.inside_fraction:>20.1f}")
+    lines.append(f"3-D region (JCGM 102) at {p:g} %: {100 * v.region_inside_fraction:.1f} % inside")
+    lines.append("reliability: stated p / observed % (x, y, z, 3-D)")
+    for i, level in enumerate(v.levels):
+        obs = ", ".join(f"{100 * a.reliability[i]:.1f}" for a in v.axes)
+        lines.append(f"  {100 * level:5.1f} %: {obs}, {100 * v.region_reliability[i]:.1f}")
+    lines.append("An honest statement has normalised RMS near 1 and observed near stated coverage.")
+    return "\n".join(lines)
+
+
+def _plot(validation: HoldoutValidation, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    v = validation
+    fig, ax = plt.subplots(figsize=(5.0, 4.5))
+    ax.plot([0.45, 1.0], [0.45, 1.0], color="0.6", lw=1.0, label="ideal")
+    for a in v.axes:
+        ax.plot(v.levels, a.reliability, marker="o", ms=3, label=a.axis)
+    ax.plot(v.levels, v.region_reliability, marker="s", ms=3, color="k", label="3-D region")
+    ax.set_xlabel("stated coverage probability p")
+    ax.set_ylabel("observed fraction of held-out measurements inside")
+    ax.set_title(f"Reliability ({v.n_held_out} held-out, {v.mode})")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_validation_report(
+    directory: str | Path,
+    validation: HoldoutValidation,
+    *,
+    extra: Mapping[str, Any] | None = None,
+    overwrite: bool = True,
+) -> Path:
+    """Write ``validation.json``, ``validation.md`` and ``reliability.png`` into `directory`.
+
+    Raises
+    ------
+    InputError
+        `directory` exists as a file or cannot be created.
+    """
+    out = Path(directory)
+    try:
+        out.mkdir(parents=True, exist_ok=overwrite)
+    except (FileExistsError, NotADirectoryError) as err:
+        msg = f"cannot write the validation report to {out}: it exists and is not a directory"
+        raise InputError(msg) from err
+    except OSError as err:
+        msg = f"cannot create {out}: {err.strerror}"
+        raise InputError(msg) from err
+    data = validation_to_dict(validation, extra=extra)
+    (out / "validation.json").write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    _plot(validation, out / "reliability.png")
+    table = format_validation(validation)
+    md = [
+        "# Hold-out validation of the uncertainty statement",
+        "",
+        data["method"] + ".",
+        "",
+        "```",
+        table,
+        "```",
+        "",
+        "![reliability](reliability.png)",
+        "",
+        "Folds: "
+        + "; ".join(
+            f"{f.n_train} training / {f.n_held_out} held out, residual RMS {f.rms_train_after * 1e6:.1f} um, "
+            + (
+                "model adequate"
+                if f.model_adequate
+                else "model error u = (" + ", ".join(f"{u * 1e6:.1f}" for u in f.model_error_std) + ") um"
+            )
+            for f in validation.folds
+        ),
+        "",
+    ]
+    (out / "validation.md").write_text("\n".join(md), encoding="utf-8")
+    return out

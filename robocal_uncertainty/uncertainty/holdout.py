@@ -1,0 +1,373 @@
+"""Proof of an uncertainty statement on held-out measurements.
+
+A calibration's uncertainty statement says where the tool will be at configurations it was
+not calibrated on. That can be checked: calibrate and evaluate on some poses exactly as
+``evaluate`` does, predict the others with their coverage intervals, and count how often
+the measurements fall inside. For each held-out pose the predictive distribution is the
+Monte Carlo distribution of the calibrated prediction (every enabled source, including the
+model error at that configuration when the ``residual`` source is on) plus the held-out
+measurement's own tracker noise, drawn from the stated tracker model. A statement that
+means what it says puts a fraction p of the held-out measurements inside its p-intervals
+and has normalised errors of RMS 1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import identify
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+
+__all__ = [
+    "RELIABILITY_LEVELS",
+    "AxisValidation",
+    "FoldResult",
+    "HoldoutSplit",
+    "HoldoutValidation",
+    "split_campaign",
+    "validate_holdout",
+]
+
+Array = NDArray[np.float64]
+RELIABILITY_LEVELS: tuple[float, ...] = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.99)
+"""Coverage probabilities of the reliability curve."""
+AXES = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class HoldoutSplit:
+    """Indices of the training and held-out poses of one fold."""
+
+    train: NDArray[np.intp]
+    held_out: NDArray[np.intp]
+
+
+def split_campaign(
+    n_poses: int,
+    *,
+    n_train: int | None = None,
+    holdout_fraction: float | None = None,
+    k_folds: int | None = None,
+    seed: int = 0,
+) -> tuple[HoldoutSplit, ...]:
+    """Random training/held-out splits of a campaign's poses.
+
+    Exactly one of `n_train`, `holdout_fraction`, `k_folds` is given.
+
+    Parameters
+    ----------
+    n_poses : int
+    n_train : int, optional
+        Training poses drawn at random; the rest are held out.
+    holdout_fraction : float, optional
+        Fraction of the poses held out, in (0, 1).
+    k_folds : int, optional
+        k-fold cross-validation: every pose is held out once.
+    seed : int
+        Seed of the permutation.
+    """
+    given = [v is not None for v in (n_train, holdout_fraction, k_folds)]
+    if sum(given) != 1:
+        raise ConfigError("give exactly one of n_train, holdout_fraction, k_folds")
+    perm = np.random.default_rng(np.random.SeedSequence([seed, 0x5EED])).permutation(n_poses)
+    if k_folds is not None:
+        if isinstance(k_folds, bool) or not isinstance(k_folds, int) or not 2 <= k_folds <= n_poses:
+            msg = f"k_folds must be an integer between 2 and the {n_poses} poses, got {k_folds!r}"
+            raise ConfigError(msg)
+        folds = np.array_split(perm, k_folds)
+        return tuple(
+            HoldoutSplit(train=np.sort(np.concatenate(folds[:i] + folds[i + 1 :])), held_out=np.sort(f))
+            for i, f in enumerate(folds)
+        )
+    if holdout_fraction is not None:
+        if not 0.0 < float(holdout_fraction) < 1.0:
+            msg = f"hold-out fraction must lie in (0, 1), got {holdout_fraction}"
+            raise ConfigError(msg)
+        n_train = n_poses - max(1, round(holdout_fraction * n_poses))
+    assert n_train is not None
+    if isinstance(n_train, bool) or not isinstance(n_train, int) or not 1 <= n_train < n_poses:
+        msg = f"training poses must be between 1 and {n_poses - 1} (the campaign has {n_poses}), got {n_train!r}"
+        raise ConfigError(msg)
+    return (HoldoutSplit(train=np.sort(perm[:n_train]), held_out=np.sort(perm[n_train:])),)
+
+
+@dataclass(frozen=True)
+class AxisValidation:
+    """Held-out statistics of one axis of the output frame.
+
+    Attributes
+    ----------
+    axis : str
+    rms_error : float [m]
+        RMS of measured minus predicted (Monte Carlo mean).
+    normalized_rms : float
+        RMS of the error divided by the predictive standard uncertainty (which includes
+        the measurement's own noise); 1 for an honest statement.
+    inside_fraction : float
+        Fraction of held-out measurements inside their probabilistically symmetric
+        p-interval at the run's coverage probability.
+    reliability : ndarray, shape (n_levels,)
+        The same fraction at every level of :data:`RELIABILITY_LEVELS`.
+    """
+
+    axis: str
+    rms_error: float
+    normalized_rms: float
+    inside_fraction: float
+    reliability: Array
+
+
+@dataclass(frozen=True)
+class FoldResult:
+    """What one fold's calibration and Monte Carlo looked like."""
+
+    n_train: int
+    n_held_out: int
+    rms_train_after: float
+    lambda_: float
+    model_adequate: bool
+    model_error_std: Array
+    n_trials: int
+
+
+@dataclass(frozen=True)
+class HoldoutValidation:
+    """Result of :func:`validate_holdout`.
+
+    Attributes
+    ----------
+    coverage_probability : float
+    levels : ndarray, shape (n_levels,)
+        Coverage probabilities of the reliability curve.
+    axes : tuple of AxisValidation, length 3
+    region_inside_fraction : float
+        Fraction of held-out measurements inside the JCGM 102 3-D region at p.
+    region_reliability : ndarray, shape (n_levels,)
+    errors : ndarray, shape (n_held_out, 3) [m]
+        Measured minus predicted, in `frame_id`.
+    standard_uncertainties : ndarray, shape (n_held_out, 3) [m]
+        Predictive standard uncertainty (calibration plus measurement noise).
+    folds : tuple of FoldResult
+    frame_id : str
+    sources : tuple of str
+    seed : int
+    mode : str
+        ``"split"``, ``"k-fold"`` or ``"campaign"`` (a second campaign held out).
+    """
+
+    coverage_probability: float
+    levels: Array
+    axes: tuple[AxisValidation, ...]
+    region_inside_fraction: float
+    region_reliability: Array
+    errors: Array
+    standard_uncertainties: Array
+    folds: tuple[FoldResult, ...]
+    frame_id: str
+    sources: tuple[str, ...]
+    seed: int
+    mode: str
+
+    @property
+    def n_held_out(self) -> int:
+        """Number of held-out measurements."""
+        return int(self.errors.shape[0])
+
+
+def _inside_regions(pred: Array, points: Array, levels: Array) -> NDArray[np.bool_]:
+    """Whether each point lies in the JCGM 102 ellipsoidal region of its samples, per level.
+
+    Vectorised over poses; the same definition as
+    :func:`robocal_uncertainty.montecarlo.coverage_region`: k_p^2 is the q-th smallest squared
+    Mahalanobis distance of the samples, q = floor(p M + 1/2).
+
+    Returns
+    -------
+    ndarray of bool, shape (n_levels, n_poses)
+    """
+    m = pred.shape[0]
+    centred = pred - pred.mean(axis=0)
+    cov = np.einsum("mpi,mpj->pij", centred, centred) / (m - 1)
+    chol = np.linalg.cholesky(cov)
+    z = np.linalg.solve(chol[None], centred[..., None])[..., 0]
+    d2 = np.sort(np.sum(z**2, axis=-1), axis=0)  # (m, n_poses)
+    zp = np.linalg.solve(chol, (points - pred.mean(axis=0))[..., None])[..., 0]
+    dp2 = np.sum(zp**2, axis=-1)
+    q = np.clip(np.floor(levels * m + 0.5).astype(int), 1, m)
+    return dp2[None, :] <= d2[q - 1]
+
+
+def _tracker_distances(points: Array, campaign: Campaign, settings: UncertaintySettings) -> Array:
+    if campaign.frame == "tracker":
+        return np.linalg.norm(points, axis=1)
+    return np.linalg.norm(points - np.asarray(settings.tracker_xyz), axis=1)
+
+
+def validate_holdout(
+    model: RobotModel,
+    campaign: Campaign,
+    *,
+    splits: Sequence[HoldoutSplit] | None = None,
+    validation_campaign: Campaign | None = None,
+    settings: UncertaintySettings | None = None,
+    lambda_: str | float = "auto",
+    trials: int = 5000,
+    coverage: float = 0.95,
+    seed: int = 0,
+    workers: int = 1,
+    levels: Sequence[float] = RELIABILITY_LEVELS,
+    progress: Callable[[str], None] | None = None,
+) -> HoldoutValidation:
+    """Calibrate on training poses, predict held-out measurements, count what the intervals hold.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+        Calibration campaign (joint readings [rad], points [m]).
+    splits : sequence of HoldoutSplit, optional
+        Folds of `campaign` (see :func:`split_campaign`); required unless
+        `validation_campaign` is given.
+    validation_campaign : Campaign, optional
+        A second campaign measured in the same frame (same tracker set-up): every pose of
+        it is held out and `campaign` is used whole for training.
+    settings : UncertaintySettings, optional
+        Sources and noise models, as for :func:`evaluate_uncertainty`.
+    lambda_ : {"auto", "gcv"} or float
+    trials : int
+        Monte Carlo trials per fold.
+    coverage : float
+        Coverage probability p of the intervals checked.
+    seed : int
+        Root seed (Monte Carlo and the held-out measurement noise).
+    workers : int
+    levels : sequence of float
+        Coverage probabilities of the reliability curve.
+    progress : callable, optional
+        Called with a one-line status per fold.
+
+    Returns
+    -------
+    HoldoutValidation
+
+    Raises
+    ------
+    ConfigError
+        Neither or both of `splits` and `validation_campaign`; bad levels.
+    InputError
+        A validation campaign in another frame or with other joints.
+    """
+    settings = settings or UncertaintySettings()
+    levels_arr = np.asarray(sorted({float(v) for v in levels} | {float(coverage)}))
+    if not ((levels_arr > 0) & (levels_arr < 1)).all():
+        raise ConfigError(f"coverage levels must lie in (0, 1), got {levels_arr.tolist()}")
+    campaign = campaign.reorder_joints(model.joint_names)
+    folds: list[tuple[Campaign, Campaign]]
+    if validation_campaign is not None:
+        if splits is not None:
+            raise ConfigError("give either splits or a validation campaign, not both")
+        held = validation_campaign.reorder_joints(model.joint_names)
+        if (held.frame, held.frame_id) != (campaign.frame, campaign.frame_id):
+            msg = (
+                f"validation campaign points are in frame {held.frame_id!r} ({held.frame}), the calibration "
+                f"campaign's in {campaign.frame_id!r} ({campaign.frame}): they must share one tracker set-up"
+            )
+            raise InputError(msg)
+        folds = [(campaign, held)]
+        mode = "campaign"
+    else:
+        if not splits:
+            raise ConfigError("give splits (hold-out fraction, training poses or k folds) or a validation campaign")
+        folds = [(campaign.subset(s.train), campaign.subset(s.held_out)) for s in splits]
+        mode = "k-fold" if len(splits) > 1 else "split"
+
+    errors, stds, inside, region_inside = [], [], [], []
+    fold_results = []
+    for f, (train, held) in enumerate(folds):
+        calibration = identify(model, train, lambda_=lambda_)
+        result = evaluate_uncertainty(
+            model,
+            train,
+            held.joint_positions,
+            settings=settings,
+            calibration=calibration,
+            trials=trials,
+            coverage=coverage,
+            seed=seed + f,
+            workers=workers,
+        )
+        n_held = held.n_poses
+        pred = result.samples[:, : 3 * n_held].reshape(-1, n_held, 3)
+        # The held-out measurement carries its own tracker noise: the predictive distribution
+        # of what the tracker will read is the prediction plus that noise.
+        rng = np.random.default_rng(np.random.SeedSequence([seed, f, 0xB0B]))
+        dist = _tracker_distances(held.points, held, settings)
+        if "tracker" in settings.sources:
+            pred = pred + settings.tracker_noise.sample(rng, np.broadcast_to(dist, pred.shape[:2]))
+        mean = pred.mean(axis=0)
+        std = pred.std(axis=0, ddof=1)
+        if not (std > 0).all():
+            raise InputError("a held-out prediction has zero spread: enable at least one noise source")
+        tails = np.concatenate(((1.0 - levels_arr) / 2.0, (1.0 + levels_arr) / 2.0))
+        q = np.quantile(pred, tails, axis=0)  # (2 L, n_held, 3)
+        lo, hi = q[: levels_arr.size], q[levels_arr.size :]
+        inside.append((held.points[None] >= lo) & (held.points[None] <= hi))
+        errors.append(held.points - mean)
+        stds.append(std)
+        region_inside.append(_inside_regions(pred, held.points, levels_arr))
+        adequacy = result.model_adequacy
+        fold_results.append(
+            FoldResult(
+                n_train=train.n_poses,
+                n_held_out=n_held,
+                rms_train_after=calibration.rms_after,
+                lambda_=calibration.lambda_,
+                model_adequate=adequacy.adequate,
+                model_error_std=adequacy.standard_uncertainty,
+                n_trials=result.n_trials,
+            )
+        )
+        if progress is not None:
+            progress(
+                f"fold {f + 1}/{len(folds)}: {train.n_poses} training poses, {n_held} held out, "
+                f"residual RMS {calibration.rms_after * 1e3:.4f} mm"
+            )
+        frame_id = result.frame_id
+    err = np.concatenate(errors)
+    sd = np.concatenate(stds)
+    ins = np.concatenate(inside, axis=1)  # (L, n, 3)
+    reg_all = np.concatenate(region_inside, axis=1)
+    at = int(np.flatnonzero(np.isclose(levels_arr, coverage))[0])
+    axes = tuple(
+        AxisValidation(
+            axis=AXES[a],
+            rms_error=float(np.sqrt(np.mean(err[:, a] ** 2))),
+            normalized_rms=float(np.sqrt(np.mean((err[:, a] / sd[:, a]) ** 2))),
+            inside_fraction=float(ins[at, :, a].mean()),
+            reliability=ins[:, :, a].mean(axis=1),
+        )
+        for a in range(3)
+    )
+    return HoldoutValidation(
+        coverage_probability=float(coverage),
+        levels=levels_arr,
+        axes=axes,
+        region_inside_fraction=float(reg_all[at].mean()),
+        region_reliability=reg_all.mean(axis=1),
+        errors=err,
+        standard_uncertainties=sd,
+        folds=tuple(fold_results),
+        frame_id=frame_id,
+        sources=tuple(settings.sources),
+        seed=seed,
+        mode=mode,
+    )
