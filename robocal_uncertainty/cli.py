@@ -314,14 +314,18 @@ def _cmd_fk(args: argparse.Namespace) -> int:
     world_points = forward_points(model.layout, p, q)
     has_world = bool(args.calibration and not np.allclose(p[b0 : b0 + 6], 0.0)) or in_world
     source = "calibrated" if args.calibration else "nominal"
-    print(f"# tool point of the {source} {model.name} model, mm")
-    header = "x_base y_base z_base" + (f" x_{model.measurement_frame_id} y z" if has_world else "")
-    print("# " + header)
+    frame = args.frame or ("measurement" if has_world else "base")
+    if frame == "measurement" and not has_world:
+        frame_id = model.base_frame_id  # no identified base: the measurement frame is the base frame
+        points = base_points
+    elif frame == "measurement":
+        frame_id, points = model.measurement_frame_id, world_points
+    else:
+        frame_id, points = model.base_frame_id, base_points
+    print(f"# tool point of the {source} {model.name} model in frame {frame_id} ({frame} frame), mm")
+    print(f"# x_{frame_id} y_{frame_id} z_{frame_id}")
     for i in range(q.shape[0]):
-        row = " ".join(f"{v * 1e3:.6f}" for v in base_points[i])
-        if has_world:
-            row += " " + " ".join(f"{v * 1e3:.6f}" for v in world_points[i])
-        print(row)
+        print(" ".join(f"{v * 1e3:.6f}" for v in points[i]))
     if args.json:
         out = {
             "units": {"length": "m", "angle": "rad"},
@@ -775,7 +779,13 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--joints", nargs="+", help="joint values, n_joints per configuration")
     p.add_argument("--joints-file", help="CSV/whitespace file, one configuration per row")
     p.add_argument("--degrees", action="store_true", help="joint values are in degrees (default radians)")
-    p.add_argument("--json")
+    p.add_argument(
+        "--frame",
+        choices=("measurement", "base"),
+        help="frame of the printed points: the measurement (tracker) frame when the calibration identified the "
+        "base (default then), else the robot base frame",
+    )
+    p.add_argument("--json", help="also write both frames' points here (SI units)")
     p.set_defaults(func=_cmd_fk)
 
     p = sub.add_parser("evaluate", help="Monte Carlo uncertainty of the calibrated tool position")
