@@ -18,7 +18,8 @@ late joiner gets the latest full set):
 
 * ``robocal/uncertainty``: ``robocal_uncertainty/PoseUncertainty``, one per configuration.
 * ``robocal/pose_with_covariance``: ``geometry_msgs/PoseWithCovarianceStamped``, one per
-  configuration, in the robot base frame: position = Monte Carlo mean; orientation = identity
+  configuration, in the frame set by ``output_frame`` (default: the frame of the campaign's points,
+  e.g. the tracker's; ``base``: the robot base frame): position = Monte Carlo mean; orientation = identity
   and NOT estimated. Covariance (6x6 row-major over x, y, z, rot x, rot y, rot z): the 3x3
   position covariance [m^2] in the top-left block; the orientation block is diagonal with
   ``orientation_variance_rad2`` (default 1e6 rad^2, "unknown" by the usual large-variance
@@ -126,6 +127,10 @@ def _xyz(value: Any) -> str | None:
     return reason
 
 
+def _output_frame(value: Any) -> str | None:
+    return None if value in ("measurement", "base") else f"must be 'measurement' or 'base', got {value!r}"
+
+
 PARAMETERS: tuple[ParamSpec, ...] = (
     ROBOT_CONFIG,
     BASE_UNKNOWN,
@@ -187,6 +192,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "m",
         check=_xyz,
         dynamic_typing=True,
+    ),
+    ParamSpec(
+        "output_frame",
+        "measurement",
+        "Frame of the published poses: 'measurement' (the campaign's points' frame, e.g. the tracker's; the base "
+        "transform's uncertainty enters) or 'base' (the robot base frame)",
+        "",
+        check=_output_frame,
     ),
     ParamSpec("workers", 1, "Monte Carlo processes (never changes the result)", "processes", True, 1, 256),
     ParamSpec("progress_period_s", 2.0, "Interval of progress reports", "s", low=0.1, high=3600.0),
@@ -312,6 +325,7 @@ class UncertaintyNode(Node):
             "coverage": float(get("coverage")),
             "n_dig": int(get("n_dig")),
             "max_trials": int(get("max_trials")),
+            "output_frame": str(get("output_frame")),
         }
 
     def _submit(self) -> None:
@@ -422,7 +436,7 @@ class UncertaintyNode(Node):
 
     def _publish(self, result: CalibrationUncertainty, msg: CalibrationResultMsg) -> None:
         stamp = stamp_ns(msg.header)
-        frame_id = self.model.base_frame_id
+        frame_id = result.frame_id  # the frame the positions are in (measurement or base)
         variance = float(self.get_parameter("orientation_variance_rad2").value)
         for message, pose in zip(uncertainty_to_msgs(result, stamp_ns=stamp, frame_id=frame_id), result.poses):
             self._uncertainty_pub.publish(to_ros(message, PoseUncertaintyMsg))

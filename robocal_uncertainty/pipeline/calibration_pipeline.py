@@ -60,6 +60,8 @@ class EvaluationOptions:
     n_dig, max_trials, block_size : int
         Adaptive-procedure digits, its trial cap, and trials per random stream (see
         :func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty`).
+    output_frame : {"measurement", "base"}
+        Frame of the output positions (the frame of the campaign's points by default).
     """
 
     lambda_: str | float = "auto"
@@ -71,6 +73,7 @@ class EvaluationOptions:
     n_dig: int = 2
     max_trials: int = 2_000_000
     block_size: int = 10_000
+    output_frame: str = "measurement"
 
     def __post_init__(self) -> None:
         if self.test_joints is not None:
@@ -130,6 +133,7 @@ def evaluate_campaign(
         block_size=options.block_size,
         workers=workers,
         progress=progress,
+        frame=options.output_frame,
     )
 
 
@@ -190,6 +194,7 @@ class CalibrationPipeline:
         n_dig: int = 2,
         max_trials: int = 2_000_000,
         block_size: int = 10_000,
+        output_frame: str = "measurement",
         campaign_path: str | Path | None = None,
         fsync: bool = True,
         metadata: dict[str, object] | None = None,
@@ -211,6 +216,7 @@ class CalibrationPipeline:
             n_dig=n_dig,
             max_trials=max_trials,
             block_size=block_size,
+            output_frame=output_frame,
         )
         self.campaign_path = None if campaign_path is None else Path(campaign_path)
         self.resume_warnings: tuple[str, ...] = ()
