@@ -713,6 +713,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         "simulated truth at the test joints: (" + ", ".join(f"{v * 1e3:.4f}" for v in truth) + ") mm; "
         f"inside the 95 % intervals (x, y, z): {inside}"
     )
+    from robocal_uncertainty.report.table2 import format_seed_comparison
+
+    print()
+    print(format_seed_comparison(result))
     return 0
 
 
