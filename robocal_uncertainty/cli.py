@@ -646,7 +646,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
     trials = _trials(args.trials)
     if trials == "auto":
-        raise ConfigError("validate needs a fixed --trials (the adaptive procedure runs per fold in evaluate)")
+        raise ConfigError("validate needs a fixed number of --trials, not auto")
     if not 0.0 < args.coverage < 1.0:
         msg = f"--coverage must lie in (0, 1), got {args.coverage}"
         raise ConfigError(msg)

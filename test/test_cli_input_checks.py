@@ -170,3 +170,20 @@ def test_complete_campaign_has_no_warning(paper_campaign: Path, capsys: pytest.C
     capsys.readouterr()
     assert main(["calibrate", str(paper_campaign), "--robot", "paper_arm"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_truncated_campaign_warning_reaches_the_evaluate_report(
+    paper_campaign: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    chopped = tmp_path / "chopped.mcap"
+    chopped.write_bytes(paper_campaign.read_bytes()[:-2000])
+    joints = ["-7.5005", "-234.4840", "-106.7448", "-92.3875", "-61.5425", "20.7451"]
+    args = ["evaluate", str(chopped), "--robot", "paper_arm", "--test-joints", *joints, "--degrees"]
+    args += ["--trials", "300", "--no-budget", "--no-sweeps", "--no-progress", "--out", str(tmp_path / "r")]
+    assert main(args) == 0
+    assert "is truncated" in capsys.readouterr().err
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert any("is truncated" in w for w in report["warnings"])
+    assert "is truncated" in (tmp_path / "r" / "report.md").read_text()
