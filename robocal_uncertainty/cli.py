@@ -650,6 +650,12 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     if not 0.0 < args.coverage < 1.0:
         msg = f"--coverage must lie in (0, 1), got {args.coverage}"
         raise ConfigError(msg)
+    if args.frame != "measurement":
+        # Held-out measurements exist only in the campaign's frame; moving them into the base
+        # frame would use the uncertain identified base and bias the comparison.
+        raise ConfigError(
+            "validate compares with measurements, so it works in the measurement frame only (no --frame base)"
+        )
     campaign, model = _campaign_and_robot(args)
     settings = _uncertainty_settings(args, campaign, parse_sources(args.sources))
     splits = None

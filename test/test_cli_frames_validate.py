@@ -79,3 +79,9 @@ def test_evaluate_names_the_frame(tmp_path: Path, capsys) -> None:
     assert len(base) == 6 and all(p["standard_uncertainty"] > 0 for p in base.values())
     assert main([*common, "--frame", "base", "--out", str(tmp_path / "b")]) == 0
     assert "Positions in frame base_link (base frame" in capsys.readouterr().out
+
+
+def test_validate_refuses_the_base_frame(ur10_campaign: Path, capsys) -> None:
+    assert main(["validate", str(ur10_campaign), "--robot", "ur10", "--frame", "base"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "measurement frame only" in err[0]
