@@ -25,8 +25,8 @@ from rosbags.typesys.store import Typestore
 
 from robocal_uncertainty.bagio.ros_messages import DECODE_ERRORS, ros_typestore, stamp_parts
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import BagError, InputError
-from robocal_uncertainty.pipeline.sample import CalibrationSample
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, PoseUncertainty
 
 __all__ = [

@@ -3,31 +3,38 @@
 Imports numpy, scipy and PyYAML only; a test forbids any ROS import here.
 """
 
-from robocal_uncertainty.core.campaign import Campaign, PointFrame
-from robocal_uncertainty.core.identification import (
-    IdentificationResult,
-    fit_rigid_base,
-    identify,
-    residual_stats,
-)
-from robocal_uncertainty.core.joint_limits import check_joint_limits
-from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
-from robocal_uncertainty.core.observability import Observability, structural_observability
-from robocal_uncertainty.core.regularization import LCurve, lcurve
-from robocal_uncertainty.core.robot_config import load_robot_model, robot_model_from_dict
-from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
-from robocal_uncertainty.core.simulation import (
-    EncoderNoise,
-    ParameterErrorRanges,
-    SimulatedCampaign,
-    SimulationSettings,
-    TrackerNoise,
-    UnmodelledErrors,
-    simulate_campaign,
-    simulate_measurements,
-)
+from typing import TYPE_CHECKING
+
+from robocal_uncertainty._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.core.campaign import Campaign, PointFrame
+    from robocal_uncertainty.core.identification import (
+        IdentificationResult,
+        fit_rigid_base,
+        identify,
+        residual_stats,
+    )
+    from robocal_uncertainty.core.joint_limits import check_joint_limits
+    from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+    from robocal_uncertainty.core.observability import Observability, structural_observability
+    from robocal_uncertainty.core.regularization import LCurve, lcurve
+    from robocal_uncertainty.core.robot_config import load_robot_model, robot_model_from_dict
+    from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
+    from robocal_uncertainty.core.sample import CalibrationSample
+    from robocal_uncertainty.core.simulation import (
+        EncoderNoise,
+        ParameterErrorRanges,
+        SimulatedCampaign,
+        SimulationSettings,
+        TrackerNoise,
+        UnmodelledErrors,
+        simulate_campaign,
+        simulate_measurements,
+    )
 
 __all__ = [
+    "CalibrationSample",
     "Campaign",
     "EncoderNoise",
     "IdentificationResult",
@@ -54,3 +61,4 @@ __all__ = [
     "simulate_measurements",
     "structural_observability",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)

@@ -6,45 +6,50 @@
 ``coverage_region`` gives the JCGM 102 hyper-ellipsoidal region for vector outputs.
 """
 
-from robocal_uncertainty.montecarlo.distributions import (
-    Arcsine,
-    CorrelatedNormal,
-    CurvilinearTrapezoid,
-    Distribution,
-    Empirical,
-    Normal,
-    Rectangular,
-    StudentT,
-    Triangular,
-)
-from robocal_uncertainty.montecarlo.engine import (
-    AdaptiveReport,
-    AdaptiveSettings,
-    DistributionTrials,
-    ModelOutputError,
-    MonteCarloResult,
-    NonFinitePolicy,
-    ProgressCallback,
-    StagedTrialBlock,
-    TrialBlock,
-    TrialsResult,
-    block_rng,
-    monte_carlo,
-    run_trials,
-)
-from robocal_uncertainty.montecarlo.gum import GumOutput, GumResult, propagate_gum
-from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
-from robocal_uncertainty.montecarlo.summary import (
-    CoverageInterval,
-    Histogram,
-    IntervalKind,
-    MonteCarloIntervalKind,
-    OutputSummary,
-    Summary,
-    numerical_tolerance,
-    summarize,
-)
-from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
+from typing import TYPE_CHECKING
+
+from robocal_uncertainty._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.montecarlo.distributions import (
+        Arcsine,
+        CorrelatedNormal,
+        CurvilinearTrapezoid,
+        Distribution,
+        Empirical,
+        Normal,
+        Rectangular,
+        StudentT,
+        Triangular,
+    )
+    from robocal_uncertainty.montecarlo.engine import (
+        AdaptiveReport,
+        AdaptiveSettings,
+        DistributionTrials,
+        ModelOutputError,
+        MonteCarloResult,
+        NonFinitePolicy,
+        ProgressCallback,
+        StagedTrialBlock,
+        TrialBlock,
+        TrialsResult,
+        block_rng,
+        monte_carlo,
+        run_trials,
+    )
+    from robocal_uncertainty.montecarlo.gum import GumOutput, GumResult, propagate_gum
+    from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
+    from robocal_uncertainty.montecarlo.summary import (
+        CoverageInterval,
+        Histogram,
+        IntervalKind,
+        MonteCarloIntervalKind,
+        OutputSummary,
+        Summary,
+        numerical_tolerance,
+        summarize,
+    )
+    from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
 
 __all__ = [
     "AdaptiveReport",
@@ -85,3 +90,4 @@ __all__ = [
     "summarize",
     "validate_gum",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)

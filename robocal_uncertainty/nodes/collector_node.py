@@ -43,6 +43,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from robocal_uncertainty.bagio.messages import sample_to_msg
+from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.nodes.common import CauseLogger, campaign_file, load_model, run_node, stamp_ns, to_ros
@@ -51,7 +52,6 @@ from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos, sensor_qos
 from robocal_uncertainty.nodes.stream_merge import StreamMerger
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import CollectorSettings, StaticPoseCollector
-from robocal_uncertainty.pipeline.sample import CalibrationSample
 
 __all__ = ["PARAMETERS", "CollectorNode", "main"]
 

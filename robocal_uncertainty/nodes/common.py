@@ -28,9 +28,9 @@ from rclpy.node import Node
 from robocal_uncertainty.core import load_robot_model
 from robocal_uncertainty.core.robot_config import resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError, InputError
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
-from robocal_uncertainty.pipeline.sample import CalibrationSample
 
 __all__ = [
     "CauseLogger",

@@ -53,6 +53,7 @@ from std_msgs.msg import String
 
 from robocal_uncertainty.bagio.messages import msg_to_sample, uncertainty_to_msgs
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError, ConfigError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
@@ -75,7 +76,6 @@ from robocal_uncertainty.nodes.parameters import (
     declare_parameters,
 )
 from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
-from robocal_uncertainty.pipeline.sample import CalibrationSample
 from robocal_uncertainty.uncertainty import CalibrationUncertainty, UncertaintySettings, parse_sources
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]

@@ -4,20 +4,25 @@ Thin ROS 2 nodes wrap these objects; ``robocal-uncertainty replay`` drives them 
 Nothing here imports ROS.
 """
 
-from robocal_uncertainty.pipeline.calibration_pipeline import (
-    CalibrationPipeline,
-    EvaluationOptions,
-    evaluate_campaign,
-)
-from robocal_uncertainty.pipeline.collector import (
-    DROP_CAUSES,
-    CollectorSettings,
-    LogCallback,
-    StaticPoseCollector,
-    samples_to_campaign,
-)
-from robocal_uncertainty.pipeline.replay import ReplayResult, replay_bag
-from robocal_uncertainty.pipeline.sample import CalibrationSample
+from typing import TYPE_CHECKING
+
+from robocal_uncertainty._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.core.sample import CalibrationSample
+    from robocal_uncertainty.pipeline.calibration_pipeline import (
+        CalibrationPipeline,
+        EvaluationOptions,
+        evaluate_campaign,
+    )
+    from robocal_uncertainty.pipeline.collector import (
+        DROP_CAUSES,
+        CollectorSettings,
+        LogCallback,
+        StaticPoseCollector,
+        samples_to_campaign,
+    )
+    from robocal_uncertainty.pipeline.replay import ReplayResult, replay_bag
 
 __all__ = [
     "DROP_CAUSES",
@@ -32,3 +37,4 @@ __all__ = [
     "replay_bag",
     "samples_to_campaign",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)

@@ -26,8 +26,8 @@ from robocal_uncertainty.bagio.campaign_reader import READ_WARNINGS_KEY
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
-from robocal_uncertainty.pipeline.sample import CalibrationSample
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 

@@ -32,8 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.pipeline.sample import CalibrationSample
 
 __all__ = [
     "DROP_CAUSES",

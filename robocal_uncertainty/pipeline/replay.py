@@ -24,10 +24,10 @@ from robocal_uncertainty.bagio.rosbag2_dir import is_rosbag2_dir, read_rosbag2_d
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import BagError, CampaignError
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import CollectorSettings, LogCallback, StaticPoseCollector
-from robocal_uncertainty.pipeline.sample import CalibrationSample
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 

@@ -1,23 +1,28 @@
 """Monte Carlo uncertainty of a calibration: sources, batched re-identification, GUM check."""
 
-from robocal_uncertainty.uncertainty.calibration_mc import (
-    CalibrationTrials,
-    CalibrationUncertainty,
-    GumPose,
-    PoseUncertainty,
-    evaluate_uncertainty,
-)
-from robocal_uncertainty.uncertainty.reidentification import (
-    BatchProblem,
-    ChordSolver,
-    reidentify_batch,
-)
-from robocal_uncertainty.uncertainty.sources import (
-    SOURCE_DESCRIPTIONS,
-    SOURCES,
-    UncertaintySettings,
-    parse_sources,
-)
+from typing import TYPE_CHECKING
+
+from robocal_uncertainty._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.uncertainty.calibration_mc import (
+        CalibrationTrials,
+        CalibrationUncertainty,
+        GumPose,
+        PoseUncertainty,
+        evaluate_uncertainty,
+    )
+    from robocal_uncertainty.uncertainty.reidentification import (
+        BatchProblem,
+        ChordSolver,
+        reidentify_batch,
+    )
+    from robocal_uncertainty.uncertainty.sources import (
+        SOURCE_DESCRIPTIONS,
+        SOURCES,
+        UncertaintySettings,
+        parse_sources,
+    )
 
 __all__ = [
     "SOURCES",
@@ -33,3 +38,4 @@ __all__ = [
     "parse_sources",
     "reidentify_batch",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)
