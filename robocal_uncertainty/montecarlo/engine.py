@@ -25,15 +25,16 @@ import multiprocessing
 import warnings
 from collections import deque
 from collections.abc import Callable, Generator, Mapping, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import Distribution
+from robocal_uncertainty.montecarlo.executor import FutureLike, check_executor, executor_slots, open_executor
+from robocal_uncertainty.montecarlo.streaming import Moments, Reduction
 from robocal_uncertainty.montecarlo.summary import (
     MonteCarloIntervalKind,
     OutputSummary,
@@ -53,11 +54,13 @@ __all__ = [
     "MonteCarloResult",
     "NonFinitePolicy",
     "ProgressCallback",
+    "ReducedTrials",
     "StagedTrialBlock",
     "TrialBlock",
     "TrialsResult",
     "block_rng",
     "monte_carlo",
+    "reduce_trials",
     "resolve_inputs",
     "run_trials",
 ]
@@ -292,6 +295,46 @@ def _evaluate_chunk(
     return [_as_outputs("trial_block", trial_block(block_rng(seed, b), n), n) for b, n in zip(blocks, sizes)]
 
 
+@dataclass(frozen=True, eq=False)
+class _ReducedBlock:
+    """One block reduced on the worker: moments of its finite rows and its kept columns."""
+
+    n_rows: int
+    n_outputs: int
+    n_bad: int
+    moments: Moments | None  # None when no row is left (or the policy is to raise)
+    kept: NDArray[np.float64]
+
+
+def _reduce_chunk(
+    trial_block: TrialBlock | StagedTrialBlock,
+    seed: int,
+    first_block: int,
+    sizes: tuple[int, ...],
+    reduction: Reduction,
+    nonfinite: NonFinitePolicy,
+) -> list[_ReducedBlock]:
+    """:func:`_evaluate_chunk`, then each block reduced where it was evaluated."""
+    out = []
+    for values in _evaluate_chunk(trial_block, seed, first_block, sizes):
+        finite = np.isfinite(values).all(axis=1)
+        n_bad = int(values.shape[0] - finite.sum())
+        if n_bad and nonfinite == "raise":
+            out.append(_ReducedBlock(values.shape[0], values.shape[1], n_bad, None, np.zeros((0, reduction.keep.size))))
+            continue
+        good = values if not n_bad else values[finite]
+        if good.shape[0] == 0:
+            reduction.check(values.shape[1])
+            out.append(_ReducedBlock(values.shape[0], values.shape[1], n_bad, None, good[:, reduction.keep]))
+            continue
+        moments, kept = reduction.reduce(good)
+        out.append(_ReducedBlock(values.shape[0], values.shape[1], n_bad, moments, kept))
+    return out
+
+
+_ChunkTask = Callable[..., list[Any]]
+
+
 def _iter_blocks(
     trial_block: TrialBlock | StagedTrialBlock,
     seed: int,
@@ -300,8 +343,15 @@ def _iter_blocks(
     chunk_blocks: int,
     workers: int,
     mp_context: str | None,
-) -> Generator[NDArray[np.float64], None, None]:
-    """Yield each block's model values in block order, evaluating chunks lazily."""
+    executor: object | None = None,
+    task: tuple[_ChunkTask, tuple[Any, ...]] = (_evaluate_chunk, ()),
+) -> Generator[Any, None, None]:
+    """Yield each block's result in block order, evaluating chunks lazily.
+
+    ``task`` is the chunk function and its extra arguments after the chunk's sizes;
+    chunks run in this process, on ``workers`` local processes or on ``executor``.
+    """
+    function, extra = task
     chunks = (
         (
             start,
@@ -309,23 +359,27 @@ def _iter_blocks(
         )
         for start in range(0, n_blocks, chunk_blocks)
     )
-    if workers == 1:
-        for start, chunk in chunks:
-            yield from _evaluate_chunk(trial_block, seed, start, chunk)
-        return
-    context = None if mp_context is None else multiprocessing.get_context(mp_context)
-    executor = ProcessPoolExecutor(max_workers=workers, mp_context=context)
-    pending: deque[Future[list[NDArray[np.float64]]]] = deque()
-    try:
-        # A bounded look-ahead keeps memory flat and lets an adaptive run stop early.
-        for start, chunk in chunks:
-            pending.append(executor.submit(_evaluate_chunk, trial_block, seed, start, chunk))
-            if len(pending) >= 2 * workers:
+    with open_executor(workers=workers, executor=executor, mp_context=mp_context) as runner:
+        if runner is None:
+            for start, chunk in chunks:
+                yield from function(trial_block, seed, start, chunk, *extra)
+            return
+        window = 2 * executor_slots(runner)
+        pending: deque[FutureLike] = deque()
+        try:
+            # A bounded look-ahead keeps memory flat and lets an adaptive run stop early.
+            for start, chunk in chunks:
+                pending.append(runner.submit(function, trial_block, seed, start, chunk, *extra))
+                if len(pending) >= window:
+                    yield from pending.popleft().result()
+            while pending:
                 yield from pending.popleft().result()
-        while pending:
-            yield from pending.popleft().result()
-    finally:
-        executor.shutdown(wait=True, cancel_futures=True)
+        finally:
+            # An executor owned by the caller keeps running: drop what is still queued.
+            for future in pending:
+                cancel = getattr(future, "cancel", None)
+                if callable(cancel):
+                    cancel()
 
 
 class _Collector:
@@ -364,6 +418,20 @@ def _check_common(seed: int, block_size: int, chunk_blocks: int, workers: int, n
     if nonfinite not in ("raise", "drop"):
         msg = f"nonfinite must be 'raise' or 'drop', got {nonfinite!r}"
         raise ConfigError(msg)
+
+
+def _check_runner(trial_block: object, workers: int, executor: object | None, mp_context: str | None) -> None:
+    if not callable(trial_block) and not isinstance(trial_block, StagedTrialBlock):
+        msg = f"trial_block must be callable or have draw/evaluate, got {type(trial_block)}"
+        raise ConfigError(msg)
+    if mp_context is not None and mp_context not in multiprocessing.get_all_start_methods():
+        msg = f"mp_context must be one of {multiprocessing.get_all_start_methods()}, got {mp_context!r}"
+        raise ConfigError(msg)
+    if executor is not None:
+        if workers > 1:
+            msg = f"give either an executor or workers > 1, not both (workers={workers})"
+            raise ConfigError(msg)
+        check_executor(executor)
 
 
 def _sequence_stats(
@@ -413,6 +481,7 @@ def run_trials(
     progress: ProgressCallback | None = None,
     nonfinite: NonFinitePolicy = "raise",
     mp_context: str | None = None,
+    executor: object | None = None,
 ) -> TrialsResult:
     """Evaluate Monte Carlo trials block by block, reproducibly (see module docstring).
 
@@ -434,29 +503,33 @@ def run_trials(
         Blocks per task (and per vectorised ``evaluate`` of a staged block): a
         memory/overhead knob that never changes the result.
     workers : int
-        Processes (1 = in this process); never changes the result.
+        Local processes (1 = in this process); never changes the result.
     progress : callable, optional
         ``progress(trials_done, trials_target_or_None)`` after each chunk.
     nonfinite : {"raise", "drop"}
         Policy for NaN/inf model values (see :data:`NonFinitePolicy`).
     mp_context : str, optional
         Multiprocessing start method for the workers; None is the platform default.
+    executor : object, optional
+        Where chunks run instead of ``workers`` local processes: anything with
+        ``submit(fn, *args)`` returning a future with ``result()``
+        (``concurrent.futures`` executors, ``dask.distributed.Client``; see
+        :mod:`.executor`). Owned by the caller, left running; never changes the result.
 
     Returns
     -------
     TrialsResult
         Model values (n_trials, n_out) and run metadata.
+
+    See Also
+    --------
+    reduce_trials : the same trials reduced block by block, for many outputs.
     """
     _check_common(seed, block_size, chunk_blocks, workers, nonfinite)
     if (n_trials is None) == (adaptive is None):
         msg = "give exactly one of n_trials and adaptive, got " + ("both" if adaptive is not None else "neither")
         raise ConfigError(msg)
-    if not callable(trial_block) and not isinstance(trial_block, StagedTrialBlock):
-        msg = f"trial_block must be callable or have draw/evaluate, got {type(trial_block)}"
-        raise ConfigError(msg)
-    if mp_context is not None and mp_context not in multiprocessing.get_all_start_methods():
-        msg = f"mp_context must be one of {multiprocessing.get_all_start_methods()}, got {mp_context!r}"
-        raise ConfigError(msg)
+    _check_runner(trial_block, workers, executor, mp_context)
     collector = _Collector(nonfinite)
     if adaptive is None:
         total = _check_int("n_trials", n_trials, 1)
@@ -471,6 +544,7 @@ def run_trials(
             chunk_blocks,
             workers,
             mp_context,
+            executor,
         )
         done = 0
         try:
@@ -495,6 +569,7 @@ def run_trials(
         progress,
         collector,
         mp_context,
+        executor,
     )
 
 
@@ -517,6 +592,7 @@ def _run_adaptive(
     progress: ProgressCallback | None,
     collector: _Collector,
     mp_context: str | None,
+    executor: object | None,
 ) -> TrialsResult:
     """JCGM 101 §7.9.4 steps: sequences of M trials until 2s <= δ everywhere."""
     blocks_per_sequence = math.ceil(settings.target_sequence / block_size)
@@ -534,6 +610,7 @@ def _run_adaptive(
         chunk_blocks,
         workers,
         mp_context,
+        executor,
     )
     sequences: list[NDArray[np.float64]] = []
     moments: list[NDArray[np.float64]] = []
@@ -592,6 +669,171 @@ def _run_adaptive(
         collector.n_dropped,
         report,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class ReducedTrials:
+    """Trials of a :func:`reduce_trials` call: moments of every output, values of a few.
+
+    Attributes
+    ----------
+    moments : Moments
+        Count, mean, variance terms and group co-moments of all n_out outputs, combined
+        over blocks in block order.
+    kept_columns : ndarray of int, shape (n_keep,)
+        Output columns whose model values are kept.
+    kept : ndarray, shape (n_trials - n_dropped, n_keep)
+        Their model values in block order (read-only), in the outputs' units.
+    n_trials : int
+        Trials evaluated.
+    seed : int
+        Root seed of the block generators.
+    block_size : int
+        Trials per block (the last block may be shorter).
+    n_blocks : int
+        Blocks evaluated.
+    n_dropped : int
+        Trials discarded for non-finite outputs (``nonfinite="drop"``), else 0.
+    """
+
+    moments: Moments
+    kept_columns: NDArray[np.intp]
+    kept: NDArray[np.float64]
+    n_trials: int
+    seed: int
+    block_size: int
+    n_blocks: int
+    n_dropped: int
+
+    @property
+    def n_outputs(self) -> int:
+        """Number of output components of the model."""
+        return int(self.moments.mean.shape[0])
+
+    def summary(
+        self,
+        coverage: float = 0.95,
+        *,
+        bins: int | str = 100,
+        expanded_from: MonteCarloIntervalKind = "probabilistically_symmetric",
+    ) -> Summary:
+        """JCGM 101 :func:`summarize` of the kept columns (in ``kept_columns`` order)."""
+        return summarize(self.kept, coverage, bins=bins, expanded_from=expanded_from)
+
+
+def _combine_reduced(
+    blocks: Generator[_ReducedBlock, None, None],
+    reduction: Reduction,
+    policy: NonFinitePolicy,
+    total: int,
+    progress: ProgressCallback | None,
+    chunk_blocks: int,
+    n_blocks: int,
+) -> tuple[Moments | None, list[NDArray[np.float64]], int]:
+    moments: Moments | None = None
+    kept: list[NDArray[np.float64]] = []
+    n_outputs: int | None = None
+    n_dropped = done = 0
+    for b, block in enumerate(blocks):
+        if n_outputs is None:
+            n_outputs = block.n_outputs
+        elif block.n_outputs != n_outputs:
+            msg = f"model output of block {b} has {block.n_outputs} components, earlier blocks had {n_outputs}"
+            raise ModelOutputError(msg)
+        if block.n_bad and policy == "raise":
+            msg = (
+                f"model returned non-finite values in {block.n_bad} of {block.n_rows} trials of "
+                f"block {b}; they must not be averaged (use nonfinite='drop' to discard)"
+            )
+            raise ModelOutputError(msg)
+        n_dropped += block.n_bad
+        if block.moments is not None:
+            # Fixed left-to-right order: the rounding never depends on who computed what.
+            moments = block.moments if moments is None else moments.combine(block.moments)
+            kept.append(block.kept)
+        done += block.n_rows
+        if progress is not None and ((b + 1) % chunk_blocks == 0 or b == n_blocks - 1):
+            progress(done, total)
+    return moments, kept, n_dropped
+
+
+def reduce_trials(
+    trial_block: TrialBlock | StagedTrialBlock,
+    reduction: Reduction,
+    *,
+    seed: int,
+    n_trials: int,
+    block_size: int = DEFAULT_BLOCK_SIZE,
+    chunk_blocks: int = 1,
+    workers: int = 1,
+    executor: object | None = None,
+    progress: ProgressCallback | None = None,
+    nonfinite: NonFinitePolicy = "raise",
+    mp_context: str | None = None,
+) -> ReducedTrials:
+    """Run trials like :func:`run_trials`, reducing each block where it is evaluated.
+
+    The driver holds the running moments of all outputs and the model values of
+    ``reduction.keep`` only, so its memory does not grow with n_trials x n_out. The
+    blocks and their generators are those of :func:`run_trials` with the same arguments,
+    and the moments are combined in block order, so the result is bit-identical whatever
+    ``workers``, ``executor`` and ``chunk_blocks`` are; ``kept`` equals the same columns
+    of ``run_trials(...).samples`` exactly, and the moments equal the mean and covariance
+    of those samples to rounding.
+
+    Parameters
+    ----------
+    trial_block : callable or StagedTrialBlock
+        As for :func:`run_trials`.
+    reduction : Reduction
+        Co-moment groups and kept columns.
+    seed, n_trials, block_size, chunk_blocks, workers, executor, progress, nonfinite, mp_context
+        As for :func:`run_trials` (a fixed number of trials only).
+
+    Returns
+    -------
+    ReducedTrials
+
+    Raises
+    ------
+    ConfigError
+        Bad settings, or reduction columns beyond the model's outputs.
+    ModelOutputError
+        Wrong output shapes, non-finite values under ``nonfinite="raise"``, or every
+        trial dropped.
+    """
+    _check_common(seed, block_size, chunk_blocks, workers, nonfinite)
+    _check_runner(trial_block, workers, executor, mp_context)
+    if not isinstance(reduction, Reduction):
+        msg = f"reduction must be a Reduction, got {type(reduction).__name__}"
+        raise ConfigError(msg)
+    total = _check_int("n_trials", n_trials, 1)
+    n_blocks = math.ceil(total / block_size)
+    last = total - (n_blocks - 1) * block_size
+    stream = _iter_blocks(
+        trial_block,
+        seed,
+        lambda b: last if b == n_blocks - 1 else block_size,
+        n_blocks,
+        chunk_blocks,
+        workers,
+        mp_context,
+        executor,
+        (_reduce_chunk, (reduction, nonfinite)),
+    )
+    try:
+        moments, kept, n_dropped = _combine_reduced(
+            stream, reduction, nonfinite, total, progress, chunk_blocks, n_blocks
+        )
+    finally:
+        stream.close()
+    if moments is None:
+        msg = f"all {total} trials had non-finite model values"
+        raise ModelOutputError(msg)
+    _warn_dropped(n_dropped, total)
+    samples = np.concatenate(kept)
+    samples.setflags(write=False)
+    return ReducedTrials(moments, reduction.keep, samples, total, seed, block_size, n_blocks, n_dropped)
 
 
 @dataclass(frozen=True)
@@ -718,6 +960,7 @@ def monte_carlo(
     expanded_from: MonteCarloIntervalKind = "probabilistically_symmetric",
     nonfinite: NonFinitePolicy = "raise",
     mp_context: str | None = None,
+    executor: object | None = None,
 ) -> MonteCarloResult:
     """Propagate input distributions through a vectorised model (JCGM 101 §7).
 
@@ -737,7 +980,7 @@ def monte_carlo(
         JCGM 101 §7.9 adaptive procedure; its coverage must equal ``coverage``.
     coverage : float
         Coverage probability p.
-    block_size, chunk_blocks, workers, progress, nonfinite, mp_context
+    block_size, chunk_blocks, workers, progress, nonfinite, mp_context, executor
         As for :func:`run_trials`.
     keep_samples : bool
         Keep the raw model values in the result.
@@ -771,6 +1014,7 @@ def monte_carlo(
         progress=progress,
         nonfinite=nonfinite,
         mp_context=mp_context,
+        executor=executor,
     )
     summary = run.summary(p, bins=bins, expanded_from=expanded_from)
     return MonteCarloResult(
