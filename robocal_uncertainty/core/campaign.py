@@ -1,4 +1,8 @@
-"""The measurement campaign: joint readings paired with tracker points, one pair per pose."""
+"""The measurement campaign: joint readings paired with measured values, one pair per pose.
+
+The values are tracker points by default; the campaign's ``measurement`` type says what they
+are (see :mod:`robocal_uncertainty.core.measurement`).
+"""
 
 from __future__ import annotations
 
@@ -8,6 +12,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal_uncertainty.core.measurement import POINT, MeasurementType
 from robocal_uncertainty.errors import InputError
 
 __all__ = ["Campaign", "PointFrame"]
@@ -35,7 +40,7 @@ def _finite_array(name: str, value: object, shape: tuple[int | None, ...]) -> ND
 
 @dataclass(frozen=True)
 class Campaign:
-    """Joint readings and measured tool points of one calibration campaign.
+    """Joint readings and measured values (tool points by default) of one calibration campaign.
 
     Parameters
     ----------
@@ -43,18 +48,22 @@ class Campaign:
         Names of the joints in the order of the columns of `joint_positions`.
     joint_positions : ndarray, shape (n_poses, n_joints) [rad]
         Joint readings (encoder values) at each measured pose.
-    points : ndarray, shape (n_poses, 3) [m]
-        Measured tool point at each pose, in the frame named by `frame`.
+    points : ndarray, shape (n_poses, measurement.value_size) [m for points]
+        Measured value at each pose (the tool point for the default point measurement), in
+        the frame named by `frame`.
     frame : {"base", "tracker"}
         Whether `points` are in the robot base frame or in the tracker frame.
     frame_id : str
         Name of the frame of `points` (``header.frame_id`` in bags).
-    point_std : ndarray, shape (n_poses, 3) [m], optional
-        Standard deviation of each measured coordinate, when the instrument reports one.
+    point_std : ndarray, shape (n_poses, measurement.dimension) [m for points], optional
+        Standard deviation of each measured component, when the instrument reports one.
     stamps_ns : ndarray of int64, shape (n_poses,), optional
         Acquisition time of each pose (ns since the epoch).
     metadata : dict
         Free-form provenance (source file, simulator seed, ...). JSON-serialisable.
+    measurement : MeasurementType
+        What `points` hold and how they enter the identification; unweighted tool points
+        (:data:`~robocal_uncertainty.core.measurement.POINT`) by default.
     """
 
     joint_names: tuple[str, ...]
@@ -65,6 +74,7 @@ class Campaign:
     point_std: NDArray[np.float64] | None = None
     stamps_ns: NDArray[np.int64] | None = None
     metadata: dict[str, object] = field(default_factory=dict)
+    measurement: MeasurementType = POINT
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
@@ -77,12 +87,16 @@ class Campaign:
         if n == 0:
             raise InputError("campaign has no poses")
         object.__setattr__(self, "joint_positions", q)
-        object.__setattr__(self, "points", _finite_array("points", self.points, (n, 3)))
+        if not isinstance(self.measurement, MeasurementType):
+            msg = f"measurement must be a MeasurementType, got {type(self.measurement).__name__}"
+            raise InputError(msg)
+        size, dim = self.measurement.value_size, self.measurement.dimension
+        object.__setattr__(self, "points", _finite_array("points", self.points, (n, size)))
         if self.frame not in ("base", "tracker"):
             msg = f"frame must be 'base' or 'tracker', got {self.frame!r}"
             raise InputError(msg)
         if self.point_std is not None:
-            std = _finite_array("point_std", self.point_std, (n, 3))
+            std = _finite_array("point_std", self.point_std, (n, dim))
             if (std < 0).any():
                 raise InputError("point_std must be non-negative")
             object.__setattr__(self, "point_std", std)
@@ -111,6 +125,7 @@ class Campaign:
             point_std=None if self.point_std is None else self.point_std[idx],
             stamps_ns=None if self.stamps_ns is None else self.stamps_ns[idx],
             metadata=dict(self.metadata),
+            measurement=self.measurement,
         )
 
     def reorder_joints(self, joint_names: tuple[str, ...]) -> Campaign:
@@ -141,4 +156,5 @@ class Campaign:
             point_std=self.point_std,
             stamps_ns=self.stamps_ns,
             metadata=dict(self.metadata),
+            measurement=self.measurement,
         )

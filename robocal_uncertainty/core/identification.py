@@ -1,6 +1,8 @@
 """Identification of kinematic parameter errors by regularised Gauss-Newton.
 
-Each iteration linearises the measured points around the current estimate and takes the
+Each iteration linearises the measurements (points by default; any
+:class:`~robocal_uncertainty.core.measurement.MeasurementType`, whitened by its weights) around
+the current estimate and takes the
 seed's Tikhonov step ``E = (U^T U + Gamma^T Gamma)^-1 U^T dS`` with ``Gamma = lambda I`` on a
 column-scaled Jacobian (metres and radians do not mix unscaled). The penalty acts on the
 whole deviation from the nominal model, so the iteration converges to the minimiser of
@@ -19,7 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.campaign import Campaign
-from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.measurement import POINT, MeasurementType, stack_equations, stack_jacobian, stack_residual
 from robocal_uncertainty.core.observability import structural_observability
 from robocal_uncertainty.core.regularization import LCurve, lcurve
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_from_matrix
@@ -60,9 +63,10 @@ class IdentificationResult:
     estimated : ndarray of bool, shape (n_params,)
         Parameters that were estimated (identifiable candidates).
     identifiable : ndarray of bool, shape (n_params,)
-        Candidates that position data can identify; same as ``estimated``.
+        Candidates that the campaign's measurements can identify; same as ``estimated``.
     candidates : ndarray of bool, shape (n_params,)
-        Parameters that were asked for (the base only when points are in a tracker frame).
+        Parameters that were asked for (the base only when measurements are in a tracker
+        frame).
     dependencies : tuple of str
         Why each candidate is not identifiable (the combination it duplicates).
     linearized_std : ndarray, shape (n_params,) [m, rad]
@@ -78,10 +82,11 @@ class IdentificationResult:
     singular_values : ndarray, shape (n_estimated,) [m]
         Of the scaled Jacobian at the solution.
     condition_number : float
-    residuals : ndarray, shape (n_poses, 3) [m]
-        Measured minus predicted points after calibration.
-    rms_before, max_before, rms_after, max_after : float [m]
-        RMS and maximum of the 3-D point error before (nominal model) and after.
+    residuals : ndarray, shape (n_poses, measurement.dimension) [m for points]
+        Measured minus predicted (``measurement.residual``) after calibration, unweighted.
+    rms_before, max_before, rms_after, max_after : float [m for points]
+        RMS and maximum over the poses of the norm of the residual (the 3-D point error)
+        before (nominal model) and after.
     iterations : int
     penalized : ndarray of bool, shape (n_params,)
         Estimated parameters whose deviation from the start the Tikhonov term penalises
@@ -94,6 +99,8 @@ class IdentificationResult:
         Key of :data:`IDENTIFICATION_MESSAGES`.
     message : str
     warnings : tuple of str
+    measurement : MeasurementType
+        The campaign's measurement type (what `residuals` are).
     """
 
     model: RobotModel
@@ -125,6 +132,7 @@ class IdentificationResult:
     penalized: NDArray[np.bool_]
     effective_parameters: float
     warnings: tuple[str, ...] = field(default=())
+    measurement: MeasurementType = POINT
 
     @property
     def success(self) -> bool:
@@ -133,15 +141,15 @@ class IdentificationResult:
 
 
 def residual_stats(residuals: Array) -> tuple[float, float]:
-    """RMS and maximum of the 3-D point errors.
+    """RMS and maximum over the poses of the residual norm (the 3-D error of a point).
 
     Parameters
     ----------
-    residuals : ndarray, shape (n_poses, 3) [m]
+    residuals : ndarray, shape (n_poses, dimension) [m for points]
 
     Returns
     -------
-    (rms, max) : tuple of float [m]
+    (rms, max) : tuple of float [m for points]
     """
     norms = np.linalg.norm(residuals, axis=-1)
     return float(np.sqrt(np.mean(norms**2))), float(norms.max())
@@ -249,6 +257,7 @@ def _objective(residual: Array, x: Array, penalized: NDArray[np.bool_], lam: flo
 
 def _gauss_newton(
     layout: ParameterLayout,
+    measurement: MeasurementType,
     p0: Array,
     est: NDArray[np.intp],
     scale: Array,
@@ -267,13 +276,13 @@ def _gauss_newton(
     once the relative step falls below 1e-6 (or after half the iterations) it is frozen, so
     the last iterations minimise one fixed objective and the stopping test is meaningful.
     """
-    n_eq = measured.size
 
     def state(x: Array) -> tuple[Array, Array, Array]:
         p = p0.copy()
         p[est] += x / scale
-        pred, jac = forward_points_and_jacobian(layout, p, q)
-        return p, (measured - pred).reshape(n_eq), jac.reshape(n_eq, layout.size)[:, est] / scale
+        pred, jac = measurement.predict_and_jacobian(layout, p, q)
+        r, a_mat = stack_equations(measurement, measurement.residual(measured, pred), jac, est)
+        return p, r, a_mat / scale
 
     x = x_start.copy()
     p, r, a_mat = state(x)
@@ -325,12 +334,14 @@ def identify(
     model : RobotModel
         Nominal model.
     campaign : Campaign
-        Joint readings [rad] and measured points [m]. When ``campaign.frame == "base"``
-        the base transform is the identity and not estimated; when ``"tracker"`` the
-        six base parameters are estimated too. The base then starts from whichever of the
-        model's base (when the model says it is known) and a rigid fit of the nominal
-        predictions to the points fits the data better, and it is not regularised: it is
-        the pose of the tracker, about which the nominal model says nothing.
+        Joint readings [rad] and measured values (points [m] by default; what
+        ``campaign.measurement`` says). When ``campaign.frame == "base"`` the base transform
+        is the identity and not estimated; when ``"tracker"`` the six base parameters are
+        estimated too. The base then starts from whichever of the model's base (when the
+        model says it is known) and a rigid fit of the nominal predictions to the measured
+        positions fits the data better (the model's base alone when the measurements hold no
+        3-D positions), and it is not regularised: it is the pose of the tracker, about which
+        the nominal model says nothing.
     lambda_ : {"auto", "gcv"} or float
         ``"auto"``: L-curve corner; ``"gcv"``: generalised cross-validation; a number:
         fixed lambda in the column-scaled units (dimensionless per unit column norm).
@@ -362,6 +373,7 @@ def identify(
         msg = f"max_iterations must be a positive integer, got {max_iterations!r}"
         raise ConfigError(msg)
     layout = model.layout
+    measurement = campaign.measurement
     q = campaign.joint_positions
     measured = campaign.points
     p0 = model.parameter_vector()
@@ -373,21 +385,22 @@ def identify(
         candidates[b0 : b0 + 6] = False
         base_init = "identity"
     else:
-        p0, base_init = _initial_base(model, p0, q, measured)
+        p0, base_init = _initial_base(model, measurement, p0, q, measured)
 
-    obs = structural_observability(model, p0, candidates)
+    obs = structural_observability(model, p0, candidates, measurement=measurement)
     est = np.flatnonzero(obs.identifiable)
-    n_eq = 3 * campaign.n_poses
+    dim = measurement.dimension
+    n_eq = dim * campaign.n_poses
     if n_eq < est.size:
         msg = (
             f"too few poses: {campaign.n_poses} poses give {n_eq} equations for "
-            f"{est.size} identifiable parameters (need at least {int(np.ceil(est.size / 3))} poses)"
+            f"{est.size} identifiable parameters (need at least {int(np.ceil(est.size / dim))} poses)"
         )
         raise IdentifiabilityError(msg)
     penalized = est < b0  # the base (last six parameters) is never regularised
 
-    pred0, jac0 = forward_points_and_jacobian(layout, p0, q)
-    jac0 = jac0.reshape(n_eq, layout.size)[:, est]
+    pred0, jac0_poses = measurement.predict_and_jacobian(layout, p0, q)
+    jac0 = stack_jacobian(measurement, jac0_poses, est)
     scale = np.linalg.norm(jac0, axis=0)
     _, s0, vt0 = np.linalg.svd(jac0 / scale, full_matrices=False)
     if s0[-1] <= _DEGENERATE_RCOND * s0[0]:
@@ -398,11 +411,12 @@ def identify(
             f"(vary the joints more; weakest direction involves {weak})"
         )
         raise IdentifiabilityError(msg)
-    rms_before, max_before = residual_stats(measured - pred0)
+    rms_before, max_before = residual_stats(measurement.residual(measured, pred0))
 
     solve = partial(
         _gauss_newton,
         layout,
+        measurement,
         p0,
         est,
         scale,
@@ -419,22 +433,23 @@ def identify(
     if solution.status != 0 and campaign.frame != "base":
         # Restart once with the base re-fitted rigidly to the current kinematic estimate:
         # a poor start of the base is the usual reason for a slow or wandering iteration.
-        restarts = 1
         p_kin = solution.params.copy()
         p_kin[b0 : b0 + 6] = 0.0
-        xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), measured)
-        x_restart = solution.x.copy()
-        base_cols = ~penalized
-        x_restart[base_cols] = (np.concatenate((xyz, rpy)) - p0[b0 : b0 + 6])[est[base_cols] - b0] * scale[base_cols]
-        second = solve(x_restart)
-        if second.status == 0 or _final_rms(layout, second.params, q, measured) < _final_rms(
-            layout, solution.params, q, measured
-        ):
-            solution = second
+        base = _rigid_base(layout, measurement, p_kin, q, measured)
+        if base is not None:
+            restarts = 1
+            x_restart = solution.x.copy()
+            base_cols = ~penalized
+            x_restart[base_cols] = (base - p0[b0 : b0 + 6])[est[base_cols] - b0] * scale[base_cols]
+            second = solve(x_restart)
+            if second.status == 0 or _final_rms(layout, measurement, second.params, q, measured) < _final_rms(
+                layout, measurement, solution.params, q, measured
+            ):
+                solution = second
     status, lam, p, curve = solution.status, solution.lam, solution.params, solution.curve
 
-    pred, jac = forward_points_and_jacobian(layout, p, q)
-    residuals = measured - pred
+    pred, jac = measurement.predict_and_jacobian(layout, p, q)
+    residuals = measurement.residual(measured, pred)
     rms_after, max_after = residual_stats(residuals)
     if status != 0 and not accept_unconverged:
         msg = (
@@ -444,14 +459,15 @@ def identify(
             "and the robot model, or accept it explicitly (--accept-unconverged)"
         )
         raise ConvergenceError(msg)
-    a_mat = jac.reshape(n_eq, layout.size)[:, est] / scale
+    whitened, a_mat = stack_equations(measurement, residuals, jac, est)
+    a_mat = a_mat / scale
     s_final = np.linalg.svd(a_mat, compute_uv=False)
     # First-order covariance of the Tikhonov estimate with residual-scatter noise.
     ata = a_mat.T @ a_mat
     reg = lam**2 * np.diag(penalized.astype(np.float64))
     inv = np.linalg.inv(ata + reg)
     dof_used = float(np.trace(inv @ ata))
-    sigma2 = float(np.sum(residuals**2)) / max(n_eq - dof_used, 1.0)
+    sigma2 = float(np.sum(whitened**2)) / max(n_eq - dof_used, 1.0)
     cov_x = sigma2 * inv @ ata @ inv
     std = np.full(layout.size, np.nan)
     std[est] = np.sqrt(np.diag(cov_x)) / scale
@@ -497,26 +513,46 @@ def identify(
         penalized=full_penalized,
         effective_parameters=dof_used,
         warnings=tuple(warns),
+        measurement=measurement,
     )
 
 
-def _final_rms(layout: ParameterLayout, params: Array, q: Array, measured: Array) -> float:
-    return residual_stats(measured - forward_points(layout, params, q))[0]
+def _final_rms(
+    layout: ParameterLayout, measurement: MeasurementType, params: Array, q: Array, measured: Array
+) -> float:
+    """RMS of the whitened residual norms: the comparison the objective makes."""
+    residual = measurement.residual(measured, measurement.predict(layout, params, q))
+    return residual_stats(stack_residual(measurement, residual).reshape(residual.shape))[0]
+
+
+def _rigid_base(
+    layout: ParameterLayout, measurement: MeasurementType, p_kin: Array, q: Array, measured: Array
+) -> Array | None:
+    """Base ``(x, y, z, roll, pitch, yaw)`` [m, rad] rigidly fitted to the measured positions.
+
+    `p_kin` has the base set to the identity. None when the measurements hold no 3-D positions.
+    """
+    positions = measurement.positions(measured)
+    if positions is None:
+        return None
+    xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), positions)
+    return np.concatenate((xyz, rpy))
 
 
 def _initial_base(
-    model: RobotModel, p0: Array, q: Array, measured: Array
+    model: RobotModel, measurement: MeasurementType, p0: Array, q: Array, measured: Array
 ) -> tuple[Array, Literal["nominal", "rigid_fit"]]:
     """Start the base at the model's (when known) or a rigid fit, whichever fits better."""
     layout = model.layout
     b0 = layout.base_index
     p_fit = p0.copy()
     p_fit[b0 : b0 + 6] = 0.0
-    xyz, rpy = fit_rigid_base(forward_points(layout, p_fit, q), measured)
-    p_fit[b0 : b0 + 3] = xyz
-    p_fit[b0 + 3 : b0 + 6] = rpy
+    base = _rigid_base(layout, measurement, p_fit, q, measured)
+    if base is None:
+        return p0, "nominal"
+    p_fit[b0 : b0 + 6] = base
     if not model.base_known:
         return p_fit, "rigid_fit"
-    if _final_rms(layout, p0, q, measured) <= _final_rms(layout, p_fit, q, measured):
+    if _final_rms(layout, measurement, p0, q, measured) <= _final_rms(layout, measurement, p_fit, q, measured):
         return p0, "nominal"
     return p_fit, "rigid_fit"

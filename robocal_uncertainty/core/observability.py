@@ -1,9 +1,10 @@
-"""Which parameters position-only measurements can identify, and which pose sets fail.
+"""Which parameters a campaign's measurements can identify, and which pose sets fail.
 
-Some parameter combinations move the measured point identically for every pose (joint-1
-offset and base yaw, d1 and base z, joint-6 offset and the tool point, the d of parallel
-axes). They are structurally not identifiable: fixing one of each dependent group at its
-nominal value loses nothing. They are found once per model on a rich random pose set, by a
+With position-only measurements (points, the default measurement type) some parameter
+combinations move the measured point identically for every pose (joint-1 offset and base yaw,
+d1 and base z, joint-6 offset and the tool point, the d of parallel axes). They are
+structurally not identifiable: fixing one of each dependent group at its nominal value loses
+nothing. They are found once per model on a rich random pose set, by a
 greedy rank test in a fixed order of preference (base, tool, then joints in order), so the
 choice is deterministic and matches common practice (keep the base yaw, drop theta1).
 """
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
+from robocal_uncertainty.core.measurement import POINT, MeasurementType, stack_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
 
 __all__ = ["Observability", "structural_observability"]
@@ -33,7 +34,7 @@ class Observability:
     candidates : ndarray of bool, shape (n_params,)
         Parameters one asked to estimate.
     identifiable : ndarray of bool, shape (n_params,)
-        Candidates that position data can identify (a maximal independent set).
+        Candidates that the measurements can identify (a maximal independent set).
     dependencies : tuple of str
         For each candidate left out, the combination of kept parameters it duplicates,
         e.g. ``"joint1.d = 1 * base.z"``.
@@ -52,7 +53,11 @@ def _probe_poses(model: RobotModel) -> NDArray[np.float64]:
 
 
 def structural_observability(
-    model: RobotModel, params: NDArray[np.float64], candidates: NDArray[np.bool_]
+    model: RobotModel,
+    params: NDArray[np.float64],
+    candidates: NDArray[np.bool_],
+    *,
+    measurement: MeasurementType = POINT,
 ) -> Observability:
     """Find a maximal identifiable subset of the candidate parameters.
 
@@ -64,10 +69,14 @@ def structural_observability(
         Linearisation point (nominal or current estimate).
     candidates : ndarray of bool, shape (n_params,)
         Which parameters one wants to estimate.
+    measurement : MeasurementType
+        What each pose measures (points by default); its equations, whitened by its weights,
+        are the rows of the rank test.
     """
     layout = model.layout
-    _, jac = forward_points_and_jacobian(layout, params, _probe_poses(model))
-    jac = jac.reshape(-1, layout.size)
+    probe = _probe_poses(model)
+    _, jac_poses = measurement.predict_and_jacobian(layout, params, probe)
+    jac = stack_jacobian(measurement, jac_poses)
     norms = np.linalg.norm(jac, axis=0)
     # Exact zeros come out as round-off; anything 1e-9 below the largest column is no motion.
     norms = np.where(norms > 1e-9 * norms.max(), norms, 0.0)
@@ -96,7 +105,7 @@ def structural_observability(
     deps = []
     for k in sorted(dropped):
         if norms[k] == 0.0:
-            deps.append(f"{names[k]} does not move the measured point")
+            deps.append(f"{names[k]} does not move the {measurement.quantity}")
             continue
         coef, *_ = np.linalg.lstsq(jac[:, kept], jac[:, k], rcond=None)
         big = np.argsort(-np.abs(coef))
