@@ -24,6 +24,8 @@ __all__ = [
     "CurvilinearTrapezoid",
     "Distribution",
     "Empirical",
+    "IndependentCopies",
+    "IndependentRectangular",
     "Normal",
     "Rectangular",
     "StudentT",
@@ -490,3 +492,103 @@ class Empirical:
         """Draw ``n`` rows with replacement: shape (n,) or (n, k)."""
         index = rng.integers(0, self.samples.shape[0], _check_n(n))
         return self.samples[index]
+
+
+@dataclass(frozen=True, eq=False)
+class IndependentRectangular:
+    """Independent rectangular components R(centre_i - a_i, centre_i + a_i), as a vector.
+
+    A laser tracker's MPE a + b L gives every measured coordinate its own half-width, so
+    one vector input with per-component half-widths replaces thousands of scalar inputs.
+
+    Parameters
+    ----------
+    half_widths : array_like, shape (k,)
+        Half-widths a_i >= 0, in the quantities' units (0 makes a component constant).
+    centres : array_like, shape (k,), optional
+        Centres, default 0 (zero-mean errors).
+    """
+
+    half_widths: NDArray[np.float64]
+    centres: NDArray[np.float64]
+
+    def __init__(self, half_widths: ArrayLike, centres: ArrayLike | None = None) -> None:
+        a = np.array(half_widths, dtype=np.float64).reshape(-1)
+        c = np.zeros_like(a) if centres is None else np.array(centres, dtype=np.float64).reshape(-1)
+        if a.size < 1 or c.shape != a.shape:
+            msg = f"IndependentRectangular needs k >= 1 half-widths and as many centres, got {a.size} and {c.size}"
+            raise ConfigError(msg)
+        if not (np.isfinite(a).all() and np.isfinite(c).all()) or (a < 0).any():
+            msg = "IndependentRectangular half-widths must be finite and >= 0, centres finite"
+            raise ConfigError(msg)
+        object.__setattr__(self, "half_widths", _readonly(a))
+        object.__setattr__(self, "centres", _readonly(c))
+
+    @property
+    def size(self) -> int:
+        return int(self.half_widths.size)
+
+    def mean_vector(self) -> NDArray[np.float64]:
+        return self.centres.copy()
+
+    def variance_vector(self) -> NDArray[np.float64]:
+        """Variances a_i^2 / 3, shape (k,): the covariance is diagonal."""
+        return np.asarray(self.half_widths**2 / 3.0, dtype=np.float64)
+
+    def covariance(self) -> NDArray[np.float64]:
+        return np.diag(self.variance_vector())
+
+    def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+        """Draw ``n`` vectors, shape (n, k)."""
+        return np.asarray(
+            self.centres + rng.uniform(-1.0, 1.0, size=(_check_n(n), self.size)) * self.half_widths,
+            dtype=np.float64,
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class IndependentCopies:
+    """``count`` independent copies of one distribution, concatenated into one vector.
+
+    E.g. the encoder error of every joint reading of every pose, or a model error
+    resampled independently for every pose.
+
+    Parameters
+    ----------
+    distribution : Distribution
+        The distribution of one copy (size m).
+    count : int
+        Number of copies, >= 1; the vector has size ``count * m``, copy-major.
+    """
+
+    distribution: Distribution
+    count: int
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.distribution, Distribution):
+            msg = f"IndependentCopies.distribution must be a Distribution, got {type(self.distribution).__name__}"
+            raise ConfigError(msg)
+        if isinstance(self.count, bool) or not isinstance(self.count, (int, np.integer)) or self.count < 1:
+            msg = f"IndependentCopies.count must be an integer >= 1, got {self.count!r}"
+            raise ConfigError(msg)
+
+    @property
+    def size(self) -> int:
+        return int(self.count) * int(self.distribution.size)
+
+    def mean_vector(self) -> NDArray[np.float64]:
+        return np.tile(self.distribution.mean_vector(), int(self.count))
+
+    def block_covariance(self) -> NDArray[np.float64]:
+        """Covariance of one copy, shape (m, m); the full covariance is block diagonal."""
+        return self.distribution.covariance()
+
+    def covariance(self) -> NDArray[np.float64]:
+        return np.asarray(np.kron(np.eye(int(self.count)), self.block_covariance()), dtype=np.float64)
+
+    def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+        """Draw ``n`` vectors, shape (n, count * m)."""
+        rows = _check_n(n)
+        return np.asarray(self.distribution.sample(rng, rows * int(self.count)), dtype=np.float64).reshape(
+            rows, self.size
+        )

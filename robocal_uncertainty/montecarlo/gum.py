@@ -18,9 +18,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
+from scipy.linalg import block_diag
 
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.montecarlo.distributions import Distribution, StudentT
+from robocal_uncertainty.montecarlo.distributions import (
+    Distribution,
+    IndependentCopies,
+    IndependentRectangular,
+    StudentT,
+)
 from robocal_uncertainty.montecarlo.engine import ModelOutputError, resolve_inputs
 from robocal_uncertainty.montecarlo.summary import CoverageInterval, check_coverage
 
@@ -69,24 +75,57 @@ class GumResult:
         ∂f_j/∂x_i at the input estimates, output unit per input unit.
     input_estimates : ndarray, shape (n_columns,)
         E[X], in the inputs' units.
-    input_covariance : ndarray, shape (n_columns, n_columns)
-        Σ, block diagonal over inputs, in products of the inputs' units.
+    input_distributions : tuple of Distribution
+        The inputs, in column order (their covariances form Σ).
     input_columns : tuple of str
         Label of each input column.
     coverage_probability : float
         p.
-    relative_step : float
-        Finite-difference step as a fraction of each input's standard uncertainty.
+    relative_step : float or None
+        Finite-difference step as a fraction of each input's standard uncertainty; None
+        when the sensitivities were given analytically.
     """
 
     outputs: tuple[GumOutput, ...]
     covariance: NDArray[np.float64]
     sensitivities: NDArray[np.float64]
     input_estimates: NDArray[np.float64]
-    input_covariance: NDArray[np.float64]
+    input_distributions: tuple[Distribution, ...]
     input_columns: tuple[str, ...]
     coverage_probability: float
-    relative_step: float
+    relative_step: float | None
+
+    @property
+    def input_covariance(self) -> NDArray[np.float64]:
+        """Σ, shape (n_columns, n_columns), block diagonal over inputs (built on demand)."""
+        return np.asarray(block_diag(*[_input_covariance(d) for d in self.input_distributions]), dtype=np.float64)
+
+
+def _input_covariance(dist: Distribution) -> NDArray[np.float64]:
+    """Covariance of one input as the GUM takes it (Type A scale² for StudentT)."""
+    if isinstance(dist, StudentT):
+        return np.array([[dist.scale**2]])
+    return np.atleast_2d(np.asarray(dist.covariance(), dtype=np.float64))
+
+
+def _variances(dist: Distribution) -> NDArray[np.float64]:
+    """Diagonal of one input's covariance, without building it when the input is independent."""
+    if isinstance(dist, IndependentRectangular):
+        return dist.variance_vector()
+    if isinstance(dist, IndependentCopies):
+        return np.tile(np.diag(np.atleast_2d(dist.block_covariance())), dist.count)
+    return np.diag(_input_covariance(dist)).copy()
+
+
+def _propagated(jacobian: NDArray[np.float64], dist: Distribution) -> NDArray[np.float64]:
+    """J_d Σ_d J_dᵀ of one input, exploiting diagonal and block-diagonal Σ_d."""
+    if isinstance(dist, IndependentRectangular):
+        return np.asarray((jacobian * dist.variance_vector()) @ jacobian.T, dtype=np.float64)
+    if isinstance(dist, IndependentCopies):
+        block = np.atleast_2d(dist.block_covariance())
+        parts = jacobian.reshape(jacobian.shape[0], dist.count, block.shape[0])
+        return np.asarray(np.einsum("ocm,mn,pcn->op", parts, block, parts, optimize=True), dtype=np.float64)
+    return np.asarray(jacobian @ _input_covariance(dist) @ jacobian.T, dtype=np.float64)
 
 
 def _model_values(model: Callable[[NDArray[np.float64]], ArrayLike], x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -110,6 +149,7 @@ def propagate_gum(
     *,
     coverage: float = 0.95,
     relative_step: float = 1e-2,
+    sensitivities: ArrayLike | None = None,
 ) -> GumResult:
     """First-order law of propagation of uncertainty for the same model as Monte Carlo.
 
@@ -117,15 +157,23 @@ def propagate_gum(
     ----------
     model : callable
         Vectorised model, x of shape (n, n_columns) -> (n,) or (n, n_out); it is
-        called once with 1 + 2 n_columns rows.
+        called once with 1 + 2 n_columns rows (once with 1 row when `sensitivities`
+        are given).
     inputs : sequence of Distribution or mapping of str to Distribution
         Inputs, as for :func:`~robocal_uncertainty.montecarlo.engine.monte_carlo`;
         correlations inside CorrelatedNormal/Empirical vector inputs are propagated.
+        Independent vector inputs (IndependentRectangular, IndependentCopies) are
+        propagated without forming their dense covariance, so thousands of input
+        columns cost little memory.
     coverage : float
         Coverage probability p.
     relative_step : float
         Central-difference step as a fraction of each input's standard uncertainty,
         in (0, 1].
+    sensitivities : array_like, shape (n_out, n_columns), optional
+        Analytic sensitivity coefficients ∂f_j/∂x_i (output unit per input unit) at the
+        input estimates (GUM §5.1.3), e.g. from a linearised model whose finite
+        differences would cost thousands of model evaluations.
 
     Returns
     -------
@@ -139,27 +187,35 @@ def propagate_gum(
     _, distributions, columns = resolve_inputs(inputs)
     n = len(columns)
     x0 = np.concatenate([d.mean_vector() for d in distributions])
-    sigma = np.zeros((n, n))
-    dof = np.full(n, math.inf)
+    variances = np.concatenate([_variances(d) for d in distributions])
+    dof = np.concatenate(
+        [np.full(d.size, d.dof if isinstance(d, StudentT) else math.inf, dtype=np.float64) for d in distributions]
+    )
+    if not np.isfinite(variances).all():
+        msg = "every input must have a finite standard uncertainty for the GUM, got inf"
+        raise ConfigError(msg)
+    u_in = np.sqrt(np.clip(variances, 0.0, None))
+    if sensitivities is None:
+        h = np.where(u_in > 0, step * u_in, step * np.maximum(np.abs(x0), 1.0))
+        points = np.vstack([x0, x0 + np.diag(h), x0 - np.diag(h)])
+        values = _model_values(model, points)
+        y = values[0]
+        jacobian = ((values[1 : n + 1] - values[n + 1 :]) / (2.0 * h)[:, np.newaxis]).T
+        used_step: float | None = step
+    else:
+        y = _model_values(model, x0[np.newaxis, :])[0]
+        jacobian = np.array(sensitivities, dtype=np.float64)
+        if jacobian.shape != (y.shape[0], n) or not np.isfinite(jacobian).all():
+            msg = f"sensitivities must be finite with shape ({y.shape[0]}, {n}), got {jacobian.shape}"
+            raise ConfigError(msg)
+        used_step = None
+    covariance = np.zeros((y.shape[0], y.shape[0]))
     start = 0
     for dist in distributions:
         stop = start + dist.size
-        if isinstance(dist, StudentT):
-            sigma[start, start] = dist.scale**2
-            dof[start] = dist.dof
-        else:
-            sigma[start:stop, start:stop] = dist.covariance()
+        covariance += _propagated(jacobian[:, start:stop], dist)
         start = stop
-    if not np.isfinite(sigma).all():
-        msg = "every input must have a finite standard uncertainty for the GUM, got inf"
-        raise ConfigError(msg)
-    u_in = np.sqrt(np.diag(sigma))
-    h = np.where(u_in > 0, step * u_in, step * np.maximum(np.abs(x0), 1.0))
-    points = np.vstack([x0, x0 + np.diag(h), x0 - np.diag(h)])
-    values = _model_values(model, points)
-    y = values[0]
-    jacobian = ((values[1 : n + 1] - values[n + 1 :]) / (2.0 * h)[:, np.newaxis]).T
-    covariance = jacobian @ sigma @ jacobian.T
+    covariance = 0.5 * (covariance + covariance.T)
     u_c = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     student = np.isfinite(dof)
     outputs = []
@@ -171,6 +227,6 @@ def propagate_gum(
         expanded = k * float(u_c[j])
         interval = CoverageInterval(float(y[j]) - expanded, float(y[j]) + expanded, "gum", p)
         outputs.append(GumOutput(float(y[j]), float(u_c[j]), nu, k, expanded, interval))
-    for array in (covariance, jacobian, x0, sigma):
+    for array in (covariance, jacobian, x0):
         array.setflags(write=False)
-    return GumResult(tuple(outputs), covariance, jacobian, x0, sigma, columns, p, step)
+    return GumResult(tuple(outputs), covariance, jacobian, x0, distributions, columns, p, used_step)

@@ -8,14 +8,25 @@ Monte Carlo probabilistically symmetric interval are within the numerical tolera
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.montecarlo.engine import MonteCarloResult
 from robocal_uncertainty.montecarlo.gum import GumResult
-from robocal_uncertainty.montecarlo.summary import numerical_tolerance
+from robocal_uncertainty.montecarlo.summary import OutputSummary, numerical_tolerance
 
 __all__ = ["GumValidation", "validate_gum"]
+
+
+class MonteCarloOutputs(Protocol):
+    """Any Monte Carlo result with per-output summaries: MonteCarloResult or Summary."""
+
+    @property
+    def outputs(self) -> Sequence[OutputSummary]: ...
+
+    @property
+    def coverage_probability(self) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -48,7 +59,7 @@ class GumValidation:
 
 def validate_gum(
     gum: GumResult,
-    monte_carlo: MonteCarloResult,
+    monte_carlo: MonteCarloOutputs,
     *,
     output: int = 0,
     n_dig: int = 2,
@@ -60,7 +71,7 @@ def validate_gum(
     ----------
     gum : GumResult
         First-order GUM propagation.
-    monte_carlo : MonteCarloResult
+    monte_carlo : MonteCarloResult or Summary
         Monte Carlo propagation of the same model, same coverage probability.
     output : int
         Output component to compare.

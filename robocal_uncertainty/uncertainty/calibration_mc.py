@@ -23,22 +23,26 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.montecarlo import (
-    AdaptiveReport,
-    AdaptiveSettings,
-    EllipsoidalRegion,
-    OutputSummary,
-    coverage_region,
-    numerical_tolerance,
-    run_trials,
-)
+from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, run_trials
+from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
+from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
+from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary
+from robocal_uncertainty.montecarlo.validation import validate_gum
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy
 from robocal_uncertainty.uncertainty.reidentification import (
     BatchProblem,
     ChordSolver,
     reidentify_batch,
 )
-from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+from robocal_uncertainty.uncertainty.sources import (
+    Source,
+    TrialBatch,
+    TrialContext,
+    UncertaintySettings,
+    build_sources,
+    source_rng,
+    stream_id,
+)
 
 __all__ = [
     "OUTPUT_FRAMES",
@@ -47,10 +51,10 @@ __all__ = [
     "GumPose",
     "PoseUncertainty",
     "evaluate_uncertainty",
+    "prepare_calibration_trials",
 ]
 
 Array = NDArray[np.float64]
-_GUM_SOURCES = frozenset(("tracker", "encoder", "residual"))
 _SUB_BATCH = 256
 OutputFrame = Literal["measurement", "base"]
 OUTPUT_FRAMES: tuple[str, ...] = ("measurement", "base")
@@ -181,113 +185,88 @@ class CalibrationUncertainty:
 
 @dataclass(frozen=True, eq=False)
 class CalibrationTrials:
-    """Picklable trial block: perturb, re-identify, evaluate at the test configurations."""
+    """Picklable trial block: perturb, re-identify, evaluate at the test configurations.
+
+    Every source draws its values for the block from its own stream (see
+    :func:`~robocal_uncertainty.uncertainty.sources.source_rng`); the block's values are
+    then applied and re-identified in fixed sub-batches.
+    """
 
     problem: BatchProblem
     x_hat: Array
     joint_positions: Array
     points: Array
     fitted: Array
-    model_errors: Array
-    distances: Array
     test_joints: Array
     drop_base: bool
     output_rotation: Array
     lambda_star: float
-    lambda_range: tuple[float, float] | None
-    min_poses: int
-    subset_size: int
-    settings: UncertaintySettings
+    sources: tuple[Source, ...]
+    gauss_newton_iterations: int
     solver: ChordSolver | None = None
 
-    def __call__(self, rng: np.random.Generator, n: int) -> Array:
-        """Model values of n trials, shape (n, 3 n_test + k)."""
-        sources = self.settings.sources
-        n_poses, n_joints = self.joint_positions.shape
-        n_test = self.test_joints.shape[0]
-        # Draw every input of the block first, in a fixed order, so the stream depends on
-        # the block alone; chunking below only bounds memory.
-        tracker = (
-            self.settings.tracker_noise.sample(rng, np.broadcast_to(self.distances, (n, n_poses)))
-            if "tracker" in sources
-            else None
-        )
-        if "encoder" in sources:
-            enc = self.settings.encoder_noise
-            q_noise = enc.sample(rng, (n, n_poses, n_joints))
-            test_noise = enc.sample(rng, (n, n_test, n_joints))
-        else:
-            q_noise = test_noise = None
-        if "residual" in sources:
-            boot = rng.integers(0, n_poses, size=(n, n_poses))
-            pred_boot = rng.integers(0, n_poses, size=(n, n_test))
-        else:
-            boot = pred_boot = None
-        if "lambda" in sources:
-            lo, hi = self.lambda_range if self.lambda_range is not None else (self.lambda_star,) * 2
-            lambdas = rng.uniform(lo, hi, size=n)
-        else:
-            lambdas = np.full(n, self.lambda_star)
-        weights = None
-        if "n_poses" in sources:
-            counts = rng.integers(self.min_poses, n_poses + 1, size=n)
-            ranks = np.argsort(np.argsort(rng.random((n, n_poses)), axis=1), axis=1)
-            weights = (ranks < counts[:, None]).astype(np.float64)
-        if "pose_choice" in sources:
-            ranks = np.argsort(np.argsort(rng.random((n, n_poses)), axis=1), axis=1)
-            chosen = (ranks < self.subset_size).astype(np.float64)
-            weights = chosen if weights is None else weights * chosen
-            # Both sources on: the subset of the subset must still identify the model.
-            short = weights.sum(axis=1) < self.min_poses
-            weights[short] = chosen[short]
+    @property
+    def n_outputs(self) -> int:
+        """Columns of a trial row: d per test configuration, then the parameters."""
+        return self.points.shape[1] * self.test_joints.shape[0] + self.x_hat.size
 
-        k = self.x_hat.size
-        out = np.empty((n, 3 * n_test + k))
+    def __call__(self, rng: np.random.Generator, n: int) -> Array:
+        """Model values of n trials, shape (n, d n_test + k)."""
+        # Draw every input of the block first, each source from its own stream, so a
+        # source's values depend on the block and the source alone; the sub-batches
+        # below only bound memory.
+        values = [source.draw(source_rng(rng, stream_id(source.name)), n) for source in self.sources]
+        n_poses, dim = self.points.shape
+        n_test = self.test_joints.shape[0]
+        out = np.empty((n, self.n_outputs))
         # A fixed sub-batch: BLAS rounding may depend on the number of rows, so the split of
         # a block must never depend on a user setting.
         for lo_i in range(0, n, _SUB_BATCH):
             sl = slice(lo_i, min(n, lo_i + _SUB_BATCH))
             t = sl.stop - sl.start
+            batch = TrialBatch(n_trials=t)
+            for source, value in zip(self.sources, values):
+                source.apply(value[sl], batch)
             # Every source perturbs the measured points with zero-mean errors, so the trials
             # stay centred on the calibration.
-            pts = np.array(np.broadcast_to(self.points, (t, n_poses, 3)))
-            if boot is not None:
-                pts += self.model_errors[boot[sl]]
-            if tracker is not None:
-                pts += tracker[sl]
-            q = self.joint_positions[None] + q_noise[sl] if q_noise is not None else self.joint_positions
-            w = None if weights is None else weights[sl]
+            pts = (
+                self.points[None] + batch.points
+                if batch.points is not None
+                else np.broadcast_to(self.points, (t, n_poses, dim))
+            )
+            q = self.joint_positions[None] + batch.joints if batch.joints is not None else self.joint_positions
+            lambdas = batch.lambdas if batch.lambdas is not None else np.full(t, self.lambda_star)
             if self.solver is not None:
                 x, _ = self.solver.solve(
                     q,
                     pts,
-                    w,
-                    lambdas[sl],
+                    batch.weights,
+                    lambdas,
                     self.x_hat,
-                    initial_prediction=self.fitted if q_noise is None else None,
+                    initial_prediction=self.fitted if batch.joints is None else None,
                 )
             else:
                 x, _ = reidentify_batch(
                     self.problem,
                     q,
-                    pts,
-                    w,
-                    lambdas[sl],
+                    np.ascontiguousarray(pts),
+                    batch.weights,
+                    lambdas,
                     self.x_hat,
-                    iterations=self.settings.gauss_newton_iterations,
+                    iterations=self.gauss_newton_iterations,
                 )
             params = self.problem.parameters(x)
-            out[sl, 3 * n_test :] = params[:, self.problem.estimated]
+            out[sl, dim * n_test :] = params[:, self.problem.estimated]
             if self.drop_base:
                 # Positions in the robot base frame: the identified base does not enter.
                 b0 = self.problem.layout.base_index
                 params[:, b0 : b0 + 6] = 0.0
-            qt = self.test_joints[None] + test_noise[sl] if test_noise is not None else self.test_joints
+            qt = self.test_joints[None] + batch.test_joints if batch.test_joints is not None else self.test_joints
             pos = forward_points(self.problem.layout, params, qt)
-            if pred_boot is not None:
+            if batch.predictions is not None:
                 # Row-vector form of R_out e: model errors live in the measurement frame.
-                pos = pos + self.model_errors[pred_boot[sl]] @ self.output_rotation.T
-            out[sl, : 3 * n_test] = pos.reshape(t, 3 * n_test)
+                pos = pos + batch.predictions @ self.output_rotation.T
+            out[sl, : dim * n_test] = pos.reshape(t, dim * n_test)
         return out
 
 
@@ -316,63 +295,275 @@ def _validate_inputs(
     return q, int(trials)
 
 
-def _gum_pose(
-    calibration: IdentificationResult,
-    problem: BatchProblem,
-    campaign: Campaign,
-    settings: UncertaintySettings,
-    distances: Array,
-    adequacy: ModelAdequacy,
-    test_joints: Array,
-    drop_base: bool,
-    output_rotation: Array,
-) -> list[tuple[Array, Array, bool]]:
-    """First-order covariance of the tool position at each test configuration (output frame)."""
+@dataclass(frozen=True, eq=False)
+class _Prepared:
+    """Everything an evaluation derives from its inputs before the trials run."""
+
+    trials: CalibrationTrials
+    calibration: IdentificationResult
+    campaign: Campaign
+    problem: BatchProblem
+    test_joints: Array
+    context: TrialContext
+    adequacy: ModelAdequacy
+    lambda_range: tuple[float, float] | None
+    frame_id: str
+
+
+def _field_sensitivities(prep: _Prepared) -> tuple[dict[str, Array], Array]:
+    """First-order sensitivity of the outputs to each additive batch field, and y = f(E[X]).
+
+    Outputs are the d components of the predicted measurement at every test
+    configuration; the identification is linearised at the calibration (x = H b).
+    """
+    problem = prep.problem
     layout = problem.layout
     est = problem.estimated
-    sources = set(settings.sources)
-    applicable = sources <= _GUM_SOURCES
-    p_hat = calibration.estimate
-    q = campaign.joint_positions
-    n = campaign.n_poses
-    _, jac = forward_points_and_jacobian(layout, p_hat, q)
-    a_mat = jac.reshape(3 * n, layout.size)[:, est] / problem.scale
+    calibration = prep.calibration
+    trials = prep.trials
+    q = prep.campaign.joint_positions
+    n_poses, dim = trials.points.shape
+    n_test, n_joints = prep.test_joints.shape
+    _, jac = forward_points_and_jacobian(layout, calibration.estimate, q)
+    a_mat = jac.reshape(dim * n_poses, layout.size)[:, est] / problem.scale
     lam = calibration.lambda_
-    h = np.linalg.solve(a_mat.T @ a_mat + lam**2 * np.diag(problem.penalty_mask), a_mat.T)  # x = H b
-    cov_b = np.zeros((3 * n, 3 * n))
-    if "tracker" in sources:
-        cov_b += np.diag(np.repeat(settings.tracker_noise.std(distances) ** 2, 3))
-    var_q = settings.encoder_noise.half_width**2 / 3.0
-    theta_cols = [idx["theta"] for idx in layout.joint_slices()]
-    if "encoder" in sources:
-        jq = jac[:, :, theta_cols]  # d point / d joint reading, per pose (n, 3, n_joints)
-        blocks = var_q * np.einsum("pij,pkj->pik", jq, jq)
-        for i in range(n):
-            cov_b[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += blocks[i]
-    model_cov = adequacy.inadequacy_covariance
-    if "residual" in sources:
-        for i in range(n):
-            cov_b[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += model_cov
-    cov_x = h @ cov_b @ h.T
-    cov_p = cov_x / np.outer(problem.scale, problem.scale)
-    p_out = p_hat.copy()
+    h = np.linalg.solve(a_mat.T @ a_mat + lam**2 * np.diag(problem.penalty_mask), a_mat.T)
+    p_out = calibration.estimate.copy()
     b0 = layout.base_index
-    if drop_base:
+    if trials.drop_base:
         p_out[b0 : b0 + 6] = 0.0
-    y, gy = forward_points_and_jacobian(layout, p_out, test_joints)
-    if drop_base:
+    y, gy = forward_points_and_jacobian(layout, p_out, prep.test_joints)
+    if trials.drop_base:
         gy[:, :, b0 : b0 + 6] = 0.0
+    n_out = dim * n_test
+    s_points = gy[:, :, est].reshape(n_out, est.size) @ (h / problem.scale[:, None])
+    theta_cols = [idx["theta"] for idx in layout.joint_slices()]
+    # A reading error dq shifts the prediction by J_q dq: for the fit, the point moved by -J_q dq.
+    s_joints = -np.einsum("opc,pcj->opj", s_points.reshape(n_out, n_poses, dim), jac[:, :, theta_cols])
+    s_test = np.zeros((n_test, dim, n_test, n_joints))
+    s_pred = np.zeros((n_test, dim, n_test, dim))
+    for i in range(n_test):
+        s_test[i, :, i, :] = gy[i][:, theta_cols]
+        s_pred[i, :, i, :] = trials.output_rotation
+    fields = {
+        "points": s_points,
+        "joints": s_joints.reshape(n_out, n_poses * n_joints),
+        "test_joints": s_test.reshape(n_out, n_test * n_joints),
+        "predictions": s_pred.reshape(n_out, n_test * dim),
+    }
+    return fields, y.reshape(n_out)
+
+
+def _gum(prep: _Prepared, coverage: float) -> GumResult | None:
+    """GUM (JCGM 100) propagation of the smooth sources' distributions; None if there is none."""
+    smooth = [src for src in prep.trials.sources if src.smooth and src.distribution is not None]
+    if not smooth:
+        return None
+    fields, y0 = _field_sensitivities(prep)
+    inputs = {}
+    columns = []
+    for src in smooth:
+        inputs[src.name] = src.distribution
+        columns.extend(fields[name] for name, _ in src.segments)
+    sensitivities = np.hstack(columns)
+
+    def estimate(x: Array) -> Array:
+        # Zero-mean deviations: the GUM estimate is the calibrated model's prediction.
+        return np.broadcast_to(y0, (x.shape[0], y0.size))
+
+    return propagate_gum(estimate, inputs, coverage=coverage, sensitivities=sensitivities)
+
+
+def _gum_poses(prep: _Prepared, summary: Summary, coverage: float, n_dig: int) -> list[GumPose]:
+    """Per test configuration: the GUM statement and its JCGM 101 §8 validation."""
+    dim = prep.trials.points.shape[1]
+    n_test = prep.test_joints.shape[0]
+    n_out = dim * n_test
+    applicable = all(src.smooth for src in prep.trials.sources)
+    gum = _gum(prep, coverage)
+    k_norm = float(stats.norm.ppf(0.5 + coverage / 2.0))
+    if gum is None:
+        _, y_all = _field_sensitivities(prep)
+        cov_all = np.zeros((n_out, n_out))
+    else:
+        y_all = np.array([o.estimate for o in gum.outputs])
+        cov_all = np.asarray(gum.covariance)
+    positions = Summary(
+        outputs=summary.outputs[:n_out],
+        covariance=summary.covariance[:n_out, :n_out],
+        coverage_probability=summary.coverage_probability,
+        n_trials=summary.n_trials,
+    )
     out = []
-    for i in range(test_joints.shape[0]):
-        g = gy[i][:, est]
-        cov_y = g @ cov_p @ g.T
-        if "encoder" in sources:
-            gq = gy[i][:, theta_cols]
-            cov_y = cov_y + var_q * gq @ gq.T
-        if "residual" in sources:
-            cov_y = cov_y + output_rotation @ model_cov @ output_rotation.T
-        out.append((y[i], cov_y, applicable))
+    for i in range(n_test):
+        cols = slice(dim * i, dim * (i + 1))
+        y = y_all[cols]
+        cov_y = cov_all[cols, cols]
+        u = np.sqrt(np.clip(np.diag(cov_y), 0.0, None))
+        big_u = k_norm * u
+        if gum is None:
+            mc = [a.probabilistically_symmetric for a in positions.outputs[cols]]
+            d_low = np.array([abs(y[j] - mc[j].low) for j in range(dim)])
+            d_high = np.array([abs(y[j] - mc[j].high) for j in range(dim)])
+            delta = np.zeros(dim)
+            validated: tuple[bool, ...] = (False,) * dim
+        else:
+            checks = [validate_gum(gum, positions, output=dim * i + j, n_dig=n_dig) for j in range(dim)]
+            d_low = np.array([c.d_low for c in checks])
+            d_high = np.array([c.d_high for c in checks])
+            delta = np.array([c.delta for c in checks])
+            validated = tuple(bool(applicable and c.validated) for c in checks)
+        out.append(
+            GumPose(
+                applicable=applicable,
+                estimate=y,
+                covariance=cov_y,
+                standard_uncertainty=u,
+                coverage_factor=k_norm,
+                expanded_uncertainty=big_u,
+                validated=validated,
+                d_low=d_low,
+                d_high=d_high,
+                delta=delta,
+            )
+        )
     return out
+
+
+def _prepare(
+    model: RobotModel,
+    campaign: Campaign,
+    test_q: Array,
+    settings: UncertaintySettings,
+    calibration: IdentificationResult | None,
+    lambda_: str | float,
+    frame: str,
+) -> _Prepared:
+    if frame not in OUTPUT_FRAMES:
+        msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
+        raise ConfigError(msg)
+    campaign = campaign.reorder_joints(model.joint_names)
+    if calibration is None:
+        calibration = identify(model, campaign, lambda_=lambda_)
+    layout = model.layout
+    est = np.flatnonzero(calibration.estimated)
+    scale = calibration.column_scale[est]
+    problem = BatchProblem(
+        layout=layout,
+        start=calibration.nominal,
+        estimated=est,
+        scale=scale,
+        penalized=calibration.penalized[est],
+    )
+    x_hat = (calibration.estimate[est] - calibration.nominal[est]) * scale
+    n_poses = campaign.n_poses
+    dim = campaign.points.shape[1]
+    k = est.size
+
+    lam_star = calibration.lambda_
+    lambda_range: tuple[float, float] | None = None
+    if "lambda" in settings.sources:
+        if settings.lambda_range is None:
+            lambda_range = (lam_star / 5.0, lam_star * 5.0)
+        else:
+            lambda_range = (float(settings.lambda_range[0]), float(settings.lambda_range[1]))
+            if not lambda_range[0] <= lam_star <= lambda_range[1]:
+                msg = (
+                    f"lambda range [{lambda_range[0]:.4g}, {lambda_range[1]:.4g}] excludes the "
+                    f"calibration's optimum lambda {lam_star:.4g} ({calibration.lambda_method})"
+                )
+                raise ConfigError(msg)
+    min_identifiable = math.ceil(k / dim)
+    min_poses = settings.min_poses or max(math.ceil(40 / dim), math.ceil(1.5 * k / dim))
+    subset_size = settings.subset_size or round(33 / 53 * n_poses)
+    for name, value in (("min_poses", min_poses), ("subset_size", subset_size)):
+        if "n_poses" in settings.sources or "pose_choice" in settings.sources:
+            if value < min_identifiable or value > n_poses:
+                msg = (
+                    f"{name} = {value} must lie between {min_identifiable} (identifiable "
+                    f"parameters / {dim}) and the campaign's {n_poses} poses"
+                )
+                raise ConfigError(msg)
+
+    b0 = layout.base_index
+    if campaign.frame == "tracker":
+        distances = np.linalg.norm(campaign.points, axis=1)
+    else:
+        distances = np.linalg.norm(campaign.points - np.asarray(settings.tracker_xyz), axis=1)
+    drop_base = frame == "base" and campaign.frame == "tracker"
+    # Model errors live in the measurement frame; R^T takes them into the base frame.
+    output_rotation = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6]).T if drop_base else np.eye(dim)
+    frame_id = model.base_frame_id if frame == "base" or campaign.frame == "base" else campaign.frame_id
+    adequacy = assess_model_adequacy(
+        calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
+    )
+    context = TrialContext(
+        n_poses=n_poses,
+        n_joints=model.n_joints,
+        n_test=test_q.shape[0],
+        measurement_dimension=dim,
+        distances=distances,
+        model_errors=adequacy.draws,
+        lambda_star=lam_star,
+        lambda_range=lambda_range,
+        min_poses=min_poses,
+        subset_size=subset_size,
+    )
+    trials = CalibrationTrials(
+        problem=problem,
+        x_hat=x_hat,
+        joint_positions=campaign.joint_positions,
+        points=campaign.points,
+        fitted=campaign.points - calibration.residuals,
+        test_joints=test_q,
+        drop_base=drop_base,
+        output_rotation=output_rotation,
+        lambda_star=lam_star,
+        sources=build_sources(settings, context),
+        gauss_newton_iterations=settings.gauss_newton_iterations,
+        solver=None
+        if settings.jacobian == "exact"
+        else ChordSolver.at(problem, calibration.estimate, campaign.joint_positions),
+    )
+    return _Prepared(
+        trials=trials,
+        calibration=calibration,
+        campaign=campaign,
+        problem=problem,
+        test_joints=test_q,
+        context=context,
+        adequacy=adequacy,
+        lambda_range=lambda_range,
+        frame_id=frame_id,
+    )
+
+
+def prepare_calibration_trials(
+    model: RobotModel,
+    campaign: Campaign,
+    test_joint_positions: Array,
+    *,
+    settings: UncertaintySettings | None = None,
+    calibration: IdentificationResult | None = None,
+    lambda_: str | float = "auto",
+    frame: str = "measurement",
+) -> CalibrationTrials:
+    """The picklable trial function of :func:`evaluate_uncertainty`, for other drivers.
+
+    ``trials(rng, n)`` returns (n, d n_test + k): the predicted measurement (x, y, z for a
+    point) at every test configuration in the output frame, then the k estimated
+    parameters. Run it with :func:`~robocal_uncertainty.montecarlo.engine.run_trials`
+    (e.g. for a workspace map); the same seed gives the same trials as
+    :func:`evaluate_uncertainty`.
+
+    Parameters
+    ----------
+    model, campaign, test_joint_positions, settings, calibration, lambda_, frame
+        As for :func:`evaluate_uncertainty`.
+    """
+    settings = settings or UncertaintySettings()
+    test_q, _ = _validate_inputs(model, test_joint_positions, 0.95, 1)
+    return _prepare(model, campaign, test_q, settings, calibration, lambda_, frame).trials
 
 
 def evaluate_uncertainty(
@@ -393,6 +584,7 @@ def evaluate_uncertainty(
     workers: int = 1,
     progress: Callable[[int, int | None], None] | None = None,
     frame: str = "measurement",
+    executor: object | None = None,
 ) -> CalibrationUncertainty:
     """Monte Carlo uncertainty of the calibrated tool position at test configurations.
 
@@ -426,7 +618,7 @@ def evaluate_uncertainty(
         Blocks evaluated per task (never changes the result). Memory is bounded by a
         fixed sub-batch of trials re-identified at once.
     workers : int
-        Processes (never changes the result).
+        Local processes (never changes the result).
     progress : callable, optional
         ``progress(done, target_or_None)``.
     frame : {"measurement", "base"}
@@ -434,6 +626,10 @@ def evaluate_uncertainty(
         campaign's points, so results compare directly with measurements; for a
         tracker-frame campaign the uncertainty of the identified base enters. ``base``: the
         robot base frame (the identified base does not enter).
+    executor : Executor-like, optional
+        Runs the trial blocks instead of local processes: anything with a
+        ``concurrent.futures``-style ``submit`` (a process pool, a ``dask.distributed``
+        Client). Never changes the result.
 
     Returns
     -------
@@ -449,87 +645,16 @@ def evaluate_uncertainty(
         msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
         raise ConfigError(msg)
     test_q, n_trials = _validate_inputs(model, test_joint_positions, coverage, trials)
-    campaign = campaign.reorder_joints(model.joint_names)
-    if calibration is None:
-        calibration = identify(model, campaign, lambda_=lambda_)
-    layout = model.layout
-    est = np.flatnonzero(calibration.estimated)
-    scale = calibration.column_scale[est]
-    problem = BatchProblem(
-        layout=layout,
-        start=calibration.nominal,
-        estimated=est,
-        scale=scale,
-        penalized=calibration.penalized[est],
-    )
-    x_hat = (calibration.estimate[est] - calibration.nominal[est]) * scale
-    n_poses = campaign.n_poses
-    k = est.size
-
-    lam_star = calibration.lambda_
-    lambda_range: tuple[float, float] | None = None
-    if "lambda" in settings.sources:
-        if settings.lambda_range is None:
-            lambda_range = (lam_star / 5.0, lam_star * 5.0)
-        else:
-            lambda_range = (float(settings.lambda_range[0]), float(settings.lambda_range[1]))
-            if not lambda_range[0] <= lam_star <= lambda_range[1]:
-                msg = (
-                    f"lambda range [{lambda_range[0]:.4g}, {lambda_range[1]:.4g}] excludes the "
-                    f"calibration's optimum lambda {lam_star:.4g} ({calibration.lambda_method})"
-                )
-                raise ConfigError(msg)
-    min_identifiable = math.ceil(k / 3)
-    min_poses = settings.min_poses or max(math.ceil(40 / 3), math.ceil(1.5 * k / 3))
-    subset_size = settings.subset_size or round(33 / 53 * n_poses)
-    for name, value in (("min_poses", min_poses), ("subset_size", subset_size)):
-        if "n_poses" in settings.sources or "pose_choice" in settings.sources:
-            if value < min_identifiable or value > n_poses:
-                msg = (
-                    f"{name} = {value} must lie between {min_identifiable} (identifiable "
-                    f"parameters / 3) and the campaign's {n_poses} poses"
-                )
-                raise ConfigError(msg)
-
-    b0 = layout.base_index
-    if campaign.frame == "tracker":
-        distances = np.linalg.norm(campaign.points, axis=1)
-    else:
-        distances = np.linalg.norm(campaign.points - np.asarray(settings.tracker_xyz), axis=1)
-    drop_base = frame == "base" and campaign.frame == "tracker"
-    # Model errors live in the measurement frame; R^T takes them into the base frame.
-    output_rotation = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6]).T if drop_base else np.eye(3)
-    frame_id = model.base_frame_id if frame == "base" or campaign.frame == "base" else campaign.frame_id
-    adequacy = assess_model_adequacy(
-        calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
-    )
-    fitted = campaign.points - calibration.residuals
-    trial_block = CalibrationTrials(
-        problem=problem,
-        x_hat=x_hat,
-        joint_positions=campaign.joint_positions,
-        points=campaign.points,
-        fitted=fitted,
-        model_errors=adequacy.draws,
-        distances=distances,
-        test_joints=test_q,
-        drop_base=drop_base,
-        output_rotation=output_rotation,
-        lambda_star=lam_star,
-        lambda_range=lambda_range,
-        min_poses=min_poses,
-        subset_size=subset_size,
-        settings=settings,
-        solver=None
-        if settings.jacobian == "exact"
-        else ChordSolver.at(problem, calibration.estimate, campaign.joint_positions),
-    )
+    prep = _prepare(model, campaign, test_q, settings, calibration, lambda_, frame)
+    calibration = prep.calibration
+    trial_block = prep.trials
+    dim = trial_block.points.shape[1]
     adaptive = None
     if n_trials is None:
         # The measurand is the tool position: its components decide convergence; the
         # parameter columns ride along and report the tolerance they reached.
         adaptive = AdaptiveSettings(
-            n_dig=n_dig, coverage=coverage, max_trials=max_trials, monitored=tuple(range(3 * test_q.shape[0]))
+            n_dig=n_dig, coverage=coverage, max_trials=max_trials, monitored=tuple(range(dim * test_q.shape[0]))
         )
     result = run_trials(
         trial_block,
@@ -539,30 +664,22 @@ def evaluate_uncertainty(
         block_size=block_size,
         chunk_blocks=chunk_blocks,
         workers=workers,
+        executor=executor,
         progress=progress,
     )
     summary = result.summary(coverage)
     n_test = test_q.shape[0]
-    gum = _gum_pose(calibration, problem, campaign, settings, distances, adequacy, test_q, drop_base, output_rotation)
-    k_norm = float(stats.norm.ppf(0.5 + coverage / 2.0))
+    gum = _gum_poses(prep, summary, coverage, n_dig)
     poses = []
     warns: list[str] = list(calibration.warnings)
     for i in range(n_test):
-        cols = slice(3 * i, 3 * i + 3)
+        cols = slice(dim * i, dim * (i + 1))
         axes = summary.outputs[cols]
-        samples = result.samples[:, cols]
         try:
-            region: EllipsoidalRegion | None = coverage_region(samples, coverage)
+            region: EllipsoidalRegion | None = coverage_region(result.samples[:, cols], coverage)
         except (InputError, ConfigError) as err:
             region = None
             warns.append(f"test configuration {i}: no coverage region ({err})")
-        y, cov_y, applicable = gum[i]
-        u = np.sqrt(np.diag(cov_y))
-        big_u = k_norm * u
-        d_low = np.array([abs(y[j] - big_u[j] - axes[j].probabilistically_symmetric.low) for j in range(3)])
-        d_high = np.array([abs(y[j] + big_u[j] - axes[j].probabilistically_symmetric.high) for j in range(3)])
-        delta = np.array([numerical_tolerance(float(u[j]), n_dig) if u[j] > 0 else 0.0 for j in range(3)])
-        validated = tuple(bool(applicable and d_low[j] <= delta[j] and d_high[j] <= delta[j]) for j in range(3))
         poses.append(
             PoseUncertainty(
                 joint_positions=test_q[i],
@@ -570,18 +687,7 @@ def evaluate_uncertainty(
                 covariance=summary.covariance[cols, cols],
                 axes=tuple(axes),
                 region=region,
-                gum=GumPose(
-                    applicable=applicable,
-                    estimate=y,
-                    covariance=cov_y,
-                    standard_uncertainty=u,
-                    coverage_factor=k_norm,
-                    expanded_uncertainty=big_u,
-                    validated=validated,
-                    d_low=d_low,
-                    d_high=d_high,
-                    delta=delta,
-                ),
+                gum=gum[i],
             )
         )
     if result.adaptive is not None and not result.adaptive.converged:
@@ -591,8 +697,8 @@ def evaluate_uncertainty(
         )
     return CalibrationUncertainty(
         poses=tuple(poses),
-        parameter_names=tuple(layout.names[j] for j in est),
-        parameters=tuple(summary.outputs[3 * n_test :]),
+        parameter_names=tuple(model.layout.names[j] for j in prep.problem.estimated),
+        parameters=tuple(summary.outputs[dim * n_test :]),
         calibration=calibration,
         settings=settings,
         coverage_probability=coverage,
@@ -601,10 +707,10 @@ def evaluate_uncertainty(
         block_size=block_size,
         adaptive=result.adaptive,
         samples=result.samples,
-        lambda_star=lam_star,
-        lambda_range=lambda_range,
+        lambda_star=calibration.lambda_,
+        lambda_range=prep.lambda_range,
         frame=frame,  # type: ignore[arg-type]
-        frame_id=frame_id,
-        model_adequacy=adequacy,
+        frame_id=prep.frame_id,
+        model_adequacy=prep.adequacy,
         warnings=tuple(warns),
     )
