@@ -1,8 +1,17 @@
-"""Complete uncertainty report on disk: JSON, figures, Markdown and HTML.
+"""Complete uncertainty report on disk: JSON, CSV, figures, Markdown and HTML.
 
 The Markdown and HTML documents are rendered from the same list of blocks, so they
 always say the same thing. Lengths are shown in mm (positions), µm (uncertainties) or
 the unit named in the column header; every number is rounded to its uncertainty.
+
+Reports scale with the number of test configurations. Up to
+:data:`~robocal_uncertainty.report.configurations.DETAIL_LIMIT` (10) configurations,
+each one is shown in full (Table 2, GUM comparison, budget, histograms). Beyond that the
+documents give summary plots and a table of the worst configurations, show full detail
+for a selection (by default the first
+:data:`~robocal_uncertainty.report.configurations.DEFAULT_HISTOGRAMS` and the worst; see
+the ``histograms`` argument of :func:`write_report`), and leave every configuration to
+``configurations.csv`` and ``report.json``.
 """
 
 from __future__ import annotations
@@ -17,15 +26,24 @@ from pathlib import Path
 import numpy as np
 
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.report.configurations import (
+    DETAIL_LIMIT,
+    ConfigurationSummary,
+    HistogramSelection,
+    select_configurations,
+    summarize_configurations,
+    write_configurations_csv,
+)
 from robocal_uncertainty.report.json_report import merge_warnings, software_version, write_report_json
 from robocal_uncertainty.report.plots import (
     plot_axis_histograms,
+    plot_configuration_summary,
     plot_lcurve,
     plot_parameter_distributions,
     plot_position_error,
     plot_uncertainty_vs,
+    plot_uncertainty_vs_reach,
 )
-from robocal_uncertainty.report.sweeps import Sweep
 from robocal_uncertainty.report.table2 import (
     budget_rows,
     format_significant,
@@ -35,11 +53,15 @@ from robocal_uncertainty.report.table2 import (
 )
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.sources import SOURCE_DESCRIPTIONS
+from robocal_uncertainty.uncertainty.sweeps import Sweep
 
 __all__ = ["REPORT_FILES", "write_report"]
 
-REPORT_FILES = ("report.json", "report.md", "report.html")
+REPORT_FILES = ("report.json", "report.md", "report.html", "configurations.csv")
 """Files every report directory holds, besides the PNG figures."""
+
+_WORST_ROWS = 10
+"""Rows of the worst-configurations table in the documents."""
 
 _INTERVAL_NAMES = {
     "probabilistically_symmetric": "probabilistically symmetric",
@@ -90,9 +112,39 @@ def _um(value: float) -> str:
     return format_significant(value * 1e6)
 
 
-def _summary(result: CalibrationUncertainty) -> list[_Block]:
+def _numbers(indices: Sequence[int]) -> str:
+    """1-based configuration numbers, e.g. ``1, 2, 3 and 87``."""
+    names = [str(i + 1) for i in indices]
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _overview(result: CalibrationUncertainty, cs: ConfigurationSummary) -> str:
+    """One summary line for many test configurations."""
+    n = len(cs)
+    w = cs.worst
+    pos = ", ".join(f"{v * 1e3:.1f}" for v in cs.position[w])
+    u_max = ", ".join(_um(v) for v in cs.standard_uncertainty.max(axis=0))
+    big_max = ", ".join(_um(v) for v in cs.expanded_uncertainty.max(axis=0))
+    gum = (
+        f"GUM validated on all axes at {int(cs.gum_validated.sum())} of {n} configurations"
+        if any(p.gum.applicable for p in result.poses)
+        else "GUM comparison not applicable (non-smooth source enabled)"
+    )
+    return (
+        f"{n} test configurations in frame `{result.frame_id}`: u_pos median "
+        f"{_um(float(np.median(cs.position_uncertainty)))} µm, largest "
+        f"{_um(float(cs.position_uncertainty[w]))} µm at test configuration {w + 1} "
+        f"(position ({pos}) mm, reach {cs.reach[w] * 1e3:.0f} mm); largest u per axis ({u_max}) µm, "
+        f"largest U ({big_max}) µm at p = {100 * result.coverage_probability:g} %; {gum}. "
+        "Every configuration: `configurations.csv` and `report.json`."
+    )
+
+
+def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_Block]:
     items = []
-    for i, pose in enumerate(result.poses):
+    if len(result.poses) > DETAIL_LIMIT:
+        items.append(_overview(result, cs))
+    for i, pose in enumerate(result.poses if len(result.poses) <= DETAIL_LIMIT else ()):
         u = [a.standard_uncertainty for a in pose.axes]
         pos = ", ".join(_mm(a.estimate, a.standard_uncertainty) for a in pose.axes)
         us = ", ".join(_um(v) for v in u)
@@ -102,6 +154,11 @@ def _summary(result: CalibrationUncertainty) -> list[_Block]:
             f"Test configuration {i + 1}: position (x, y, z) in frame `{result.frame_id}` = ({pos}) mm; "
             f"u = ({us}) µm, U = ({big}) µm at p = {100 * result.coverage_probability:g} %; "
             f"u_pos = {u_pos} µm; GUM validated: {gum_verdict(pose)}."
+        )
+    if 1 < len(result.poses) <= DETAIL_LIMIT:
+        items.append(
+            f"Largest uncertainty: test configuration {cs.worst + 1} "
+            f"(u_pos = {_um(float(cs.position_uncertainty[cs.worst]))} µm)."
         )
     ad = result.model_adequacy
     if ad.adequate:
@@ -132,9 +189,72 @@ def _summary(result: CalibrationUncertainty) -> list[_Block]:
     return [_Heading(2, "Summary"), _List(tuple(items))]
 
 
-def _table2(result: CalibrationUncertainty) -> list[_Block]:
+def _configurations(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_Block]:
+    """Worst configurations first; with many, statistics over all of them."""
+    n = len(cs)
+    shown = cs.order[:_WORST_ROWS]
+    which = f"the {len(shown)} worst of {n}" if len(shown) < n else f"all {n}"
+    pct = f"{100 * result.coverage_probability:g}"
+    blocks: list[_Block] = [
+        _Heading(2, "Test configurations"),
+        _Para(
+            f"Sorted by u_pos = √(u_x² + u_y² + u_z²), worst first ({which}). Positions in frame "
+            f"`{result.frame_id}`; reach = distance of the tool from the robot base; a₁ = largest "
+            f"semi-axis of the JCGM 102 coverage ellipsoid at p = {pct} %. Every configuration, with "
+            "joints, both coverage intervals and the GUM comparison, is in `configurations.csv`."
+        ),
+    ]
+    rows = []
+    for i in shown:
+        u = cs.standard_uncertainty[i]
+        rows.append(
+            (
+                str(i + 1),
+                *(_mm(float(v), float(uu)) for v, uu in zip(cs.position[i], u)),
+                f"{cs.reach[i] * 1e3:.0f}",
+                *(_um(float(v)) for v in u),
+                _um(float(cs.position_uncertainty[i])),
+                _um(float(cs.region_semi_axes[i, 0])),
+                gum_verdict(result.poses[i]),
+            )
+        )
+    header = ("Config.", "x / mm", "y / mm", "z / mm", "reach / mm")
+    header += ("u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm", "a₁ / µm", "GUM validated")
+    blocks.append(_table(header, rows))
+    if n > DETAIL_LIMIT:
+        columns = [*cs.standard_uncertainty.T, cs.position_uncertainty, cs.region_semi_axes[:, 0]]
+        stats = []
+        for label, fn in (("minimum", np.nanmin), ("median", np.nanmedian), ("maximum", np.nanmax)):
+            stats.append((label, *(_um(float(fn(c))) if np.isfinite(c).any() else "n/a" for c in columns)))
+        blocks.append(
+            _table(
+                (f"Over {n} configurations", "u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm", "a₁ / µm"),
+                stats,
+            )
+        )
+    return blocks
+
+
+def _detail_note(result: CalibrationUncertainty, indices: Sequence[int], worst: int) -> list[_Block]:
+    """Which configurations a per-configuration section shows, when not all."""
+    if len(indices) == len(result.poses):
+        return []
+    if not indices:
+        return [_Para("No test configuration selected for detail; see `configurations.csv`.")]
+    tail = f" ({worst + 1} is the worst)" if worst in indices else ""
+    return [
+        _Para(
+            f"Shown for test configurations {_numbers(indices)}{tail} of {len(result.poses)}; "
+            "every configuration is in `configurations.csv` and `report.json`."
+        )
+    ]
+
+
+def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) -> list[_Block]:
     blocks: list[_Block] = [_Heading(2, "Uncertainty of the tool position (seed Table 2)")]
-    for i, pose in enumerate(result.poses):
+    blocks += _detail_note(result, indices, worst)
+    for i in indices:
+        pose = result.poses[i]
         joints = ", ".join(f"{v:.4f}" for v in np.degrees(pose.joint_positions))
         kind = pose.axes[0].expanded_from
         blocks.append(_Heading(3, f"Test configuration {i + 1}"))
@@ -161,13 +281,24 @@ def _table2(result: CalibrationUncertainty) -> list[_Block]:
     return blocks
 
 
-def _budget(budget: Mapping[str, CalibrationUncertainty]) -> list[_Block]:
+def _budget(budget: Mapping[str, CalibrationUncertainty], indices: Sequence[int]) -> list[_Block]:
     blocks: list[_Block] = [
         _Heading(2, "Uncertainty budget"),
         _Para("Each row is a Monte Carlo run with that source alone; u in µm."),
     ]
     n_test = min(len(r.poses) for r in budget.values())
-    for i in range(n_test):
+    if n_test > DETAIL_LIMIT:
+        rows = []
+        for name, res in budget.items():
+            u_pos = np.array([np.linalg.norm([a.standard_uncertainty for a in p.axes]) for p in res.poses[:n_test]])
+            rows.append((name, _um(float(np.median(u_pos))), _um(float(u_pos.max())), str(int(np.argmax(u_pos)) + 1)))
+        blocks.append(
+            _table(
+                (f"Source (over {n_test} configurations)", "median u_pos / µm", "max u_pos / µm", "at config."), rows
+            )
+        )
+    indices = [i for i in indices if i < n_test] if n_test > DETAIL_LIMIT else list(range(n_test))
+    for i in indices:
         if n_test > 1:
             blocks.append(_Heading(3, f"Test configuration {i + 1}"))
         blocks.append(
@@ -179,7 +310,7 @@ def _budget(budget: Mapping[str, CalibrationUncertainty]) -> list[_Block]:
     return blocks
 
 
-def _gum(result: CalibrationUncertainty) -> list[_Block]:
+def _gum(result: CalibrationUncertainty, indices: Sequence[int], cs: ConfigurationSummary) -> list[_Block]:
     blocks: list[_Block] = [
         _Heading(2, "Comparison with the GUM (JCGM 101 §8)"),
         _Para(
@@ -188,7 +319,19 @@ def _gum(result: CalibrationUncertainty) -> list[_Block]:
             "differences d_low, d_high are within the numerical tolerance δ."
         ),
     ]
-    for i, pose in enumerate(result.poses):
+    n = len(result.poses)
+    if n > DETAIL_LIMIT and any(p.gum.applicable for p in result.poses):
+        failed = [i for i in range(n) if not cs.gum_validated[i]]
+        listed = _numbers(failed[:30]) + (f" and {len(failed) - 30} more" if len(failed) > 30 else "")
+        blocks.append(
+            _Para(
+                f"Validated on all three axes at {n - len(failed)} of {n} test configurations"
+                + (f"; not at {listed}." if failed else ".")
+            )
+        )
+    blocks += _detail_note(result, indices, cs.worst)
+    for i in indices:
+        pose = result.poses[i]
         g = pose.gum
         if len(result.poses) > 1:
             blocks.append(_Heading(3, f"Test configuration {i + 1}"))
@@ -427,14 +570,26 @@ def write_report(
     title: str | None = None,
     embed_images: bool = True,
     input_warnings: Sequence[str] = (),
+    histograms: HistogramSelection = None,
 ) -> Path:
     """Write the full uncertainty report into `directory` (created if needed).
 
-    Files written: ``report.json`` (see :mod:`.json_report`), ``report.md``,
-    ``report.html`` (self-contained: figures embedded as data URIs unless
+    Files written: ``report.json`` (see :mod:`.json_report`; every test configuration),
+    ``configurations.csv`` (one row per test configuration, see
+    :func:`~robocal_uncertainty.report.configurations.write_configurations_csv`),
+    ``report.md``, ``report.html`` (self-contained: figures embedded as data URIs unless
     `embed_images` is False), and the figures ``histograms_<i>.png`` and
-    ``position_error_<i>.png`` per test configuration (1-based), ``lcurve.png``,
-    ``parameters.png`` and ``sweep_<name>.png`` per sweep.
+    ``position_error_<i>.png`` per selected test configuration (1-based, see
+    `histograms`), ``configurations.png`` and ``uncertainty_vs_reach.png`` when there
+    are two or more test configurations, ``lcurve.png``, ``parameters.png`` and
+    ``sweep_<name>.png`` per sweep.
+
+    With more than 10 test configurations
+    (:data:`~robocal_uncertainty.report.configurations.DETAIL_LIMIT`) the documents
+    summarise: a table of the 10 worst configurations and statistics over all, with
+    Table 2, the GUM comparison and the budget in full only for the configurations with
+    histograms and the worst one. A 150-configuration report takes a few seconds and a
+    few MB (``benchmarks/bench_report.py``).
 
     Parameters
     ----------
@@ -457,13 +612,30 @@ def write_report(
         Warnings about the input data, e.g. ``campaign.metadata.get("warnings", [])`` of a
         campaign recovered from a truncated file; listed first in ``report.json``'s
         ``warnings`` and in the Warnings section of ``report.md``/``report.html``.
+    histograms : None, int, "all" or sequence of int
+        Test configurations that get per-configuration histogram figures. ``None``
+        (default): all of them when there are at most 10, otherwise the first 6
+        (:data:`~robocal_uncertainty.report.configurations.DEFAULT_HISTOGRAMS`) and the
+        worst. An int N: the first N (0 for none). ``"all"``: every one (one figure pair
+        per configuration: about 0.3 MB and 0.2 s each). A sequence: those 0-based
+        configuration indices.
 
     Returns
     -------
     Path
         The report directory.
+
+    Raises
+    ------
+    ConfigError
+        `histograms` is not one of the forms above or names a configuration that does
+        not exist.
     """
     warnings = merge_warnings(input_warnings, result.warnings)
+    cs = summarize_configurations(result)
+    n_test = len(result.poses)
+    selected = select_configurations(histograms, n_test, cs.worst)
+    detail = list(range(n_test)) if n_test <= DETAIL_LIMIT else sorted({*selected, cs.worst})
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     title = title or f"Calibration uncertainty report: {robot_name}"
@@ -477,8 +649,25 @@ def write_report(
         sweeps=sweeps,
         input_warnings=input_warnings,
     )
+    write_configurations_csv(out / "configurations.csv", result, cs)
     figures: list[_Image] = []
-    for i in range(len(result.poses)):
+    if n_test > 1:
+        plot_configuration_summary(result, out / "configurations.png", summary=cs)
+        figures.append(
+            _Image(
+                "configurations.png",
+                "Standard uncertainty per axis and u_pos per test configuration, worst ringed; "
+                "semi-axes of the JCGM 102 coverage ellipsoid",
+            )
+        )
+        plot_uncertainty_vs_reach(result, out / "uncertainty_vs_reach.png", summary=cs)
+        figures.append(
+            _Image(
+                "uncertainty_vs_reach.png",
+                "Standard uncertainty against the distance of the tool from the robot base",
+            )
+        )
+    for i in selected:
         name = f"histograms_{i + 1}.png"
         plot_axis_histograms(result, out / name, pose=i)
         figures.append(
@@ -519,11 +708,13 @@ def write_report(
         figures.append(_Image(name, f"Standard uncertainty vs {sw.xlabel} (cf. seed Figs. 7-9)"))
 
     blocks: list[_Block] = [_Heading(1, title)]
-    blocks += _summary(result)
-    blocks += _table2(result)
+    blocks += _summary(result, cs)
+    if n_test > 1:
+        blocks += _configurations(result, cs)
+    blocks += _table2(result, detail, cs.worst)
     if budget:
-        blocks += _budget(budget)
-    blocks += _gum(result)
+        blocks += _budget(budget, detail)
+    blocks += _gum(result, detail, cs)
     blocks += _calibration(result.calibration, result)
     if sweeps:
         blocks.append(_Heading(2, "Sweeps"))
