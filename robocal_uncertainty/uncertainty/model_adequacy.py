@@ -6,9 +6,10 @@ sources of the Monte Carlo already carry the first part; counting the raw residu
 again would double it. Here the residuals are compared with the noise the stated models
 predict, pose by pose:
 
-* the statistic ``chi2 = sum_i r_i^T Sigma_noise,i^-1 r_i`` with ``3 n - p_eff`` degrees of
-  freedom (``p_eff`` the effective number of parameters of the regularised fit) tests
-  whether the model is adequate;
+* the statistic ``chi2 = sum_i r_i^T Sigma_noise,i^-1 r_i`` with ``d n - p_eff`` degrees of
+  freedom (``d`` the equations per pose of the measurement type, 3 for points; ``p_eff`` the
+  effective number of parameters of the regularised fit) tests whether the model is
+  adequate;
 * if the test rejects adequacy at the significance level, the model-error covariance per
   pose is estimated by moments, ``Sigma_m = S - mean_i Sigma_noise,i``, with ``S`` the
   residual covariance corrected for the degrees of freedom the fit used, and negative
@@ -17,8 +18,12 @@ predict, pose by pose:
 
 The Monte Carlo draws model errors as a residual bootstrap whitened to ``Sigma_m`` (the
 shape of the real residual distribution, the covariance of the unexplained part), adds one
-to every measured point (the error a pose's model error leaves in the identification) and
+to every measured value (the error a pose's model error leaves in the identification) and
 one to every prediction (the model error at the test configuration).
+
+Everything is in the residual coordinates of the calibration's measurement type
+(:class:`~robocal_uncertainty.core.measurement.MeasurementType`): ``d = dimension`` components
+per pose; when the type weighs its components, the test runs on whitened residuals.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from robocal_uncertainty.core.identification import IdentificationResult
-from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
+from robocal_uncertainty.core.measurement import row_weights, stack_jacobian
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 
 __all__ = ["ModelAdequacy", "assess_model_adequacy", "pose_noise_covariances"]
@@ -44,25 +49,28 @@ SIGNIFICANCE = 0.01
 class ModelAdequacy:
     """Outcome of :func:`assess_model_adequacy`; covariances in the measurement frame.
 
+    ``d`` is the measurement type's dimension (3 for points, components x, y, z in metres).
+
     Attributes
     ----------
     chi2 : float
         ``sum_i r_i^T Sigma_noise,i^-1 r_i`` over the calibration poses.
     dof : float
-        ``3 n - p_eff``.
+        Degrees of freedom of the scaled chi-square (``d n - p_eff`` for a noise-free
+        statement).
     p_value : float
         Probability of a chi2 at least this large if the model were adequate.
     significance : float
         Test level; below it the model is declared inadequate.
     adequate : bool
         True when the residuals are consistent with the stated noise.
-    residual_covariance : ndarray, shape (3, 3) [m^2]
+    residual_covariance : ndarray, shape (d, d) [m^2 for points]
         Per-pose covariance of the residuals, corrected for the fitted degrees of freedom.
-    noise_covariance : ndarray, shape (3, 3) [m^2]
+    noise_covariance : ndarray, shape (d, d) [m^2 for points]
         Mean over the poses of the covariance the stated noise models predict.
-    inadequacy_covariance : ndarray, shape (3, 3) [m^2]
+    inadequacy_covariance : ndarray, shape (d, d) [m^2 for points]
         Covariance of the model error per pose (zero when adequate).
-    draws : ndarray, shape (n_poses, 3) [m]
+    draws : ndarray, shape (n_poses, d) [m for points]
         Centred residuals whitened to `inadequacy_covariance`: the values the residual
         source resamples (all zero when adequate).
     """
@@ -79,7 +87,7 @@ class ModelAdequacy:
 
     @property
     def standard_uncertainty(self) -> Array:
-        """Model-error standard uncertainty per measurement-frame axis, shape (3,) [m]."""
+        """Model-error standard uncertainty per residual component, shape (d,) [m for points]."""
         return np.sqrt(np.diag(self.inadequacy_covariance))
 
 
@@ -90,7 +98,7 @@ def pose_noise_covariances(
     encoder_noise: EncoderNoise,
     distances: Array,
 ) -> Array:
-    """Covariance of each measured point that tracker and encoder noise predict.
+    """Covariance of each measured value that tracker and encoder noise predict.
 
     Parameters
     ----------
@@ -103,14 +111,14 @@ def pose_noise_covariances(
 
     Returns
     -------
-    ndarray, shape (n_poses, 3, 3) [m^2], in the measurement frame.
+    ndarray, shape (n_poses, d, d) [m^2 for points], in the measurement frame, in the
+    residual coordinates of ``calibration.measurement`` (unweighted).
     """
-    layout = calibration.model.layout
-    _, jac = forward_points_and_jacobian(layout, calibration.estimate, joint_positions)
-    theta_cols = [idx["theta"] for idx in layout.joint_slices()]
-    jq = jac[:, :, theta_cols]  # a joint reading enters exactly like its offset theta
+    measurement = calibration.measurement
+    jq = measurement.joint_jacobian(calibration.model.layout, calibration.estimate, joint_positions)
+    # Variance of the uniform encoder error: half-width^2 / 3 (not a point dimension).
     cov = (encoder_noise.half_width**2 / 3.0) * np.einsum("pij,pkj->pik", jq, jq)
-    cov += np.eye(3) * (tracker_noise.std(distances) ** 2)[:, None, None]
+    cov += measurement.instrument_covariance(tracker_noise.std(distances))
     return cov
 
 
@@ -141,41 +149,54 @@ def assess_model_adequacy(
     ModelAdequacy
     """
     residuals = np.asarray(calibration.residuals, dtype=np.float64)
-    n = residuals.shape[0]
+    measurement = calibration.measurement
+    n, dim = residuals.shape
+    n_eq = dim * n
     noise = pose_noise_covariances(calibration, joint_positions, tracker_noise, encoder_noise, distances)
     # Noise reaches the residuals through the fit, r = (I - H) e: with the encoders' strongly
     # anisotropic covariance the residual covariance is (I - H) Sigma (I - H)^T, not Sigma.
+    # With whitening weights w the fit solves on W A and W b, so H = A (A^T W^2 A + P)^-1 A^T W^2.
     layout = calibration.model.layout
     est = np.flatnonzero(calibration.estimated)
-    _, jac = forward_points_and_jacobian(layout, calibration.estimate, joint_positions)
-    a_mat = jac.reshape(3 * n, layout.size)[:, est] / calibration.column_scale[est]
+    _, jac = measurement.predict_and_jacobian(layout, calibration.estimate, joint_positions)
+    a_mat = jac.reshape(n_eq, layout.size)[:, est] / calibration.column_scale[est]
     penalty = calibration.lambda_**2 * np.diag(calibration.penalized[est].astype(np.float64))
-    hat = a_mat @ np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T)
-    proj = np.eye(3 * n) - hat
-    sigma = np.zeros((3 * n, 3 * n))
+    w = row_weights(measurement, n)
+    if w is None:
+        hat = a_mat @ np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T)
+    else:
+        a_w = stack_jacobian(measurement, jac, est) / calibration.column_scale[est]
+        hat = a_mat @ np.linalg.solve(a_w.T @ a_w + penalty, a_w.T * w)
+    proj = np.eye(n_eq) - hat
+    sigma = np.zeros((n_eq, n_eq))
     for i in range(n):
-        sigma[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = noise[i]
+        sigma[dim * i : dim * (i + 1), dim * i : dim * (i + 1)] = noise[i]
     m_cov = proj @ sigma @ proj.T
     # Sum of squares under adequacy: a weighted sum of chi2(1); Satterthwaite's scaled chi2
-    # matches its first two moments.
-    sum_sq = float(np.sum(residuals**2))
-    tr1 = float(np.trace(m_cov))
-    tr2 = float(np.sum(m_cov * m_cov))
+    # matches its first two moments (on the whitened residuals when the type weighs them).
+    if w is None:
+        sum_sq = float(np.sum(residuals**2))
+        m_cov_w = m_cov
+    else:
+        sum_sq = float(np.sum((residuals.reshape(n_eq) * w) ** 2))
+        m_cov_w = m_cov * np.outer(w, w)
+    tr1 = float(np.trace(m_cov_w))
+    tr2 = float(np.sum(m_cov_w * m_cov_w))
     if tr1 > 0.0:
         scale = tr2 / tr1
         dof = tr1**2 / tr2
         chi2 = sum_sq / scale
         p_value = float(stats.chi2.sf(chi2, dof))
     else:  # a noise-free statement: every residual is model error
-        dof = max(3.0 * n - calibration.effective_parameters, 1.0)
+        dof = max(float(n_eq) - calibration.effective_parameters, 1.0)
         chi2 = float("inf")
         p_value = 0.0
-    blocks = np.stack([m_cov[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] for i in range(n)])
+    blocks = np.stack([m_cov[dim * i : dim * (i + 1), dim * i : dim * (i + 1)] for i in range(n)])
     noise_in_residuals = blocks.mean(axis=0)
-    fitted_fraction = max(1.0 - calibration.effective_parameters / (3.0 * n), 1.0 / (3.0 * n))
+    fitted_fraction = max(1.0 - calibration.effective_parameters / float(n_eq), 1.0 / float(n_eq))
     observed = residuals.T @ residuals / n
     adequate = p_value >= significance
-    inadequacy = np.zeros((3, 3))
+    inadequacy = np.zeros((dim, dim))
     draws = np.zeros_like(residuals)
     if not adequate:
         evals, evecs = np.linalg.eigh((observed - noise_in_residuals) / fitted_fraction)

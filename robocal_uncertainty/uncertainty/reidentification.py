@@ -3,9 +3,12 @@
 One Monte Carlo trial is a full re-identification. Here all trials of a chunk share the
 nominal structure (which parameters are estimated, the column scaling) and are solved
 together: batched Jacobians, batched regularised normal equations, no Python loop over
-trials. Each trial has its own joint readings, points, pose weights (0/1 for subsets) and
-lambda. The iteration is the same Tikhonov Gauss-Newton as
-:func:`robocal_uncertainty.core.identification.identify`, warm-started at the calibration.
+trials. Each trial has its own joint readings, measured values, pose weights (0/1 for subsets)
+and lambda. The iteration is the same Tikhonov Gauss-Newton as
+:func:`robocal_uncertainty.core.identification.identify`, warm-started at the calibration, on
+the equations of the campaign's measurement type
+(:class:`~robocal_uncertainty.core.measurement.MeasurementType`: its dimension, residual,
+Jacobian and weights), so a new type needs no change here.
 """
 
 from __future__ import annotations
@@ -15,7 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.measurement import (
+    POINT,
+    MeasurementType,
+    stack_jacobian,
+    stack_residual,
+)
 from robocal_uncertainty.core.robot_model import ParameterLayout
 
 __all__ = ["BatchProblem", "ChordSolver", "reidentify_batch"]
@@ -39,6 +48,8 @@ class BatchProblem:
     penalized : ndarray of bool, shape (k,), optional
         Which estimated parameters the Tikhonov term penalises (all but the base, see
         :func:`robocal_uncertainty.core.identification.identify`); None penalises all.
+    measurement : MeasurementType
+        What each pose measures (tool points by default).
     """
 
     layout: ParameterLayout
@@ -46,6 +57,20 @@ class BatchProblem:
     estimated: NDArray[np.intp]
     scale: Array
     penalized: NDArray[np.bool_] | None = None
+    measurement: MeasurementType = POINT
+
+    @classmethod
+    def from_calibration(cls, calibration: IdentificationResult) -> BatchProblem:
+        """The structure of `calibration`: its start, estimated set, scaling, penalty and type."""
+        est = np.flatnonzero(calibration.estimated)
+        return cls(
+            layout=calibration.model.layout,
+            start=calibration.nominal,
+            estimated=est,
+            scale=calibration.column_scale[est],
+            penalized=calibration.penalized[est],
+            measurement=calibration.measurement,
+        )
 
     @property
     def penalty_mask(self) -> Array:
@@ -60,11 +85,15 @@ class BatchProblem:
         p[:, self.estimated] += x / self.scale
         return p
 
+    def scaled_deviation(self, params: Array) -> Array:
+        """Scaled deviations x (..., k) of full parameter vectors (..., n_params) from the start."""
+        return (params[..., self.estimated] - self.start[self.estimated]) * self.scale
+
 
 def reidentify_batch(
     problem: BatchProblem,
     joint_positions: Array,
-    points: Array,
+    measured: Array,
     weights: Array | None,
     lambdas: Array,
     x_start: Array,
@@ -78,8 +107,8 @@ def reidentify_batch(
     ----------
     problem : BatchProblem
     joint_positions : ndarray, shape (T, n_poses, n_joints) or (n_poses, n_joints) [rad]
-    points : ndarray, shape (T, n_poses, 3) [m]
-        Measured points of each trial.
+    measured : ndarray, shape (T, n_poses, value_size) [m for points]
+        Measured values of each trial (``problem.measurement``'s; points by default).
     weights : ndarray, shape (T, n_poses), or None
         1 for poses used by a trial, 0 for poses left out; None uses all.
     lambdas : ndarray, shape (T,)
@@ -97,19 +126,19 @@ def reidentify_batch(
         Scaled deviations from nominal of every trial.
     iterations_run : int
     """
-    n_trials = points.shape[0]
+    measurement = problem.measurement
+    n_trials = measured.shape[0]
     k = problem.estimated.size
     x = np.array(np.broadcast_to(x_start, (n_trials, k)), dtype=np.float64)
     lam2 = (np.asarray(lambdas, dtype=np.float64) ** 2)[:, None, None] * np.diag(problem.penalty_mask)
-    n_eq = 3 * points.shape[1]
-    w = None if weights is None else np.repeat(weights, 3, axis=1)[:, :, None]
+    w = None if weights is None else np.repeat(weights, measurement.dimension, axis=1)[:, :, None]
     done = 0
     for done in range(1, iterations + 1):
         p = problem.parameters(x)
-        pred, jac = forward_points_and_jacobian(problem.layout, p, joint_positions)
-        a_mat = jac.reshape(n_trials, n_eq, problem.layout.size)[:, :, problem.estimated]
+        pred, jac = measurement.predict_and_jacobian(problem.layout, p, joint_positions)
+        a_mat = stack_jacobian(measurement, jac, problem.estimated)
         a_mat /= problem.scale
-        r = (points - pred).reshape(n_trials, n_eq)
+        r = stack_residual(measurement, measurement.residual(measured, pred))
         b = r + np.einsum("tek,tk->te", a_mat, x)
         aw = a_mat if w is None else a_mat * w
         normal = np.matmul(aw.transpose(0, 2, 1), a_mat) + lam2
@@ -128,8 +157,9 @@ class ChordSolver:
 
     Each trial minimises the same regularised objective as :func:`identify`,
     ``||W^1/2 (S_t - F(p, Q_t))||^2 + lambda_t^2 ||x||^2``, iterating with the exact
-    residual of its own readings, points and pose weights but with the Jacobian frozen at
-    the calibration. Perturbations in a Monte Carlo are tiny (micrometres, millidegrees),
+    residual of its own readings, measured values and pose weights but with the Jacobian
+    frozen at the calibration (equations whitened by the measurement type's weights).
+    Perturbations in a Monte Carlo are tiny (micrometres, millidegrees),
     so the Jacobian moves by ~1e-4 relative and the chord iteration converges to the
     trial's own solution to well below 1e-6 of its deviation in two or three steps,
     while the normal matrix is factorised once instead of per trial. The exact batched
@@ -141,8 +171,9 @@ class ChordSolver:
     Attributes
     ----------
     problem : BatchProblem
-    jacobian : ndarray, shape (3 n_poses, k)
-        Column-scaled Jacobian at the calibration.
+    jacobian : ndarray, shape (dimension * n_poses, k)
+        Column-scaled (and whitened) Jacobian at the calibration, ``dimension`` the
+        measurement type's equations per pose.
     pose_normal : ndarray, shape (n_poses, k * k)
         Per-pose contributions ``J_i^T J_i`` to the normal matrix, flattened.
     eigenvalues : ndarray, shape (k_pen,)
@@ -169,12 +200,15 @@ class ChordSolver:
     @classmethod
     def at(cls, problem: BatchProblem, params: Array, joint_positions: Array) -> ChordSolver:
         """Freeze the Jacobian at `params` (n_params,) and readings (n_poses, n_joints)."""
-        _, jac = forward_points_and_jacobian(problem.layout, params, joint_positions)
+        measurement = problem.measurement
+        _, jac = measurement.predict_and_jacobian(problem.layout, params, joint_positions)
         n_poses = joint_positions.shape[0]
         k = problem.estimated.size
-        per_pose = jac[:, :, problem.estimated] / problem.scale  # (n_poses, 3, k)
+        per_pose = jac[:, :, problem.estimated] / problem.scale  # (n_poses, dimension, k)
+        if measurement.weights is not None:
+            per_pose = per_pose * measurement.weights[:, None]
         pose_normal = np.einsum("pik,pil->pkl", per_pose, per_pose).reshape(n_poses, k * k)
-        a_mat = per_pose.reshape(3 * n_poses, k)
+        a_mat = per_pose.reshape(measurement.dimension * n_poses, k)
         normal = a_mat.T @ a_mat
         pen = problem.penalty_mask > 0
         free_inverse = np.linalg.inv(normal[np.ix_(~pen, ~pen)])
@@ -200,7 +234,7 @@ class ChordSolver:
     def solve(
         self,
         joint_positions: Array,
-        points: Array,
+        measured: Array,
         weights: Array | None,
         lambdas: Array,
         x_start: Array,
@@ -214,16 +248,17 @@ class ChordSolver:
         Parameters
         ----------
         joint_positions : ndarray, shape (T, n_poses, n_joints) or (n_poses, n_joints) [rad]
-        points : ndarray, shape (T, n_poses, 3) [m]
+        measured : ndarray, shape (T, n_poses, value_size) [m for points]
+            Measured values of each trial (the problem's measurement type).
         weights : ndarray, shape (T, n_poses), or None
             Pose weights (0/1 for subsets); None uses every pose.
         lambdas : ndarray, shape (T,)
             Regularisation parameter per trial (scaled units).
         x_start : ndarray, shape (k,)
             Calibration's scaled deviation from nominal.
-        initial_prediction : ndarray, shape (n_poses, 3) [m], optional
-            ``F(p_start, Q)`` when every trial shares the readings Q (saves one
-            kinematics pass).
+        initial_prediction : ndarray, shape (n_poses, value_size) [m for points], optional
+            ``F(p_start, Q)`` (the measurement type's prediction) when every trial shares
+            the readings Q (saves one kinematics pass).
         max_iterations : int
         relative_tolerance : float
             Stop when every trial's step is below this fraction of its first step. The
@@ -236,11 +271,12 @@ class ChordSolver:
         x : ndarray, shape (T, k)
         iterations_run : int
         """
-        n_trials, n_poses = points.shape[0], points.shape[1]
+        measurement = self.problem.measurement
+        n_trials = measured.shape[0]
         k = x_start.size
         lam2 = np.asarray(lambdas, dtype=np.float64)[:, None] ** 2
         x = np.repeat(x_start[None, :], n_trials, axis=0)
-        w_rows = None if weights is None else np.repeat(weights, 3, axis=1)
+        w_rows = None if weights is None else np.repeat(weights, measurement.dimension, axis=1)
         mask = self.problem.penalty_mask
         if weights is not None:
             normal = (weights @ self.pose_normal).reshape(n_trials, k, k)
@@ -251,8 +287,8 @@ class ChordSolver:
             if done == 1 and initial_prediction is not None:
                 pred = initial_prediction
             else:
-                pred = forward_points(self.problem.layout, self.problem.parameters(x), joint_positions)
-            r = (points - pred).reshape(n_trials, 3 * n_poses)
+                pred = measurement.predict(self.problem.layout, self.problem.parameters(x), joint_positions)
+            r = stack_residual(measurement, measurement.residual(measured, pred))
             if w_rows is not None:
                 r *= w_rows
             rhs = r @ self.jacobian - lam2 * (x * mask)
