@@ -4,6 +4,7 @@ and one-line errors for bad settings."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,12 +26,14 @@ from robocal_uncertainty.uncertainty import (
     parse_sources,
 )
 
+ROOT = Path(__file__).resolve().parents[2]
+
 TEST_JOINTS = np.radians([-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451])
 
 
 @pytest.fixture(scope="module")
 def paper():
-    model = load_robot_model("config/paper_arm.yaml")
+    model = load_robot_model(ROOT / "config/paper_arm.yaml")
     sim = simulate_campaign(model, SimulationSettings(), seed=11)
     return model, sim
 
@@ -147,7 +150,7 @@ def test_positions_are_in_the_identified_base_frame_for_tracker_campaigns() -> N
     identified one (joint 1 nominal). The truth, seen from that frame, must be covered."""
     from robocal_uncertainty.core.robot_model import rpy_to_matrix
 
-    model = dataclasses.replace(load_robot_model("config/paper_arm.yaml"), base_known=False)
+    model = dataclasses.replace(load_robot_model(ROOT / "config/paper_arm.yaml"), base_known=False)
     sim = simulate_campaign(model, SimulationSettings(frame="tracker"), seed=4)
     result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1, frame="base")
     assert result.frame_id == model.base_frame_id
@@ -204,9 +207,9 @@ def test_residual_source_reflects_real_robot_scatter() -> None:
 
     from robocal_uncertainty.importers import read_tracker_csv
 
-    csv = Path("test/data/ur10_laser_tracker/measurements_iso_cubes.csv")
+    csv = Path(ROOT / "test/data/ur10_laser_tracker/measurements_iso_cubes.csv")
     campaign = read_tracker_csv(csv)
-    model = load_robot_model("config/ur10.yaml")
+    model = load_robot_model(ROOT / "config/ur10.yaml")
     train = campaign.subset(np.random.default_rng(0).permutation(campaign.n_poses)[:53])
     test_q = train.joint_positions[0]
     settings_noise = UncertaintySettings(sources=("tracker", "encoder"))
@@ -225,7 +228,7 @@ def test_residual_source_reflects_real_robot_scatter() -> None:
 def test_positions_default_to_the_measurement_frame_and_carry_the_base_uncertainty() -> None:
     """By default a tracker campaign's results are in the tracker frame, where the truth is
     directly comparable with measurements; the identified base adds its uncertainty."""
-    model = dataclasses.replace(load_robot_model("config/paper_arm.yaml"), base_known=False)
+    model = dataclasses.replace(load_robot_model(ROOT / "config/paper_arm.yaml"), base_known=False)
     sim = simulate_campaign(model, SimulationSettings(frame="tracker"), seed=4)
     meas = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1)
     base = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, trials=2000, seed=1, frame="base")

@@ -13,6 +13,8 @@ import sys
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -24,12 +26,14 @@ from robocal_uncertainty.core import (
 )
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
 
+ROOT = Path(__file__).resolve().parents[2]
+
 TEST_JOINTS = np.radians([-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451])
 
 
 def coverage_experiment(n_campaigns: int, *, trials: int = 2000, seed: int = 2024) -> dict[str, float]:
     """Fraction of campaigns whose intervals contain the truth, per axis and for the 3-D region."""
-    model = load_robot_model("config/paper_arm.yaml")
+    model = load_robot_model(ROOT / "config/paper_arm.yaml")
     settings = SimulationSettings()
     rng = np.random.default_rng(seed)
     hits = np.zeros(3)
