@@ -49,6 +49,7 @@ from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
     "POINT",
+    "POSITION_AXES",
     "MeasurementType",
     "PointMeasurement",
     "joint_columns",

@@ -9,6 +9,11 @@ model error at that configuration when the ``residual`` source is on) plus the h
 measurement's own tracker noise, drawn from the stated tracker model. A statement that
 means what it says puts a fraction p of the held-out measurements inside its p-intervals
 and has normalised errors of RMS 1.
+
+The check is on positions: the Monte Carlo predicts the tool position, and each held-out
+measurement gives its 3-D position through its measurement type
+(:meth:`~robocal_uncertainty.core.measurement.MeasurementType.positions`); a type that holds
+no position (e.g. a distance) cannot be held out this way.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from numpy.typing import NDArray
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import identify
+from robocal_uncertainty.core.measurement import POSITION_AXES
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
@@ -39,7 +45,8 @@ __all__ = [
 Array = NDArray[np.float64]
 RELIABILITY_LEVELS: tuple[float, ...] = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.99)
 """Coverage probabilities of the reliability curve."""
-AXES = ("x", "y", "z")
+AXES = POSITION_AXES
+"""Axes of the predicted position (the output of the Monte Carlo), in its frame."""
 
 
 @dataclass(frozen=True)
@@ -147,13 +154,13 @@ class HoldoutValidation:
     coverage_probability : float
     levels : ndarray, shape (n_levels,)
         Coverage probabilities of the reliability curve.
-    axes : tuple of AxisValidation, length 3
+    axes : tuple of AxisValidation, one per axis of :data:`AXES`
     region_inside_fraction : float
         Fraction of held-out measurements inside the JCGM 102 3-D region at p.
     region_reliability : ndarray, shape (n_levels,)
-    errors : ndarray, shape (n_held_out, 3) [m]
+    errors : ndarray, shape (n_held_out, len(AXES)) [m]
         Measured minus predicted, in `frame_id`.
-    standard_uncertainties : ndarray, shape (n_held_out, 3) [m]
+    standard_uncertainties : ndarray, shape (n_held_out, len(AXES)) [m]
         Predictive standard uncertainty (calibration plus measurement noise).
     folds : tuple of FoldResult
     frame_id : str
@@ -203,6 +210,18 @@ def _inside_regions(pred: Array, points: Array, levels: Array) -> NDArray[np.boo
     dp2 = np.sum(zp**2, axis=-1)
     q = np.clip(np.floor(levels * m + 0.5).astype(int), 1, m)
     return dp2[None, :] <= d2[q - 1]
+
+
+def _held_out_positions(campaign: Campaign) -> Array:
+    """3-D positions [m] of the held-out measurements, shape (n_poses, len(AXES))."""
+    positions = campaign.measurement.positions(campaign.points)
+    if positions is None:
+        msg = (
+            f"held-out {campaign.measurement.name} measurements hold no 3-D position: "
+            "validation compares predicted and measured positions"
+        )
+        raise InputError(msg)
+    return positions
 
 
 def _tracker_distances(points: Array, campaign: Campaign, settings: UncertaintySettings) -> Array:
@@ -306,11 +325,13 @@ def validate_holdout(
             workers=workers,
         )
         n_held = held.n_poses
-        pred = result.samples[:, : 3 * n_held].reshape(-1, n_held, 3)
+        n_axes = len(AXES)
+        held_points = _held_out_positions(held)
+        pred = result.samples[:, : n_axes * n_held].reshape(-1, n_held, n_axes)
         # The held-out measurement carries its own tracker noise: the predictive distribution
         # of what the tracker will read is the prediction plus that noise.
         rng = np.random.default_rng(np.random.SeedSequence([seed, f, 0xB0B]))
-        dist = _tracker_distances(held.points, held, settings)
+        dist = _tracker_distances(held_points, held, settings)
         if "tracker" in settings.sources:
             pred = pred + settings.tracker_noise.sample(rng, np.broadcast_to(dist, pred.shape[:2]))
         mean = pred.mean(axis=0)
@@ -318,12 +339,12 @@ def validate_holdout(
         if not (std > 0).all():
             raise InputError("a held-out prediction has zero spread: enable at least one noise source")
         tails = np.concatenate(((1.0 - levels_arr) / 2.0, (1.0 + levels_arr) / 2.0))
-        q = np.quantile(pred, tails, axis=0)  # (2 L, n_held, 3)
+        q = np.quantile(pred, tails, axis=0)  # (2 L, n_held, n_axes)
         lo, hi = q[: levels_arr.size], q[levels_arr.size :]
-        inside.append((held.points[None] >= lo) & (held.points[None] <= hi))
-        errors.append(held.points - mean)
+        inside.append((held_points[None] >= lo) & (held_points[None] <= hi))
+        errors.append(held_points - mean)
         stds.append(std)
-        region_inside.append(_inside_regions(pred, held.points, levels_arr))
+        region_inside.append(_inside_regions(pred, held_points, levels_arr))
         adequacy = result.model_adequacy
         fold_results.append(
             FoldResult(
@@ -344,7 +365,7 @@ def validate_holdout(
         frame_id = result.frame_id
     err = np.concatenate(errors)
     sd = np.concatenate(stds)
-    ins = np.concatenate(inside, axis=1)  # (L, n, 3)
+    ins = np.concatenate(inside, axis=1)  # (L, n, n_axes)
     reg_all = np.concatenate(region_inside, axis=1)
     at = int(np.flatnonzero(np.isclose(levels_arr, coverage))[0])
     axes = tuple(
@@ -355,7 +376,7 @@ def validate_holdout(
             inside_fraction=float(ins[at, :, a].mean()),
             reliability=ins[:, :, a].mean(axis=1),
         )
-        for a in range(3)
+        for a in range(len(AXES))
     )
     return HoldoutValidation(
         coverage_probability=float(coverage),
