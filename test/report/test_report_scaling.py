@@ -100,8 +100,13 @@ def test_many_configurations_report_is_small_and_summarised(many, many_report):
 
 
 def test_histograms_argument_selects_figures(many, tmp_path):
-    out = write_report(tmp_path / "none", many, robot_name="arm", histograms=0, embed_images=False)
+    budget = {"tracker": many, "encoder": many}
+    out = write_report(tmp_path / "none", many, robot_name="arm", histograms=0, embed_images=False, budget=budget)
     assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS
+    # Budget: one table over all configurations, full tables only for the worst.
+    budget_md = (out / "report.md").read_text(encoding="utf-8").split("## Uncertainty budget", 1)[1].split("\n## ")[0]
+    assert f"Source (over {N_MANY} configurations)" in budget_md
+    assert budget_md.count("### Test configuration ") == 1
     out = write_report(tmp_path / "two", many, robot_name="arm", histograms=[3, 10], embed_images=False)
     assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS | _per_config_pngs([3, 10])
     html = (out / "report.html").read_text(encoding="utf-8")
