@@ -357,6 +357,51 @@ def _uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Sequ
     )
 
 
+def _evaluation_options(args: argparse.Namespace, sources: Sequence[str], test_joints: NDArray[np.float64]) -> Any:
+    """The :class:`EvaluationOptions` of the parsed uncertainty arguments."""
+    from robocal_uncertainty.uncertainty import EvaluationOptions, parse_sources
+
+    for option in ("budget_trials", "sweep_trials", "max_trials"):
+        value = getattr(args, option)
+        if value <= 0:
+            msg = f"--{option.replace('_', '-')} must be a positive integer, got {value}"
+            raise ConfigError(msg)
+    return EvaluationOptions(
+        lambda_=_lambda_arg(args.lambda_),
+        uncertainty=_uncertainty_settings(args, None, parse_sources(list(sources))),
+        test_joints=test_joints,
+        trials=_trials(args.trials),
+        seed=args.seed,
+        coverage=args.coverage,
+        max_trials=args.max_trials,
+        output_frame=args.frame,
+        accept_unconverged=args.accept_unconverged,
+        budget=args.budget,
+        budget_trials=args.budget_trials,
+        sweeps=args.sweeps,
+        sweep_trials=args.sweep_trials,
+    )
+
+
+def _timed_progress(enabled: bool, label: str) -> tuple[Callable[[int, int | None], None], Callable[[], float]]:
+    """A progress callback (a bar on stderr when `enabled`) and a function that closes the bar
+    and returns the seconds from now to the last progress report (the main Monte Carlo run)."""
+    update, close = _progress_bar(enabled, label)
+    start = time.perf_counter()
+    last = [start]
+
+    def progress(done: int, target: int | None) -> None:
+        last[0] = time.perf_counter()
+        if update is not None:
+            update(done, target)
+
+    def finish() -> float:
+        close()
+        return max(last[0] - start, 1e-9)
+
+    return progress, finish
+
+
 def run_evaluation(
     model: Any,
     campaign: Any,
@@ -367,60 +412,30 @@ def run_evaluation(
     out_dir: Path,
     label: str,
 ) -> Any:
-    """Calibrate, run the Monte Carlo, the per-source budget and the report: shared by
-    ``evaluate``, ``demo`` and ``replay`` so they give the same numbers."""
-    from robocal_uncertainty.core import identify
-    from robocal_uncertainty.report import format_budget, format_table2, write_report
-    from robocal_uncertainty.uncertainty import evaluate_uncertainty, parse_sources
+    """Evaluate through :func:`robocal_uncertainty.app.evaluate`, print and write the report:
+    shared by ``evaluate``, ``demo`` and ``replay``. Returns the uncertainty result."""
+    from robocal_uncertainty.app import evaluate
 
-    for option in ("budget_trials", "sweep_trials", "max_trials"):
-        value = getattr(args, option)
-        if value <= 0:
-            msg = f"--{option.replace('_', '-')} must be a positive integer, got {value}"
-            raise ConfigError(msg)
-    sources = parse_sources(list(sources))
-    settings = _uncertainty_settings(args, campaign, sources)
-    calibration = identify(
-        model, campaign, lambda_=_lambda_arg(args.lambda_), accept_unconverged=args.accept_unconverged
-    )
-    _print_calibration(calibration)
-    trials = _trials(args.trials)
-    update, close = _progress_bar(not args.no_progress, label)
-    start = time.perf_counter()
+    options = _evaluation_options(args, sources, test_joints)
+    progress, finish = _timed_progress(not args.no_progress, label)
     try:
-        result = evaluate_uncertainty(
-            model,
-            campaign,
-            test_joints,
-            settings=settings,
-            calibration=calibration,
-            trials=trials,
-            coverage=args.coverage,
-            seed=args.seed,
-            max_trials=args.max_trials,
-            workers=args.workers,
-            progress=update,
-            frame=args.frame,
-        )
+        from robocal_uncertainty.montecarlo.executor import open_executor
+
+        # --dask (evaluate only) or --workers: one executor for the main run, budget and sweeps.
+        with open_executor(workers=args.workers, dask=getattr(args, "dask", None)) as executor:
+            evaluation = evaluate(model, campaign, options, executor=executor, progress=progress)
     finally:
-        close()
-    elapsed = time.perf_counter() - start
-    budget = {}
-    if args.budget and len(sources) > 1:
-        for source in sources:
-            budget[source] = evaluate_uncertainty(
-                model,
-                campaign,
-                test_joints,
-                settings=replace(settings, sources=(source,)),
-                calibration=calibration,
-                trials=args.budget_trials,
-                coverage=args.coverage,
-                seed=args.seed,
-                workers=args.workers,
-                frame=args.frame,
-            )
-    sweeps = _sweeps(model, campaign, calibration, test_joints, settings, args) if args.sweeps else None
+        elapsed = finish()
+    _print_evaluation(evaluation, options, model, out_dir, elapsed)
+    return evaluation.uncertainty
+
+
+def _print_evaluation(evaluation: Any, options: Any, model: Any, out_dir: Path, elapsed: float) -> None:
+    """Print an :class:`~robocal_uncertainty.app.Evaluation` and write its report."""
+    from robocal_uncertainty.report import format_budget, format_table2, write_report
+
+    result = evaluation.uncertainty
+    _print_calibration(evaluation.calibration)
     print()
     _print_adequacy(result)
     print(f"Positions in frame {result.frame_id} ({result.frame} frame; --frame base|measurement)")
@@ -433,73 +448,21 @@ def run_evaluation(
             f"{adaptive.n_sequences} sequences of {adaptive.sequence_trials} trials"
         )
     print(f"{result.n_trials} trials in {elapsed:.1f} s ({result.n_trials / elapsed:.0f} trials/s)")
-    if budget:
+    if evaluation.budget:
         print()
-        print(f"Uncertainty budget: each source alone, {args.budget_trials} trials each")
-        print(format_budget(budget))
+        print(f"Uncertainty budget: each source alone, {options.budget_trials} trials each")
+        print(format_budget(evaluation.budget))
     for warning in result.warnings:
         print(f"warning: {warning}")
     path = write_report(
         out_dir,
         result,
         robot_name=model.name,
-        budget=budget or None,
-        sweeps=sweeps,
-        input_warnings=tuple(campaign.metadata.get("warnings") or ()),
+        budget=dict(evaluation.budget) or None,
+        sweeps=list(evaluation.sweeps) if options.sweeps else None,
+        input_warnings=evaluation.input_warnings,
     )
     print(f"report written to {path}")
-    return result
-
-
-def _sweeps(
-    model: Any,
-    campaign: Any,
-    calibration: Any,
-    test_joints: NDArray[np.float64],
-    settings: Any,
-    args: argparse.Namespace,
-) -> list[Any]:
-    """Uncertainty against lambda (seed Fig. 7) and against the number of equations (Figs. 8-9)."""
-    from robocal_uncertainty.report import Sweep, sweep_equations, sweep_lambda
-
-    noise = replace(
-        settings,
-        sources=tuple(s for s in settings.sources if s in ("tracker", "encoder", "residual")) or ("tracker", "encoder"),
-    )
-    lam = calibration.lambda_
-    lambdas = np.geomspace(lam / 10.0, lam * 10.0, 9) if lam > 0 else np.geomspace(1e-4, 1e-1, 9)
-    n_est = int(calibration.estimated.sum())
-    lowest = max(int(np.ceil(1.5 * n_est / 3)), int(np.ceil(40 / 3)))
-    counts = np.unique(np.linspace(min(lowest, campaign.n_poses), campaign.n_poses, 8).round().astype(int))
-    trials = args.sweep_trials
-    u_lam = sweep_lambda(
-        model, campaign, calibration, test_joints, lambdas, trials=trials, seed=args.seed, settings=noise
-    )
-    u_eq = sweep_equations(
-        model, campaign, calibration, test_joints, counts, trials=trials, seed=args.seed, settings=noise
-    )
-    return [
-        Sweep(
-            name="lambda",
-            xlabel="lambda (scaled units)",
-            values=lambdas,
-            standard_uncertainty=u_lam,
-            reference=lam,
-            log_x=True,
-            n_trials=trials,
-            seed=args.seed,
-        ),
-        Sweep(
-            name="equations",
-            xlabel="number of equations (3 per pose)",
-            values=3 * counts.astype(float),
-            standard_uncertainty=u_eq,
-            reference=float(3 * campaign.n_poses),
-            log_x=False,
-            n_trials=trials,
-            seed=args.seed,
-        ),
-    ]
 
 
 def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> None:
@@ -595,47 +558,50 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from robocal_uncertainty.pipeline import CollectorSettings, replay_bag
-    from robocal_uncertainty.uncertainty import parse_sources
+    from robocal_uncertainty.app import replay
+    from robocal_uncertainty.pipeline import CollectorSettings
 
     model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
-    test_q = _test_joints(args, model)
-    logged: list[str] = []
+    options = _evaluation_options(args, _sources_arg(args.sources), _test_joints(args, model))
 
     def log(cause: str, message: str) -> None:
-        logged.append(cause)
         print(f"replay: dropped ({cause}): {message}", file=sys.stderr)
 
-    replay = replay_bag(
-        args.bag,
-        model,
-        joint_topic=args.joint_topic,
-        point_topic=args.point_topic,
-        tracker_frame_id=args.tracker_frame,
-        collector=CollectorSettings(
-            window_s=args.window_s,
-            joint_motion_threshold=args.joint_motion_threshold_rad,
-            tracker_scatter_threshold=args.tracker_scatter_threshold_m,
-            min_points=args.min_points,
-        ),
-        campaign_path=args.campaign_out,
-        calibrate=False,
-        log=log,
-    )
-    dropped = ", ".join(f"{k}: {v}" for k, v in sorted(replay.dropped.items()) if v) or "none"
-    print(f"replay of {args.bag}: {len(replay.samples)} static poses found; dropped messages: {dropped}")
+    progress, finish = _timed_progress(not args.no_progress, "replay")
+    try:
+        replayed = replay(
+            args.bag,
+            model,
+            options,
+            joint_topic=args.joint_topic,
+            point_topic=args.point_topic,
+            tracker_frame_id=args.tracker_frame,
+            collector=CollectorSettings(
+                window_s=args.window_s,
+                joint_motion_threshold=args.joint_motion_threshold_rad,
+                tracker_scatter_threshold=args.tracker_scatter_threshold_m,
+                min_points=args.min_points,
+            ),
+            campaign_path=args.campaign_out,
+            log=log,
+            workers=args.workers,
+            progress=progress,
+        )
+    finally:
+        elapsed = finish()
+    result = replayed.replay
+    dropped = ", ".join(f"{k}: {v}" for k, v in sorted(result.dropped.items()) if v) or "none"
+    print(f"replay of {args.bag}: {len(result.samples)} static poses found; dropped messages: {dropped}")
     if args.campaign_out:
         print(f"campaign written to {args.campaign_out}")
-    run_evaluation(
-        model,
-        replay.campaign,
-        test_q,
-        sources=parse_sources(args.sources),
-        args=args,
-        out_dir=Path(args.out),
-        label="replay",
-    )
+    _print_evaluation(replayed.evaluation, options, model, Path(args.out), elapsed)
     return 0
+
+
+def _sources_arg(text: str) -> tuple[str, ...]:
+    from robocal_uncertainty.uncertainty import parse_sources
+
+    return tuple(parse_sources(text))
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -723,6 +689,69 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     print()
     print(format_seed_comparison(result))
+    return 0
+
+
+def _add_dask_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run the trial blocks on a Dask cluster: scheduler address, or 'local' for a LocalCluster of "
+        "--workers processes (needs the [dask] extra; never changes the result)",
+    )
+
+
+def _cmd_map(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.montecarlo.executor import open_executor
+    from robocal_uncertainty.report.map_report import weakest_region, write_map_report
+    from robocal_uncertainty.uncertainty.sources import parse_sources
+    from robocal_uncertainty.uncertainty.workspace_map import grid_configurations, map_workspace, sample_configurations
+
+    campaign, model = _campaign_and_robot(args)
+    campaign = campaign.reorder_joints(model.joint_names)
+    span = np.column_stack([campaign.joint_positions.min(axis=0), campaign.joint_positions.max(axis=0)])
+    limits = span if args.within_campaign else None
+    if args.from_file:
+        q = _read_joints_file(args.from_file, model.n_joints, degrees=args.degrees)
+    elif args.grid:
+        q = grid_configurations(model, args.grid[0] if len(args.grid) == 1 else args.grid, limits=limits)
+    else:
+        q = sample_configurations(model, args.configurations, rng=np.random.default_rng(args.seed), limits=limits)
+    settings = _uncertainty_settings(args, None, parse_sources(args.sources))
+    progress, finish = _timed_progress(not args.no_progress, "map")
+    try:
+        with open_executor(workers=args.workers, dask=args.dask) as executor:
+            wmap = map_workspace(
+                model,
+                campaign,
+                q,
+                settings=settings,
+                lambda_=_lambda_arg(args.lambda_),
+                accept_unconverged=args.accept_unconverged,
+                trials=args.trials,
+                seed=args.seed,
+                frame=args.frame,
+                coverage=args.coverage,
+                regions=range(min(args.regions, len(q))),
+                block_size=args.block_size,
+                executor=executor,
+                progress=progress,
+            )
+    finally:
+        elapsed = finish()
+    files = write_map_report(wmap, args.out)
+    weak = weakest_region(wmap)
+    print(f"{len(wmap)} configurations x {wmap.n_trials} trials in {elapsed:.1f} s; positions in frame {wmap.frame_id}")
+    print(
+        f"u_pos: median {weak.median_u * 1e6:.1f} um, 95th percentile {weak.p95_u * 1e6:.1f} um, "
+        f"max {weak.max_u * 1e6:.1f} um"
+    )
+    worst = int(wmap.order[0])
+    where = ", ".join(f"{v:.3f}" for v in wmap.positions[worst])
+    print(f"weakest: configuration {worst + 1} at ({where}) m, reach {wmap.reach[worst]:.3f} m")
+    for warning in wmap.warnings:
+        print(f"warning: {warning}")
+    print(f"map report written to {files.markdown.parent}")
     return 0
 
 
@@ -816,6 +845,7 @@ def _build_parser() -> argparse.ArgumentParser:
         help="identify the base transform even if the robot config says it is known",
     )
     _add_uncertainty_args(p, trials_default="auto")
+    _add_dask_arg(p)
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser(
@@ -870,6 +900,41 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     _add_uncertainty_args(p, trials_default="5000")
     p.set_defaults(func=_cmd_validate)
+
+    p = sub.add_parser("map", help="uncertainty map over the workspace: u at many configurations, where it is weakest")
+    p.add_argument("campaign")
+    p.add_argument("--robot", required=True)
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--configurations", type=int, default=1000, help="uniform random configurations (default %(default)s)"
+    )
+    where.add_argument(
+        "--grid", type=int, nargs="+", metavar="STEPS", help="grid: values per joint (one for all, or one per joint)"
+    )
+    where.add_argument("--from-file", help="CSV/whitespace file, one configuration per row")
+    p.add_argument("--degrees", action="store_true", help="--from-file values are in degrees (default radians)")
+    p.add_argument(
+        "--within-campaign", action="store_true", help="sample inside the campaign's joint span, not the joint limits"
+    )
+    p.add_argument("--sources", default="tracker,encoder", help="comma list of sources, or all (default %(default)s)")
+    p.add_argument("--trials", type=int, default=10_000, help="Monte Carlo trials (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="root seed of the trials and of random configurations")
+    p.add_argument(
+        "--coverage", type=float, default=0.95, help="coverage probability of the regions (default %(default)s)"
+    )
+    p.add_argument("--regions", type=int, default=0, help="first N configurations keep samples for a JCGM 102 region")
+    p.add_argument("--block-size", type=int, default=1000, help="trials per random stream (default %(default)s)")
+    p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
+    p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker half-width a, um (uniform)")
+    p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m")
+    p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder half-width, deg (uniform)")
+    p.add_argument("--base-unknown", action="store_true", help="identify the base transform even if known")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes (never changes the result)")
+    _add_dask_arg(p)
+    p.add_argument("--out", default="robocal_map", help="report directory (default %(default)s)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_frame_and_convergence_args(p)
+    p.set_defaults(func=_cmd_map, lambda_range=None, min_poses=None, subset_size=None)
     return parser
 
 

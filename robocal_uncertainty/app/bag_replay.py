@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from robocal_uncertainty.app.evaluate import Evaluation, evaluate
+from robocal_uncertainty.app.evaluation import Evaluation, evaluate
 from robocal_uncertainty.bagio.campaign_format import JOINT_TOPIC, POINT_TOPIC
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import IdentifiabilityError

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal_uncertainty.bagio.bag import Bag, open_bag
 from robocal_uncertainty.bagio.campaign_format import (
     JOINT_TOPIC,
     METADATA_NAME,
@@ -36,7 +37,7 @@ from robocal_uncertainty.bagio.campaign_format import (
     CampaignHeader,
     parse_header,
 )
-from robocal_uncertainty.bagio.mcap_stream import McapContents, RawMessage, is_mcap, read_mcap_file
+from robocal_uncertainty.bagio.mcap_stream import RawMessage
 from robocal_uncertainty.bagio.pairing import pair_by_stamp
 from robocal_uncertainty.bagio.ros_messages import (
     DECODE_ERRORS,
@@ -48,7 +49,6 @@ from robocal_uncertainty.bagio.ros_messages import (
     decode_joint_state,
     decode_vector_stamped,
 )
-from robocal_uncertainty.bagio.rosbag2_dir import is_rosbag2_dir, read_rosbag2_dir
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
 from robocal_uncertainty.errors import BagError, CampaignError, InputError
 
@@ -56,42 +56,6 @@ __all__ = ["READ_WARNINGS_KEY", "read_campaign"]
 
 READ_WARNINGS_KEY = "warnings"
 """Key of ``Campaign.metadata`` holding the reader's warnings (one-line strings), if any."""
-
-
-def _load(path: Path, topics: tuple[str, ...]) -> tuple[McapContents, str]:
-    if not path.exists():
-        msg = f"campaign file not found: {path}"
-        raise CampaignError(msg)
-    try:
-        if is_rosbag2_dir(path):
-            return read_rosbag2_dir(path, topics), "rosbag2"
-        if path.is_file() and is_mcap(path):
-            return read_mcap_file(path), "mcap"
-    except OSError as err:
-        msg = f"cannot read campaign {path}: {err.strerror or err}"
-        raise CampaignError(msg) from err
-    msg = f"not a campaign: {path} is neither an MCAP file nor a rosbag2 directory"
-    raise CampaignError(msg)
-
-
-def _topic_messages(
-    contents: McapContents, topic: str, typename: str, path: Path, *, required: bool
-) -> list[RawMessage]:
-    channels = {c for c in contents.channels if c.topic == topic}
-    if not channels:
-        if not required:
-            return []
-        known = sorted({c.topic for c in contents.channels})
-        msg = f"{path}: topic {topic} not found (topics: {known})"
-        raise BagError(msg)
-    for channel in channels:
-        if channel.schema_name != typename:
-            msg = f"{path}: topic {topic} has type {channel.schema_name!r}, expected {typename}"
-            raise BagError(msg)
-        if channel.message_encoding != "cdr":
-            msg = f"{path}: topic {topic} has encoding {channel.message_encoding!r}, expected 'cdr'"
-            raise BagError(msg)
-    return [m for m in contents.messages if m.channel.topic == topic]
 
 
 def _decode_joints(raw: list[RawMessage], path: Path) -> list[JointReading]:
@@ -185,18 +149,17 @@ def _point_std(
 
 
 def _decode_all(
-    contents: McapContents, topics: tuple[str, str, str], path: Path
+    bag: Bag, topics: tuple[str, str, str]
 ) -> tuple[list[JointReading], list[VectorReading], list[VectorReading]]:
     """Decode joint states, points and point std; raise when no pose can be formed."""
     joint_topic, point_topic, std_topic = topics
-    if contents.truncated and not contents.messages:
+    path = bag.path
+    if bag.truncated and not bag.contents.messages:
         raise BagError(_early(path))
-    joints = _decode_joints(_topic_messages(contents, joint_topic, JOINT_STATE, path, required=True), path)
-    raw_points = _topic_messages(contents, point_topic, POINT_STAMPED, path, required=True)
-    points = _decode_vectors(raw_points, POINT_STAMPED, path)
-    raw_stds = _topic_messages(contents, std_topic, VECTOR3_STAMPED, path, required=False)
-    stds = _decode_vectors(raw_stds, VECTOR3_STAMPED, path)
-    if (not joints or not points) and contents.truncated:
+    joints = _decode_joints(bag.topic_messages(joint_topic, JOINT_STATE), path)
+    points = _decode_vectors(bag.topic_messages(point_topic, POINT_STAMPED), POINT_STAMPED, path)
+    stds = _decode_vectors(bag.topic_messages(std_topic, VECTOR3_STAMPED, required=False), VECTOR3_STAMPED, path)
+    if (not joints or not points) and bag.truncated:
         raise BagError(_early(path))
     if not joints or not points:
         msg = f"{path}: no pose found ({len(joints)} {joint_topic} and {len(points)} {point_topic} messages)"
@@ -286,11 +249,11 @@ def read_campaign(
 
     Raises
     ------
-    CampaignError
-        If the path is missing or is not an MCAP file or rosbag2 directory.
     BagError
-        Missing topics, wrong message types or encodings, undecodable messages, NaN, differing
-        joint names, repeated stamps or no pose at all.
+        (a :class:`CampaignError`) The path is missing or is not an MCAP file or rosbag2
+        directory (see :func:`~robocal_uncertainty.bagio.bag.open_bag`); missing topics,
+        wrong message types or encodings, undecodable messages, NaN, differing joint names,
+        repeated stamps or no pose at all.
 
     Warns
     -----
@@ -305,7 +268,8 @@ def read_campaign(
         point_topic or POINT_TOPIC,
         point_std_topic or POINT_STD_TOPIC,
     )
-    contents, source = _load(path, wanted)
+    bag = open_bag(path, wanted, what="campaign")
+    contents, source = bag.contents, bag.storage
     record = contents.metadata.get(METADATA_NAME)
     header = None if record is None else parse_header(record, str(path))
     if header is not None:
@@ -315,7 +279,7 @@ def read_campaign(
             point_std_topic or header.point_std_topic,
         )
     joint_topic, point_topic, point_std_topic = wanted
-    joints, points, stds = _decode_all(contents, wanted, path)
+    joints, points, stds = _decode_all(bag, wanted)
     names, positions = _joint_matrix(joints, header.joint_names if header else None, joint_topic, path)
     point_stamps = np.array([r.stamp_ns for r in points], dtype=np.int64)
     notes: list[str] = []

@@ -33,7 +33,7 @@ from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
-from robocal_uncertainty.nodes.common import CauseLogger, SampleStore, campaign_file, load_model, run_node, to_ros
+from robocal_uncertainty.nodes.common import CauseLogger, campaign_file, load_model, run_node, to_ros
 from robocal_uncertainty.nodes.parameters import (
     BASE_UNKNOWN,
     CAMPAIGN_PATH_READ,
@@ -45,6 +45,8 @@ from robocal_uncertainty.nodes.parameters import (
     parse_lambda,
 )
 from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
+from robocal_uncertainty.pipeline.sample_store import SampleStore
+from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
 __all__ = ["PARAMETERS", "CalibrationNode", "main"]
 
@@ -65,6 +67,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "Regularisation: 'auto' (L-curve corner), 'gcv', or a fixed lambda in column-scaled units",
         "dimensionless",
         check=lambda_text,
+    ),
+    ParamSpec(
+        "accept_unconverged",
+        False,
+        "Publish an identification that did not converge instead of logging the failure",
     ),
     ParamSpec(
         "min_samples", 10, "Fewest samples before the first automatic calibration", "samples", low=1, high=100_000
@@ -116,7 +123,7 @@ class CalibrationNode(Node):
 
     def _note_change(self, parameters: list[Parameter]) -> None:
         """A new lambda re-identifies the same samples (once rclpy has applied it)."""
-        if any(parameter.name == "lambda" for parameter in parameters):
+        if any(parameter.name in ("lambda", "accept_unconverged") for parameter in parameters):
             self._changed = True
 
     def _after_parameter_change(self) -> None:
@@ -163,7 +170,10 @@ class CalibrationNode(Node):
             return None
         lambda_ = parse_lambda(str(self.get_parameter("lambda").value))
         try:
-            result = self.store.pipeline(lambda_=lambda_, min_samples=min_samples).calibrate()
+            options = EvaluationOptions(
+                lambda_=lambda_, accept_unconverged=bool(self.get_parameter("accept_unconverged").value)
+            )
+            result = self.store.pipeline(options=options, min_samples=min_samples).calibrate()
         except CalibError as err:
             self.calibrated_count = n  # retry after the next `recalibrate_every` samples
             self._causes.warning("calibration_failed", f"calibration from {n} samples failed: {err}")

@@ -49,9 +49,9 @@ from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.nodes.common import CauseLogger, campaign_file, load_model, run_node, stamp_ns, to_ros
 from robocal_uncertainty.nodes.parameters import ParamSpec, declare_parameters, non_empty, positive
 from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos, sensor_qos
-from robocal_uncertainty.nodes.stream_merge import StreamMerger
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import CollectorSettings, StaticPoseCollector
+from robocal_uncertainty.pipeline.stream_merge import StreamMerger
 
 __all__ = ["PARAMETERS", "CollectorNode", "main"]
 

@@ -7,11 +7,13 @@ evaluated on the n earliest samples, the campaign the calibration node identifie
 node re-identifies it with the calibration's own lambda method and warns if its estimate
 differs from the published one. It waits for samples still in transit.
 
-The evaluation (:meth:`CalibrationPipeline.evaluate`, the call the command line's
-``evaluate``/``replay`` make, so the same settings give the same numbers bit for bit) runs
-in a worker thread: callbacks never block. A newer calibration, or a change of a Monte Carlo
-parameter, supersedes the running evaluation: it is cancelled at its next progress report
-(every ``block_size`` = 10 000 trials) and its result, if any, discarded.
+The evaluation (:func:`robocal_uncertainty.app.evaluate` on the pipeline's campaign and
+calibration, the call the command line's ``evaluate``/``replay`` make, so the same settings
+give the same numbers bit for bit; with ``budget``/``sweeps`` also the per-source budget and
+the sweeps, summarised in the status JSON) runs in a worker thread: callbacks never block.
+A newer calibration, or a change of a Monte Carlo parameter, supersedes the running
+evaluation: it is cancelled at its next progress report (every ``block_size`` = 10 000
+trials) and its result, if any, discarded.
 
 Outputs, all reliable + transient local with one message per test configuration kept (a
 late joiner gets the latest full set):
@@ -51,6 +53,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
+from robocal_uncertainty.app import Evaluation, evaluate
 from robocal_uncertainty.bagio.messages import msg_to_sample, uncertainty_to_msgs
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.sample import CalibrationSample
@@ -60,7 +63,6 @@ from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.msg import PoseUncertainty as PoseUncertaintyMsg
 from robocal_uncertainty.nodes.common import (
     CauseLogger,
-    SampleStore,
     campaign_file,
     load_model,
     run_node,
@@ -76,7 +78,13 @@ from robocal_uncertainty.nodes.parameters import (
     declare_parameters,
 )
 from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
-from robocal_uncertainty.uncertainty import CalibrationUncertainty, UncertaintySettings, parse_sources
+from robocal_uncertainty.pipeline.sample_store import SampleStore
+from robocal_uncertainty.uncertainty import (
+    CalibrationUncertainty,
+    EvaluationOptions,
+    UncertaintySettings,
+    parse_sources,
+)
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
 
@@ -100,6 +108,12 @@ _MONTE_CARLO = frozenset(
         "min_poses",
         "subset_size",
         "tracker_xyz_m",
+        "output_frame",
+        "accept_unconverged",
+        "budget",
+        "budget_trials",
+        "sweeps",
+        "sweep_trials",
     }
 )
 
@@ -201,6 +215,15 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "",
         check=_output_frame,
     ),
+    ParamSpec(
+        "accept_unconverged",
+        False,
+        "Evaluate an identification that did not converge instead of reporting the failure",
+    ),
+    ParamSpec("budget", False, "Also run each source alone (uncertainty budget; two or more sources)"),
+    ParamSpec("budget_trials", 2000, "Trials of each budget run", "trials", low=1, high=100_000_000),
+    ParamSpec("sweeps", False, "Also compute u against lambda and against the number of equations"),
+    ParamSpec("sweep_trials", 300, "Trials per sweep point", "trials", low=1, high=100_000_000),
     ParamSpec("workers", 1, "Monte Carlo processes (never changes the result)", "processes", True, 1, 256),
     ParamSpec("progress_period_s", 2.0, "Interval of progress reports", "s", low=0.1, high=3600.0),
     ParamSpec(
@@ -214,6 +237,22 @@ PARAMETERS: tuple[ParamSpec, ...] = (
 )
 
 
+def _extras(evaluation: Evaluation) -> dict[str, Any]:
+    """Budget and sweeps of the first test configuration for the status JSON, in um."""
+    out: dict[str, Any] = {}
+    if evaluation.budget:
+        out["budget_u_um"] = {
+            source: [round(a.standard_uncertainty * 1e6, 4) for a in run.poses[0].axes]
+            for source, run in evaluation.budget.items()
+        }
+    for sweep in evaluation.sweeps:
+        out[f"sweep_{sweep.name}"] = {
+            "values": sweep.values.tolist(),
+            "u_um": np.round(sweep.standard_uncertainty * 1e6, 4).tolist(),
+        }
+    return out
+
+
 class _Superseded(Exception):
     """Raised in the progress callback to abandon a stale evaluation."""
 
@@ -223,7 +262,7 @@ class _Job:
     generation: int
     samples: tuple[CalibrationSample, ...]
     calibration: CalibrationResultMsg
-    options: dict[str, Any]
+    options: EvaluationOptions
 
 
 class UncertaintyNode(Node):
@@ -302,7 +341,9 @@ class UncertaintyNode(Node):
                 self.get_logger().info("Monte Carlo settings changed: re-evaluating the latest calibration")
                 self._submit()
 
-    def _options(self) -> dict[str, Any]:
+    def _options(self, msg: CalibrationResultMsg) -> EvaluationOptions:
+        """The :class:`EvaluationOptions` of the parameters, with the calibration's lambda choice."""
+
         def get(name: str) -> Any:
             return self.get_parameter(name).value
 
@@ -317,16 +358,22 @@ class UncertaintyNode(Node):
             tracker_xyz=tuple(float(v) for v in get("tracker_xyz_m")),
         )
         trials = int(get("trials"))
-        return {
-            "uncertainty": settings,
-            "test_joints": self.test_joints,
-            "trials": trials if trials > 0 else "auto",
-            "seed": int(get("seed")),
-            "coverage": float(get("coverage")),
-            "n_dig": int(get("n_dig")),
-            "max_trials": int(get("max_trials")),
-            "output_frame": str(get("output_frame")),
-        }
+        return EvaluationOptions(
+            lambda_=self._lambda_of(msg),
+            uncertainty=settings,
+            test_joints=self.test_joints,
+            trials=trials if trials > 0 else "auto",
+            seed=int(get("seed")),
+            coverage=float(get("coverage")),
+            n_dig=int(get("n_dig")),
+            max_trials=int(get("max_trials")),
+            output_frame=str(get("output_frame")),
+            accept_unconverged=bool(get("accept_unconverged")),
+            budget=bool(get("budget")),
+            budget_trials=int(get("budget_trials")),
+            sweeps=bool(get("sweeps")),
+            sweep_trials=int(get("sweep_trials")),
+        )
 
     def _submit(self) -> None:
         """Queue the evaluation of the latest calibration (superseding any other)."""
@@ -342,7 +389,7 @@ class UncertaintyNode(Node):
             return
         self._waiting = False
         try:
-            options = self._options()
+            options = self._options(msg)
         except CalibError as err:
             self.get_logger().error(f"invalid Monte Carlo settings: {err}")
             return
@@ -383,11 +430,17 @@ class UncertaintyNode(Node):
                 self.get_logger().info(f"Monte Carlo of the {n}-sample calibration: {done}{of} trials")
                 self._status({"state": "running", "done": done, "target": target, "sample_count": n})
 
-        self._status({"state": "running", "done": 0, "target": job.options["trials"], "sample_count": n})
-        lambda_ = self._lambda_of(job.calibration)
-        pipeline = SampleStore.pipeline_of(self.model, job.samples, lambda_=lambda_, **job.options)
+        self._status({"state": "running", "done": 0, "target": job.options.trials, "sample_count": n})
+        pipeline = SampleStore.pipeline_of(self.model, job.samples, options=job.options)
         try:
-            result = pipeline.evaluate(workers=int(self.get_parameter("workers").value), progress=progress)
+            evaluation = evaluate(
+                self.model,
+                pipeline.campaign,
+                job.options,
+                calibration=pipeline.calibrate(),
+                workers=int(self.get_parameter("workers").value),
+                progress=progress,
+            )
         except _Superseded:
             self.get_logger().info(f"Monte Carlo of the {n}-sample calibration superseded; abandoned")
             return
@@ -398,6 +451,9 @@ class UncertaintyNode(Node):
         if self._stop or job.generation != self._generation:
             self.get_logger().info(f"Monte Carlo of the {n}-sample calibration superseded; result discarded")
             return
+        result = evaluation.uncertainty
+        for warning in evaluation.input_warnings:
+            self._causes.warning("input_warning", warning)
         self._check_same_calibration(result, job.calibration)
         self._publish(result, job.calibration)
         self.completed += 1
@@ -414,6 +470,7 @@ class UncertaintyNode(Node):
                 "trials": result.n_trials,
                 "converged": result.converged,
                 "elapsed_s": round(elapsed, 3),
+                **_extras(evaluation),
             }
         )
 

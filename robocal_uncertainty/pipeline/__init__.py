@@ -1,7 +1,10 @@
-"""ROS-free online pipeline: static-pose collection, calibration, uncertainty, bag replay.
+"""ROS-free online pipeline: static-pose collection, sample store, stream merge, calibration
+pipeline (sample accumulation, recording, resume) and bag replay into samples and a campaign.
 
 Thin ROS 2 nodes wrap these objects; ``robocal-uncertainty replay`` drives them offline.
-Nothing here imports ROS.
+The uncertainty evaluation is :func:`robocal_uncertainty.app.evaluate`, above this layer.
+``EvaluationOptions`` and ``evaluate_campaign`` are re-exported from
+:mod:`robocal_uncertainty.uncertainty.options`. Nothing here imports ROS.
 """
 
 from typing import TYPE_CHECKING
@@ -10,11 +13,7 @@ from robocal_uncertainty._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from robocal_uncertainty.core.sample import CalibrationSample
-    from robocal_uncertainty.pipeline.calibration_pipeline import (
-        CalibrationPipeline,
-        EvaluationOptions,
-        evaluate_campaign,
-    )
+    from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
     from robocal_uncertainty.pipeline.collector import (
         DROP_CAUSES,
         CollectorSettings,
@@ -23,6 +22,9 @@ if TYPE_CHECKING:
         samples_to_campaign,
     )
     from robocal_uncertainty.pipeline.replay import ReplayResult, replay_bag
+    from robocal_uncertainty.pipeline.sample_store import SampleStore
+    from robocal_uncertainty.pipeline.stream_merge import StreamMerger
+    from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
 
 __all__ = [
     "DROP_CAUSES",
@@ -32,7 +34,9 @@ __all__ = [
     "EvaluationOptions",
     "LogCallback",
     "ReplayResult",
+    "SampleStore",
     "StaticPoseCollector",
+    "StreamMerger",
     "evaluate_campaign",
     "replay_bag",
     "samples_to_campaign",

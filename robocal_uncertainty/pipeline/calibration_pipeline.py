@@ -1,25 +1,26 @@
-"""Samples in, calibration and uncertainty out: the state a calibration node holds.
+"""Samples in, campaign and calibration out: the state a calibration node holds.
 
 :class:`CalibrationPipeline` accumulates calibration samples into a campaign (optionally
 recorded to a campaign MCAP file pose by pose, so a crash loses nothing, and resumed from
-that file on restart), identifies the parameters and evaluates the Monte Carlo
-uncertainty. :func:`evaluate_campaign` is the single place that calls
-:func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty` from
-:class:`EvaluationOptions`; the command line ``evaluate`` uses it too, so a replay and an
-``evaluate`` of the same campaign agree bit for bit.
+that file on restart) and identifies the parameters. The uncertainty of that calibration
+is the application service's job: ``robocal_uncertainty.app.evaluate(model,
+pipeline.campaign, options, calibration=pipeline.calibrate())``, the call the command line,
+the replay and the nodes make, so the same campaign and options give the same numbers bit
+for bit.
+
+:class:`EvaluationOptions` and :func:`evaluate_campaign` are re-exported from
+:mod:`robocal_uncertainty.uncertainty.options`, where they now live.
 """
 
 from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from robocal_uncertainty.bagio.campaign_mcap import CampaignRecorder, read_campaign
 from robocal_uncertainty.bagio.campaign_reader import READ_WARNINGS_KEY
@@ -28,133 +29,27 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, evaluate_uncertainty
-from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
 
-__all__ = ["CalibrationPipeline", "EvaluationOptions", "evaluate_campaign"]
+__all__ = ["CalibrationPipeline", "EvaluationOptions", "evaluate_campaign"]  # the last two: re-exports
 
 Array = NDArray[np.float64]
-Progress = Callable[[int, int | None], None]
-
-
-@dataclass(frozen=True)
-class EvaluationOptions:
-    """Everything that determines a calibration and its uncertainty result.
-
-    Parameters
-    ----------
-    lambda_ : {"auto", "gcv"} or float
-        Lambda method of the identification (see
-        :func:`~robocal_uncertainty.core.identification.identify`).
-    uncertainty : UncertaintySettings
-        Sources and noise models of the Monte Carlo.
-    test_joints : ndarray, shape (n_test, n_joints) [rad], optional
-        Configurations at which the tool position uncertainty is evaluated; required by
-        :func:`evaluate_campaign`.
-    trials : int or "auto"
-        Number of Monte Carlo trials, or the adaptive procedure.
-    seed : int
-        Root seed of the Monte Carlo.
-    coverage : float
-        Coverage probability p in (0, 1).
-    n_dig, max_trials, block_size : int
-        Adaptive-procedure digits, its trial cap, and trials per random stream (see
-        :func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty`).
-    output_frame : {"measurement", "base"}
-        Frame of the output positions (the frame of the campaign's points by default).
-    """
-
-    lambda_: str | float = "auto"
-    uncertainty: UncertaintySettings = field(default_factory=UncertaintySettings)
-    test_joints: Array | None = None
-    trials: int | str = 10_000
-    seed: int = 0
-    coverage: float = 0.95
-    n_dig: int = 2
-    max_trials: int = 2_000_000
-    block_size: int = 10_000
-    output_frame: str = "measurement"
-
-    def __post_init__(self) -> None:
-        if self.test_joints is not None:
-            q = np.array(self.test_joints, dtype=np.float64)
-            if q.ndim == 1:
-                q = q[None, :]
-            if q.ndim != 2 or not np.isfinite(q).all():
-                msg = f"test_joints must be finite, shape (n_test, n_joints), got shape {q.shape}"
-                raise ConfigError(msg)
-            q.setflags(write=False)
-            object.__setattr__(self, "test_joints", q)
-
-
-def evaluate_campaign(
-    model: RobotModel,
-    campaign: Campaign,
-    options: EvaluationOptions,
-    *,
-    calibration: IdentificationResult | None = None,
-    workers: int = 1,
-    progress: Progress | None = None,
-) -> CalibrationUncertainty:
-    """Monte Carlo uncertainty of `campaign` as set by `options` (the one shared call).
-
-    Parameters
-    ----------
-    model : RobotModel
-        Nominal model.
-    campaign : Campaign
-    options : EvaluationOptions
-        Must have ``test_joints``.
-    calibration : IdentificationResult, optional
-        ``identify(model, campaign, lambda_=options.lambda_)`` if already computed; it is
-        computed the same way when omitted, so the result does not depend on it.
-    workers, progress
-        Passed through; they never change the result.
-
-    Raises
-    ------
-    ConfigError
-        No test joints, or invalid options.
-    """
-    if options.test_joints is None:
-        raise ConfigError("no test joint configurations given for the uncertainty evaluation")
-    return evaluate_uncertainty(
-        model,
-        campaign,
-        options.test_joints,
-        settings=options.uncertainty,
-        calibration=calibration,
-        lambda_=options.lambda_,
-        trials=options.trials,
-        coverage=options.coverage,
-        seed=options.seed,
-        n_dig=options.n_dig,
-        max_trials=options.max_trials,
-        block_size=options.block_size,
-        workers=workers,
-        progress=progress,
-        frame=options.output_frame,
-    )
 
 
 class CalibrationPipeline:
-    """Accumulate calibration samples; calibrate and evaluate on demand.
+    """Accumulate calibration samples; calibrate on demand.
 
     Parameters
     ----------
     model : RobotModel
         Nominal model; samples must carry exactly its joints (any order).
-    lambda_ : {"auto", "gcv"} or float
-        Lambda method of the identification.
+    options : EvaluationOptions, optional
+        Its ``lambda_`` and ``accept_unconverged`` set the identification of
+        :meth:`calibrate` (defaults: ``EvaluationOptions()``); the rest is carried for the
+        evaluation (``robocal_uncertainty.app.evaluate``).
     min_samples : int, optional
         Fewest samples :meth:`calibrate` accepts; None leaves the check to the
         identification (enough equations for the identifiable parameters).
-    uncertainty : UncertaintySettings, optional
-        Monte Carlo sources and noise models (defaults: tracker and encoder).
-    test_joints : array_like, shape (n_test, n_joints) [rad], optional
-        Configurations for :meth:`evaluate`.
-    trials, seed, coverage, n_dig, max_trials, block_size
-        See :class:`EvaluationOptions`.
     campaign_path : str or Path, optional
         Campaign MCAP file recording every sample as it is added (flushed and fsynced per
         pose). If it exists, the pipeline resumes from it: its poses are read (a file
@@ -184,17 +79,8 @@ class CalibrationPipeline:
         self,
         model: RobotModel,
         *,
-        lambda_: str | float = "auto",
+        options: EvaluationOptions | None = None,
         min_samples: int | None = None,
-        uncertainty: UncertaintySettings | None = None,
-        test_joints: ArrayLike | None = None,
-        trials: int | str = 10_000,
-        seed: int = 0,
-        coverage: float = 0.95,
-        n_dig: int = 2,
-        max_trials: int = 2_000_000,
-        block_size: int = 10_000,
-        output_frame: str = "measurement",
         campaign_path: str | Path | None = None,
         fsync: bool = True,
         metadata: dict[str, object] | None = None,
@@ -206,18 +92,7 @@ class CalibrationPipeline:
             raise ConfigError(msg)
         self.model = model
         self.min_samples = min_samples
-        self.options = EvaluationOptions(
-            lambda_=lambda_,
-            uncertainty=uncertainty or UncertaintySettings(),
-            test_joints=None if test_joints is None else np.asarray(test_joints, dtype=np.float64),
-            trials=trials,
-            seed=seed,
-            coverage=coverage,
-            n_dig=n_dig,
-            max_trials=max_trials,
-            block_size=block_size,
-            output_frame=output_frame,
-        )
+        self.options = EvaluationOptions() if options is None else options
         self.campaign_path = None if campaign_path is None else Path(campaign_path)
         self.resume_warnings: tuple[str, ...] = ()
         """Warnings raised while reading the resumed campaign file (e.g. truncation)."""
@@ -326,30 +201,13 @@ class CalibrationPipeline:
             msg = f"only {self.n_samples} calibration samples, need at least {need}"
             raise IdentifiabilityError(msg)
         if self._calibration is None:
-            self._calibration = identify(self.model, campaign, lambda_=self.options.lambda_)
+            self._calibration = identify(
+                self.model,
+                campaign,
+                lambda_=self.options.lambda_,
+                accept_unconverged=self.options.accept_unconverged,
+            )
         return self._calibration
-
-    def evaluate(self, *, workers: int = 1, progress: Progress | None = None) -> CalibrationUncertainty:
-        """Monte Carlo uncertainty of the current calibration via :func:`evaluate_campaign`.
-
-        Raises
-        ------
-        IdentifiabilityError
-            See :meth:`calibrate`.
-        ConfigError
-            No test joints configured, or invalid options.
-        """
-        calibration = self.calibrate()
-        campaign = self.campaign
-        assert campaign is not None  # calibrate() checked
-        return evaluate_campaign(
-            self.model,
-            campaign,
-            self.options,
-            calibration=calibration,
-            workers=workers,
-            progress=progress,
-        )
 
     # -- campaign file ---------------------------------------------------------------------
 

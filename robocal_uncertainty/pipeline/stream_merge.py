@@ -22,6 +22,8 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+from robocal_uncertainty.errors import ConfigError
+
 __all__ = ["StreamMerger"]
 
 
@@ -39,7 +41,7 @@ class StreamMerger:
     def __init__(self, sink: Callable[[int, Any], None], *, hold_ns: int) -> None:
         if hold_ns < 0:
             msg = f"hold_ns must be >= 0, got {hold_ns}"
-            raise ValueError(msg)
+            raise ConfigError(msg)
         self._sink = sink
         self.hold_ns = int(hold_ns)
         self._queues: tuple[deque[tuple[int, int, int, Any]], ...] = (deque(), deque())

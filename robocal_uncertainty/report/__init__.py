@@ -20,12 +20,12 @@ if TYPE_CHECKING:
         plot_position_error,
         plot_uncertainty_vs,
     )
-    from robocal_uncertainty.report.sweeps import Sweep, sweep_equations, sweep_lambda
     from robocal_uncertainty.report.table2 import (
         format_budget,
         format_table2,
         round_to_uncertainty,
     )
+    from robocal_uncertainty.uncertainty.sweeps import Sweep, sweep_equations, sweep_lambda
 
 __all__ = [
     "REPORT_FILES",

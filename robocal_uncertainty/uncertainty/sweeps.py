@@ -3,6 +3,10 @@
 Each point is a small Monte Carlo run (a few hundred trials by default): the curves show
 trends, not uncertainty statements. Every point uses the same root seed, so differences
 between points come from the setting, not from the random stream.
+
+:func:`evaluate_sweeps` gives the report's two standard curves (against lambda and against
+the number of equations) from :class:`~robocal_uncertainty.uncertainty.options.EvaluationOptions`;
+:mod:`robocal_uncertainty.report` only plots and tabulates the :class:`Sweep` results.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -19,9 +24,10 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.options import EvaluationOptions
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
-__all__ = ["DEFAULT_SWEEP_TRIALS", "Sweep", "sweep_equations", "sweep_lambda"]
+__all__ = ["DEFAULT_SWEEP_TRIALS", "Sweep", "evaluate_sweeps", "sweep_equations", "sweep_lambda"]
 
 Array = NDArray[np.float64]
 DEFAULT_SWEEP_TRIALS = 300
@@ -85,6 +91,10 @@ def _check_points(name: str, values: ArrayLike) -> Array:
     return arr
 
 
+def _executor(executor: Any | None) -> dict[str, Any]:
+    return {} if executor is None else {"executor": executor}
+
+
 def sweep_lambda(
     model: RobotModel,
     campaign: Campaign,
@@ -96,6 +106,9 @@ def sweep_lambda(
     seed: int = 0,
     settings: UncertaintySettings | None = None,
     pose: int = 0,
+    frame: str = "measurement",
+    workers: int = 1,
+    executor: Any | None = None,
 ) -> Array:
     """Standard uncertainty of the tool position with lambda fixed at each value (Fig. 7).
 
@@ -121,6 +134,11 @@ def sweep_lambda(
         Sources and their models (default: tracker and encoder).
     pose : int
         Which test configuration to report.
+    frame : {"measurement", "base"}
+        Frame of the output positions.
+    workers, executor
+        Passed to ``evaluate_uncertainty``; they never change the result (`executor` only
+        when given).
 
     Returns
     -------
@@ -149,6 +167,9 @@ def sweep_lambda(
             calibration=cal,
             trials=trials,
             seed=seed,
+            frame=frame,
+            workers=workers,
+            **_executor(executor),
         )
         out[i] = [a.standard_uncertainty for a in res.poses[pose].axes]
     return out
@@ -165,6 +186,9 @@ def sweep_equations(
     seed: int = 0,
     settings: UncertaintySettings | None = None,
     pose: int = 0,
+    frame: str = "measurement",
+    workers: int = 1,
+    executor: Any | None = None,
 ) -> Array:
     """Standard uncertainty when each trial re-identifies from n random poses (Figs. 8-9).
 
@@ -189,6 +213,11 @@ def sweep_equations(
         Sources and their models (default: tracker and encoder).
     pose : int
         Which test configuration to report.
+    frame : {"measurement", "base"}
+        Frame of the output positions.
+    workers, executor
+        Passed to ``evaluate_uncertainty``; they never change the result (`executor` only
+        when given).
 
     Returns
     -------
@@ -222,6 +251,89 @@ def sweep_equations(
             calibration=calibration,
             trials=trials,
             seed=seed,
+            frame=frame,
+            workers=workers,
+            **_executor(executor),
         )
         out[i] = [a.standard_uncertainty for a in res.poses[pose].axes]
     return out
+
+
+def evaluate_sweeps(
+    model: RobotModel,
+    campaign: Campaign,
+    calibration: IdentificationResult,
+    options: EvaluationOptions,
+    *,
+    workers: int = 1,
+    executor: Any | None = None,
+) -> tuple[Sweep, ...]:
+    """The report's sweeps: u against lambda (seed Fig. 7) and against the number of equations (Figs. 8-9).
+
+    Lambda: 9 values spaced logarithmically from lambda*/10 to 10 lambda* (1e-4 .. 1e-1
+    when lambda* = 0). Equations: 8 pose counts from max(1.5 n_estimated / 3, 40 / 3) poses
+    to the whole campaign. Each point runs ``options.sweep_trials`` trials with
+    ``options.seed`` and the noise sources of ``options.uncertainty`` (tracker, encoder,
+    residual; tracker and encoder when it has none of them), at the first test configuration.
+
+    Parameters
+    ----------
+    model : RobotModel
+    campaign : Campaign
+    calibration : IdentificationResult
+        Calibration of the whole campaign (the reference lambda and pose count).
+    options : EvaluationOptions
+        Must have ``test_joints``.
+    workers, executor
+        Passed through; they never change the result.
+
+    Returns
+    -------
+    tuple of Sweep
+        ``"lambda"`` then ``"equations"``; standard uncertainties [m].
+    """
+    if options.test_joints is None:
+        raise ConfigError("no test joint configurations given for the sweeps")
+    settings = options.uncertainty
+    noise = dataclasses.replace(
+        settings,
+        sources=tuple(s for s in settings.sources if s in ("tracker", "encoder", "residual")) or ("tracker", "encoder"),
+    )
+    lam = calibration.lambda_
+    lambdas = np.geomspace(lam / 10.0, lam * 10.0, 9) if lam > 0 else np.geomspace(1e-4, 1e-1, 9)
+    n_est = int(calibration.estimated.sum())
+    lowest = max(int(np.ceil(1.5 * n_est / 3)), int(np.ceil(40 / 3)))
+    counts = np.unique(np.linspace(min(lowest, campaign.n_poses), campaign.n_poses, 8).round().astype(int))
+    trials, seed = options.sweep_trials, options.seed
+    common: dict[str, Any] = {
+        "trials": trials,
+        "seed": seed,
+        "settings": noise,
+        "frame": options.output_frame,
+        "workers": workers,
+        "executor": executor,
+    }
+    u_lam = sweep_lambda(model, campaign, calibration, options.test_joints, lambdas, **common)
+    u_eq = sweep_equations(model, campaign, calibration, options.test_joints, counts, **common)
+    return (
+        Sweep(
+            name="lambda",
+            xlabel="lambda (scaled units)",
+            values=lambdas,
+            standard_uncertainty=u_lam,
+            reference=lam,
+            log_x=True,
+            n_trials=trials,
+            seed=seed,
+        ),
+        Sweep(
+            name="equations",
+            xlabel="number of equations (3 per pose)",
+            values=3 * counts.astype(float),
+            standard_uncertainty=u_eq,
+            reference=float(3 * campaign.n_poses),
+            log_x=False,
+            n_trials=trials,
+            seed=seed,
+        ),
+    )

@@ -10,14 +10,15 @@ import numpy as np
 import pytest
 from pipeline_data import BASE_BAG, COLLECTOR, SEED, TEST_JOINTS, TRACKER_BAG, TRIALS
 
+from robocal_uncertainty.app import ReplayEvaluation, evaluate, replay
 from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.bagio.raw_bag_simulator import RawBagTruth
 from robocal_uncertainty.core import RobotModel, SimulationSettings
 from robocal_uncertainty.errors import BagError, CampaignError
-from robocal_uncertainty.pipeline import ReplayResult, replay_bag
-from robocal_uncertainty.pipeline.calibration_pipeline import EvaluationOptions, evaluate_campaign
+from robocal_uncertainty.pipeline import EvaluationOptions, replay_bag
 from robocal_uncertainty.uncertainty import CalibrationUncertainty, UncertaintySettings, evaluate_uncertainty
 
+OPTIONS = EvaluationOptions(test_joints=TEST_JOINTS, trials=TRIALS, seed=SEED)
 ENCODER = SimulationSettings().encoder_noise
 TRACKER = SimulationSettings().tracker_noise
 
@@ -27,18 +28,10 @@ def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 @pytest.fixture(scope="module")
-def base_replay(paper_arm: RobotModel, tmp_path_factory: pytest.TempPathFactory) -> tuple[ReplayResult, Path]:
+def base_replay(paper_arm: RobotModel, tmp_path_factory: pytest.TempPathFactory) -> tuple[ReplayEvaluation, Path]:
     campaign_path = tmp_path_factory.mktemp("replay") / "campaign.mcap"
-    result = replay_bag(
-        BASE_BAG,
-        paper_arm,
-        collector=COLLECTOR,
-        test_joints=TEST_JOINTS,
-        trials=TRIALS,
-        seed=SEED,
-        campaign_path=campaign_path,
-    )
-    return result, campaign_path
+    replayed = replay(BASE_BAG, paper_arm, OPTIONS, collector=COLLECTOR, campaign_path=campaign_path)
+    return replayed, campaign_path
 
 
 def _check_windows(samples: tuple, truth: RawBagTruth) -> None:
@@ -65,7 +58,7 @@ def _check_means(samples: tuple, truth: RawBagTruth) -> None:
 
 
 def test_base_bag_finds_every_static_pose(base_replay, base_truth: RawBagTruth) -> None:
-    result, _ = base_replay
+    result = base_replay[0].replay
     _check_windows(result.samples, base_truth)
     assert result.rejected_dwells == 0
     assert sum(result.dropped.values()) == 0
@@ -75,7 +68,7 @@ def test_base_bag_finds_every_static_pose(base_replay, base_truth: RawBagTruth) 
 
 
 def test_base_bag_sample_means_within_noise(base_replay, base_truth: RawBagTruth) -> None:
-    result, _ = base_replay
+    result = base_replay[0].replay
     _check_means(result.samples, base_truth)
     for sample in result.samples:
         assert sample.joint_state_count >= 20
@@ -83,30 +76,31 @@ def test_base_bag_sample_means_within_noise(base_replay, base_truth: RawBagTruth
 
 
 def test_base_bag_calibrates(base_replay) -> None:
-    result, _ = base_replay
-    assert result.campaign is not None
-    assert result.campaign.frame == "base"
-    assert result.calibration is not None
-    assert result.calibration.rms_after < 2e-5 < result.calibration.rms_before
+    result = base_replay[0]
+    assert result.replay.campaign is not None
+    assert result.replay.campaign.frame == "base"
+    assert result.replay.calibration is None  # the service calibrates (once)
+    assert result.evaluation.calibration.rms_after < 2e-5 < result.evaluation.calibration.rms_before
 
 
 def test_replay_uncertainty_is_bit_identical_to_evaluate(base_replay, paper_arm: RobotModel) -> None:
-    result, _ = base_replay
-    assert isinstance(result.uncertainty, CalibrationUncertainty)
+    result = base_replay[0]
+    assert isinstance(result.evaluation.uncertainty, CalibrationUncertainty)
     direct = evaluate_uncertainty(
         paper_arm,
-        result.campaign,
+        result.replay.campaign,
         TEST_JOINTS,
         settings=UncertaintySettings(),
         trials=TRIALS,
         seed=SEED,
         coverage=0.95,
     )
-    _assert_same_uncertainty(result.uncertainty, direct)
+    _assert_same_uncertainty(result.evaluation.uncertainty, direct)
 
 
 def test_recorded_campaign_file_gives_the_same_uncertainty(base_replay, paper_arm: RobotModel) -> None:
-    result, campaign_path = base_replay
+    replayed, campaign_path = base_replay
+    result = replayed.replay
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a closed, complete file
         stored = read_campaign(campaign_path)
@@ -117,8 +111,7 @@ def test_recorded_campaign_file_gives_the_same_uncertainty(base_replay, paper_ar
         result.campaign.frame_id,
         result.campaign.joint_names,
     )
-    options = EvaluationOptions(test_joints=TEST_JOINTS, trials=TRIALS, seed=SEED)
-    _assert_same_uncertainty(result.uncertainty, evaluate_campaign(paper_arm, stored, options))
+    _assert_same_uncertainty(replayed.evaluation.uncertainty, evaluate(paper_arm, stored, OPTIONS).uncertainty)
 
 
 def _assert_same_uncertainty(a: CalibrationUncertainty, b: CalibrationUncertainty) -> None:
@@ -140,14 +133,13 @@ def test_tracker_bag_ends_in_a_dwell_and_identifies_the_base(
     assert result.tracker_frame_id == "laser_tracker"
     assert result.campaign is not None and result.campaign.frame == "tracker"
     assert result.calibration is not None and result.calibration.rms_after < 2e-5
-    assert result.uncertainty is None  # no test joints
     # The recording stops during the last dwell: flush() emitted it.
     assert tracker_truth.windows[-1].end_ns >= result.samples[-1].stamp_ns
 
 
 def test_replay_without_calibration_only_collects(paper_arm: RobotModel, base_truth: RawBagTruth) -> None:
-    result = replay_bag(BASE_BAG, paper_arm, collector=COLLECTOR, calibrate=False, test_joints=TEST_JOINTS)
-    assert result.calibration is None and result.uncertainty is None
+    result = replay_bag(BASE_BAG, paper_arm, collector=COLLECTOR, calibrate=False)
+    assert result.calibration is None
     assert len(result.samples) == len(base_truth.windows)
 
 

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from pipeline_data import BASE_BAG, COLLECTOR, SEED, TEST_JOINTS
 
+from robocal_uncertainty.app import evaluate
 from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.core import RobotModel
 from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
-from robocal_uncertainty.pipeline import CalibrationPipeline, CalibrationSample, replay_bag
+from robocal_uncertainty.pipeline import CalibrationPipeline, CalibrationSample, EvaluationOptions, replay_bag
 from robocal_uncertainty.uncertainty import evaluate_uncertainty
 
 
@@ -86,10 +87,11 @@ def test_abandoned_pipeline_resumes_on_the_same_path(
 
 
 def test_evaluate_matches_evaluate_uncertainty(paper_arm: RobotModel, samples) -> None:
-    pipeline = CalibrationPipeline(paper_arm, test_joints=TEST_JOINTS, trials=200, seed=SEED)
+    options = EvaluationOptions(test_joints=TEST_JOINTS, trials=200, seed=SEED)
+    pipeline = CalibrationPipeline(paper_arm, options=options)
     for sample in samples:
         pipeline.add_sample(sample)
-    result = pipeline.evaluate()
+    result = evaluate(paper_arm, pipeline.campaign, options, calibration=pipeline.calibrate()).uncertainty
     direct = evaluate_uncertainty(paper_arm, pipeline.campaign, TEST_JOINTS, trials=200, seed=SEED, coverage=0.95)
     assert result.samples.tobytes() == direct.samples.tobytes()
     assert pipeline.calibrate() is pipeline.calibrate()  # cached until the next sample
@@ -103,9 +105,8 @@ def test_too_few_samples_and_missing_test_joints(paper_arm: RobotModel, samples)
     for sample in samples[:10]:
         pipeline.add_sample(sample)
     assert pipeline.ready
-    pipeline.calibrate()
     with pytest.raises(ConfigError, match="no test joint"):
-        pipeline.evaluate()
+        evaluate(paper_arm, pipeline.campaign, pipeline.options, calibration=pipeline.calibrate())
 
 
 def test_bad_samples_are_refused(tmp_path: Path, paper_arm: RobotModel, samples) -> None:

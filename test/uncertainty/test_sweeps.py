@@ -2,12 +2,36 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+from robocal_uncertainty.core import SimulationSettings, load_robot_model, simulate_campaign
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.report import Sweep, sweep_equations, sweep_lambda
-from robocal_uncertainty.uncertainty import evaluate_uncertainty
+from robocal_uncertainty.uncertainty import (
+    EvaluationOptions,
+    Sweep,
+    UncertaintySettings,
+    evaluate_sweeps,
+    evaluate_uncertainty,
+    sweep_equations,
+    sweep_lambda,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+SEED_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
+
+
+@pytest.fixture(scope="module")
+def setup() -> SimpleNamespace:
+    model = load_robot_model(REPO / "config" / "paper_arm.yaml")
+    sim = simulate_campaign(model, SimulationSettings(), seed=1)
+    qt = np.radians(SEED_JOINTS_DEG)
+    settings = UncertaintySettings(sources=("tracker", "encoder"))
+    result = evaluate_uncertainty(model, sim.campaign, qt, settings=settings, trials=200, seed=1)
+    return SimpleNamespace(model=model, campaign=sim.campaign, test_joints=qt, result=result)
 
 
 def test_sweep_equations_fewer_poses_larger_u(setup):
@@ -49,3 +73,19 @@ def test_sweep_bad_inputs(setup):
         sweep_lambda(*args, [1.0], trials=50, pose=1)
     with pytest.raises(ConfigError):
         Sweep("x", "x", np.arange(3.0), np.zeros((2, 3)))
+
+
+def test_evaluate_sweeps_are_the_two_sweep_functions(setup):
+    """The report's standard sweeps are sweep_lambda and sweep_equations on their grids."""
+    cal = setup.result.calibration
+    options = EvaluationOptions(test_joints=setup.test_joints, seed=5, sweep_trials=60)
+    by_lambda, by_equations = evaluate_sweeps(setup.model, setup.campaign, cal, options)
+    assert (by_lambda.name, by_equations.name) == ("lambda", "equations")
+    assert by_lambda.values.shape == (9,) and by_lambda.reference == cal.lambda_
+    assert by_equations.values[-1] == 3 * setup.campaign.n_poses
+    again = sweep_equations(
+        setup.model, setup.campaign, cal, setup.test_joints, by_equations.values[:2] / 3, trials=60, seed=5
+    )
+    np.testing.assert_array_equal(again, by_equations.standard_uncertainty[:2])
+    with pytest.raises(ConfigError, match="test joint"):
+        evaluate_sweeps(setup.model, setup.campaign, cal, EvaluationOptions())

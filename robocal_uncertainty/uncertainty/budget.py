@@ -1,0 +1,66 @@
+"""Uncertainty budget: the Monte Carlo run again with each source alone.
+
+Each source's run uses the same calibration, root seed and test configurations as the
+full evaluation, with ``options.budget_trials`` trials, so a budget row tells how much of
+the combined uncertainty that source alone produces.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any
+
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
+
+__all__ = ["evaluate_budget"]
+
+
+def evaluate_budget(
+    model: RobotModel,
+    campaign: Campaign,
+    calibration: IdentificationResult,
+    options: EvaluationOptions,
+    *,
+    workers: int = 1,
+    executor: Any | None = None,
+) -> Mapping[str, CalibrationUncertainty]:
+    """Each source of ``options.uncertainty`` alone, ``options.budget_trials`` trials each.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+    calibration : IdentificationResult
+        Calibration of `campaign` (shared by every run).
+    options : EvaluationOptions
+        Must have ``test_joints``; its ``trials`` is replaced by ``budget_trials``.
+    workers, executor
+        Passed through; they never change the result.
+
+    Returns
+    -------
+    mapping of str to CalibrationUncertainty
+        Read-only, in the order of the sources; empty with fewer than two sources (the
+        budget would repeat the full evaluation).
+    """
+    sources = options.uncertainty.sources
+    if len(sources) < 2:
+        return MappingProxyType({})
+    out = {}
+    for source in sources:
+        alone = dataclasses.replace(
+            options,
+            uncertainty=dataclasses.replace(options.uncertainty, sources=(source,)),
+            trials=options.budget_trials,
+        )
+        out[source] = evaluate_campaign(
+            model, campaign, alone, calibration=calibration, workers=workers, executor=executor
+        )
+    return MappingProxyType(out)
