@@ -141,7 +141,7 @@ def _dask_client(address: str, workers: int) -> Generator[Any, None, None]:
             cluster.close()
         return
     try:
-        client = Client(address, timeout=30)
+        client = Client(address, timeout=10)
     except OSError as err:
         msg = f"cannot connect to the Dask scheduler at {address!r}: {err}"
         raise ConfigError(msg) from err

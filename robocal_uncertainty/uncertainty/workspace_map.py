@@ -237,6 +237,8 @@ def map_workspace(
     *,
     settings: UncertaintySettings | None = None,
     calibration: IdentificationResult | None = None,
+    lambda_: str | float = "auto",
+    accept_unconverged: bool = False,
     trials: int = 10_000,
     seed: int = 0,
     frame: str = "measurement",
@@ -262,7 +264,11 @@ def map_workspace(
     settings : UncertaintySettings, optional
         Sources and their models; default as :func:`evaluate_uncertainty`.
     calibration : IdentificationResult, optional
-        An existing calibration of `campaign`; identified with the default lambda if omitted.
+        An existing calibration of `campaign`; identified with `lambda_` if omitted.
+    lambda_ : {"auto", "gcv"} or float
+        Lambda method of the calibration when it is identified here.
+    accept_unconverged : bool
+        Use an identification that did not converge instead of raising ConvergenceError.
     trials : int
         Monte Carlo trials (fixed, >= 2; a region needs more, e.g. 11 at p = 0.95, and
         JCGM 101 asks for 10^4 or more).
@@ -313,7 +319,7 @@ def map_workspace(
     kept_configs = _check_regions(regions, n)
     campaign = campaign.reorder_joints(model.joint_names)
     if calibration is None:
-        calibration = identify(model, campaign)
+        calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     trial_block = prepare_calibration_trials(
         model, campaign, q, settings=settings, calibration=calibration, frame=frame
     )

@@ -170,3 +170,32 @@ def test_map_errors(paper_arm, configurations) -> None:
         sample_configurations(model, 0, rng=np.random.default_rng(0))
     with pytest.raises(ConfigError, match=r"joint ranges must be finite \(low, high\) rows"):
         sample_configurations(model, 3, rng=np.random.default_rng(0), limits=[[0.0, 1.0]])
+
+
+def test_cli_map_on_dask_writes_the_same_table(tmp_path: Path, capsys) -> None:
+    pytest.importorskip("distributed")
+    from robocal_uncertainty.cli import main
+
+    campaign = tmp_path / "campaign.mcap"
+    assert main(["simulate", "--out", str(campaign), "--seed", "1"]) == 0
+    common = ["map", str(campaign), "--robot", "paper_arm", "--configurations", "40", "--trials", "400"]
+    common += ["--block-size", "100", "--regions", "2", "--no-progress"]
+    assert main([*common, "--out", str(tmp_path / "one")]) == 0
+    assert main([*common, "--dask", "local", "--workers", "2", "--out", str(tmp_path / "dask")]) == 0
+    out = capsys.readouterr().out
+    assert "40 configurations x 400 trials" in out and "weakest: configuration" in out
+    one = (tmp_path / "one" / "map.csv").read_text(encoding="utf-8")
+    assert one == (tmp_path / "dask" / "map.csv").read_text(encoding="utf-8")
+    assert len(one.splitlines()) == 41
+
+
+def test_cli_map_errors(tmp_path: Path, capsys) -> None:
+    from robocal_uncertainty.cli import main
+
+    campaign = tmp_path / "campaign.mcap"
+    assert main(["simulate", "--out", str(campaign), "--seed", "1"]) == 0
+    args = ["map", str(campaign), "--robot", "paper_arm", "--trials", "100", "--no-progress"]
+    assert main([*args, "--configurations", "0", "--out", str(tmp_path / "a")]) == 1
+    assert "number of configurations must be an integer >= 1" in capsys.readouterr().err
+    assert main([*args, "--grid", "2", "3", "--out", str(tmp_path / "b")]) == 1
+    assert "grid steps must be 6 integers" in capsys.readouterr().err
