@@ -155,3 +155,16 @@ def test_json_number_arrays_on_one_line_strings_untouched(setup, tmp_path):
     mean = data["test_configurations"][0]["mean_m"]
     assert '"mean_m": ' + json.dumps(mean) in text
     assert data["test_configurations"][0]["covariance_m2"] == setup.result.poses[0].covariance.tolist()
+
+
+def test_cli_histograms_option(tmp_path, capsys):
+    from robocal_uncertainty.cli import main
+
+    out = tmp_path / "demo"
+    argv = ["demo", "--out", str(out), "--trials", "200", "--no-budget", "--no-sweeps", "--no-progress"]
+    assert main([*argv, "--histograms", "0"]) == 0
+    assert not (out / "histograms_1.png").exists()
+    assert (out / "configurations.csv").exists()
+    with pytest.raises(SystemExit):
+        main([*argv, "--histograms", "some"])
+    assert "expected a count >= 0 or 'all', got 'some'" in capsys.readouterr().err
