@@ -617,7 +617,7 @@ def write_report(
         (default): all of them when there are at most 10, otherwise the first 6
         (:data:`~robocal_uncertainty.report.configurations.DEFAULT_HISTOGRAMS`) and the
         worst. An int N: the first N (0 for none). ``"all"``: every one (one figure pair
-        per configuration: about 0.3 MB and 0.2 s each). A sequence: those 0-based
+        per configuration: about 0.25 MB and 0.3 s each). A sequence: those 0-based
         configuration indices.
 
     Returns
