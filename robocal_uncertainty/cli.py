@@ -426,11 +426,13 @@ def run_evaluation(
             evaluation = evaluate(model, campaign, options, executor=executor, progress=progress)
     finally:
         elapsed = finish()
-    _print_evaluation(evaluation, options, model, out_dir, elapsed)
+    _print_evaluation(evaluation, options, model, out_dir, elapsed, histograms=getattr(args, "histograms", None))
     return evaluation.uncertainty
 
 
-def _print_evaluation(evaluation: Any, options: Any, model: Any, out_dir: Path, elapsed: float) -> None:
+def _print_evaluation(
+    evaluation: Any, options: Any, model: Any, out_dir: Path, elapsed: float, *, histograms: int | str | None = None
+) -> None:
     """Print an :class:`~robocal_uncertainty.app.Evaluation` and write its report."""
     from robocal_uncertainty.report import format_budget, format_table2, write_report
 
@@ -461,6 +463,7 @@ def _print_evaluation(evaluation: Any, options: Any, model: Any, out_dir: Path, 
         budget=dict(evaluation.budget) or None,
         sweeps=list(evaluation.sweeps) if options.sweeps else None,
         input_warnings=evaluation.input_warnings,
+        histograms=histograms,
     )
     print(f"report written to {path}")
 
@@ -522,7 +525,27 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
     )
     p.add_argument("--sweep-trials", type=int, default=300, help="trials per sweep point (default %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--histograms",
+        type=_histogram_count,
+        metavar="N|all",
+        help="report: histogram figures for the first N test configurations, or all (default: all of up to 10, "
+        "else the first 6 and the worst); not used by validate",
+    )
     _add_frame_and_convergence_args(p)
+
+
+def _histogram_count(text: str) -> int | str:
+    if text == "all":
+        return text
+    try:
+        count = int(text)
+    except ValueError:
+        count = -1
+    if count < 0:
+        msg = f"expected a count >= 0 or 'all', got {text!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return count
 
 
 def _add_frame_and_convergence_args(p: argparse.ArgumentParser) -> None:
@@ -594,7 +617,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"replay of {args.bag}: {len(result.samples)} static poses found; dropped messages: {dropped}")
     if args.campaign_out:
         print(f"campaign written to {args.campaign_out}")
-    _print_evaluation(replayed.evaluation, options, model, Path(args.out), elapsed)
+    _print_evaluation(
+        replayed.evaluation, options, model, Path(args.out), elapsed, histograms=getattr(args, "histograms", None)
+    )
     return 0
 
 
