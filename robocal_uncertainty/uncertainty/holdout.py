@@ -209,7 +209,8 @@ def _inside_regions(pred: Array, points: Array, levels: Array) -> NDArray[np.boo
     zp = np.linalg.solve(chol, (points - pred.mean(axis=0))[..., None])[..., 0]
     dp2 = np.sum(zp**2, axis=-1)
     q = np.clip(np.floor(levels * m + 0.5).astype(int), 1, m)
-    return dp2[None, :] <= d2[q - 1]
+    inside: NDArray[np.bool_] = dp2[None, :] <= d2[q - 1]
+    return inside
 
 
 def _held_out_positions(campaign: Campaign) -> Array:
@@ -225,9 +226,9 @@ def _held_out_positions(campaign: Campaign) -> Array:
 
 
 def _tracker_distances(points: Array, campaign: Campaign, settings: UncertaintySettings) -> Array:
-    if campaign.frame == "tracker":
-        return np.linalg.norm(points, axis=1)
-    return np.linalg.norm(points - np.asarray(settings.tracker_xyz), axis=1)
+    origin = np.zeros(len(AXES)) if campaign.frame == "tracker" else np.asarray(settings.tracker_xyz)
+    distances: Array = np.linalg.norm(points - origin, axis=1)
+    return distances
 
 
 def validate_holdout(

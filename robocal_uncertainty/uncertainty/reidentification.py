@@ -211,7 +211,7 @@ class ChordSolver:
         a_mat = per_pose.reshape(measurement.dimension * n_poses, k)
         normal = a_mat.T @ a_mat
         pen = problem.penalty_mask > 0
-        free_inverse = np.linalg.inv(normal[np.ix_(~pen, ~pen)])
+        free_inverse: Array = np.linalg.inv(normal[np.ix_(~pen, ~pen)]).astype(np.float64, copy=False)
         coupling = normal[np.ix_(pen, ~pen)] @ free_inverse
         schur = normal[np.ix_(pen, pen)] - coupling @ normal[np.ix_(~pen, pen)]
         evals, evecs = np.linalg.eigh(schur)
