@@ -1,0 +1,1 @@
+"""Blade-section inspection: point clouds, section algorithms and their CMM Monte Carlo."""

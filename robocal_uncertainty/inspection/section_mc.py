@@ -1,0 +1,640 @@
+"""Monte Carlo (JCGM 101) and GUM uncertainty of the section parameters under the CMM model.
+
+Batched model
+-------------
+Every trial perturbs every measured point by the CMM sources (:mod:`.cmm_model`) and
+re-evaluates the nine section parameters. Many trials are evaluated at once with the
+segmentation and the registration correspondences frozen at the unperturbed solution:
+
+- position, twist and profile: the registration is linearised at its solution (feet and normals
+  fixed; the perturbations are microns, the point spacing and edge radii a millimetre or more),
+  so the offsets and twist change by ``G @ dn`` (``G`` the least-squares solution matrix, ``dn``
+  the normal displacements) and the residuals by ``dn - A @ G @ dn``;
+- maximum thickness and chord: not linearised. The candidate pressure-side points,
+  suction-side segments and farthest pairs that could attain the max/min under *any* draw of
+  the bounded (rectangular) sources are selected once, from the bound on a point's
+  displacement, and the max/min is taken over them exactly in every trial; with bounded
+  sources this equals the full algorithm on the same frozen segmentation.
+
+:func:`full_section_trials` runs the full algorithm (registration, segmentation and all) per
+trial on the same random draws, for checking the batched model.
+
+Random streams
+--------------
+The block contract of :func:`~robocal_uncertainty.montecarlo.engine.run_trials` holds (results
+independent of ``chunk_blocks``, ``workers`` and the internal ``batch``). Inside block ``b``
+source ``s`` (index in :data:`~.cmm_model.SOURCE_NAMES`) draws from
+``default_rng(SeedSequence(seed, spawn_key=(b, s)))``, the ``s``-th child of the block's
+sequence, so switching a source off leaves the other sources' draws unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import ConvexHull, QhullError
+
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.inspection.cmm_model import (
+    SOURCE_NAMES,
+    CmmInstrument,
+    ErrorSource,
+    draw_bound,
+    point_error_sources,
+)
+from robocal_uncertainty.inspection.nominal_curve import NominalCurve
+from robocal_uncertainty.inspection.point_cloud import PointCloud
+from robocal_uncertainty.inspection.section import (
+    PARAMETER_NAMES,
+    SectionEvaluation,
+    SectionOptions,
+    SectionParameters,
+    evaluate_section,
+    point_to_polyline,
+)
+from robocal_uncertainty.inspection.segmentation import PRESSURE_SIDE, REGIONS, SUCTION_SIDE
+from robocal_uncertainty.montecarlo.distributions import Normal
+from robocal_uncertainty.montecarlo.engine import (
+    DEFAULT_BLOCK_SIZE,
+    AdaptiveSettings,
+    MonteCarloResult,
+    ProgressCallback,
+    run_trials,
+)
+from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
+from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
+
+__all__ = [
+    "FrozenSectionModel",
+    "SectionTrials",
+    "SectionUncertainty",
+    "build_frozen_model",
+    "full_section_trials",
+    "gum_source_budget",
+    "section_sources",
+    "section_uncertainty",
+    "source_generator",
+]
+
+_BOUND_MARGIN = 1.0 + 1e-6
+"""Relative slack on the candidate windows, so round-off never drops a candidate."""
+
+
+def _segment_distance(a: NDArray[np.float64], s0: NDArray[np.float64], s1: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distance of points ``a`` (..., 2) to segments s0-s1 (..., 2), broadcast, shape (...) [m]."""
+    edge = s1 - s0
+    rel = a - s0
+    length2 = np.maximum(np.einsum("...i,...i->...", edge, edge), 1e-300)
+    t = np.clip(np.einsum("...i,...i->...", rel, edge) / length2, 0.0, 1.0)
+    gap = rel - t[..., np.newaxis] * edge
+    return np.asarray(np.sqrt(np.einsum("...i,...i->...", gap, gap)))
+
+
+@dataclass(frozen=True, eq=False)
+class FrozenSectionModel:
+    """Section parameters of many perturbed clouds at once (see module docstring).
+
+    Attributes
+    ----------
+    points : ndarray, shape (n, 2) [m]
+        Unperturbed measured points in contour order.
+    normals : ndarray, shape (n, 2)
+        Outward nominal normals at the registration feet (measured frame).
+    residual : ndarray, shape (n,) [m]
+        Signed distances to the registered nominal curve.
+    labels : ndarray of int8, shape (n,)
+        Frozen region codes.
+    jacobian : ndarray, shape (n, 3) [1, 1, m]
+        Registration model matrix A.
+    solve : ndarray, shape (3, n) [1, 1, 1/m]
+        G = pinv(A): registration change per normal displacement.
+    base : ndarray, shape (9,) [m, rad]
+        Parameters of the unperturbed cloud.
+    subset : ndarray of intp, shape (m,)
+        Points whose full 2-D displacement the thickness and chord need.
+    thickness_points : ndarray of intp, shape (ka,)
+        Positions in ``subset`` of the candidate pressure-side points.
+    thickness_segments : ndarray of intp, shape (ka, ks, 2)
+        Positions in ``subset`` of the start/end points of each candidate's suction segments.
+    chord_pairs : ndarray of intp, shape (kc, 2)
+        Positions in ``subset`` of the candidate farthest pairs.
+    bound : float
+        Largest displacement of any point under any draw [m] (6σ for unbounded sources).
+    """
+
+    points: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    residual: NDArray[np.float64]
+    labels: NDArray[np.int8]
+    jacobian: NDArray[np.float64]
+    solve: NDArray[np.float64]
+    base: NDArray[np.float64]
+    subset: NDArray[np.intp]
+    thickness_points: NDArray[np.intp]
+    thickness_segments: NDArray[np.intp]
+    chord_pairs: NDArray[np.intp]
+    bound: float
+
+    def evaluate(self, normal_shift: NDArray[np.float64], subset_shift: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Parameters of T perturbed clouds.
+
+        Parameters
+        ----------
+        normal_shift : ndarray, shape (T, n) [m]
+            Displacement of every point along ``normals``.
+        subset_shift : ndarray, shape (T, m, 2) [m]
+            Full displacement of the ``subset`` points.
+
+        Returns
+        -------
+        ndarray, shape (T, 9) [m, rad]
+            Columns in :data:`~.section.PARAMETER_NAMES` order.
+        """
+        trials = normal_shift.shape[0]
+        out = np.empty((trials, len(PARAMETER_NAMES)))
+        moved = self.points[self.subset] + subset_shift  # (T, m, 2)
+        a = moved[:, self.thickness_points, np.newaxis, :]
+        s0 = moved[:, self.thickness_segments[..., 0], :]
+        s1 = moved[:, self.thickness_segments[..., 1], :]
+        out[:, 0] = _segment_distance(a, s0, s1).min(axis=2).max(axis=1)
+        ends = moved[:, self.chord_pairs[:, 0], :] - moved[:, self.chord_pairs[:, 1], :]
+        out[:, 1] = np.sqrt(np.einsum("tki,tki->tk", ends, ends).max(axis=1))
+        change = normal_shift @ self.solve_t  # (T, 3)
+        out[:, 2:5] = self.base[2:5] + change
+        residual = normal_shift - change @ self.jacobian_t
+        residual += self.residual
+        for region, runs in enumerate(self.region_runs):
+            high = np.max([residual[:, a:b].max(axis=1) for a, b in runs], axis=0)
+            low = np.min([residual[:, a:b].min(axis=1) for a, b in runs], axis=0)
+            out[:, 5 + region] = high - low
+        return out
+
+    @cached_property
+    def solve_t(self) -> NDArray[np.float64]:
+        """``solve.T`` stored contiguously, shape (n, 3)."""
+        return np.ascontiguousarray(self.solve.T)
+
+    @cached_property
+    def jacobian_t(self) -> NDArray[np.float64]:
+        """``jacobian.T`` stored contiguously, shape (3, n)."""
+        return np.ascontiguousarray(self.jacobian.T)
+
+    @cached_property
+    def region_runs(self) -> tuple[tuple[tuple[int, int], ...], ...]:
+        """Contiguous index runs ``(start, stop)`` of each region (a region through 0 has two)."""
+        runs = []
+        for region in range(len(REGIONS)):
+            index = np.flatnonzero(self.labels == region)
+            cuts = np.flatnonzero(np.diff(index) > 1) + 1
+            runs.append(tuple((int(part[0]), int(part[-1]) + 1) for part in np.split(index, cuts)))
+        return tuple(runs)
+
+
+def section_sources(
+    evaluation: SectionEvaluation,
+    instrument: CmmInstrument,
+    *,
+    probe_vectors: ArrayLike | None = None,
+    reference: ArrayLike | None = None,
+) -> tuple[ErrorSource, ...]:
+    """CMM sources for the ordered points of an evaluation.
+
+    Parameters
+    ----------
+    evaluation : SectionEvaluation
+        Unperturbed evaluation of the measured cloud.
+    instrument : CmmInstrument
+        Source magnitudes.
+    probe_vectors : array_like, shape (n, 2) or (n, 3), optional
+        Probe vectors in the *input* order of the cloud (reordered here); None: along normals.
+    reference : array_like, shape (2,) [m], optional
+        Reference point of the MPE/thermal lengths; default the leading-edge extreme point
+        (so the trailing-edge point's L is the chord, as in the seed's GUM budget).
+
+    Returns
+    -------
+    tuple of ErrorSource
+        In :data:`~.cmm_model.SOURCE_NAMES` order.
+    """
+    points = evaluation.points
+    ref = points[evaluation.segmentation.leading_edge_point] if reference is None else reference
+    probe = None if probe_vectors is None else np.asarray(probe_vectors, dtype=np.float64)[evaluation.order]
+    return point_error_sources(instrument, points, evaluation.registration.normal, reference=ref, probe_vectors=probe)
+
+
+def build_frozen_model(evaluation: SectionEvaluation, sources: Sequence[ErrorSource]) -> FrozenSectionModel:
+    """Freeze the evaluation's segmentation and correspondences and pick the max/min candidates.
+
+    Parameters
+    ----------
+    evaluation : SectionEvaluation
+        Unperturbed evaluation of the measured cloud.
+    sources : sequence of ErrorSource
+        The sources that will perturb it (their bounds size the candidate windows).
+
+    Returns
+    -------
+    FrozenSectionModel
+    """
+    p = evaluation.points
+    n = p.shape[0]
+    per_point = np.zeros(n)
+    for source in sources:
+        scale = draw_bound(source.distribution)
+        if source.kind == "xy":
+            per_point += np.sqrt(2.0) * np.abs(source.gain) * scale
+        else:
+            per_point += np.linalg.norm(source.gain, axis=1) * scale
+    bound = float(per_point.max()) * _BOUND_MARGIN
+    seg = evaluation.segmentation
+    pressure = seg.indices(PRESSURE_SIDE)
+    suction = seg.indices(SUCTION_SIDE)
+    distance = _segment_distance(
+        p[pressure][:, np.newaxis, :], p[suction[:-1]][np.newaxis, :, :], p[suction[1:]][np.newaxis, :, :]
+    )  # (n_pressure, n_segments)
+    reach = distance.min(axis=1)
+    _, _, interior = point_to_polyline(p[pressure], p[suction])
+    best = reach[interior].max()
+    keep = np.flatnonzero(reach >= best - 4.0 * bound)
+    rows = [np.flatnonzero(distance[k] <= reach[k] + 4.0 * bound) for k in keep]
+    last = suction.size - 2
+    if any(r[0] == 0 or r[-1] == last for r in rows):
+        msg = (
+            "the maximum thickness lies within the error bound of a suction-side end; "
+            "the batched model needs it inside the side"
+        )
+        raise ConfigError(msg)
+    width = max(len(r) for r in rows)
+    segments = np.array([np.concatenate([r, np.full(width - len(r), r[0])]) for r in rows])
+    starts, ends = suction[segments], suction[segments + 1]
+    thick_points = pressure[keep]
+    # Chord: points that could be an end of the farthest pair, then their pairs.
+    try:
+        hull = ConvexHull(p).vertices
+    except QhullError:
+        hull = np.arange(n)
+    chord0 = float(np.linalg.norm(p[evaluation.chord_points[0]] - p[evaluation.chord_points[1]]))
+    far = np.sqrt(((p[:, np.newaxis, :] - p[hull][np.newaxis, :, :]) ** 2).sum(axis=-1)).max(axis=1)
+    ends_ok = np.flatnonzero(far >= chord0 - 4.0 * bound)
+    pair_d = np.sqrt(((p[ends_ok][:, np.newaxis, :] - p[ends_ok][np.newaxis, :, :]) ** 2).sum(axis=-1))
+    ii, jj = np.nonzero(np.triu(pair_d >= chord0 - 4.0 * bound, k=1))
+    chord_pairs = np.column_stack([ends_ok[ii], ends_ok[jj]])
+    subset, inverse = np.unique(
+        np.concatenate([thick_points, starts.ravel(), ends.ravel(), chord_pairs.ravel()]), return_inverse=True
+    )
+    inverse = inverse.ravel()
+    k1 = thick_points.size
+    k2 = k1 + starts.size
+    k3 = k2 + ends.size
+    reg = evaluation.registration
+    solve = np.linalg.pinv(reg.jacobian)
+    arrays = [p, reg.normal, reg.residual, seg.labels, reg.jacobian, solve]
+    for array in arrays:
+        array.setflags(write=False)
+    return FrozenSectionModel(
+        points=p,
+        normals=reg.normal,
+        residual=reg.residual,
+        labels=seg.labels,
+        jacobian=reg.jacobian,
+        solve=solve,
+        base=evaluation.parameters.as_array(),
+        subset=subset,
+        thickness_points=inverse[:k1],
+        thickness_segments=np.stack(
+            [inverse[k1:k2].reshape(segments.shape), inverse[k2:k3].reshape(segments.shape)], axis=-1
+        ),
+        chord_pairs=inverse[k3:].reshape(-1, 2),
+        bound=bound,
+    )
+
+
+def source_generator(rng: np.random.Generator, source_index: int) -> np.random.Generator:
+    """The generator of source ``source_index`` inside the block whose generator is ``rng``.
+
+    ``default_rng(SeedSequence(entropy, spawn_key=block_key + (source_index,)))`` from the
+    block's SeedSequence; a generator not built from a SeedSequence seeds it from its own
+    first draws instead.
+    """
+    bit_generator = rng.bit_generator
+    sequence = getattr(bit_generator, "seed_seq", None) or getattr(bit_generator, "_seed_seq", None)
+    if not isinstance(sequence, np.random.SeedSequence):
+        sequence = np.random.SeedSequence(rng.integers(0, 2**63, size=4))
+    child = np.random.SeedSequence(
+        sequence.entropy, spawn_key=(*sequence.spawn_key, int(source_index)), pool_size=sequence.pool_size
+    )
+    return np.random.default_rng(child)
+
+
+@dataclass(frozen=True, eq=False)
+class SectionTrials:
+    """Trial block for :func:`~robocal_uncertainty.montecarlo.engine.run_trials`.
+
+    Attributes
+    ----------
+    model : FrozenSectionModel
+        Batched section model.
+    sources : tuple of ErrorSource
+        Enabled sources.
+    source_indices : tuple of int
+        Stream key of each source (its index in :data:`~.cmm_model.SOURCE_NAMES`).
+    batch : int
+        Trials evaluated per vectorised step (memory knob; never changes the result).
+    """
+
+    model: FrozenSectionModel
+    sources: tuple[ErrorSource, ...]
+    source_indices: tuple[int, ...]
+    batch: int = 1000
+
+    def __call__(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+        """Parameters of ``n`` trials, shape (n, 9) [m, rad]."""
+        generators = [source_generator(rng, k) for k in self.source_indices]
+        out = np.empty((n, len(PARAMETER_NAMES)))
+        for start in range(0, n, self.batch):
+            size = min(self.batch, n - start)
+            draws = [s.draw(g, size) for s, g in zip(self.sources, generators)]
+            out[start : start + size] = self.evaluate_draws(draws)
+        return out
+
+    def evaluate_draws(self, draws: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+        """Parameters for given draws (one (T, n_draws) array per source), shape (T, 9)."""
+        model = self.model
+        trials = draws[0].shape[0]
+        normal_shift = np.zeros((trials, model.points.shape[0]))
+        subset_shift = np.zeros((trials, model.subset.shape[0], 2))
+        for source, values in zip(self.sources, draws):
+            normal_shift += source.normal_displacement(values, model.normals)
+            subset_shift += source.displacement(values, model.subset)
+        return model.evaluate(normal_shift, subset_shift)
+
+    def model_of_columns(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Parameters for concatenated draw columns x (T, Σ n_draws), evaluated in row chunks."""
+        sizes = np.cumsum([s.n_draws for s in self.sources])[:-1]
+        out = np.empty((x.shape[0], len(PARAMETER_NAMES)))
+        for start in range(0, x.shape[0], self.batch):
+            part = x[start : start + self.batch]
+            out[start : start + part.shape[0]] = self.evaluate_draws(np.split(part, sizes, axis=1))
+        return out
+
+
+@dataclass(frozen=True)
+class _FullTrials:
+    """Trial block running the full algorithm per trial on the same draws as SectionTrials."""
+
+    points: NDArray[np.float64]
+    curve: NominalCurve
+    options: SectionOptions
+    sources: tuple[ErrorSource, ...]
+    source_indices: tuple[int, ...]
+
+    def __call__(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+        generators = [source_generator(rng, k) for k in self.source_indices]
+        index = np.arange(self.points.shape[0])
+        shift = np.zeros((n, index.shape[0], 2))
+        for source, generator in zip(self.sources, generators):
+            shift += source.displacement(source.draw(generator, n), index)
+        return np.array(
+            [evaluate_section(self.points + shift[t], self.curve, self.options).parameters.as_array() for t in range(n)]
+        )
+
+
+def _select_sources(names: Sequence[str]) -> tuple[int, ...]:
+    chosen = tuple(dict.fromkeys(names))
+    unknown = [name for name in chosen if name not in SOURCE_NAMES]
+    if unknown or not chosen:
+        msg = f"sources must be a non-empty subset of {list(SOURCE_NAMES)}, got {list(names)!r}"
+        raise ConfigError(msg)
+    return tuple(SOURCE_NAMES.index(name) for name in chosen)
+
+
+def full_section_trials(
+    cloud: PointCloud | ArrayLike,
+    curve: NominalCurve,
+    *,
+    seed: int,
+    trials: int,
+    instrument: CmmInstrument | None = None,
+    sources: Sequence[str] = SOURCE_NAMES,
+    options: SectionOptions | None = None,
+    reference: ArrayLike | None = None,
+    block_size: int = DEFAULT_BLOCK_SIZE,
+) -> NDArray[np.float64]:
+    """Parameters of each trial by the full algorithm (re-registration, re-segmentation).
+
+    Same random draws as :func:`section_uncertainty` with the same ``seed``, ``block_size`` and
+    ``sources``; slow (about 0.1 s per trial for 1 836 points): for checking the batched model.
+
+    Returns
+    -------
+    ndarray, shape (trials, 9) [m, rad]
+    """
+    opts = SectionOptions() if options is None else options
+    evaluation = evaluate_section(cloud, curve, opts)
+    indices = _select_sources(sources)
+    probe = cloud.probe_vectors if isinstance(cloud, PointCloud) else None
+    every = section_sources(evaluation, instrument or CmmInstrument(), probe_vectors=probe, reference=reference)
+    block = _FullTrials(evaluation.points, curve, opts, tuple(every[k] for k in indices), indices)
+    return np.array(run_trials(block, seed=seed, n_trials=trials, block_size=block_size).samples)
+
+
+def gum_source_budget(trials: SectionTrials) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-source GUM standard contributions from finite-difference sensitivities.
+
+    Every draw column is perturbed by ±1 % of its standard uncertainty (central differences
+    of the batched model at zero error); the squared contributions of a source's columns are
+    summed: ``u_jk² = Σ_i∈k (∂y_j/∂x_i · u(x_i))²``.
+
+    Returns
+    -------
+    budget : ndarray, shape (9, n_sources) [m, rad]
+        Standard contribution of each source to each parameter.
+    covariance : ndarray, shape (9, 9)
+        First-order output covariance Σ_i c_i c_iᵀ u(x_i)² [products of m, rad].
+    """
+    widths = [s.n_draws for s in trials.sources]
+    u = np.concatenate([np.full(w, s.draw_uncertainty) for s, w in zip(trials.sources, widths)])
+    total = u.shape[0]
+    step = np.where(u > 0, 0.01 * u, 1.0)
+    budget = np.zeros((len(PARAMETER_NAMES), len(trials.sources)))
+    covariance = np.zeros((len(PARAMETER_NAMES), len(PARAMETER_NAMES)))
+    owner = np.repeat(np.arange(len(widths)), widths)
+    chunk = 500
+    for start in range(0, total, chunk):
+        cols = np.arange(start, min(start + chunk, total))
+        x = np.zeros((2 * cols.size, total))
+        x[np.arange(cols.size), cols] = step[cols]
+        x[cols.size + np.arange(cols.size), cols] = -step[cols]
+        y = trials.model_of_columns(x)
+        scaled = (y[: cols.size] - y[cols.size :]) / (2.0 * step[cols])[:, np.newaxis] * u[cols][:, np.newaxis]
+        np.add.at(budget.T, owner[cols], scaled**2)
+        covariance += scaled.T @ scaled
+    return np.sqrt(budget), covariance
+
+
+@dataclass(frozen=True, eq=False)
+class SectionUncertainty:
+    """Monte Carlo and GUM uncertainty of the section parameters.
+
+    Attributes
+    ----------
+    parameters : SectionParameters
+        Parameters of the measured cloud itself (the GUM estimate).
+    monte_carlo : MonteCarloResult
+        JCGM 101 summary per parameter (outputs in :data:`~.section.PARAMETER_NAMES` order);
+        ``input_names`` are the enabled sources.
+    gum : GumResult
+        First-order GUM: inputs are the sources' standardised contributions, so its
+        ``sensitivities`` (9, n_sources) are the per-source standard contributions [m, rad].
+    gum_covariance : ndarray, shape (9, 9)
+        First-order output covariance over all point-wise inputs [products of m, rad].
+    validation : tuple of GumValidation
+        JCGM 101 §8 comparison per parameter.
+    sources : tuple of str
+        Enabled sources.
+    instrument : CmmInstrument
+        Source magnitudes.
+    reference : ndarray, shape (2,) [m]
+        Reference point of the MPE/thermal lengths.
+    candidate_counts : tuple of int
+        Thickness candidate points, suction segments per candidate, chord pairs.
+    """
+
+    parameters: SectionParameters
+    monte_carlo: MonteCarloResult
+    gum: GumResult
+    gum_covariance: NDArray[np.float64]
+    validation: tuple[GumValidation, ...]
+    sources: tuple[str, ...]
+    instrument: CmmInstrument
+    reference: NDArray[np.float64]
+    candidate_counts: tuple[int, int, int]
+
+
+def section_uncertainty(
+    cloud: PointCloud | ArrayLike,
+    curve: NominalCurve,
+    *,
+    seed: int,
+    trials: int | None = 1_000_000,
+    adaptive: AdaptiveSettings | None = None,
+    instrument: CmmInstrument | None = None,
+    sources: Sequence[str] = SOURCE_NAMES,
+    options: SectionOptions | None = None,
+    reference: ArrayLike | None = None,
+    coverage: float = 0.95,
+    block_size: int = DEFAULT_BLOCK_SIZE,
+    batch: int = 1000,
+    chunk_blocks: int = 1,
+    workers: int = 1,
+    progress: ProgressCallback | None = None,
+    keep_samples: bool = False,
+    bins: int | str = 100,
+) -> SectionUncertainty:
+    """Monte Carlo of the nine section parameters under the CMM model, with the GUM comparison.
+
+    Parameters
+    ----------
+    cloud : PointCloud or array_like, shape (n, 2) [m]
+        Measured section (its probe vectors, if any, orient the probing error).
+    curve : NominalCurve
+        Nominal section.
+    seed : int
+        Root seed (>= 0).
+    trials : int or None
+        Fixed number of trials (default 10^6); None with ``adaptive``.
+    adaptive : AdaptiveSettings, optional
+        JCGM 101 §7.9 adaptive trial count instead (give ``trials=None``).
+    instrument : CmmInstrument, optional
+        Source magnitudes; default the seed's.
+    sources : sequence of str
+        Enabled sources, a subset of :data:`~.cmm_model.SOURCE_NAMES`.
+    options : SectionOptions, optional
+        Evaluation settings.
+    reference : array_like, shape (2,) [m], optional
+        Reference point of the MPE/thermal lengths (default the leading-edge extreme point).
+    coverage : float
+        Coverage probability p.
+    block_size, chunk_blocks, workers, progress
+        As for :func:`~robocal_uncertainty.montecarlo.engine.run_trials`.
+    batch : int
+        Trials per vectorised step inside a block (memory ~ 60 kB × n_points × batch / 1836).
+    keep_samples : bool
+        Keep the (trials, 9) model values.
+    bins : int or str
+        Histogram bins.
+
+    Returns
+    -------
+    SectionUncertainty
+    """
+    if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
+        msg = f"batch must be an integer >= 1, got {batch!r}"
+        raise ConfigError(msg)
+    opts = SectionOptions() if options is None else options
+    evaluation = evaluate_section(cloud, curve, opts)
+    indices = _select_sources(sources)
+    probe = cloud.probe_vectors if isinstance(cloud, PointCloud) else None
+    inst = instrument or CmmInstrument()
+    every = section_sources(evaluation, inst, probe_vectors=probe, reference=reference)
+    chosen = tuple(every[k] for k in indices)
+    model = build_frozen_model(evaluation, chosen)
+    block = SectionTrials(model, chosen, indices, batch)
+    run = run_trials(
+        block,
+        seed=seed,
+        n_trials=trials,
+        adaptive=adaptive,
+        block_size=block_size,
+        chunk_blocks=chunk_blocks,
+        workers=workers,
+        progress=progress,
+    )
+    p = coverage if adaptive is None else adaptive.coverage
+    summary = run.summary(p, bins=bins)
+    names = tuple(SOURCE_NAMES[k] for k in indices)
+    mc = MonteCarloResult(
+        outputs=summary.outputs,
+        covariance=summary.covariance,
+        coverage_probability=p,
+        samples=run.samples if keep_samples else None,
+        input_names=names,
+        input_columns=names,
+        n_trials=run.n_trials,
+        seed=run.seed,
+        block_size=run.block_size,
+        n_dropped=run.n_dropped,
+        adaptive=run.adaptive,
+    )
+    budget, covariance = gum_source_budget(block)
+    base = model.base
+
+    def combined(z: NDArray[np.float64]) -> NDArray[np.float64]:
+        return base + z @ budget.T
+
+    gum = propagate_gum(combined, {name: Normal(0.0, 1.0) for name in names}, coverage=p)
+    validation = tuple(validate_gum(gum, mc, output=j) for j in range(len(PARAMETER_NAMES)))
+    reference_point = (
+        evaluation.points[evaluation.segmentation.leading_edge_point]
+        if reference is None
+        else np.asarray(reference, dtype=np.float64)
+    )
+    return SectionUncertainty(
+        parameters=evaluation.parameters,
+        monte_carlo=mc,
+        gum=gum,
+        gum_covariance=covariance,
+        validation=validation,
+        sources=names,
+        instrument=inst,
+        reference=reference_point,
+        candidate_counts=(
+            int(model.thickness_points.size),
+            int(model.thickness_segments.shape[1]),
+            int(model.chord_pairs.shape[0]),
+        ),
+    )
