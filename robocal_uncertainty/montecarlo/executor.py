@@ -125,6 +125,26 @@ def _check_workers(workers: object) -> int:
 
 
 @contextmanager
+def _without_malloc_trim() -> Generator[None, None, None]:
+    """Start Dask workers without Dask's default ``MALLOC_TRIM_THRESHOLD_=65536``.
+
+    Setting it stops glibc from raising its mmap threshold, so every large numpy
+    temporary of a trial block is mapped and page-faulted afresh: trial blocks ran 2x
+    slower (measured, 1 000 configurations x 4 000 trials). Only for the clusters started
+    here; a user's cluster keeps its own configuration.
+    """
+    import dask  # optional extra, present with distributed
+
+    environ = dask.config.get("distributed.nanny.pre-spawn-environ", default=None)
+    if not isinstance(environ, dict) or "MALLOC_TRIM_THRESHOLD_" not in environ:
+        yield
+        return
+    # None unsets a variable in this configuration (distributed.nanny._get_env_variables).
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+        yield
+
+
+@contextmanager
 def _dask_client(address: str, workers: int) -> Generator[Any, None, None]:
     try:
         from distributed import Client, LocalCluster  # optional extra
@@ -133,7 +153,8 @@ def _dask_client(address: str, workers: int) -> Generator[Any, None, None]:
         raise ConfigError(msg) from err
     if address == LOCAL_DASK:
         # One thread per worker process: trial blocks are numpy-bound and hold the GIL.
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        with _without_malloc_trim():
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         try:
             with Client(cluster) as client:
                 yield client
