@@ -49,6 +49,7 @@ __all__ = [
     "parse_sources",
     "register_source",
     "source_rng",
+    "sources_help",
     "stream_id",
 ]
 
@@ -407,6 +408,11 @@ def source_rng(block_rng: np.random.Generator, stream: int) -> np.random.Generat
     bit_generator = block_rng.bit_generator
     seq = getattr(bit_generator, "seed_seq", None) or bit_generator._seed_seq  # numpy < 1.25
     return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, int(stream))))
+
+
+def sources_help() -> str:
+    """``"tracker, encoder, ... or all"`` from the registry, for help texts and node parameters."""
+    return f"{', '.join(SOURCE_REGISTRY)}, or all"
 
 
 def build_sources(settings: UncertaintySettings, context: TrialContext) -> tuple[Source, ...]:
