@@ -170,17 +170,26 @@ def load_instrument(path: str | Path) -> CmmInstrument:
         raise ConfigError(msg)
     values: dict[str, float] = {}
     for key, field in _KEYS.items():
-        value = data[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            msg = f"instrument file {file}: {key} must be a number, got {value!r}"
-            raise ConfigError(msg)
-        values[field] = float(value) * _SCALE[field]
+        values[field] = _number(file, key, data[key]) * _SCALE[field]
     name = str(data.get("name", file.stem))
     try:
         return CmmInstrument(**values, name=name)
     except ConfigError as err:
         msg = f"instrument file {file}: {err}"
         raise ConfigError(msg) from err
+
+
+def _number(file: Path, key: str, value: object) -> float:
+    """A YAML number; also a numeric string, since YAML 1.1 reads ``2e-6`` (no dot) as text."""
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            pass
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    msg = f"instrument file {file}: {key} must be a number, got {value!r}"
+    raise ConfigError(msg)
 
 
 @dataclass(frozen=True, eq=False)

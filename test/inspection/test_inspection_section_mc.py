@@ -1,0 +1,164 @@
+"""Batched Monte Carlo of the section parameters: agreement with the full algorithm,
+reproducibility, independent source streams, GUM budget."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.inspection.cmm_model import SOURCE_NAMES, CmmInstrument
+from robocal_uncertainty.inspection.nominal_curve import NominalCurve
+from robocal_uncertainty.inspection.point_cloud import PointCloud
+from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
+from robocal_uncertainty.inspection.section_mc import (
+    SectionTrials,
+    build_frozen_model,
+    full_section_trials,
+    gum_source_budget,
+    section_sources,
+    section_uncertainty,
+    source_generator,
+)
+from robocal_uncertainty.inspection.simulate import simulate_section_scan
+from robocal_uncertainty.montecarlo.engine import block_rng, run_trials
+
+TRUE_OFFSET = (-0.1013e-3, 0.0538e-3)  # the seed's measured offsets [m]
+TRUE_TWIST = np.deg2rad(0.0512)  # the seed's measured twist [rad]
+
+
+@pytest.fixture(scope="module")
+def small_scan(rotor37_curve: NominalCurve) -> PointCloud:
+    """A 400-point scan of the seed-sized Rotor 37 section with a 5 µm form error."""
+    return simulate_section_scan(rotor37_curve, 400, offset=TRUE_OFFSET, twist=TRUE_TWIST, form_amplitude=5e-6)
+
+
+def trials_of(cloud: PointCloud, curve: NominalCurve, names: tuple[str, ...] = SOURCE_NAMES, batch: int = 1000):
+    evaluation = evaluate_section(cloud, curve)
+    every = section_sources(evaluation, CmmInstrument(), probe_vectors=cloud.probe_vectors)
+    indices = tuple(SOURCE_NAMES.index(n) for n in names)
+    chosen = tuple(every[k] for k in indices)
+    return SectionTrials(build_frozen_model(evaluation, chosen), chosen, indices, batch)
+
+
+def test_batched_model_agrees_with_the_full_algorithm(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
+    n = 40
+    full = full_section_trials(small_scan, rotor37_curve, seed=11, trials=n, block_size=16)
+    batched = np.array(run_trials(trials_of(small_scan, rotor37_curve), seed=11, n_trials=n, block_size=16).samples)
+    assert full.shape == batched.shape == (n, 9)
+    # Thickness and chord: the candidate sets make the batched max/min exact.
+    assert batched[:, :2] == pytest.approx(full[:, :2], abs=1e-15)
+    # Offsets and twist: linearised registration, errors of second order in microns.
+    assert batched[:, 2:4] == pytest.approx(full[:, 2:4], abs=2e-9)
+    assert batched[:, 4] == pytest.approx(full[:, 4], abs=1e-8)
+    # Side profiles: same frozen regions; edges: the full algorithm may move a junction point.
+    assert batched[:, 7:] == pytest.approx(full[:, 7:], abs=2e-9)
+    spread = batched.std(axis=0, ddof=1)
+    assert spread[5:7] == pytest.approx(full[:, 5:7].std(axis=0, ddof=1), rel=0.1)
+
+
+def test_results_do_not_depend_on_chunking_batching_or_workers(
+    small_scan: PointCloud, rotor37_curve: NominalCurve
+) -> None:
+    reference = run_trials(trials_of(small_scan, rotor37_curve), seed=5, n_trials=90, block_size=40).samples
+    # The internal batch only regroups BLAS products: same draws, round-off apart.
+    chunked = run_trials(trials_of(small_scan, rotor37_curve, batch=7), seed=5, n_trials=90, block_size=40)
+    assert chunked.samples == pytest.approx(reference, abs=1e-18, rel=1e-12)
+    parallel = run_trials(
+        trials_of(small_scan, rotor37_curve), seed=5, n_trials=90, block_size=40, chunk_blocks=2, workers=2
+    )
+    assert np.array_equal(parallel.samples, reference)
+    other = run_trials(trials_of(small_scan, rotor37_curve), seed=6, n_trials=90, block_size=40).samples
+    assert not np.array_equal(other, reference)
+
+
+def test_switching_a_source_off_leaves_the_others_draws(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
+    both = run_trials(trials_of(small_scan, rotor37_curve, ("mpe", "probing")), seed=2, n_trials=50, block_size=20)
+    mpe = run_trials(trials_of(small_scan, rotor37_curve, ("mpe",)), seed=2, n_trials=50, block_size=20)
+    probing = run_trials(trials_of(small_scan, rotor37_curve, ("probing",)), seed=2, n_trials=50, block_size=20)
+    base = evaluate_section(small_scan, rotor37_curve).parameters.as_array()
+    # Offsets and twist are linear in the displacements: the two sources' effects add up
+    # exactly only if each source drew the same numbers with and without the other.
+    combined = mpe.samples[:, 2:5] + probing.samples[:, 2:5] - base[2:5]
+    assert both.samples[:, 2:5] == pytest.approx(combined, abs=1e-15)
+    first = source_generator(block_rng(2, 0), 2).random(3)
+    again = source_generator(block_rng(2, 0), 2).random(3)
+    assert np.array_equal(first, again)
+    assert not np.array_equal(first, source_generator(block_rng(2, 0), 0).random(3))
+
+
+def test_gum_budget_of_the_chord(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
+    trials = trials_of(small_scan, rotor37_curve)
+    budget, covariance = gum_source_budget(trials)
+    assert budget.shape == (9, 4) and covariance.shape == (9, 9)
+    assert np.sqrt(np.diag(covariance)) == pytest.approx(np.sqrt((budget**2).sum(axis=1)), rel=1e-9)
+    chord = float(trials.model.base[1])
+    # Thermal scale error: u = chord · Δt · 2e-6/√3, the seed's 1.15e-3·L·Δt µm (L in mm).
+    assert budget[1, 1] == pytest.approx(chord * 0.3 * 2e-6 / np.sqrt(3), rel=1e-3)
+    # MPE: the chord ends' x errors along the chord, E = 1.2 µm at the leading edge (L = 0)
+    # and 1.2 + chord/350 µm at the trailing edge; u = sqrt(E_le² + E_te²)/√3.
+    e_le, e_te = 1.2e-6, (1.2 + chord * 1e3 / 350) * 1e-6
+    assert budget[1, 0] == pytest.approx(np.hypot(e_le, e_te) / np.sqrt(3), rel=0.02)
+
+
+def test_section_uncertainty_end_to_end(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
+    result = section_uncertainty(small_scan, rotor37_curve, seed=1, trials=4000, block_size=1000, keep_samples=True)
+    mc = result.monte_carlo
+    assert len(mc.outputs) == len(result.validation) == len(result.gum.outputs) == 9
+    assert mc.samples is not None and mc.samples.shape == (4000, 9)
+    assert mc.input_names == SOURCE_NAMES and result.sources == SOURCE_NAMES
+    assert result.gum.sensitivities.shape == (9, 4)
+    # Offsets and twist are linear in the errors: GUM and Monte Carlo agree.
+    for j in (2, 3, 4):
+        assert mc.outputs[j].standard_uncertainty == pytest.approx(result.gum.outputs[j].standard_uncertainty, rel=0.05)
+        assert mc.outputs[j].estimate == pytest.approx(result.parameters.as_array()[j], abs=0.1e-6)
+    # The offsets recover the truth within a few standard uncertainties.
+    assert result.parameters.axial_offset == pytest.approx(TRUE_OFFSET[0], abs=5 * mc.outputs[2].standard_uncertainty)
+    assert result.reference.shape == (2,)
+    assert result.candidate_counts[0] >= 1
+    probing_only = section_uncertainty(
+        small_scan, rotor37_curve, seed=1, trials=200, block_size=100, sources=("probing",)
+    )
+    assert probing_only.sources == ("probing",)
+    assert probing_only.gum.sensitivities.shape == (9, 1)
+    # The probing error is the largest source: alone it gives most of the thickness uncertainty.
+    assert (
+        0.3 * mc.outputs[0].standard_uncertainty
+        < probing_only.monte_carlo.outputs[0].standard_uncertainty
+        < mc.outputs[0].standard_uncertainty
+    )
+
+
+def test_configuration_errors(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
+    with pytest.raises(ConfigError, match="sources must be a non-empty subset"):
+        section_uncertainty(small_scan, rotor37_curve, seed=1, trials=10, sources=("wind",))
+    with pytest.raises(ConfigError, match="sources must be a non-empty subset"):
+        section_uncertainty(small_scan, rotor37_curve, seed=1, trials=10, sources=())
+    with pytest.raises(ConfigError, match="batch must be an integer"):
+        section_uncertainty(small_scan, rotor37_curve, seed=1, trials=10, batch=0)
+    with pytest.raises(ConfigError, match="n_trials must be an integer"):
+        section_uncertainty(small_scan, rotor37_curve, seed=1, trials=0)
+
+
+def test_parameter_names_match_the_model_columns() -> None:
+    assert PARAMETER_NAMES[:5] == (
+        "max_thickness",
+        "chord_length",
+        "axial_offset",
+        "circumferential_offset",
+        "twist_angle",
+    )
+
+
+@pytest.mark.slow
+def test_batched_equals_full_algorithm_on_2000_trials(rotor37_curve: NominalCurve) -> None:
+    """Issue 9: batched vs full per trial on 2 000 trials (same seeds), within 2 % in u."""
+    cloud = simulate_section_scan(rotor37_curve, 1836, offset=TRUE_OFFSET, twist=TRUE_TWIST, form_amplitude=5e-6)
+    full = full_section_trials(cloud, rotor37_curve, seed=3, trials=2000)
+    result = section_uncertainty(cloud, rotor37_curve, seed=3, trials=2000, keep_samples=True)
+    batched = result.monte_carlo.samples
+    assert batched is not None
+    u_full = full.std(axis=0, ddof=1)
+    u_batched = batched.std(axis=0, ddof=1)
+    assert u_batched == pytest.approx(u_full, rel=0.02)
+    assert batched[:, :2] == pytest.approx(full[:, :2], abs=1e-15)
