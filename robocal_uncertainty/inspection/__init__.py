@@ -1,1 +1,82 @@
-"""Blade-section inspection: point clouds, section algorithms and their CMM Monte Carlo."""
+"""Blade-section inspection: point clouds, section algorithms and their CMM Monte Carlo (issue 9).
+
+``read_point_cloud`` / ``read_nominal_section`` (and the shipped blade readers) give SI data;
+``evaluate_section`` computes the seed's nine section parameters; ``section_uncertainty`` runs
+the batched Monte Carlo under the CMM model (``load_instrument``) with the GUM comparison.
+"""
+
+from robocal_uncertainty.inspection.cmm_model import (
+    SOURCE_NAMES,
+    CmmInstrument,
+    ErrorSource,
+    load_instrument,
+    point_displacements,
+    point_error_sources,
+    seed_instrument,
+)
+from robocal_uncertainty.inspection.nominal_curve import ClosestPoints, NominalCurve
+from robocal_uncertainty.inspection.point_cloud import (
+    LENGTH_UNITS,
+    NominalSection,
+    PointCloud,
+    read_cascade_profile,
+    read_nominal_section,
+    read_point_cloud,
+    read_rotor37_section,
+)
+from robocal_uncertainty.inspection.registration import Registration, register_to_nominal
+from robocal_uncertainty.inspection.section import (
+    PARAMETER_NAMES,
+    PARAMETER_UNITS,
+    SectionEvaluation,
+    SectionOptions,
+    SectionParameters,
+    chord_length,
+    evaluate_section,
+    max_thickness,
+    profile_deviations,
+)
+from robocal_uncertainty.inspection.section_mc import (
+    SectionUncertainty,
+    full_section_trials,
+    section_uncertainty,
+)
+from robocal_uncertainty.inspection.segmentation import REGIONS, Segmentation, segment_section
+from robocal_uncertainty.inspection.simulate import simulate_section_scan
+
+__all__ = [
+    "LENGTH_UNITS",
+    "PARAMETER_NAMES",
+    "PARAMETER_UNITS",
+    "REGIONS",
+    "SOURCE_NAMES",
+    "ClosestPoints",
+    "CmmInstrument",
+    "ErrorSource",
+    "NominalCurve",
+    "NominalSection",
+    "PointCloud",
+    "Registration",
+    "SectionEvaluation",
+    "SectionOptions",
+    "SectionParameters",
+    "SectionUncertainty",
+    "Segmentation",
+    "chord_length",
+    "evaluate_section",
+    "full_section_trials",
+    "load_instrument",
+    "max_thickness",
+    "point_displacements",
+    "point_error_sources",
+    "profile_deviations",
+    "read_cascade_profile",
+    "read_nominal_section",
+    "read_point_cloud",
+    "read_rotor37_section",
+    "register_to_nominal",
+    "section_uncertainty",
+    "seed_instrument",
+    "segment_section",
+    "simulate_section_scan",
+]

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import ellipse, stadium
+from conftest import CASCADE, ellipse, stadium
 
 from robocal_uncertainty.errors import InputError
+from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements, point_error_sources
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
-from robocal_uncertainty.inspection.point_cloud import NominalSection
+from robocal_uncertainty.inspection.point_cloud import NominalSection, read_cascade_profile
 from robocal_uncertainty.inspection.registration import polygon_centroid, register_to_nominal, rotation
 from robocal_uncertainty.inspection.section import (
     PARAMETER_NAMES,
@@ -220,3 +221,23 @@ def test_chord_length_is_the_farthest_pair_distance() -> None:
     chord, i, j = chord_length(ellipse(30e-3, 5e-3, 400))
     assert chord == pytest.approx(60e-3, abs=1e-15)
     assert (i, j) == (0, 200)
+
+
+@pytest.mark.parametrize("blade", ["rotor37", "cascade"])
+def test_real_blades_with_simulated_cmm_noise(blade: str, rotor37_curve: NominalCurve) -> None:
+    # Cascade scaled to a 600 mm chord: maximum thickness 30 mm like the seed's blade.
+    curve = rotor37_curve if blade == "rotor37" else NominalCurve(read_cascade_profile(CASCADE, chord_m=0.6))
+    twist = np.deg2rad(0.0512)
+    cloud = simulate_section_scan(curve, 1836, offset=(-0.1013e-3, 0.0538e-3), twist=twist, form_amplitude=5e-6)
+    clean = evaluate_section(cloud, curve)
+    sources = point_error_sources(CmmInstrument(), clean.points, clean.registration.normal, reference=clean.points[0])
+    noisy = clean.points + point_displacements(sources, np.random.default_rng(9))[0]
+    result = evaluate_section(noisy, curve)
+    truth, measured = clean.parameters.as_array(), result.parameters.as_array()
+    # Errors of a few µm per point: offsets within 1 µm, twist within 1e-5 rad, thickness and
+    # chord within 10 µm, profiles within 15 µm of the noise-free evaluation.
+    assert measured[2:4] == pytest.approx(truth[2:4], abs=1e-6)
+    assert measured[4] == pytest.approx(truth[4], abs=1e-5)
+    assert measured[:2] == pytest.approx(truth[:2], abs=10e-6)
+    assert measured[5:] == pytest.approx(truth[5:], abs=15e-6)
+    assert np.array_equal(np.bincount(result.segmentation.labels, minlength=4) > 0, [True] * 4)
