@@ -58,7 +58,7 @@ from robocal_uncertainty.inspection.section import (
     point_to_polyline,
 )
 from robocal_uncertainty.inspection.segmentation import PRESSURE_SIDE, REGIONS, SUCTION_SIDE
-from robocal_uncertainty.montecarlo.distributions import Normal
+from robocal_uncertainty.montecarlo.distributions import Distribution, Normal, StudentT
 from robocal_uncertainty.montecarlo.engine import (
     DEFAULT_BLOCK_SIZE,
     AdaptiveSettings,
@@ -495,7 +495,12 @@ class SectionUncertainty:
     gum_covariance : ndarray, shape (9, 9)
         First-order output covariance over all point-wise inputs [products of m, rad].
     validation : tuple of GumValidation
-        JCGM 101 §8 comparison per parameter.
+        JCGM 101 §8 comparison per parameter (instrument model only, as simulated).
+    gum_with_repeatability : GumResult or None
+        GUM budget with the repeatability of repeated scans added as a Type A input per
+        parameter (the seed's u3; Student t with k - 1 degrees of freedom, Welch-Satterthwaite);
+        None when no repeated scans were given. Its ``sensitivities`` (9, n_sources + 9) hold
+        the instrument sources' contributions, then the repeatability standard deviations.
     sources : tuple of str
         Enabled sources.
     instrument : CmmInstrument
@@ -515,6 +520,7 @@ class SectionUncertainty:
     instrument: CmmInstrument
     reference: NDArray[np.float64]
     candidate_counts: tuple[int, int, int]
+    gum_with_repeatability: GumResult | None = None
 
 
 def section_uncertainty(
@@ -536,6 +542,7 @@ def section_uncertainty(
     progress: ProgressCallback | None = None,
     keep_samples: bool = False,
     bins: int | str = 100,
+    repeat_parameters: ArrayLike | None = None,
 ) -> SectionUncertainty:
     """Monte Carlo of the nine section parameters under the CMM model, with the GUM comparison.
 
@@ -569,6 +576,9 @@ def section_uncertainty(
         Keep the (trials, 9) model values.
     bins : int or str
         Histogram bins.
+    repeat_parameters : array_like, shape (k, 9) [m, rad], optional
+        Parameters of k >= 2 repeated scans of the same section (``SectionParameters.as_array``
+        of each); their standard deviations enter ``gum_with_repeatability`` (the seed's u3).
 
     Returns
     -------
@@ -577,6 +587,7 @@ def section_uncertainty(
     if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
         msg = f"batch must be an integer >= 1, got {batch!r}"
         raise ConfigError(msg)
+    repeats = None if repeat_parameters is None else _check_repeats(repeat_parameters)
     opts = SectionOptions() if options is None else options
     evaluation = evaluate_section(cloud, curve, opts)
     indices = _select_sources(sources)
@@ -620,6 +631,18 @@ def section_uncertainty(
 
     gum = propagate_gum(combined, {name: Normal(0.0, 1.0) for name in names}, coverage=p)
     validation = tuple(validate_gum(gum, mc, output=j) for j in range(len(PARAMETER_NAMES)))
+    with_repeats = None
+    if repeats is not None:
+        spread = repeats.std(axis=0, ddof=1)
+        dof = repeats.shape[0] - 1
+        full_budget = np.concatenate([budget, np.diag(spread)], axis=1)
+
+        def with_repeatability(z: NDArray[np.float64]) -> NDArray[np.float64]:
+            return base + z @ full_budget.T
+
+        inputs: dict[str, Distribution] = {name: Normal(0.0, 1.0) for name in names}
+        inputs.update({f"repeatability[{name}]": StudentT(0.0, 1.0, dof) for name in PARAMETER_NAMES})
+        with_repeats = propagate_gum(with_repeatability, inputs, coverage=p)
     reference_point = (
         evaluation.points[evaluation.segmentation.leading_edge_point]
         if reference is None
@@ -639,4 +662,16 @@ def section_uncertainty(
             int(model.thickness_segments.shape[1]),
             int(model.chord_pairs.shape[0]),
         ),
+        gum_with_repeatability=with_repeats,
     )
+
+
+def _check_repeats(values: ArrayLike) -> NDArray[np.float64]:
+    repeats = np.asarray(values, dtype=np.float64)
+    if repeats.ndim != 2 or repeats.shape[1] != len(PARAMETER_NAMES) or repeats.shape[0] < 2:
+        msg = f"repeat_parameters must have shape (k, {len(PARAMETER_NAMES)}) with k >= 2, got {repeats.shape}"
+        raise ConfigError(msg)
+    if not np.isfinite(repeats).all():
+        msg = "repeat_parameters must be finite, got NaN/inf"
+        raise ConfigError(msg)
+    return repeats

@@ -21,7 +21,7 @@ from robocal_uncertainty.inspection.section_mc import (
     source_generator,
 )
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
-from robocal_uncertainty.montecarlo.engine import block_rng, run_trials
+from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, block_rng, run_trials
 
 TRUE_OFFSET = (-0.1013e-3, 0.0538e-3)  # the seed's measured offsets [m]
 TRUE_TWIST = np.deg2rad(0.0512)  # the seed's measured twist [rad]
@@ -162,3 +162,31 @@ def test_batched_equals_full_algorithm_on_2000_trials(rotor37_curve: NominalCurv
     u_batched = batched.std(axis=0, ddof=1)
     assert u_batched == pytest.approx(u_full, rel=0.02)
     assert batched[:, :2] == pytest.approx(full[:, :2], abs=1e-15)
+
+
+def test_repeatability_enters_the_gum_budget(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
+    base = evaluate_section(small_scan, rotor37_curve).parameters.as_array()
+    # Five repeated scans whose chord scatters by s = 2.087 µm (the seed's u3).
+    offsets = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
+    repeats = np.tile(base, (5, 1))
+    repeats[:, 1] += offsets / offsets.std(ddof=1) * 2.087e-6
+    result = section_uncertainty(
+        small_scan, rotor37_curve, seed=1, trials=200, block_size=100, repeat_parameters=repeats
+    )
+    gum = result.gum_with_repeatability
+    assert gum is not None
+    assert gum.sensitivities.shape == (9, 13)
+    u_instrument = result.gum.outputs[1].standard_uncertainty
+    assert gum.outputs[1].standard_uncertainty == pytest.approx(np.hypot(u_instrument, 2.087e-6), rel=1e-9)
+    assert np.isfinite(gum.outputs[1].effective_dof) and gum.outputs[1].coverage_factor > 1.96
+    assert gum.outputs[0].standard_uncertainty == pytest.approx(result.gum.outputs[0].standard_uncertainty)
+    with pytest.raises(ConfigError, match=r"repeat_parameters must have shape \(k, 9\) with k >= 2"):
+        section_uncertainty(small_scan, rotor37_curve, seed=1, trials=10, repeat_parameters=repeats[:1])
+
+
+def test_adaptive_trial_count(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
+    settings = AdaptiveSettings(tolerance=0.05e-6, sequence_trials=2000, max_trials=40_000, monitored=(2, 3))
+    result = section_uncertainty(small_scan, rotor37_curve, seed=4, trials=None, adaptive=settings, block_size=1000)
+    report = result.monte_carlo.adaptive
+    assert report is not None and report.converged
+    assert result.monte_carlo.n_trials % 2000 == 0
