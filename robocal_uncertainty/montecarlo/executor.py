@@ -12,6 +12,7 @@ it is imported only when a Dask address is given or a Dask client is passed in.
 
 from __future__ import annotations
 
+import importlib
 import multiprocessing
 from collections.abc import Callable, Generator
 from concurrent.futures import ProcessPoolExecutor
@@ -104,10 +105,10 @@ def executor_slots(executor: object) -> int:
     ``max_workers`` of a ``concurrent.futures`` pool, the total worker threads of a
     Dask cluster, else 4. Never changes a result, only how many blocks are in flight.
     """
-    client = executor.client if isinstance(executor, _DaskSubmitter) else executor
+    client: Any = executor.client if isinstance(executor, _DaskSubmitter) else executor
     if _is_dask_client(client):
         try:
-            workers = client.scheduler_info()["workers"]  # type: ignore[attr-defined]
+            workers = client.scheduler_info()["workers"]
             return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
         except (KeyError, AttributeError, TypeError):
             return _DEFAULT_SLOTS
@@ -133,7 +134,7 @@ def _without_malloc_trim() -> Generator[None, None, None]:
     slower (measured, 1 000 configurations x 4 000 trials). Only for the clusters started
     here; a user's cluster keeps its own configuration.
     """
-    import dask  # optional extra, present with distributed
+    dask: Any = importlib.import_module("dask")  # optional extra, present with distributed
 
     environ = dask.config.get("distributed.nanny.pre-spawn-environ", default=None)
     if not isinstance(environ, dict) or "MALLOC_TRIM_THRESHOLD_" not in environ:
@@ -147,22 +148,25 @@ def _without_malloc_trim() -> Generator[None, None, None]:
 @contextmanager
 def _dask_client(address: str, workers: int) -> Generator[Any, None, None]:
     try:
-        from distributed import Client, LocalCluster  # optional extra
+        # Optional extra, untyped: held as Any.
+        distributed: Any = importlib.import_module("distributed")
     except ImportError as err:
         msg = "--dask needs dask.distributed: pip install 'robocal_uncertainty[dask]'"
         raise ConfigError(msg) from err
     if address == LOCAL_DASK:
         # One thread per worker process: trial blocks are numpy-bound and hold the GIL.
         with _without_malloc_trim():
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            cluster = distributed.LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+            )
         try:
-            with Client(cluster) as client:
+            with distributed.Client(cluster) as client:
                 yield client
         finally:
             cluster.close()
         return
     try:
-        client = Client(address, timeout=10)
+        client = distributed.Client(address, timeout=10)
     except OSError as err:
         msg = f"cannot connect to the Dask scheduler at {address!r}: {err}"
         raise ConfigError(msg) from err

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import numpy as np
@@ -154,3 +155,9 @@ def test_executor_slots_and_resolution() -> None:
         assert runner is None
     with open_executor(workers=2) as runner:
         assert isinstance(runner, ProcessPoolExecutor) and executor_slots(runner) == 2
+
+
+def test_dask_missing_is_a_one_line_error(monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import fails as if not installed
+    with pytest.raises(ConfigError, match=r"--dask needs dask.distributed: pip install"), open_executor(dask="local"):
+        pass
