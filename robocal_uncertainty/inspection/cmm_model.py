@@ -245,11 +245,11 @@ class ErrorSource:
         """Displacement of every point along ``normals`` (n, 2), shape (T, n) [m]."""
         if self.kind == "xy":
             pairs = draws.reshape(draws.shape[0], self.n_points, 2)
-            return np.einsum("tij,ij->ti", pairs, self.gain[:, np.newaxis] * normals)
+            return np.asarray(np.einsum("tij,ij->ti", pairs, self.gain[:, np.newaxis] * normals))
         projected = np.einsum("ij,ij->i", self.gain, normals)
         if self.kind == "along":
-            return draws * projected
-        return draws[:, :1] * projected
+            return np.asarray(draws * projected)
+        return np.asarray(draws[:, :1] * projected)
 
 
 def draw_bound(distribution: Distribution) -> float:

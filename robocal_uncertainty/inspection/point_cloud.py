@@ -284,10 +284,10 @@ def _read_table(path: Path, unit: str | None, columns: tuple[int, ...]) -> tuple
         raise InputError(msg)
     factor = _resolve_unit(path, unit, stated)
     table = np.array(rows, dtype=np.float64)
-    bad = ~np.isfinite(table)
-    if bad.any():
-        row = int(np.argmax(bad.any(axis=1)))
-        msg = f"{path}: {int(bad.sum())} NaN/inf values (first in data row {row + 1})"
+    nonfinite = ~np.isfinite(table)
+    if nonfinite.any():
+        row = int(np.argmax(nonfinite.any(axis=1)))
+        msg = f"{path}: {int(nonfinite.sum())} NaN/inf values (first in data row {row + 1})"
         raise InputError(msg)
     return table, factor, width
 

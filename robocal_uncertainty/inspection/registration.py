@@ -53,7 +53,8 @@ def polygon_centroid(points: ArrayLike) -> NDArray[np.float64]:
     if abs(area) < 1e-300:
         msg = "polygon has zero area; cannot take its centroid"
         raise InputError(msg)
-    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
+    sums = np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()], dtype=np.float64)
+    return np.asarray(sums / (6.0 * area), dtype=np.float64)
 
 
 @dataclass(frozen=True, eq=False)

@@ -34,6 +34,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -292,8 +293,8 @@ def build_frozen_model(evaluation: SectionEvaluation, sources: Sequence[ErrorSou
     k2 = k1 + starts.size
     k3 = k2 + ends.size
     reg = evaluation.registration
-    solve = np.linalg.pinv(reg.jacobian)
-    arrays = [p, reg.normal, reg.residual, seg.labels, reg.jacobian, solve]
+    solve = np.asarray(np.linalg.pinv(reg.jacobian), dtype=np.float64)
+    arrays: list[NDArray[Any]] = [p, reg.normal, reg.residual, seg.labels, reg.jacobian, solve]
     for array in arrays:
         array.setflags(write=False)
     return FrozenSectionModel(
@@ -638,7 +639,7 @@ def section_uncertainty(
         full_budget = np.concatenate([budget, np.diag(spread)], axis=1)
 
         def with_repeatability(z: NDArray[np.float64]) -> NDArray[np.float64]:
-            return base + z @ full_budget.T
+            return np.asarray(base + z @ full_budget.T, dtype=np.float64)
 
         inputs: dict[str, Distribution] = {name: Normal(0.0, 1.0) for name in names}
         inputs.update({f"repeatability[{name}]": StudentT(0.0, 1.0, dof) for name in PARAMETER_NAMES})
