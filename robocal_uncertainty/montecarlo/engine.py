@@ -16,6 +16,13 @@ once per block), or a :class:`StagedTrialBlock` with ``draw(rng, n)`` and
 ``chunk_blocks`` consecutive blocks are evaluated in one vectorised call. The staged
 form is bit-identical across ``chunk_blocks`` as long as ``evaluate`` computes each
 row from that row alone, which JCGM 101 models (one model value per trial) do.
+
+Chunks run in this process, on ``workers`` local processes, or on any ``executor`` with
+``submit`` (``concurrent.futures``, a ``dask.distributed.Client``; see :mod:`.executor`);
+the result is the same on all. :func:`run_trials` returns every model value;
+:func:`reduce_trials` reduces each block where it ran (moments of all outputs, values of a
+few columns, see :mod:`.streaming`) so the driver's memory does not grow with the
+number of outputs.
 """
 
 from __future__ import annotations

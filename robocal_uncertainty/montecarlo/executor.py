@@ -190,7 +190,7 @@ def open_executor(
     ----------
     workers : int
         Local worker processes (1 = run in this process); with ``dask="local"``, the
-        number of worker processes of the ``LocalCluster``.
+        number of worker processes of the ``LocalCluster``; must be 1 with a remote address.
     executor : object, optional
         An executor owned by the caller (left running on exit); excludes ``workers > 1``
         and ``dask``.
@@ -223,6 +223,9 @@ def open_executor(
     if dask is not None:
         if not isinstance(dask, str) or not dask.strip():
             msg = f"dask must be a scheduler address or 'local', got {dask!r}"
+            raise ConfigError(msg)
+        if dask.strip() != LOCAL_DASK and workers > 1:
+            msg = f"workers={workers} applies to local processes or dask='local'; the cluster at {dask!r} has its own"
             raise ConfigError(msg)
         with _dask_client(dask.strip(), workers) as client:
             yield check_executor(client)

@@ -63,7 +63,7 @@ class Reduction:
         object.__setattr__(self, "keep", _index_array("reduction keep", np.asarray(keep, dtype=np.intp), 1))
 
     def check(self, n_outputs: int) -> None:
-        """Raise ModelOutputError-style ConfigError if a column index is >= n_outputs."""
+        """Raise ConfigError if a column index is not below ``n_outputs``."""
         for name, cols in (("groups", self.groups), ("keep", self.keep)):
             if cols.size and int(cols.max()) >= n_outputs:
                 msg = f"reduction {name} names column {int(cols.max())}, but the model has {n_outputs} outputs"

@@ -205,12 +205,12 @@ def _check_configurations(model: RobotModel, configurations: ArrayLike) -> Array
 
 
 def _check_regions(regions: Sequence[int], n: int) -> NDArray[np.intp]:
-    chosen = sorted({int(i) for i in regions})
-    for value in regions:
+    values = list(regions)
+    for value in values:
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value < n:
             msg = f"region configuration {value!r} is not a 0-based index in [0, {n})"
             raise ConfigError(msg)
-    return np.array(chosen, dtype=np.intp)
+    return np.array(sorted({int(i) for i in values}), dtype=np.intp)
 
 
 def _calibrated_points(calibration: IdentificationResult, joints: Array, *, in_base: bool) -> Array:

@@ -145,6 +145,9 @@ def test_executor_errors() -> None:
         pass
     with pytest.raises(ConfigError, match="workers must be an integer >= 1"), open_executor(workers=0):
         pass
+    remote = open_executor(workers=2, dask="tcp://127.0.0.1:1")
+    with pytest.raises(ConfigError, match="applies to local processes or dask='local'"), remote:
+        pass
 
 
 def test_executor_slots_and_resolution() -> None:
