@@ -169,8 +169,8 @@ def _print_adequacy(result: Any) -> None:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from robocal_uncertainty.bagio import write_campaign
-    from robocal_uncertainty.core import EncoderNoise, SimulationSettings, TrackerNoise, simulate_campaign
+    from robocal_uncertainty.app import simulate
+    from robocal_uncertainty.core import EncoderNoise, SimulationSettings, TrackerNoise
 
     model = _load_robot(args.robot)
     settings = SimulationSettings(
@@ -179,33 +179,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
         encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
     )
-    sim = simulate_campaign(model, settings, seed=args.seed)
-    out = Path(args.out)
-    write_campaign(out, sim.campaign, overwrite=args.force)
-    truth = out.with_suffix(".truth.json")
-    truth.write_text(
-        json.dumps(
-            {
-                "format": "robocal_uncertainty/simulation_truth/1",
-                "units": {"length": "m", "angle": "rad"},
-                "robot": model.name,
-                "seed": args.seed,
-                "frame": args.frame,
-                "parameter_names": list(model.layout.names),
-                "true_parameters": sim.true_model.parameter_vector().tolist(),
-                "nominal_parameters": model.parameter_vector().tolist(),
-                "true_joint_positions_rad": sim.true_joint_positions.tolist(),
-                "true_points_m": sim.true_points.tolist(),
-                "tracker_noise_a_m": settings.tracker_noise.a,
-                "tracker_noise_b_m_per_m": settings.tracker_noise.b,
-                "encoder_noise_half_width_rad": settings.encoder_noise.half_width,
-            },
-            indent=1,
-        )
-        + "\n",
-        encoding="utf-8",
+    files = simulate(model, settings, args.out, seed=args.seed, overwrite=args.force)
+    print(
+        f"wrote {files.campaign_path} ({files.simulation.campaign.n_poses} poses, points in the {args.frame} frame) "
+        f"and truth {files.truth_path}"
     )
-    print(f"wrote {out} ({sim.campaign.n_poses} poses, points in the {args.frame} frame) and truth {truth}")
     return 0
 
 
@@ -290,7 +268,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_fk(args: argparse.Namespace) -> int:
-    from robocal_uncertainty.core import check_joint_limits, forward_points
+    from robocal_uncertainty.app import tool_points
+    from robocal_uncertainty.core import check_joint_limits
     from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration
 
     model = _load_robot(args.robot)
@@ -305,41 +284,15 @@ def _cmd_fk(args: argparse.Namespace) -> int:
     else:
         raise ConfigError("give --joints or --joints-file")
     check_joint_limits(model, q, what=what, degrees_hint=None if args.degrees else "did you mean --degrees?")
-    p = model.parameter_vector()
-    in_world = model.base_known and (np.any(model.base_xyz != 0) or np.any(model.base_rpy != 0))
-    b0 = model.layout.base_index
-    p_base = p.copy()
-    p_base[b0 : b0 + 6] = 0.0
-    base_points = forward_points(model.layout, p_base, q)
-    world_points = forward_points(model.layout, p, q)
-    has_world = bool(args.calibration and not np.allclose(p[b0 : b0 + 6], 0.0)) or in_world
-    source = "calibrated" if args.calibration else "nominal"
-    frame = args.frame or ("measurement" if has_world else "base")
-    if frame == "measurement" and not has_world:
-        frame_id = model.base_frame_id  # no identified base: the measurement frame is the base frame
-        points = base_points
-    elif frame == "measurement":
-        frame_id, points = model.measurement_frame_id, world_points
-    else:
-        frame_id, points = model.base_frame_id, base_points
-    print(f"# tool point of the {source} {model.name} model in frame {frame_id} ({frame} frame), mm")
-    print(f"# x_{frame_id} y_{frame_id} z_{frame_id}")
-    for i in range(q.shape[0]):
-        print(" ".join(f"{v * 1e3:.6f}" for v in points[i]))
+    points = tool_points(model, q, calibrated=bool(args.calibration), frame=args.frame)
+    print(
+        f"# tool point of the {points.model} {model.name} model in frame {points.frame_id} ({points.frame} frame), mm"
+    )
+    print(f"# x_{points.frame_id} y_{points.frame_id} z_{points.frame_id}")
+    for row in points.points:
+        print(" ".join(f"{v * 1e3:.6f}" for v in row))
     if args.json:
-        out = {
-            "units": {"length": "m", "angle": "rad"},
-            "model": source,
-            "robot": model.name,
-            "joint_names": list(model.joint_names),
-            "joint_positions_rad": q.tolist(),
-            "points_base_m": base_points.tolist(),
-            "base_frame_id": model.base_frame_id,
-        }
-        if has_world:
-            out["points_measurement_frame_m"] = world_points.tolist()
-            out["measurement_frame_id"] = model.measurement_frame_id
-        Path(args.json).write_text(json.dumps(out, indent=2) + "\n", encoding="utf-8")
+        Path(args.json).write_text(json.dumps(points.to_dict(), indent=2) + "\n", encoding="utf-8")
     return 0
 
 
@@ -630,51 +583,21 @@ def _sources_arg(text: str) -> tuple[str, ...]:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.app import validate
     from robocal_uncertainty.bagio import read_campaign
     from robocal_uncertainty.report.validation_report import format_validation, write_validation_report
-    from robocal_uncertainty.uncertainty import parse_sources
-    from robocal_uncertainty.uncertainty.holdout import split_campaign, validate_holdout
 
-    trials = _trials(args.trials)
-    if trials == "auto":
-        raise ConfigError("validate needs a fixed number of --trials, not auto")
-    if not 0.0 < args.coverage < 1.0:
-        msg = f"--coverage must lie in (0, 1), got {args.coverage}"
-        raise ConfigError(msg)
-    if args.frame != "measurement":
-        # Held-out measurements exist only in the campaign's frame; moving them into the base
-        # frame would use the uncertain identified base and bias the comparison.
-        raise ConfigError(
-            "validate compares with measurements, so it works in the measurement frame only (no --frame base)"
-        )
+    options = _evaluation_options(args, _sources_arg(args.sources), None)
     campaign, model = _campaign_and_robot(args)
-    settings = _uncertainty_settings(args, campaign, parse_sources(args.sources))
-    splits = None
-    validation_campaign = None
-    if args.validation_campaign:
-        validation_campaign = read_campaign(args.validation_campaign)
-    else:
-        chosen = [x is not None for x in (args.train_poses, args.holdout_fraction, args.k_folds)]
-        if sum(chosen) > 1:
-            raise ConfigError("give only one of --train-poses, --holdout-fraction, --k-folds")
-        fraction = args.holdout_fraction if any(chosen) else 0.25
-        splits = split_campaign(
-            campaign.n_poses,
-            n_train=args.train_poses,
-            holdout_fraction=fraction if args.train_poses is None and args.k_folds is None else None,
-            k_folds=args.k_folds,
-            seed=args.seed,
-        )
-    validation = validate_holdout(
+    validation_campaign = read_campaign(args.validation_campaign) if args.validation_campaign else None
+    validation = validate(
         model,
         campaign,
-        splits=splits,
+        options,
+        train_poses=args.train_poses,
+        holdout_fraction=args.holdout_fraction,
+        k_folds=args.k_folds,
         validation_campaign=validation_campaign,
-        settings=settings,
-        lambda_=_lambda_arg(args.lambda_),
-        trials=int(trials),
-        coverage=args.coverage,
-        seed=args.seed,
         workers=args.workers,
         progress=print,
     )
@@ -683,7 +606,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     out = write_validation_report(
         args.out,
         validation,
-        extra={"campaign": str(args.campaign), "robot": str(args.robot), "trials": int(trials)},
+        extra={"campaign": str(args.campaign), "robot": str(args.robot), "trials": int(options.trials)},
     )
     print(f"report written to {out}")
     return 0

@@ -2,7 +2,11 @@
 
 The command line, the ROS 2 nodes and the tests call these; they parse, print or publish,
 and nothing else. ``evaluate`` calibrates a campaign and gives its Monte Carlo uncertainty,
-budget and sweeps; ``replay`` turns a raw bag into a campaign and evaluates it the same way.
+budget and sweeps; ``replay`` turns a raw bag into a campaign and evaluates it the same way;
+``validate`` checks an uncertainty statement on held-out measurements; ``simulate`` writes a
+simulated campaign and its truth; ``tool_points`` gives the tool positions of a nominal or
+calibrated model in a named frame. ``output_paths`` checks output files and report
+directories before any work (one overwrite rule).
 
 Modules are named after what they hold (``evaluation``, ``bag_replay``), never after an
 exported function: importing a submodule binds its name on the package, which would hide
@@ -16,7 +20,21 @@ from robocal_uncertainty._lazy import lazy_exports
 if TYPE_CHECKING:
     from robocal_uncertainty.app.bag_replay import ReplayEvaluation, replay
     from robocal_uncertainty.app.evaluation import Evaluation, evaluate
+    from robocal_uncertainty.app.forward_kinematics import ToolPoints, tool_points
+    from robocal_uncertainty.app.simulation import SimulationFiles, simulate
+    from robocal_uncertainty.app.validation import validate
     from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
-__all__ = ["Evaluation", "EvaluationOptions", "ReplayEvaluation", "evaluate", "replay"]
+__all__ = [
+    "Evaluation",
+    "EvaluationOptions",
+    "ReplayEvaluation",
+    "SimulationFiles",
+    "ToolPoints",
+    "evaluate",
+    "replay",
+    "simulate",
+    "tool_points",
+    "validate",
+]
 __getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)

@@ -1,0 +1,132 @@
+"""The forward-kinematics service: tool points of a nominal or calibrated model, in a named frame.
+
+A calibration that identified the base transform (a tracker-frame campaign) gives points
+in the measurement (tracker) frame as well as in the robot base frame; a nominal model
+has measurement-frame points only when its config places the base away from the origin.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError
+
+__all__ = ["FRAMES", "ToolPoints", "tool_points"]
+
+Array = NDArray[np.float64]
+
+FRAMES = ("measurement", "base")
+"""Frames :func:`tool_points` can report."""
+
+
+@dataclass(frozen=True, eq=False)
+class ToolPoints:
+    """Tool points of a model at some joint configurations.
+
+    Attributes
+    ----------
+    model : {"nominal", "calibrated"}
+    robot : str
+    joint_names : tuple of str, length n_joints
+    joint_positions : ndarray, shape (n, n_joints) [rad]
+    points_base : ndarray, shape (n, 3) [m]
+        In the robot base frame ``base_frame_id``.
+    base_frame_id : str
+    points_measurement : ndarray, shape (n, 3) [m], or None
+        In the measurement frame ``measurement_frame_id``; None when the model places the
+        base at the measurement frame's origin (the two frames coincide).
+    measurement_frame_id : str
+    frame : {"measurement", "base"}
+        The frame chosen for :attr:`points`.
+    frame_id : str
+        Its ``frame_id``.
+    points : ndarray, shape (n, 3) [m]
+        The points in `frame`.
+    """
+
+    model: str
+    robot: str
+    joint_names: tuple[str, ...]
+    joint_positions: Array
+    points_base: Array
+    base_frame_id: str
+    points_measurement: Array | None
+    measurement_frame_id: str
+    frame: str
+    frame_id: str
+    points: Array
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (lengths [m], angles [rad]): both frames' points where they differ."""
+        out: dict[str, Any] = {
+            "units": {"length": "m", "angle": "rad"},
+            "model": self.model,
+            "robot": self.robot,
+            "joint_names": list(self.joint_names),
+            "joint_positions_rad": self.joint_positions.tolist(),
+            "points_base_m": self.points_base.tolist(),
+            "base_frame_id": self.base_frame_id,
+        }
+        if self.points_measurement is not None:
+            out["points_measurement_frame_m"] = self.points_measurement.tolist()
+            out["measurement_frame_id"] = self.measurement_frame_id
+        return out
+
+
+def tool_points(model: RobotModel, joints: Array, *, calibrated: bool, frame: str | None = None) -> ToolPoints:
+    """Tool points of `model` at `joints`.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model, or one with a calibration applied.
+    joints : ndarray, shape (n, n_joints) [rad]
+    calibrated : bool
+        Whether `model` carries a calibration (recorded, and a calibration with an
+        identified base gives measurement-frame points).
+    frame : {"measurement", "base"}, optional
+        Frame of :attr:`ToolPoints.points`; default the measurement frame when the model has
+        one distinct from the base, else the base frame. ``"measurement"`` without such a
+        frame gives the base-frame points (the frames coincide).
+
+    Raises
+    ------
+    ConfigError
+        Unknown `frame`.
+    """
+    if frame is not None and frame not in FRAMES:
+        msg = f"frame must be one of {', '.join(FRAMES)}, got {frame!r}"
+        raise ConfigError(msg)
+    q = np.asarray(joints, dtype=np.float64)
+    p = model.parameter_vector()
+    b0 = model.layout.base_index
+    p_base = p.copy()
+    p_base[b0 : b0 + 6] = 0.0
+    base_points = forward_points(model.layout, p_base, q)
+    world_points = forward_points(model.layout, p, q)
+    placed = model.base_known and bool(np.any(model.base_xyz != 0) or np.any(model.base_rpy != 0))
+    has_world = (calibrated and not np.allclose(p[b0 : b0 + 6], 0.0)) or placed
+    chosen = frame or ("measurement" if has_world else "base")
+    if chosen == "measurement" and has_world:
+        frame_id, points = model.measurement_frame_id, world_points
+    else:
+        frame_id, points = model.base_frame_id, base_points
+    return ToolPoints(
+        model="calibrated" if calibrated else "nominal",
+        robot=model.name,
+        joint_names=tuple(model.joint_names),
+        joint_positions=q,
+        points_base=base_points,
+        base_frame_id=model.base_frame_id,
+        points_measurement=world_points if has_world else None,
+        measurement_frame_id=model.measurement_frame_id,
+        frame=chosen,
+        frame_id=frame_id,
+        points=points,
+    )
