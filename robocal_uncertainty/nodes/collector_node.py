@@ -105,7 +105,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec("min_points", 10, "Fewest tracker points a dwell must average", "", True, 2, 1_000_000),
     ParamSpec("guard_s", 0.1, "Data dropped at each end of a dwell before averaging", "s", True, 0.0, 60.0),
-    ParamSpec("max_average_s", 30.0, "Longest span of a dwell averaged", "s", True, 0.001, 3600.0, positive),
+    ParamSpec(
+        "average_s",
+        1.0,
+        "Span of a dwell averaged after the settle guard; a dwell static for guard + average + guard is complete "
+        "and its sample taken at once (the last pose of a campaign included)",
+        "s",
+        True,
+        0.001,
+        3600.0,
+        positive,
+    ),
     ParamSpec(
         "ignore_extra_joints",
         False,
@@ -164,7 +174,7 @@ class CollectorNode(Node):
             tracker_scatter_threshold=p["tracker_scatter_threshold_m"],
             min_points=p["min_points"],
             guard_s=p["guard_s"],
-            max_average_s=p["max_average_s"],
+            average_s=p["average_s"],
             log_throttle_s=p["log_throttle_s"],
             ignore_extra_joints=p["ignore_extra_joints"],
         )

@@ -10,12 +10,28 @@ The arm is *static* at time ``t`` when, over the window ``[t - window_s, t]``,
   beam dropout, does not veto: the joints alone decide).
 
 A *dwell* starts at the window start of the first static window and ends at the first
-message whose window is not static. When it ends, the collector emits ONE
-:class:`~robocal_uncertainty.pipeline.sample.CalibrationSample` averaging the data of
-``[start + guard_s, end - guard_s]``; the guards drop the tail of the arrival and the
-start of the departure, where the arm moves by less than the thresholds. :meth:`flush`
-(end of the stream) and :meth:`capture_now` emit the current dwell at once (no trailing
-guard); a dwell is emitted at most once.
+message whose window is not static. Each dwell gives at most ONE
+:class:`~robocal_uncertainty.pipeline.sample.CalibrationSample`:
+
+* **complete dwell**: as soon as the arm has stayed static until
+  ``start + guard_s + average_s + guard_s`` (the settle guard, the averaged span and a
+  guard after it, all inside static windows), the sample averaging
+  ``[start + guard_s, start + guard_s + average_s]`` is emitted, by the message that
+  completes it. Whatever happens afterwards (the arm stays, the stream ends, the arm moves
+  on) does not change it: a live collector, which never sees an end of stream, emits the
+  last pose of a campaign exactly as a replay does.
+* **short dwell** (motion resumes before it is complete): the sample averages
+  ``[start + guard_s, end - guard_s]``, emitted by the message that ends the dwell.
+* :meth:`flush` (end of the stream) and :meth:`capture_now` emit a dwell that is not
+  complete yet at once, over ``[start + guard_s, latest message]``.
+
+The guards drop the tail of the arrival and the start of the departure, where the arm
+moves by less than the thresholds. Too few data in the averaged span (fewer than two
+joint states or `min_points` tracker points, e.g. the beam was blocked) rejects the dwell.
+
+The window statistics are incremental (:class:`_StillTracker`): a message costs O(1)
+amortised numpy work whatever the window length, and the decisions are exactly those of
+recomputing the peak-to-peak ranges over every window.
 
 Time is message time (header stamps, int ns), never the wall clock, so a replay behaves
 exactly like the live run. Bad messages are dropped and counted per cause (see
@@ -88,10 +104,11 @@ class CollectorSettings:
     min_points : int
         Fewest tracker points a dwell must average to give a sample (at least 2).
     guard_s : float [s]
-        Data dropped at each end of a dwell before averaging.
-    max_average_s : float [s]
-        Longest span averaged: a longer dwell is averaged over its first `max_average_s`
-        after the guard (bounds the memory of an arm parked for hours).
+        Data dropped at each end of a dwell before averaging (the settle guard).
+    average_s : float [s]
+        Span averaged per dwell, after the settle guard: a dwell static for
+        ``guard_s + average_s + guard_s`` is complete and its sample is emitted at once.
+        A shorter dwell is averaged over what it holds when motion resumes.
     log_throttle_s : float [s]
         At most one ``log`` call per cause per this much message time.
     ignore_extra_joints : bool
@@ -104,14 +121,14 @@ class CollectorSettings:
     tracker_scatter_threshold: float = 1e-4
     min_points: int = 10
     guard_s: float = 0.1
-    max_average_s: float = 30.0
+    average_s: float = 1.0
     log_throttle_s: float = 5.0
     ignore_extra_joints: bool = False
 
     def __post_init__(self) -> None:
         _seconds_to_ns("window_s", self.window_s, positive=True)
         _seconds_to_ns("guard_s", self.guard_s, positive=False)
-        _seconds_to_ns("max_average_s", self.max_average_s, positive=True)
+        _seconds_to_ns("average_s", self.average_s, positive=True)
         _seconds_to_ns("log_throttle_s", self.log_throttle_s, positive=False)
         for name in ("joint_motion_threshold", "tracker_scatter_threshold"):
             value = getattr(self, name)
@@ -181,6 +198,65 @@ class _Series:
         self._lo = self._hi = 0
 
 
+class _StillTracker:
+    """Whether the rows of a sliding time window span at most `threshold` per column.
+
+    Exact and amortised O(1) per row: two facts are remembered between windows.
+
+    * A *run*: every row since `run_start` lies within [run_min, run_max] and
+      ``max(run_max - run_min) <= threshold``. While the run holds the whole window (the
+      window start only moves forward), the window is still without looking at it.
+    * A *block*: rows ``a..b`` of some window span more than `threshold`; every later
+      window that still holds row `a` (it ends at or before ``stamp[a] + window``) holds
+      ``a..b`` too and cannot be still. `a` is the latest such row.
+
+    Only when neither applies are the window's rows reduced (then the run or the block
+    is renewed from them), so a window is reduced about once per window length.
+    """
+
+    def __init__(self, threshold: float, window_ns: int) -> None:
+        self.threshold = float(threshold)
+        self.window_ns = window_ns
+        self.reset()
+
+    def reset(self) -> None:
+        self._blocked_until: int | None = None
+        self._run_start: int | None = None
+        self._run_max: NDArray[np.float64] | None = None
+        self._run_min: NDArray[np.float64] | None = None
+
+    def push(self, row: NDArray[np.float64]) -> None:
+        """Extend the run (if any) by a newly appended row."""
+        if self._run_max is not None and self._run_min is not None:
+            np.maximum(self._run_max, row, out=self._run_max)
+            np.minimum(self._run_min, row, out=self._run_min)
+
+    def still(self, series: _Series, first: int, now: int) -> bool:
+        """Whether rows ``first..`` of `series` (the window ending at `now`) are still."""
+        if self._blocked_until is not None and now <= self._blocked_until:
+            return False
+        if (
+            self._run_start is not None
+            and self._run_max is not None
+            and self._run_min is not None
+            and self._run_start <= int(series.stamps[first])
+            and float(np.max(self._run_max - self._run_min)) <= self.threshold
+        ):
+            return True
+        values = series.values[first:]
+        high, low = values.max(axis=0), values.min(axis=0)
+        if float(np.max(high - low)) <= self.threshold:
+            self._run_start, self._run_max, self._run_min = int(series.stamps[first]), high, low
+            return True
+        # The latest row `a` such that rows a.. still span more than the threshold.
+        backwards = values[::-1]
+        spread = np.maximum.accumulate(backwards, axis=0) - np.minimum.accumulate(backwards, axis=0)
+        latest = values.shape[0] - 1 - int(np.argmax(spread.max(axis=1) > self.threshold))
+        self._blocked_until = int(series.stamps[first + latest]) + self.window_ns
+        self._run_start = self._run_max = self._run_min = None
+        return False
+
+
 class StaticPoseCollector:
     """Detect static dwells of the arm and emit one averaged sample per dwell.
 
@@ -191,7 +267,7 @@ class StaticPoseCollector:
     tracker_frame_id : str
         ``header.frame_id`` expected on tracker points; others are dropped (``wrong_frame``).
     window_s, joint_motion_threshold, tracker_scatter_threshold, min_points, guard_s,
-    max_average_s, log_throttle_s, ignore_extra_joints
+    average_s, log_throttle_s, ignore_extra_joints
         See :class:`CollectorSettings` (same defaults, same units).
     log : callable, optional
         ``log(cause, message)`` called for dropped messages and rejected dwells, at most
@@ -219,7 +295,7 @@ class StaticPoseCollector:
         tracker_scatter_threshold: float = 1e-4,
         min_points: int = 10,
         guard_s: float = 0.1,
-        max_average_s: float = 30.0,
+        average_s: float = 1.0,
         log_throttle_s: float = 5.0,
         ignore_extra_joints: bool = False,
         log: LogCallback | None = None,
@@ -237,7 +313,7 @@ class StaticPoseCollector:
             tracker_scatter_threshold=tracker_scatter_threshold,
             min_points=min_points,
             guard_s=guard_s,
-            max_average_s=max_average_s,
+            average_s=average_s,
             log_throttle_s=log_throttle_s,
             ignore_extra_joints=ignore_extra_joints,
         )
@@ -247,7 +323,7 @@ class StaticPoseCollector:
         self._window_ns = _seconds_to_ns("window_s", window_s, positive=True)
         self._guard_ns = _seconds_to_ns("guard_s", guard_s, positive=False)
         self._throttle_ns = _seconds_to_ns("log_throttle_s", log_throttle_s, positive=False)
-        self._max_average_ns = _seconds_to_ns("max_average_s", max_average_s, positive=True)
+        self._average_ns = _seconds_to_ns("average_s", average_s, positive=True)
         self._log = log
         self._dropped = dict.fromkeys(DROP_CAUSES, 0)
         self._last_logged: dict[str, int] = {}
@@ -260,6 +336,13 @@ class StaticPoseCollector:
         self._now: int | None = None
         self._dwell_start: int | None = None
         self._captured = False
+        self.emitted = 0
+        """Samples emitted (complete, short, captured or flushed dwells)."""
+        self._joint_still = _StillTracker(joint_motion_threshold, self._window_ns)
+        self._point_still = _StillTracker(tracker_scatter_threshold, self._window_ns)
+        # The column order of the last accepted joint-state names (robots repeat them).
+        self._last_names: tuple[str, ...] | None = None
+        self._last_order: list[int] = []
 
     @classmethod
     def from_settings(
@@ -279,7 +362,7 @@ class StaticPoseCollector:
             tracker_scatter_threshold=settings.tracker_scatter_threshold,
             min_points=settings.min_points,
             guard_s=settings.guard_s,
-            max_average_s=settings.max_average_s,
+            average_s=settings.average_s,
             log_throttle_s=settings.log_throttle_s,
             ignore_extra_joints=settings.ignore_extra_joints,
             log=log,
@@ -327,20 +410,23 @@ class StaticPoseCollector:
             return self._drop(
                 "length_mismatch", stamp, f"joint state has {len(names)} names but {values.size} positions"
             )
-        if len(set(names)) != len(names):
-            return self._drop("duplicate_joint", stamp, f"joint state repeats a joint name: {list(names)}")
-        unknown = [n for n in names if n not in self._column]
-        if unknown and not self.settings.ignore_extra_joints:
-            return self._drop("unknown_joint", stamp, f"joint state has unknown joints {unknown}")
-        index = {name: i for i, name in enumerate(names)}
-        missing = [n for n in self.joint_names if n not in index]
-        if missing:
-            return self._drop("missing_joint", stamp, f"joint state lacks joints {missing}")
-        q = values[[index[n] for n in self.joint_names]]
+        if names != self._last_names:
+            if len(set(names)) != len(names):
+                return self._drop("duplicate_joint", stamp, f"joint state repeats a joint name: {list(names)}")
+            unknown = [n for n in names if n not in self._column]
+            if unknown and not self.settings.ignore_extra_joints:
+                return self._drop("unknown_joint", stamp, f"joint state has unknown joints {unknown}")
+            index = {name: i for i, name in enumerate(names)}
+            missing = [n for n in self.joint_names if n not in index]
+            if missing:
+                return self._drop("missing_joint", stamp, f"joint state lacks joints {missing}")
+            self._last_names, self._last_order = names, [index[n] for n in self.joint_names]
+        q = values[self._last_order]
         if not np.isfinite(q).all():
             return self._drop("nan", stamp, f"joint state has NaN or inf positions {q.tolist()}")
         self._last_joint = stamp
         self._joints.append(stamp, q)
+        self._joint_still.push(q)
         return self._update(stamp)
 
     def add_tracker_point(self, stamp_ns: int, frame_id: str, xyz: ArrayLike) -> CalibrationSample | None:
@@ -376,6 +462,7 @@ class StaticPoseCollector:
             return self._drop("nan", stamp, f"tracker point has NaN or inf coordinates {point.tolist()}")
         self._last_point = stamp
         self._points.append(stamp, point)
+        self._point_still.push(point)
         return self._update(stamp)
 
     def capture_now(self) -> CalibrationSample | None:
@@ -384,8 +471,9 @@ class StaticPoseCollector:
         Returns
         -------
         CalibrationSample or None
-            None when the arm is not static, the dwell was already emitted, or it holds
-            too few data (logged as ``not_static``, ``already_captured``, ``rejected_dwell``).
+            None when the arm is not static, the dwell was already emitted (it was complete,
+            or captured before), or it holds too few data (logged as ``not_static``,
+            ``already_captured``, ``rejected_dwell``).
         """
         if self._dwell_start is None or self._now is None:
             self._report("not_static", self._now or 0, "capture requested while the arm is not static")
@@ -397,9 +485,11 @@ class StaticPoseCollector:
         return self._average(self._dwell_start + self._guard_ns, self._now)
 
     def flush(self) -> CalibrationSample | None:
-        """End of the stream: emit the current dwell if any and clear the buffers.
+        """End of the stream: emit the current dwell if not emitted yet, and clear the buffers.
 
-        Stamp monotonicity is still checked against the messages before the flush.
+        A complete dwell was emitted when it completed, so this only emits a dwell the
+        stream ended in before it was complete (over the data it holds). Stamp
+        monotonicity is still checked against the messages before the flush.
         """
         sample = None
         if self._dwell_start is not None and not self._captured and self._now is not None:
@@ -408,6 +498,8 @@ class StaticPoseCollector:
         self._captured = False
         self._joints.clear()
         self._points.clear()
+        self._joint_still.reset()
+        self._point_still.reset()
         return sample
 
     # -- internals -------------------------------------------------------------------------
@@ -434,17 +526,10 @@ class StaticPoseCollector:
         if not len(joints) or joints.stamps[0] > lo:
             return False  # the window is not covered by joint states yet
         i0 = joints.index(lo)
-        if len(joints) - i0 < 2:
-            return False
-        q = joints.values[i0:]
-        if float(np.max(q.max(axis=0) - q.min(axis=0))) > self.settings.joint_motion_threshold:
+        if len(joints) - i0 < 2 or not self._joint_still.still(joints, i0, now):
             return False
         k0 = points.index(lo)
-        if len(points) - k0 >= 2:
-            x = points.values[k0:]
-            if float(np.max(x.max(axis=0) - x.min(axis=0))) > self.settings.tracker_scatter_threshold:
-                return False
-        return True
+        return len(points) - k0 < 2 or self._point_still.still(points, k0, now)
 
     def _prune(self, now: int) -> None:
         """Drop data no window can need: keep one joint state at or before the window start."""
@@ -459,7 +544,7 @@ class StaticPoseCollector:
         assert self._dwell_start is not None
         keep_until = self._dwell_start - 1
         if not self._captured:
-            keep_until = self._dwell_start + self._guard_ns + self._max_average_ns
+            keep_until = self._dwell_start + self._guard_ns + self._average_ns
         keep_from = now - self._window_ns - self._guard_ns
         for series in (self._joints, self._points):
             i0, i1 = series.index(keep_until, "right"), series.index(keep_from)
@@ -478,19 +563,27 @@ class StaticPoseCollector:
             else:
                 self._prune(now)
             return None
+        start = self._dwell_start
+        span_start = start + self._guard_ns
+        span_end = span_start + self._average_ns
         if static:
+            sample = None
+            if not self._captured and now >= span_end + self._guard_ns:
+                # Complete: static through the averaged span and the guard after it.
+                self._captured = True
+                sample = self._average(span_start, span_end)
             self._prune_dwell(now)
-            return None
-        start, captured = self._dwell_start, self._captured
+            return sample
+        captured = self._captured
         self._dwell_start = None
         self._captured = False
-        sample = None if captured else self._average(start + self._guard_ns, now - self._guard_ns)
+        sample = None if captured else self._average(span_start, now - self._guard_ns)
         self._prune(now)
         return sample
 
     def _average(self, t0: int, t1: int) -> CalibrationSample | None:
-        """Average the data stamped in [t0, min(t1, t0 + max_average)] (None if too few)."""
-        t1 = min(t1, t0 + self._max_average_ns)
+        """Average the data stamped in [t0, min(t1, t0 + average_s)] (None if too few)."""
+        t1 = min(t1, t0 + self._average_ns)
         joints, points = self._joints, self._points
         i0, i1 = joints.index(t0), joints.index(t1, "right")
         k0, k1 = points.index(t0), points.index(t1, "right")
@@ -508,6 +601,7 @@ class StaticPoseCollector:
         x = points.values[k0:k1]
         first = int(min(joints.stamps[i0], points.stamps[k0]))
         last = int(max(joints.stamps[i1 - 1], points.stamps[k1 - 1]))
+        self.emitted += 1
         return CalibrationSample(
             stamp_ns=first + (last - first) // 2,
             frame_id=self.tracker_frame_id,

@@ -125,8 +125,8 @@ def test_beam_dropout_inside_a_dwell_does_not_split_it() -> None:
     assert len(stream.samples) == 1
 
 
-def test_long_dwell_is_averaged_over_max_average_s_only() -> None:
-    stream = Stream(_collector(max_average_s=1.0))
+def test_long_dwell_is_averaged_over_average_s_only() -> None:
+    stream = Stream(_collector(average_s=1.0))
     stream.run(6.0, _still([0.5, 0.5]))
     # Memory stays bounded by the averaged span plus the window.
     assert len(stream.collector._points) < 2 * 200 * 1.5
@@ -189,7 +189,7 @@ def test_backwards_stamps_are_dropped_per_stream() -> None:
         {"joint_motion_threshold": 0.0},
         {"tracker_scatter_threshold": float("inf")},
         {"min_points": 1},
-        {"max_average_s": 0.0},
+        {"average_s": 0.0},
     ],
 )
 def test_bad_settings_raise_config_error(kwargs) -> None:
