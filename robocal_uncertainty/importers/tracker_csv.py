@@ -9,7 +9,8 @@ Profiles
     (``frame="tracker"``, ``frame_id="laser_tracker"``). Its ``Timestamp`` column is mangled
     by a spreadsheet (``2,02103E+13``) and is not used.
 ``generic``
-    Comma- or semicolon-separated (semicolon: a comma inside a number is a decimal comma),
+    Comma-, semicolon- or tab-separated (semicolon or tab: a comma inside a number is a
+    decimal comma),
     one header row. Units are written in the header, ``name[unit]`` or ``name(unit)``, or
     given by `length_unit` / `angle_unit`; a column with no unit anywhere is an error.
     Columns: ``x``, ``y``, ``z`` (optionally prefixed ``point_``/``measurement_``) for the
@@ -25,7 +26,8 @@ their decimal text (see :mod:`~robocal_uncertainty.importers.units`).
 Metadata of the campaign: ``source_file``, ``source_format`` ("csv"), ``profile``,
 ``source_rows`` (0-based index of every kept pose among the non-blank rows after the
 header, as ``pandas.read_csv`` numbers them), ``skipped_rows`` (same numbering), ``units``
-(per column used) and ``ignored_columns``. Error messages name the file line and data row.
+(per column used) and ``ignored_columns``. Error messages name the file line and the data
+row counted from 1 (the first row after the header).
 """
 
 from __future__ import annotations
@@ -92,11 +94,11 @@ def _split_header(cell: str) -> tuple[str, str | None]:
 
 def _resolve_unit(path: Path, name: str, stated: str | None, given: str | None, kind: UnitKind) -> str:
     supported = ", ".join(LENGTH_UNITS if kind == "length" else ANGLE_UNITS)
-    argument = "length_unit" if kind == "length" else "angle_unit"
+    argument = f"the {kind} unit (import-csv --{kind}-unit)"
     if stated is None and given is None:
         msg = (
             f"{path}: column {name!r} has no unit; write it in the header as "
-            f"'{name}[unit]' or pass {argument} (supported: {supported})"
+            f"'{name}[unit]' or give {argument} (supported: {supported})"
         )
         raise InputError(msg)
     units = [canonical_unit(u, kind) for u in (stated, given) if u is not None]
@@ -105,7 +107,7 @@ def _resolve_unit(path: Path, name: str, stated: str | None, given: str | None, 
         msg = f"{path}: column {name!r} has unsupported {kind} unit {bad!r} (supported: {supported})"
         raise InputError(msg)
     if len(set(units)) > 1:
-        msg = f"{path}: column {name!r} states unit {stated!r} but {argument}={given!r} was passed"
+        msg = f"{path}: column {name!r} states unit {stated!r} but {kind} unit {given!r} was given (--{kind}-unit)"
         raise InputError(msg)
     return str(units[0])
 
@@ -117,7 +119,7 @@ def _ipa_columns(path: Path, header: list[str], length_unit: str | None, angle_u
     )
     for given, fixed, kind in checks:
         if given is not None and canonical_unit(given, kind) != fixed:
-            msg = f"{path}: the ipa profile has {kind}s in {fixed}, got {kind}_unit={given!r}"
+            msg = f"{path}: the ipa profile has {kind}s in {fixed}, got --{kind}-unit {given}"
             raise InputError(msg)
     position = {cell.strip(): i for i, cell in enumerate(header)}
     missing = [n for n in IPA_JOINTS + _IPA_POINT + _IPA_STD if n not in position]
@@ -162,7 +164,10 @@ def _generic_columns(
         msg = f"{path}: joint columns {absent} not in the header"
         raise InputError(msg)
     if not joints:
-        msg = f"{path}: no joint column found (names containing 'joint' or q1, q2, ...; or pass joint_columns)"
+        msg = (
+            f"{path}: no joint column found (names containing 'joint' or q1, q2, ...; "
+            "or name them with import-csv --joint-columns)"
+        )
         raise InputError(msg)
     for role, needed in (("point", True), ("std", False)):
         axes = sorted(c.key for c in columns if c.role == role)
@@ -190,7 +195,9 @@ def _read_rows(path: Path) -> tuple[str, list[list[str]], list[int]]:
     if not first:
         msg = f"tracker CSV {path} is empty"
         raise InputError(msg)
-    separator = ";" if ";" in first else ","
+    # Spreadsheets export tab-separated text as "CSV" too; a comma in a number is then a
+    # decimal comma, as with semicolons.
+    separator = "\t" if "\t" in first else ";" if ";" in first else ","
     reader = csv.reader(text.splitlines(), delimiter=separator)
     rows, lines = [], []
     for row in reader:
@@ -279,7 +286,7 @@ def read_tracker_csv(
             values = _parse_row(row, header, columns, separator)
         except ValueError as err:
             if not skip_invalid:
-                msg = f"{path}: line {line} (data row {data_row}): {err}"
+                msg = f"{path}: line {line} (data row {data_row + 1}): {err}"
                 raise InputError(msg) from None
             skipped.append(data_row)
             continue
@@ -321,7 +328,7 @@ def _parse_row(row: list[str], header: list[str], columns: list[_Column], separa
     values: dict[int, float] = {}
     for column in columns:
         text = row[column.index].strip()
-        if separator == ";":
+        if separator in (";", "\t"):
             text = text.replace(",", ".")
         if not text:
             msg = f"column {column.name!r} is empty"

@@ -147,7 +147,7 @@ def test_missing_unit_raises(tmp_path: Path) -> None:
 
 def test_missing_joint_unit_raises(tmp_path: Path) -> None:
     path = _write(tmp_path, "joint1,x[m],y[m],z[m]\n1,2,3,4\n")
-    with pytest.raises(InputError, match=r"column 'joint1' has no unit.*angle_unit"):
+    with pytest.raises(InputError, match=r"column 'joint1' has no unit.*--angle-unit"):
         read_tracker_csv(path)
 
 
@@ -159,13 +159,13 @@ def test_unsupported_unit_raises(tmp_path: Path) -> None:
 
 def test_header_unit_conflicting_with_argument_raises(tmp_path: Path) -> None:
     path = _write(tmp_path, "joint1[rad],x[mm],y[mm],z[mm]\n1,2,3,4\n")
-    with pytest.raises(InputError, match="states unit 'mm' but length_unit='m'"):
+    with pytest.raises(InputError, match=r"states unit 'mm' but length unit 'm' was given \(--length-unit\)"):
         read_tracker_csv(path, length_unit="m")
 
 
 def test_nan_row_raises_naming_the_line(tmp_path: Path) -> None:
     path = _write(tmp_path, "joint1[rad],x[m],y[m],z[m]\n1,2,3,4\n1,nan,3,4\n")
-    with pytest.raises(InputError, match=r"line 3 \(data row 1\): column 'x'.*not finite"):
+    with pytest.raises(InputError, match=r"line 3 \(data row 2\): column 'x'.*not finite"):
         read_tracker_csv(path)
 
 
