@@ -21,6 +21,7 @@ from scipy import stats
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.measurement import POSITION_AXES, joint_columns, row_weights, stack_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, run_trials
@@ -56,6 +57,8 @@ __all__ = [
 
 Array = NDArray[np.float64]
 _SUB_BATCH = 256
+# The outputs at the test configurations are tool positions (x, y, z), whatever is measured.
+_N_AXES = len(POSITION_AXES)
 OutputFrame = Literal["measurement", "base"]
 OUTPUT_FRAMES: tuple[str, ...] = ("measurement", "base")
 """``measurement``: the frame of the campaign's points (the tracker's, or the base when the
@@ -207,8 +210,8 @@ class CalibrationTrials:
 
     @property
     def n_outputs(self) -> int:
-        """Columns of a trial row: d per test configuration, then the parameters."""
-        return self.points.shape[1] * self.test_joints.shape[0] + self.x_hat.size
+        """Columns of a trial row: x, y, z per test configuration, then the parameters."""
+        return _N_AXES * self.test_joints.shape[0] + self.x_hat.size
 
     def __call__(self, rng: np.random.Generator, n: int) -> Array:
         """Model values of n trials, shape (n, d n_test + k)."""
@@ -216,7 +219,8 @@ class CalibrationTrials:
         # source's values depend on the block and the source alone; the sub-batches
         # below only bound memory.
         values = [source.draw(source_rng(rng, stream_id(source.name)), n) for source in self.sources]
-        n_poses, dim = self.points.shape
+        measurement = self.problem.measurement
+        dim = _N_AXES
         n_test = self.test_joints.shape[0]
         out = np.empty((n, self.n_outputs))
         # A fixed sub-batch: BLAS rounding may depend on the number of rows, so the split of
@@ -229,10 +233,11 @@ class CalibrationTrials:
                 source.apply(value[sl], batch)
             # Every source perturbs the measured points with zero-mean errors, so the trials
             # stay centred on the calibration.
+            # Source deviations are in the residual coordinates of the measurement type.
             pts = (
-                self.points[None] + batch.points
+                measurement.perturb(self.points[None], batch.points)
                 if batch.points is not None
-                else np.broadcast_to(self.points, (t, n_poses, dim))
+                else np.broadcast_to(self.points, (t, *self.points.shape))
             )
             q = self.joint_positions[None] + batch.joints if batch.joints is not None else self.joint_positions
             lambdas = batch.lambdas if batch.lambdas is not None else np.full(t, self.lambda_star)
@@ -322,12 +327,20 @@ def _field_sensitivities(prep: _Prepared) -> tuple[dict[str, Array], Array]:
     calibration = prep.calibration
     trials = prep.trials
     q = prep.campaign.joint_positions
-    n_poses, dim = trials.points.shape
+    measurement = problem.measurement
+    n_poses = trials.points.shape[0]
+    dim = _N_AXES
     n_test, n_joints = prep.test_joints.shape
-    _, jac = forward_points_and_jacobian(layout, calibration.estimate, q)
-    a_mat = jac.reshape(dim * n_poses, layout.size)[:, est] / problem.scale
+    _, jac = measurement.predict_and_jacobian(layout, calibration.estimate, q)
+    weights = row_weights(measurement, n_poses)
+    a_mat = stack_jacobian(measurement, jac, est) / problem.scale
+    if weights is not None:
+        a_mat = a_mat * weights[:, None]
     lam = calibration.lambda_
+    # x = H b: the linearised (weighted) Tikhonov solution for the stacked residual b.
     h = np.linalg.solve(a_mat.T @ a_mat + lam**2 * np.diag(problem.penalty_mask), a_mat.T)
+    if weights is not None:
+        h = h * weights[None, :]
     p_out = calibration.estimate.copy()
     b0 = layout.base_index
     if trials.drop_base:
@@ -337,9 +350,10 @@ def _field_sensitivities(prep: _Prepared) -> tuple[dict[str, Array], Array]:
         gy[:, :, b0 : b0 + 6] = 0.0
     n_out = dim * n_test
     s_points = gy[:, :, est].reshape(n_out, est.size) @ (h / problem.scale[:, None])
-    theta_cols = [idx["theta"] for idx in layout.joint_slices()]
-    # A reading error dq shifts the prediction by J_q dq: for the fit, the point moved by -J_q dq.
-    s_joints = -np.einsum("opc,pcj->opj", s_points.reshape(n_out, n_poses, dim), jac[:, :, theta_cols])
+    theta_cols = joint_columns(layout)
+    # A reading error dq shifts the prediction by J_q dq: for the fit, the measurement moved by -J_q dq.
+    m_dim = measurement.dimension
+    s_joints = -np.einsum("opc,pcj->opj", s_points.reshape(n_out, n_poses, m_dim), jac[..., theta_cols])
     s_test = np.zeros((n_test, dim, n_test, n_joints))
     s_pred = np.zeros((n_test, dim, n_test, dim))
     for i in range(n_test):
@@ -376,7 +390,7 @@ def _gum(prep: _Prepared, coverage: float) -> GumResult | None:
 
 def _gum_poses(prep: _Prepared, summary: Summary, coverage: float, n_dig: int) -> list[GumPose]:
     """Per test configuration: the GUM statement and its JCGM 101 §8 validation."""
-    dim = prep.trials.points.shape[1]
+    dim = _N_AXES
     n_test = prep.test_joints.shape[0]
     n_out = dim * n_test
     applicable = all(src.smooth for src in prep.trials.sources)
@@ -446,19 +460,12 @@ def _prepare(
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_)
     layout = model.layout
-    est = np.flatnonzero(calibration.estimated)
-    scale = calibration.column_scale[est]
-    problem = BatchProblem(
-        layout=layout,
-        start=calibration.nominal,
-        estimated=est,
-        scale=scale,
-        penalized=calibration.penalized[est],
-    )
-    x_hat = (calibration.estimate[est] - calibration.nominal[est]) * scale
+    problem = BatchProblem.from_calibration(calibration)
+    x_hat = problem.scaled_deviation(calibration.estimate)
+    measurement = campaign.measurement
     n_poses = campaign.n_poses
-    dim = campaign.points.shape[1]
-    k = est.size
+    dim = measurement.dimension
+    k = problem.estimated.size
 
     lam_star = calibration.lambda_
     lambda_range: tuple[float, float] | None = None
@@ -486,13 +493,15 @@ def _prepare(
                 raise ConfigError(msg)
 
     b0 = layout.base_index
-    if campaign.frame == "tracker":
-        distances = np.linalg.norm(campaign.points, axis=1)
-    else:
-        distances = np.linalg.norm(campaign.points - np.asarray(settings.tracker_xyz), axis=1)
+    positions = measurement.positions(campaign.points)
+    if positions is None:
+        msg = f"{measurement.quantity} measurements hold no position: no tracker distance for the noise model"
+        raise InputError(msg)
+    origin = np.zeros(3) if campaign.frame == "tracker" else np.asarray(settings.tracker_xyz)
+    distances = np.linalg.norm(positions - origin, axis=1)
     drop_base = frame == "base" and campaign.frame == "tracker"
     # Model errors live in the measurement frame; R^T takes them into the base frame.
-    output_rotation = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6]).T if drop_base else np.eye(dim)
+    output_rotation = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6]).T if drop_base else np.eye(_N_AXES)
     frame_id = model.base_frame_id if frame == "base" or campaign.frame == "base" else campaign.frame_id
     adequacy = assess_model_adequacy(
         calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
@@ -514,7 +523,7 @@ def _prepare(
         x_hat=x_hat,
         joint_positions=campaign.joint_positions,
         points=campaign.points,
-        fitted=campaign.points - calibration.residuals,
+        fitted=measurement.perturb(campaign.points, -calibration.residuals),
         test_joints=test_q,
         drop_base=drop_base,
         output_rotation=output_rotation,
@@ -648,7 +657,7 @@ def evaluate_uncertainty(
     prep = _prepare(model, campaign, test_q, settings, calibration, lambda_, frame)
     calibration = prep.calibration
     trial_block = prep.trials
-    dim = trial_block.points.shape[1]
+    dim = _N_AXES
     adaptive = None
     if n_trials is None:
         # The measurand is the tool position: its components decide convergence; the
