@@ -17,6 +17,8 @@ if TYPE_CHECKING:
         CurvilinearTrapezoid,
         Distribution,
         Empirical,
+        IndependentCopies,
+        IndependentRectangular,
         Normal,
         Rectangular,
         StudentT,
@@ -30,15 +32,19 @@ if TYPE_CHECKING:
         MonteCarloResult,
         NonFinitePolicy,
         ProgressCallback,
+        ReducedTrials,
         StagedTrialBlock,
         TrialBlock,
         TrialsResult,
         block_rng,
         monte_carlo,
+        reduce_trials,
         run_trials,
     )
+    from robocal_uncertainty.montecarlo.executor import open_executor
     from robocal_uncertainty.montecarlo.gum import GumOutput, GumResult, propagate_gum
     from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
+    from robocal_uncertainty.montecarlo.streaming import Moments, Reduction
     from robocal_uncertainty.montecarlo.summary import (
         CoverageInterval,
         Histogram,
@@ -49,7 +55,7 @@ if TYPE_CHECKING:
         numerical_tolerance,
         summarize,
     )
-    from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
+    from robocal_uncertainty.montecarlo.validation import GumValidation, MonteCarloOutputs, validate_gum
 
 __all__ = [
     "AdaptiveReport",
@@ -66,15 +72,21 @@ __all__ = [
     "GumResult",
     "GumValidation",
     "Histogram",
+    "IndependentCopies",
+    "IndependentRectangular",
     "IntervalKind",
     "ModelOutputError",
+    "Moments",
     "MonteCarloIntervalKind",
+    "MonteCarloOutputs",
     "MonteCarloResult",
     "NonFinitePolicy",
     "Normal",
     "OutputSummary",
     "ProgressCallback",
     "Rectangular",
+    "ReducedTrials",
+    "Reduction",
     "StagedTrialBlock",
     "StudentT",
     "Summary",
@@ -85,7 +97,9 @@ __all__ = [
     "coverage_region",
     "monte_carlo",
     "numerical_tolerance",
+    "open_executor",
     "propagate_gum",
+    "reduce_trials",
     "run_trials",
     "summarize",
     "validate_gum",

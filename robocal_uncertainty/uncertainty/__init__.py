@@ -12,6 +12,7 @@ if TYPE_CHECKING:
         GumPose,
         PoseUncertainty,
         evaluate_uncertainty,
+        prepare_calibration_trials,
     )
     from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
     from robocal_uncertainty.uncertainty.reidentification import (
@@ -21,15 +22,31 @@ if TYPE_CHECKING:
     )
     from robocal_uncertainty.uncertainty.sources import (
         SOURCE_DESCRIPTIONS,
+        SOURCE_REGISTRY,
         SOURCES,
+        AdditiveSource,
+        Source,
+        SourceSpec,
+        TrialBatch,
+        TrialContext,
         UncertaintySettings,
         parse_sources,
+        register_source,
+        sources_help,
     )
     from robocal_uncertainty.uncertainty.sweeps import Sweep, evaluate_sweeps, sweep_equations, sweep_lambda
+    from robocal_uncertainty.uncertainty.workspace_map import (
+        WorkspaceMap,
+        grid_configurations,
+        map_workspace,
+        sample_configurations,
+    )
 
 __all__ = [
     "SOURCES",
     "SOURCE_DESCRIPTIONS",
+    "SOURCE_REGISTRY",
+    "AdditiveSource",
     "BatchProblem",
     "CalibrationTrials",
     "CalibrationUncertainty",
@@ -37,14 +54,25 @@ __all__ = [
     "EvaluationOptions",
     "GumPose",
     "PoseUncertainty",
+    "Source",
+    "SourceSpec",
     "Sweep",
+    "TrialBatch",
+    "TrialContext",
     "UncertaintySettings",
+    "WorkspaceMap",
     "evaluate_budget",
     "evaluate_campaign",
     "evaluate_sweeps",
     "evaluate_uncertainty",
+    "grid_configurations",
+    "map_workspace",
     "parse_sources",
+    "prepare_calibration_trials",
+    "register_source",
     "reidentify_batch",
+    "sample_configurations",
+    "sources_help",
     "sweep_equations",
     "sweep_lambda",
 ]
