@@ -117,7 +117,7 @@ def _base(p: Array, layout: ParameterLayout) -> tuple[Array, Array, Array]:
 
 
 def _rotate(base_cols: Array, v: Array) -> Array:
-    return base_cols[0] * v[0] + base_cols[1] * v[1] + base_cols[2] * v[2]
+    return np.asarray(base_cols[0] * v[0] + base_cols[1] * v[1] + base_cols[2] * v[2], dtype=np.float64)
 
 
 def _points_in_base(layout: ParameterLayout, p: Array, q: Array, shape: tuple[int, ...]) -> tuple[Array, Array, Array]:

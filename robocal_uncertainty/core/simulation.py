@@ -65,7 +65,7 @@ class TrackerNoise:
 
     def std(self, distance: Array) -> Array:
         """Standard deviation [m] per coordinate: half-width / sqrt(3)."""
-        return self.half_width(distance) / np.sqrt(3.0)
+        return np.asarray(self.half_width(distance) / np.sqrt(3.0), dtype=np.float64)
 
     def sample(self, rng: np.random.Generator, distance: Array) -> Array:
         """Errors of shape (*distance.shape, 3) [m]."""
