@@ -21,6 +21,8 @@ if TYPE_CHECKING:
         StaticPoseCollector,
         samples_to_campaign,
     )
+    from robocal_uncertainty.pipeline.diagnostics import DiagnosticLevel, DiagnosticStatus, DiagnosticThresholds
+    from robocal_uncertainty.pipeline.markers import MarkerSpec, uncertainty_markers
     from robocal_uncertainty.pipeline.replay import ReplayResult, replay_bag
     from robocal_uncertainty.pipeline.sample_store import SampleStore
     from robocal_uncertainty.pipeline.stream_merge import StreamMerger
@@ -31,8 +33,12 @@ __all__ = [
     "CalibrationPipeline",
     "CalibrationSample",
     "CollectorSettings",
+    "DiagnosticLevel",
+    "DiagnosticStatus",
+    "DiagnosticThresholds",
     "EvaluationOptions",
     "LogCallback",
+    "MarkerSpec",
     "ReplayResult",
     "SampleStore",
     "StaticPoseCollector",
@@ -40,5 +46,6 @@ __all__ = [
     "evaluate_campaign",
     "replay_bag",
     "samples_to_campaign",
+    "uncertainty_markers",
 ]
 __getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)
