@@ -36,6 +36,11 @@ PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7
 
 DEMO_SOURCES = ("tracker", "encoder", "lambda", "n_poses", "pose_choice")
 
+DEFAULT_PAIRING_TOLERANCE_MS = 50.0
+"""Default of ``--pairing-tolerance-ms``: a tracker point stamped up to this long before or after
+its joint reading is paired with it (tracker latency of a real recording is a few ms; poses are
+seconds apart)."""
+
 
 def _load_robot(name: str, *, base_known: bool | None = None) -> Any:
     from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
@@ -63,28 +68,47 @@ def _parse_joint_values(values: Sequence[str], n_joints: int, *, degrees: bool, 
 
 
 def _read_joints_file(path: str, n_joints: int, *, degrees: bool) -> NDArray[np.float64]:
+    """Joint configurations from a text file: one per row, numbers separated by commas,
+    semicolons or whitespace; blank lines, ``#`` comments and a header row are skipped."""
     try:
         text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        msg = f"cannot read joints file {path}: not UTF-8 text"
+        raise InputError(msg) from err
     except OSError as err:
         msg = f"cannot read joints file {path}: {err.strerror}"
         raise InputError(msg) from err
-    rows = [
-        line.replace(";", ",").replace(",", " ").split()
-        for line in text.splitlines()
-        if line.strip() and not line.lstrip().startswith("#")
-    ]
-    try:
-        q = np.array([[float(v) for v in row] for row in rows if not row[0][0].isalpha()])
-    except ValueError as err:
-        msg = f"joints file {path}: not a number ({err})"
-        raise InputError(msg) from err
-    if q.ndim != 2 or q.shape[1] != n_joints:
-        msg = f"joints file {path} must have {n_joints} numbers per row, got shape {q.shape}"
+    rows: list[list[float]] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        cells = line.replace(";", ",").replace(",", " ").split()
+        if not cells or cells[0].startswith("#") or (not rows and cells[0][0].isalpha()):
+            continue
+        try:
+            values = [float(v) for v in cells]
+        except ValueError:
+            bad = next(v for v in cells if not _is_number(v))
+            msg = f"joints file {path}, line {number}: {bad!r} is not a number"
+            raise InputError(msg) from None
+        if len(values) != n_joints:
+            msg = f"joints file {path}, line {number}: {len(values)} values, the robot has {n_joints} joints"
+            raise ConfigError(msg)
+        if not np.isfinite(values).all():
+            msg = f"joints file {path}, line {number}: NaN or inf"
+            raise InputError(msg)
+        rows.append(values)
+    if not rows:
+        msg = f"joints file {path} has no configuration (one row of {n_joints} numbers per configuration)"
         raise ConfigError(msg)
-    if not np.isfinite(q).all():
-        msg = f"joints file {path} contains NaN or inf"
-        raise InputError(msg)
+    q = np.array(rows)
     return np.radians(q) if degrees else q
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _trials(text: str) -> int | str:
@@ -101,24 +125,80 @@ def _trials(text: str) -> int | str:
     return value
 
 
-def _progress_bar(enabled: bool, label: str) -> tuple[Callable[[int, int | None], None] | None, Callable[[], None]]:
-    if not enabled:
-        return None, lambda: None
-    from tqdm import tqdm
+class _Progress:
+    """Progress bars on stderr (tqdm) for the phases of a run: the main Monte Carlo, the
+    budget, the sweeps and the report. Drawn only when `enabled` and stderr is a terminal;
+    the main run's duration (first to last progress report) is measured either way."""
 
-    bar = tqdm(total=None, unit="trial", desc=label, file=sys.stderr, leave=False, dynamic_ncols=True)
+    def __init__(self, enabled: bool, label: str, *, max_trials: int | None = None) -> None:
+        self.enabled = enabled and sys.stderr.isatty()
+        self.label = label
+        self.max_trials = max_trials
+        self.start = time.perf_counter()
+        self.last = self.start
+        self._bars: dict[str, Any] = {}
 
-    def update(done: int, target: int | None) -> None:
-        if target is not None and bar.total != target:
-            bar.total = target
+    def _bar(self, key: str, desc: str, total: int | None, unit: str) -> Any:
+        bar = self._bars.get(key)
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, leave=False, dynamic_ncols=True)
+            self._bars[key] = bar
+        return bar
+
+    def main(self, done: int, target: int | None) -> None:
+        """``progress(done, target)`` of the main Monte Carlo run (target None: adaptive)."""
+        self.last = time.perf_counter()
+        if not self.enabled:
+            return
+        if target is None:
+            bar = self._bar("main", f"{self.label} (adaptive JCGM 101 7.9)", None, "trial")
+            bar.update(done - bar.n)
+            rate = done / max(self.last - self.start, 1e-9)
+            if self.max_trials:
+                bar.set_postfix_str(
+                    f"stops when u is stable; at most {self.max_trials} trials, "
+                    f"<= {max(self.max_trials - done, 0) / rate:.0f} s more",
+                    refresh=False,
+                )
+            return
+        bar = self._bar("main", self.label, target, "trial")
+        bar.total = target
         bar.update(done - bar.n)
 
-    return update, bar.close
+    def phase(self, phase: str, done: int, total: int | None) -> None:
+        """``phase_progress`` of :func:`robocal_uncertainty.app.evaluate` (budget, sweeps)."""
+        if not self.enabled:
+            return
+        self.close("main")
+        desc = {"budget": "budget (each source alone)", "sweeps": "sweeps (u vs lambda, vs equations)"}.get(
+            phase, phase
+        )
+        bar = self._bar(phase, desc, total, "trial" if phase == "budget" else "step")
+        bar.update(done - bar.n)
+        if total is not None and done >= total:
+            self.close(phase)
+
+    def note(self, text: str) -> None:
+        """A one-line status on stderr (e.g. while the report is written), when drawing."""
+        if self.enabled:
+            print(f"{self.label}: {text}", file=sys.stderr, flush=True)
+
+    def close(self, key: str | None = None) -> None:
+        for name in [key] if key is not None else list(self._bars):
+            bar = self._bars.pop(name, None) if name is not None else None
+            if bar is not None:
+                bar.close()
+
+    def elapsed(self) -> float:
+        """Seconds of the main run (start to its last progress report)."""
+        return max(self.last - self.start, 1e-9)
 
 
 def _print_calibration(result: Any) -> None:
     print(
-        f"Calibration of {result.model.name}: {result.n_poses} poses, "
+        f"Calibration of {result.model.name}: {_count(result.n_poses, 'pose')}, "
         f"{int(result.estimated.sum())} parameters identified"
     )
     print(
@@ -181,7 +261,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     )
     files = simulate(model, settings, args.out, seed=args.seed, overwrite=args.force)
     print(
-        f"wrote {files.campaign_path} ({files.simulation.campaign.n_poses} poses, points in the {args.frame} frame) "
+        f"wrote {files.campaign_path} ({_count(files.simulation.campaign.n_poses, 'pose')}, "
+        f"points in the {args.frame} frame) "
         f"and truth {files.truth_path}"
     )
     return 0
@@ -191,15 +272,24 @@ def _cmd_import_csv(args: argparse.Namespace) -> int:
     from robocal_uncertainty.bagio import write_campaign
     from robocal_uncertainty.importers import read_tracker_csv
 
+    joint_columns = None
+    if args.joint_columns is not None:
+        joint_columns = [name.strip() for name in args.joint_columns.split(",") if name.strip()]
+        if not joint_columns:
+            raise ConfigError("--joint-columns needs a comma list of column names")
     campaign = read_tracker_csv(
-        args.csv, length_unit=args.length_unit, angle_unit=args.angle_unit, skip_invalid=args.skip_invalid
+        args.csv,
+        length_unit=args.length_unit,
+        angle_unit=args.angle_unit,
+        skip_invalid=args.skip_invalid,
+        joint_columns=joint_columns,
     )
     write_campaign(args.out, campaign, overwrite=args.force)
     skipped = campaign.metadata.get("skipped_rows") or []
     print(
-        f"wrote {args.out}: {campaign.n_poses} poses, joints {', '.join(campaign.joint_names)}, "
+        f"wrote {args.out}: {_count(campaign.n_poses, 'pose')}, joints {', '.join(campaign.joint_names)}, "
         f"points in the {campaign.frame} frame ({campaign.frame_id})"
-        + (f", {len(skipped)} invalid rows skipped" if skipped else "")
+        + (f", {_count(len(skipped), 'invalid row')} skipped" if skipped else "")
     )
     return 0
 
@@ -212,9 +302,11 @@ def _campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
     from robocal_uncertainty.bagio import read_campaign
     from robocal_uncertainty.core import check_joint_limits
 
+    tolerance_ms = getattr(args, "pairing_tolerance_ms", DEFAULT_PAIRING_TOLERANCE_MS)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        campaign = read_campaign(args.campaign)
+        campaign = read_campaign(args.campaign, stamp_tolerance_ns=round(tolerance_ms * 1e6))
+    _check_campaign_counts(args, campaign.n_poses)
     notes = [str(w) for w in campaign.metadata.get("warnings") or ()]
     notes += [str(w.message) for w in caught if str(w.message) not in notes]
     for note in notes:
@@ -252,6 +344,11 @@ def _lambda_arg(text: str) -> str | float:
     except ValueError as err:
         msg = f"--lambda must be 'auto', 'gcv' or a number, got {text!r}"
         raise ConfigError(msg) from err
+
+
+def _count(n: int, noun: str) -> str:
+    """``1 pose``, ``2 poses``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
@@ -337,22 +434,15 @@ def _evaluation_options(args: argparse.Namespace, sources: Sequence[str], test_j
 
 
 def _timed_progress(enabled: bool, label: str) -> tuple[Callable[[int, int | None], None], Callable[[], float]]:
-    """A progress callback (a bar on stderr when `enabled`) and a function that closes the bar
-    and returns the seconds from now to the last progress report (the main Monte Carlo run)."""
-    update, close = _progress_bar(enabled, label)
-    start = time.perf_counter()
-    last = [start]
-
-    def progress(done: int, target: int | None) -> None:
-        last[0] = time.perf_counter()
-        if update is not None:
-            update(done, target)
+    """A progress callback (a bar on stderr when `enabled` and stderr is a terminal) and a
+    function that closes the bar and returns the seconds to the last progress report."""
+    bars = _Progress(enabled, label)
 
     def finish() -> float:
-        close()
-        return max(last[0] - start, 1e-9)
+        bars.close()
+        return bars.elapsed()
 
-    return progress, finish
+    return bars.main, finish
 
 
 def run_evaluation(
@@ -366,30 +456,38 @@ def run_evaluation(
     label: str,
 ) -> Any:
     """Evaluate through :func:`robocal_uncertainty.app.evaluate`, print and write the report:
-    shared by ``evaluate``, ``demo`` and ``replay``. Returns the uncertainty result."""
+    shared by ``evaluate`` and ``demo``. Returns the uncertainty result."""
     from robocal_uncertainty.app import evaluate
+    from robocal_uncertainty.montecarlo.executor import open_executor
 
     options = _evaluation_options(args, sources, test_joints)
-    progress, finish = _timed_progress(not args.no_progress, label)
+    bars = _Progress(not args.no_progress, label, max_trials=args.max_trials)
     try:
-        from robocal_uncertainty.montecarlo.executor import open_executor
-
         # --dask (evaluate only) or --workers: one executor for the main run, budget and sweeps.
         with open_executor(workers=args.workers, dask=getattr(args, "dask", None)) as executor:
-            evaluation = evaluate(model, campaign, options, executor=executor, progress=progress)
+            evaluation = evaluate(
+                model, campaign, options, executor=executor, progress=bars.main, phase_progress=bars.phase
+            )
     finally:
-        elapsed = finish()
-    _print_evaluation(evaluation, options, model, out_dir, elapsed, histograms=getattr(args, "histograms", None))
+        bars.close()
+    _print_evaluation(evaluation, options, model, out_dir, bars, args)
     return evaluation.uncertainty
 
 
+def _seconds(value: float) -> str:
+    return f"{value:.1f} s" if value >= 1 else f"{value:.2g} s"
+
+
 def _print_evaluation(
-    evaluation: Any, options: Any, model: Any, out_dir: Path, elapsed: float, *, histograms: int | str | None = None
+    evaluation: Any, options: Any, model: Any, out_dir: Path, bars: _Progress, args: argparse.Namespace
 ) -> None:
-    """Print an :class:`~robocal_uncertainty.app.Evaluation` and write its report."""
+    """Print an :class:`~robocal_uncertainty.app.Evaluation` and write its report (an
+    earlier report's files in `out_dir` are removed first; ``--force`` was checked)."""
+    from robocal_uncertainty.app.output_paths import clear_earlier_report
     from robocal_uncertainty.report import format_budget, format_table2, write_report
 
     result = evaluation.uncertainty
+    elapsed = bars.elapsed()
     _print_calibration(evaluation.calibration)
     print()
     _print_adequacy(result)
@@ -402,13 +500,17 @@ def _print_evaluation(
             f"adaptive JCGM 101 7.9: {state} at {adaptive.n_dig} significant digits of u, "
             f"{adaptive.n_sequences} sequences of {adaptive.sequence_trials} trials"
         )
-    print(f"{result.n_trials} trials in {elapsed:.1f} s ({result.n_trials / elapsed:.0f} trials/s)")
+    print(f"{result.n_trials} trials in {_seconds(elapsed)} ({result.n_trials / elapsed:.0f} trials/s)")
     if evaluation.budget:
         print()
-        print(f"Uncertainty budget: each source alone, {options.budget_trials} trials each")
         print(format_budget(evaluation.budget))
+        print(f"(each source alone, {options.budget_trials} trials each)")
+    for note in evaluation.notes:
+        print(f"note: {_in_cli_words(note)}")
     for warning in result.warnings:
         print(f"warning: {warning}")
+    clear_earlier_report(out_dir)
+    bars.note(f"writing the report to {out_dir} ...")
     path = write_report(
         out_dir,
         result,
@@ -416,7 +518,7 @@ def _print_evaluation(
         budget=dict(evaluation.budget) or None,
         sweeps=list(evaluation.sweeps) if options.sweeps else None,
         input_warnings=evaluation.input_warnings,
-        histograms=histograms,
+        histograms=getattr(args, "histograms", None),
     )
     print(f"report written to {path}")
 
@@ -432,7 +534,12 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
     )
     p.add_argument("--coverage", type=float, default=0.95, help="coverage probability p (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
-    p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
+    p.add_argument(
+        "--lambda",
+        dest="lambda_",
+        default="auto",
+        help="auto (L-curve corner), gcv, or a fixed value (default %(default)s)",
+    )
     p.add_argument(
         "--lambda-range",
         type=float,
@@ -440,8 +547,17 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
         metavar=("LOW", "HIGH"),
         help="range of lambda for the 'lambda' source (default lambda*/5 .. 5 lambda*)",
     )
-    p.add_argument("--min-poses", type=int, help="smallest pose count of the 'n_poses' source")
-    p.add_argument("--subset-size", type=int, help="pose count of the 'pose_choice' source")
+    p.add_argument(
+        "--min-poses",
+        type=int,
+        help="smallest pose count of the 'n_poses' source (default: 40 equations or 1.5 x the identifiable "
+        "parameters, whichever is more; lowered for a smaller campaign)",
+    )
+    p.add_argument(
+        "--subset-size",
+        type=int,
+        help="pose count of the 'pose_choice' source (default: 33/53 of the campaign's poses)",
+    )
     p.add_argument(
         "--tracker-noise-um",
         type=float,
@@ -460,12 +576,14 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
         default=0.005,
         help="encoder error half-width, deg (default %(default)s, uniform)",
     )
-    p.add_argument("--workers", type=int, default=1, help="worker processes (never changes the result)")
+    p.add_argument(
+        "--workers", type=int, default=1, help="worker processes (never changes the result; default %(default)s)"
+    )
     p.add_argument(
         "--budget",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="also run each source alone (uncertainty budget)",
+        help="also run each source alone (uncertainty budget; default on)",
     )
     p.add_argument(
         "--budget-trials", type=int, default=2000, help="trials per source of the budget (default %(default)s)"
@@ -474,10 +592,12 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
         "--sweeps",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="uncertainty against lambda and against the number of equations (report plots)",
+        help="uncertainty against lambda and against the number of equations (report plots; default on)",
     )
     p.add_argument("--sweep-trials", type=int, default=300, help="trials per sweep point (default %(default)s)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress bars (default: shown when stderr is a terminal)"
+    )
     p.add_argument(
         "--histograms",
         type=_histogram_count,
@@ -539,11 +659,20 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
     options = _evaluation_options(args, _sources_arg(args.sources), _test_joints(args, model))
+    window = _window_arg(args.window_s)
+    settings = CollectorSettings(
+        window_s=window if window is not None else CollectorSettings().window_s,
+        joint_motion_threshold=args.joint_motion_threshold_rad,
+        tracker_scatter_threshold=args.tracker_scatter_threshold_m,
+        min_points=args.min_points,
+    )
+    if args.campaign_out and args.force:
+        Path(args.campaign_out).unlink(missing_ok=True)  # --force: replay writes a new campaign
 
     def log(cause: str, message: str) -> None:
         print(f"replay: dropped ({cause}): {message}", file=sys.stderr)
 
-    progress, finish = _timed_progress(not args.no_progress, "replay")
+    bars = _Progress(not args.no_progress, "replay", max_trials=args.max_trials)
     try:
         replayed = replay(
             args.bag,
@@ -552,27 +681,27 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             joint_topic=args.joint_topic,
             point_topic=args.point_topic,
             tracker_frame_id=args.tracker_frame,
-            collector=CollectorSettings(
-                window_s=args.window_s,
-                joint_motion_threshold=args.joint_motion_threshold_rad,
-                tracker_scatter_threshold=args.tracker_scatter_threshold_m,
-                min_points=args.min_points,
-            ),
+            collector=settings,
             campaign_path=args.campaign_out,
             log=log,
+            auto_window=window is None,
             workers=args.workers,
-            progress=progress,
+            progress=bars.main,
+            phase_progress=bars.phase,
         )
     finally:
-        elapsed = finish()
+        bars.close()
     result = replayed.replay
     dropped = ", ".join(f"{k}: {v}" for k, v in sorted(result.dropped.items()) if v) or "none"
-    print(f"replay of {args.bag}: {len(result.samples)} static poses found; dropped messages: {dropped}")
+    used = result.collector
+    how = "auto, from the joints' still intervals" if window is None else "--window-s"
+    print(
+        f"replay of {args.bag}: {_count(len(result.samples), 'static pose')} found "
+        f"(window {used.window_s:g} s, {how}); dropped messages: {dropped}"
+    )
     if args.campaign_out:
         print(f"campaign written to {args.campaign_out}")
-    _print_evaluation(
-        replayed.evaluation, options, model, Path(args.out), elapsed, histograms=getattr(args, "histograms", None)
-    )
+    _print_evaluation(replayed.evaluation, options, model, Path(args.out), bars, args)
     return 0
 
 
@@ -603,6 +732,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     )
     print()
     print(format_validation(validation))
+    from robocal_uncertainty.app.output_paths import clear_earlier_report
+
+    clear_earlier_report(args.out)
     out = write_validation_report(
         args.out,
         validation,
@@ -631,7 +763,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     inside = [result.poses[0].axes[i].probabilistically_symmetric.contains(float(truth[i])) for i in range(3)]
     print(
         "simulated truth at the test joints: (" + ", ".join(f"{v * 1e3:.4f}" for v in truth) + ") mm; "
-        f"inside the 95 % intervals (x, y, z): {inside}"
+        "inside the 95 % intervals: " + ", ".join(f"{a} {'yes' if v else 'no'}" for a, v in zip("xyz", inside))
     )
     from robocal_uncertainty.report.table2 import format_seed_comparison
 
@@ -687,6 +819,9 @@ def _cmd_map(args: argparse.Namespace) -> int:
             )
     finally:
         elapsed = finish()
+    from robocal_uncertainty.app.output_paths import clear_earlier_report
+
+    clear_earlier_report(args.out)
     files = write_map_report(wmap, args.out)
     weak = weakest_region(wmap)
     print(f"{len(wmap)} configurations x {wmap.n_trials} trials in {elapsed:.1f} s; positions in frame {wmap.frame_id}")
@@ -703,56 +838,292 @@ def _cmd_map(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------------------------
+# Early checks: every option and output path is checked before any computation, with the
+# command line's own words (flags, units, 1-based counts).
+
+_POSITIVE_INTS = (
+    "workers",
+    "max_trials",
+    "budget_trials",
+    "sweep_trials",
+    "min_poses",
+    "subset_size",
+    "poses",
+    "configurations",
+    "block_size",
+    "train_poses",
+)
+_NON_NEGATIVE_INTS = ("seed", "regions")
+_NON_NEGATIVE_FLOATS = (
+    ("tracker_noise_um", "um"),
+    ("tracker_noise_um_per_m", "um/m"),
+    ("encoder_noise_deg", "deg"),
+    ("pairing_tolerance_ms", "ms"),
+)
+_POSITIVE_FLOATS = (("joint_motion_threshold_rad", "rad"), ("tracker_scatter_threshold_m", "m"))
+
+_INTERNAL_WORDS = (
+    # Names the library's messages use for what the command line calls otherwise.
+    (r"\(pass overwrite=True to replace it\)", "(give --force to replace it)"),
+    (r"\badaptive\.max_trials\b", "--max-trials"),
+    (r"\blambda_range\b", "--lambda-range"),
+    (r"\bmin_poses\b", "--min-poses"),
+    (r"\bsubset_size\b", "--subset-size"),
+    (r"\bwindow_s\b", "--window-s"),
+    (r"\bmin_points\b", "--min-points"),
+    (r"\bjoint_motion_threshold\b", "--joint-motion-threshold-rad"),
+    (r"\btracker_scatter_threshold\b", "--tracker-scatter-threshold-m"),
+    (r"\bk_folds\b", "--k-folds"),
+    (r"\bn_train\b", "--train-poses"),
+    (r"\bthe pairing tolerance of ([0-9.e+-]+) ms\b", r"--pairing-tolerance-ms \1"),
+)
+
+
+def _flag(dest: str) -> str:
+    return "--lambda" if dest == "lambda_" else "--" + dest.replace("_", "-")
+
+
+def _in_cli_words(message: str) -> str:
+    """A library message with its argument names replaced by the command line's flags."""
+    import re
+
+    for pattern, flag in _INTERNAL_WORDS:
+        message = re.sub(pattern, flag, message)
+    return message
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse bad option values before anything is read or computed (one line each)."""
+    for dest in _POSITIVE_INTS:
+        value = getattr(args, dest, None)
+        if value is not None and value < 1:
+            msg = f"{_flag(dest)} must be a positive integer, got {value}"
+            raise ConfigError(msg)
+    for dest in _NON_NEGATIVE_INTS:
+        value = getattr(args, dest, None)
+        if value is not None and value < 0:
+            msg = f"{_flag(dest)} must be an integer >= 0, got {value}"
+            raise ConfigError(msg)
+    for dest, unit in _NON_NEGATIVE_FLOATS:
+        value = getattr(args, dest, None)
+        if value is not None and not (np.isfinite(value) and value >= 0):
+            msg = f"{_flag(dest)} must be a finite number >= 0 {unit}, got {value:g}"
+            raise ConfigError(msg)
+    for dest, unit in _POSITIVE_FLOATS:
+        value = getattr(args, dest, None)
+        if value is not None and not (np.isfinite(value) and value > 0):
+            msg = f"{_flag(dest)} must be a finite number > 0 {unit}, got {value:g}"
+            raise ConfigError(msg)
+    trials = getattr(args, "trials", None)
+    if isinstance(trials, str):
+        _trials(trials)
+    elif trials is not None and trials < 1:
+        msg = f"--trials must be a positive integer, got {trials}"
+        raise ConfigError(msg)
+    coverage = getattr(args, "coverage", None)
+    if coverage is not None and not 0.0 < coverage < 1.0:
+        hint = f"; did you mean {coverage / 100:g}?" if 50.0 <= coverage < 100.0 else ""
+        msg = f"--coverage is a probability in (0, 1), got {coverage:g}{hint}"
+        raise ConfigError(msg)
+    if getattr(args, "lambda_", None) is not None:
+        _lambda_arg(args.lambda_)
+    lambda_range = getattr(args, "lambda_range", None)
+    if lambda_range is not None:
+        low, high = lambda_range
+        if not (np.isfinite(low) and np.isfinite(high) and 0.0 <= low < high):
+            msg = f"--lambda-range needs 0 <= LOW < HIGH, got {low:g} {high:g}"
+            raise ConfigError(msg)
+    fraction = getattr(args, "holdout_fraction", None)
+    if fraction is not None and not 0.0 < fraction < 1.0:
+        msg = f"--holdout-fraction must lie in (0, 1), got {fraction:g}"
+        raise ConfigError(msg)
+    k_folds = getattr(args, "k_folds", None)
+    if k_folds is not None and k_folds < 2:
+        msg = f"--k-folds must be an integer >= 2, got {k_folds}"
+        raise ConfigError(msg)
+    min_points = getattr(args, "min_points", None)
+    if min_points is not None and min_points < 2:
+        msg = f"--min-points must be an integer >= 2, got {min_points}"
+        raise ConfigError(msg)
+    window = getattr(args, "window_s", None)
+    if window is not None and window != "auto":
+        _window_arg(window)
+    grid = getattr(args, "grid", None)
+    if grid is not None and min(grid) < 2:
+        msg = f"--grid needs at least 2 values per joint, got {' '.join(map(str, grid))}"
+        raise ConfigError(msg)
+    if getattr(args, "trials", None) == "auto" and args.command == "validate":
+        raise ConfigError("validate needs a fixed number of --trials, not auto")
+
+
+def _window_arg(text: str) -> float | None:
+    """``--window-s``: a number of seconds > 0, or ``auto`` (None)."""
+    if text == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (np.isfinite(value) and value > 0):
+        msg = f"--window-s must be 'auto' or a number of seconds > 0, got {text!r}"
+        raise ConfigError(msg)
+    return value
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse output paths that cannot or must not be written, before any work (--force rule)."""
+    from robocal_uncertainty.app.output_paths import check_output_file, check_report_directory
+    from robocal_uncertainty.app.simulation import truth_path
+
+    force = bool(getattr(args, "force", False))
+    if args.command in ("simulate", "import-csv"):
+        check_output_file(args.out, force=force, option="--out")
+        if args.command == "simulate":
+            check_output_file(truth_path(args.out), force=force, option="truth file")
+    elif args.command in ("demo", "evaluate", "replay", "validate", "map"):
+        check_report_directory(args.out, force=force, option="--out")
+    if getattr(args, "json", None):
+        check_output_file(args.json, force=force, option="--json")
+    if getattr(args, "campaign_out", None):
+        check_output_file(args.campaign_out, force=force, option="--campaign-out")
+        if Path(args.campaign_out).resolve() == Path(args.bag).resolve():
+            msg = f"--campaign-out {args.campaign_out} is the bag being replayed"
+            raise ConfigError(msg)
+
+
+def _check_campaign_counts(args: argparse.Namespace, n_poses: int) -> None:
+    """Options bounded by the campaign's size, checked right after reading it."""
+    for dest in ("min_poses", "subset_size"):
+        value = getattr(args, dest, None)
+        if value is not None and value > n_poses:
+            msg = f"{_flag(dest)} {value} is more than the campaign's {n_poses} poses"
+            raise ConfigError(msg)
+    train = getattr(args, "train_poses", None)
+    if train is not None and train >= n_poses:
+        msg = f"--train-poses {train} leaves no pose to hold out: the campaign has {n_poses} poses"
+        raise ConfigError(msg)
+    k_folds = getattr(args, "k_folds", None)
+    if k_folds is not None and k_folds > n_poses:
+        msg = f"--k-folds {k_folds} is more than the campaign's {n_poses} poses"
+        raise ConfigError(msg)
+
+
+def _add_force_arg(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--force", action="store_true", help=f"replace {what} if it exists (default: refuse)")
+
+
+def _add_base_unknown_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--base-unknown",
+        action="store_true",
+        help="identify the base transform even if the robot config says it is known",
+    )
+
+
+def _add_campaign_args(p: argparse.ArgumentParser) -> None:
+    """The campaign positional, --robot, --base-unknown and --pairing-tolerance-ms."""
+    p.add_argument("campaign", help="campaign: .mcap file or rosbag2 directory")
+    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    _add_base_unknown_arg(p)
+    p.add_argument(
+        "--pairing-tolerance-ms",
+        type=float,
+        default=DEFAULT_PAIRING_TOLERANCE_MS,
+        help="recordings without our campaign metadata: pair each tracker point with the joint reading nearest in "
+        "stamp when it is at most this far, ms (default %(default)g)",
+    )
+
+
+def _add_test_joint_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--test-joints", nargs="+", help="joint values of the test configurations, n_joints each")
+    p.add_argument("--test-joints-file", help="CSV/whitespace file of test configurations, one per row")
+    p.add_argument("--degrees", action="store_true", help="test joint values are in degrees (default radians)")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("robocal_uncertainty")
+    except PackageNotFoundError:
+        return "(not installed)"
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="robocal-uncertainty",
         description="Robot arm calibration from laser-tracker points and its Monte Carlo uncertainty (JCGM 101).",
+        epilog="Exit status: 0 success, 1 error (one line on stderr), 2 usage error (argparse), "
+        "130 interrupted, 141 output pipe closed (e.g. | head).",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser(
         "demo", help="the main job on the embedded default: seed's arm, simulated 53-pose campaign, Table 2 and report"
     )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
+    _add_force_arg(p, "an earlier report in --out")
     _add_uncertainty_args(p, trials_default="20000")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("simulate", help="write a simulated campaign MCAP (truth in a sidecar .truth.json)")
-    p.add_argument("--robot", default="paper_arm", help="robot YAML or shipped model name (default %(default)s)")
-    p.add_argument("--out", required=True, help="campaign .mcap to write")
-    p.add_argument("--poses", type=int, default=53)
+    p.add_argument("--robot", default="paper_arm", help="robot YAML file or shipped model name (default %(default)s)")
+    p.add_argument("--out", required=True, help="campaign .mcap to write; the truth goes to the same name .truth.json")
+    p.add_argument("--poses", type=int, default=53, help="number of measured poses (default %(default)s)")
     p.add_argument(
         "--frame",
         choices=("base", "tracker"),
         default="base",
-        help="points in the robot base frame or in a tracker frame with an unknown base",
+        help="points in the robot base frame or in a tracker frame with an unknown base (default %(default)s)",
     )
-    p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker error half-width a, um (uniform)")
-    p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m")
-    p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder error half-width, deg (uniform)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.add_argument(
+        "--tracker-noise-um",
+        type=float,
+        default=5.0,
+        help="tracker error half-width a, um (uniform; default %(default)s)",
+    )
+    p.add_argument(
+        "--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m (default %(default)s)"
+    )
+    p.add_argument(
+        "--encoder-noise-deg",
+        type=float,
+        default=0.005,
+        help="encoder error half-width, deg (uniform; default %(default)s)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated robot, poses and noise (default 0)")
+    _add_force_arg(p, "the campaign and truth files")
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("import-csv", help="convert a tracker CSV export into a campaign MCAP")
-    p.add_argument("csv")
-    p.add_argument("--out", required=True)
-    p.add_argument("--length-unit", help="unit of length columns whose header states none (m, mm, um)")
-    p.add_argument("--angle-unit", help="unit of joint columns whose header states none (rad, deg)")
-    p.add_argument("--skip-invalid", action="store_true", help="drop invalid rows instead of failing")
-    p.add_argument("--force", action="store_true")
+    p.add_argument("csv", help="tracker CSV (comma-, semicolon- or tab-separated, units in the header)")
+    p.add_argument("--out", required=True, help="campaign .mcap to write")
+    p.add_argument(
+        "--length-unit", help="unit of length columns whose header states none: m, mm, um (default: none assumed)"
+    )
+    p.add_argument(
+        "--angle-unit", help="unit of joint columns whose header states none: rad, deg (default: none assumed)"
+    )
+    p.add_argument(
+        "--joint-columns",
+        help="comma list of the joint column names, in joint order (default: columns named *joint* or q1, q2, ...)",
+    )
+    p.add_argument("--skip-invalid", action="store_true", help="drop invalid rows instead of failing (default: fail)")
+    _add_force_arg(p, "the campaign file")
     p.set_defaults(func=_cmd_import_csv)
 
     p = sub.add_parser("calibrate", help="identify the parameter errors from a campaign")
-    p.add_argument("campaign")
-    p.add_argument("--robot", required=True)
-    p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
-    p.add_argument("--json", help="write the result here (SI units)")
+    _add_campaign_args(p)
     p.add_argument(
-        "--base-unknown",
-        action="store_true",
-        help="identify the base transform even if the robot config says it is known",
+        "--lambda",
+        dest="lambda_",
+        default="auto",
+        help="auto (L-curve corner), gcv, or a fixed value (default %(default)s)",
     )
+    p.add_argument("--json", help="also write the result to this JSON file (SI units)")
+    _add_force_arg(p, "the --json file")
     p.add_argument(
         "--accept-unconverged",
         action="store_true",
@@ -761,8 +1132,8 @@ def _build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("fk", help="tool positions of the nominal or calibrated model")
-    p.add_argument("--robot", required=True)
-    p.add_argument("--calibration", help="calibration JSON from 'calibrate --json'")
+    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    p.add_argument("--calibration", help="calibration JSON from 'calibrate --json' (default: the nominal model)")
     p.add_argument("--joints", nargs="+", help="joint values, n_joints per configuration")
     p.add_argument("--joints-file", help="CSV/whitespace file, one configuration per row")
     p.add_argument("--degrees", action="store_true", help="joint values are in degrees (default radians)")
@@ -772,26 +1143,20 @@ def _build_parser() -> argparse.ArgumentParser:
         help="frame of the printed points: the measurement (tracker) frame when the calibration identified the "
         "base (default then), else the robot base frame",
     )
-    p.add_argument("--json", help="also write both frames' points here (SI units)")
+    p.add_argument("--json", help="also write both frames' points to this JSON file (SI units)")
+    _add_force_arg(p, "the --json file")
     p.set_defaults(func=_cmd_fk)
 
     p = sub.add_parser("evaluate", help="Monte Carlo uncertainty of the calibrated tool position")
-    p.add_argument("campaign")
-    p.add_argument("--robot", required=True)
-    p.add_argument("--test-joints", nargs="+", help="joint values of the test configurations")
-    p.add_argument("--test-joints-file")
-    p.add_argument("--degrees", action="store_true")
+    _add_campaign_args(p)
+    _add_test_joint_args(p)
     p.add_argument(
         "--sources",
         default="tracker,encoder",
-        help="comma list of tracker, encoder, lambda, n_poses, pose_choice, residual, or all",
+        help="comma list of tracker, encoder, lambda, n_poses, pose_choice, residual, or all (default %(default)s)",
     )
-    p.add_argument("--out", default="robocal_report")
-    p.add_argument(
-        "--base-unknown",
-        action="store_true",
-        help="identify the base transform even if the robot config says it is known",
-    )
+    p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
+    _add_force_arg(p, "an earlier report in --out")
     _add_uncertainty_args(p, trials_default="auto")
     _add_dask_arg(p)
     p.set_defaults(func=_cmd_evaluate)
@@ -800,26 +1165,40 @@ def _build_parser() -> argparse.ArgumentParser:
         "replay", help="replay a raw bag: detect static poses, calibrate, evaluate (same report as evaluate)"
     )
     p.add_argument("bag", help="raw recording: .mcap file or rosbag2 directory")
-    p.add_argument("--robot", required=True)
-    p.add_argument("--test-joints", nargs="+")
-    p.add_argument("--test-joints-file")
-    p.add_argument("--degrees", action="store_true")
-    p.add_argument("--sources", default="tracker,encoder")
-    p.add_argument("--out", default="robocal_report")
+    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    _add_base_unknown_arg(p)
+    _add_test_joint_args(p)
     p.add_argument(
-        "--base-unknown",
-        action="store_true",
-        help="identify the base transform even if the robot config says it is known",
+        "--sources", default="tracker,encoder", help="comma list of uncertainty sources, or all (default %(default)s)"
     )
-    p.add_argument("--joint-topic", default="/joint_states")
-    p.add_argument("--point-topic", default="/tracker/point")
+    p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
+    _add_force_arg(p, "an earlier report in --out and the --campaign-out file")
+    p.add_argument("--joint-topic", default="/joint_states", help="sensor_msgs/JointState topic (default %(default)s)")
+    p.add_argument(
+        "--point-topic", default="/tracker/point", help="geometry_msgs/PointStamped topic (default %(default)s)"
+    )
     p.add_argument("--tracker-frame", help="frame_id of valid tracker points (default: the most frequent)")
-    p.add_argument("--window-s", type=float, default=0.5, help="static window length, s (default %(default)s)")
-    p.add_argument("--joint-motion-threshold-rad", type=float, default=5e-4, help="max joint motion in the window, rad")
     p.add_argument(
-        "--tracker-scatter-threshold-m", type=float, default=1e-4, help="max tracker scatter in the window, m"
+        "--window-s",
+        default="auto",
+        help="static window length, s, or auto: 0.5 s, shortened to half the typical still interval of the "
+        "joints when the recording's dwells are shorter (default %(default)s)",
     )
-    p.add_argument("--min-points", type=int, default=10, help="min tracker points per static window")
+    p.add_argument(
+        "--joint-motion-threshold-rad",
+        type=float,
+        default=5e-4,
+        help="max joint motion in a static window, rad (default %(default)s)",
+    )
+    p.add_argument(
+        "--tracker-scatter-threshold-m",
+        type=float,
+        default=1e-4,
+        help="max tracker scatter in a static window, m (default %(default)s)",
+    )
+    p.add_argument(
+        "--min-points", type=int, default=10, help="min tracker points averaged per static pose (default %(default)s)"
+    )
     p.add_argument("--campaign-out", help="also write the collected campaign MCAP here")
     _add_uncertainty_args(p, trials_default="auto")
     p.set_defaults(func=_cmd_replay)
@@ -828,8 +1207,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "validate",
         help="prove the uncertainty statement: calibrate on some poses, check the coverage of held-out measurements",
     )
-    p.add_argument("campaign")
-    p.add_argument("--robot", required=True)
+    _add_campaign_args(p)
     split = p.add_argument_group("what is held out (default: --holdout-fraction 0.25)")
     split.add_argument("--train-poses", type=int, help="calibrate on this many random poses, hold out the rest")
     split.add_argument("--holdout-fraction", type=float, help="fraction of the poses held out at random")
@@ -841,11 +1219,7 @@ def _build_parser() -> argparse.ArgumentParser:
         help="sources of the statement under test (default %(default)s)",
     )
     p.add_argument("--out", default="robocal_validation", help="report directory (default %(default)s)")
-    p.add_argument(
-        "--base-unknown",
-        action="store_true",
-        help="identify the base transform even if the robot config says it is known",
-    )
+    _add_force_arg(p, "an earlier report in --out")
     _add_uncertainty_args(p, trials_default="5000")
     p.set_defaults(func=_cmd_validate)
 
@@ -880,6 +1254,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=1, help="local worker processes (never changes the result)")
     _add_dask_arg(p)
     p.add_argument("--out", default="robocal_map", help="report directory (default %(default)s)")
+    _add_force_arg(p, "an earlier map report in --out")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _add_frame_and_convergence_args(p)
     p.set_defaults(func=_cmd_map, lambda_range=None, min_poses=None, subset_size=None)
@@ -891,9 +1266,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _build_parser()
     args = parser.parse_args(argv)
     try:
+        _check_options(args)
+        _check_outputs(args)
         return int(args.func(args))
     except CalibError as err:
-        print(f"robocal-uncertainty {args.command}: error: {err}", file=sys.stderr)
+        print(f"robocal-uncertainty {args.command}: error: {_in_cli_words(str(err))}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"robocal-uncertainty {args.command}: interrupted", file=sys.stderr)

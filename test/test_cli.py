@@ -105,7 +105,7 @@ def test_import_csv_and_calibrate_real_ur10(tmp_path: Path, capsys: pytest.Captu
     ("extra", "match"),
     [
         (["--trials", "0"], "--trials must be a positive integer"),
-        (["--coverage", "1.5"], r"coverage probability must be in \(0, 1\)"),
+        (["--coverage", "1.5"], r"--coverage is a probability in \(0, 1\), got 1.5$"),
         (["--sources", "tracker,thermal"], "unknown uncertainty source"),
         (["--sources", "lambda", "--lambda-range", "5", "9"], "excludes the calibration's optimum"),
     ],

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from robocal_uncertainty.app.evaluation import Evaluation, evaluate
+from robocal_uncertainty.app.evaluation import Evaluation, PhaseProgress, evaluate
 from robocal_uncertainty.bagio.campaign_format import JOINT_TOPIC, POINT_TOPIC
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import IdentifiabilityError
@@ -42,9 +42,11 @@ def replay(
     collector: CollectorSettings | None = None,
     campaign_path: str | Path | None = None,
     log: LogCallback | None = None,
+    auto_window: bool = False,
     executor: Any | None = None,
     workers: int = 1,
     progress: Progress | None = None,
+    phase_progress: PhaseProgress | None = None,
 ) -> ReplayEvaluation:
     """Replay a raw bag into a campaign and evaluate it with `options`.
 
@@ -56,9 +58,9 @@ def replay(
         Nominal model.
     options : EvaluationOptions
         As for :func:`~robocal_uncertainty.app.evaluate`; must have ``test_joints``.
-    joint_topic, point_topic, tracker_frame_id, collector, campaign_path, log
+    joint_topic, point_topic, tracker_frame_id, collector, campaign_path, log, auto_window
         See :func:`~robocal_uncertainty.pipeline.replay.replay_bag`.
-    executor, workers, progress
+    executor, workers, progress, phase_progress
         See :func:`~robocal_uncertainty.app.evaluate`.
 
     Raises
@@ -66,7 +68,8 @@ def replay(
     BagError, CampaignError
         See :func:`~robocal_uncertainty.pipeline.replay.replay_bag`.
     IdentifiabilityError
-        No static pose found, or too few to identify the model.
+        No static pose found (the message gives the likely cause), or too few to identify
+        the model.
     """
     result = replay_bag(
         bag,
@@ -79,9 +82,10 @@ def replay(
         campaign_path=campaign_path,
         calibrate=False,
         log=log,
+        auto_window=auto_window,
     )
     if result.campaign is None:
-        msg = f"{bag}: no static pose found, nothing to calibrate"
+        msg = f"{bag}: 0 static poses found: {result.diagnosis or 'nothing to calibrate'}"
         raise IdentifiabilityError(msg)
     evaluation = evaluate(
         model,
@@ -90,5 +94,6 @@ def replay(
         executor=executor,
         workers=workers,
         progress=progress,
+        phase_progress=phase_progress,
     )
     return ReplayEvaluation(replay=result, evaluation=evaluation)

@@ -8,7 +8,9 @@ it, so the same campaign, options and seed give the same numbers bit for bit.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
@@ -18,12 +20,16 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.budget import evaluate_budget
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.options import EvaluationOptions, Progress, evaluate_campaign
 from robocal_uncertainty.uncertainty.sweeps import Sweep, evaluate_sweeps
 
-__all__ = ["Evaluation", "evaluate"]
+__all__ = ["Evaluation", "PhaseProgress", "evaluate", "small_campaign_options"]
+
+PhaseProgress = Callable[[str, int, "int | None"], None]
+"""``phase_progress(phase, done, total)`` of the phases after the main run: ``"budget"``
+(trials done over all single-source runs, of ``total``) and ``"sweeps"`` (0 of 1 when it
+starts, 1 of 1 when it ends)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,6 +51,9 @@ class Evaluation:
         recovered), then the result's own (``uncertainty.warnings``), each once.
     input_warnings : tuple of str
         The first group of `warnings` alone (reports list them apart).
+    notes : tuple of str
+        What was adapted to the campaign (e.g. the pose-count defaults of a small
+        campaign), one line each; not warnings: the result is as asked.
     """
 
     calibration: IdentificationResult
@@ -53,6 +62,7 @@ class Evaluation:
     sweeps: tuple[Sweep, ...]
     warnings: tuple[str, ...]
     input_warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
 
 def _merge(*groups: Sequence[str]) -> tuple[str, ...]:
@@ -60,6 +70,83 @@ def _merge(*groups: Sequence[str]) -> tuple[str, ...]:
     for group in groups:
         out += [str(w) for w in group if str(w) not in out]
     return tuple(out)
+
+
+def small_campaign_options(
+    campaign: Campaign, calibration: IdentificationResult, options: EvaluationOptions
+) -> tuple[EvaluationOptions, tuple[str, ...]]:
+    """Adapt the pose-count defaults to a campaign too small for them; return the notes.
+
+    The defaults of ``min_poses`` (40 equations or 1.5 x the identifiable parameters) and
+    ``subset_size`` (33/53 of the poses) suit the seed's 53 poses. When a default does not
+    fit the campaign and the ``n_poses`` or ``pose_choice`` source or the sweeps need it, it
+    becomes the fewest poses that identify the model (identifiable parameters / 3); values
+    the caller set are never changed.
+    """
+    settings = options.uncertainty
+    sources = settings.sources
+    n_poses = campaign.n_poses
+    dim = int(campaign.points.shape[1])
+    k = int(calibration.estimated.sum())
+    fewest = math.ceil(k / dim)
+    notes: list[str] = []
+    changes: dict[str, int] = {}
+    default_min = max(math.ceil(40 / dim), math.ceil(1.5 * k / dim))
+    uses_min = "n_poses" in sources or "pose_choice" in sources or options.sweeps
+    if settings.min_poses is None and uses_min and default_min > n_poses:
+        changes["min_poses"] = fewest
+        if "n_poses" in sources:
+            notes.append(
+                f"the campaign's {n_poses} poses are fewer than the {default_min} the n_poses source starts from "
+                f"by default (40 equations or 1.5 x the {k} identifiable parameters): it draws {fewest} to "
+                f"{n_poses} poses ({fewest} = identifiable parameters / {dim}); set min_poses to choose"
+            )
+    default_subset = round(33 / 53 * n_poses)
+    if settings.subset_size is None and "pose_choice" in sources and default_subset < fewest:
+        changes["subset_size"] = fewest
+        notes.append(
+            f"33/53 of the campaign's {n_poses} poses ({default_subset}) cannot identify the {k} parameters: "
+            f"the pose_choice source draws subsets of {fewest} poses; set subset_size to choose"
+        )
+    if not changes:
+        return options, ()
+    adapted = dataclasses.replace(options, uncertainty=dataclasses.replace(settings, **changes))
+    return adapted, tuple(notes)
+
+
+def _budget(
+    model: RobotModel,
+    campaign: Campaign,
+    calibration: IdentificationResult,
+    options: EvaluationOptions,
+    *,
+    workers: int,
+    executor: Any | None,
+    phase_progress: PhaseProgress | None,
+) -> Mapping[str, CalibrationUncertainty]:
+    """Each source alone, ``options.budget_trials`` trials each (as
+    :func:`~robocal_uncertainty.uncertainty.budget.evaluate_budget`), with progress."""
+    sources = options.uncertainty.sources
+    if len(sources) < 2:
+        return MappingProxyType({})
+    total = len(sources) * options.budget_trials
+    out: dict[str, CalibrationUncertainty] = {}
+    for i, source in enumerate(sources):
+        alone = dataclasses.replace(
+            options,
+            uncertainty=dataclasses.replace(options.uncertainty, sources=(source,)),
+            trials=options.budget_trials,
+        )
+        done_before = i * options.budget_trials
+
+        def progress(done: int, _target: int | None, before: int = done_before) -> None:
+            if phase_progress is not None:
+                phase_progress("budget", before + done, total)
+
+        out[source] = evaluate_campaign(
+            model, campaign, alone, calibration=calibration, workers=workers, executor=executor, progress=progress
+        )
+    return MappingProxyType(out)
 
 
 def evaluate(
@@ -71,6 +158,7 @@ def evaluate(
     executor: Any | None = None,
     workers: int = 1,
     progress: Progress | None = None,
+    phase_progress: PhaseProgress | None = None,
     input_warnings: Sequence[str] = (),
 ) -> Evaluation:
     """Calibrate `campaign` and evaluate its uncertainty, budget and sweeps as `options` say.
@@ -94,6 +182,8 @@ def evaluate(
         Local worker processes when no `executor` is given; never changes the result.
     progress : callable, optional
         ``progress(done, target)`` of the main Monte Carlo run.
+    phase_progress : callable, optional
+        Progress of the budget and the sweeps (see :data:`PhaseProgress`).
     input_warnings : sequence of str
         Further warnings about the inputs (e.g. dropped messages of a replay), listed after
         the campaign's.
@@ -101,6 +191,8 @@ def evaluate(
     Returns
     -------
     Evaluation
+        Pose-count defaults that do not fit a small campaign are adapted first (see
+        :func:`small_campaign_options`; said in ``notes``).
 
     Raises
     ------
@@ -114,15 +206,31 @@ def evaluate(
         raise ConfigError("no test joint configurations given for the uncertainty evaluation")
     if calibration is None:
         calibration = identify(model, campaign, lambda_=options.lambda_, accept_unconverged=options.accept_unconverged)
+    options, notes = small_campaign_options(campaign, calibration, options)
     uncertainty = evaluate_campaign(
         model, campaign, options, calibration=calibration, workers=workers, progress=progress, executor=executor
     )
     budget: Mapping[str, CalibrationUncertainty] = MappingProxyType({})
     if options.budget:
-        budget = evaluate_budget(model, campaign, calibration, options, workers=workers, executor=executor)
+        budget = _budget(
+            model, campaign, calibration, options, workers=workers, executor=executor, phase_progress=phase_progress
+        )
     sweeps: tuple[Sweep, ...] = ()
     if options.sweeps:
+        if phase_progress is not None:
+            phase_progress("sweeps", 0, 1)
         sweeps = evaluate_sweeps(model, campaign, calibration, options, workers=workers, executor=executor)
+        if phase_progress is not None:
+            phase_progress("sweeps", 1, 1)
+        short = [sw for sw in sweeps if sw.name == "equations" and len(sw.values) < 2]
+        if short:
+            sweeps = tuple(sw for sw in sweeps if sw not in short)
+            notes = (
+                *notes,
+                f"the sweep over the number of equations is skipped: the campaign's {campaign.n_poses} poses "
+                "are fewer than the smallest pose count it starts from (40 equations or 1.5 x the identifiable "
+                "parameters)",
+            )
     inputs = _merge(campaign.metadata.get(READ_WARNINGS_KEY) or (), input_warnings)
     return Evaluation(
         calibration=calibration,
@@ -131,4 +239,5 @@ def evaluate(
         sweeps=sweeps,
         warnings=_merge(inputs, uncertainty.warnings),
         input_warnings=inputs,
+        notes=notes,
     )

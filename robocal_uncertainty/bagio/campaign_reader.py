@@ -171,6 +171,17 @@ def _early(path: Path) -> str:
     return f"{path} is truncated before its first complete pose (writer stopped early)"
 
 
+def _nearest_gaps_ms(joint_stamps: NDArray[np.int64], point_stamps: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Distance [ms] from each point stamp to the nearest joint stamp (inf without joints)."""
+    if joint_stamps.size == 0:
+        return np.full(point_stamps.size, np.inf)
+    ordered = np.sort(joint_stamps)
+    right = np.searchsorted(ordered, point_stamps).clip(0, ordered.size - 1)
+    left = (right - 1).clip(0, ordered.size - 1)
+    gap = np.minimum(np.abs(ordered[right] - point_stamps), np.abs(ordered[left] - point_stamps))
+    return gap / 1e6
+
+
 def _pair(
     joints: list[JointReading],
     point_stamps: NDArray[np.int64],
@@ -190,17 +201,22 @@ def _pair(
     point_index, joint_index = pair_by_stamp(joint_stamps, point_stamps, tolerance_ns)
     if point_index.size == 0 and truncated:
         raise BagError(_early(path))
-    if point_index.size == 0:
-        msg = (
-            f"{path}: no pose found: no {point_topic} message has a {joint_topic} message "
-            f"within {tolerance_ns} ns of its stamp"
+    unpaired = np.setdiff1d(np.arange(point_stamps.size), point_index)
+    if unpaired.size:
+        gaps = _nearest_gaps_ms(joint_stamps, point_stamps[unpaired])
+        worst = int(np.argmax(gaps))
+        first = (
+            f"pose {int(unpaired[0]) + 1} of {point_stamps.size}: the {joint_topic} message nearest to its "
+            f"{point_topic} stamp is {gaps[0]:.3g} ms away"
+            + ("" if unpaired.size == 1 else f"; pose {int(unpaired[worst]) + 1}: {gaps[worst]:.3g} ms")
         )
-        raise BagError(msg)
-    dropped = point_stamps.size - point_index.size
-    if dropped:
+        tolerance = f"the pairing tolerance of {tolerance_ns / 1e6:g} ms"
+        if point_index.size == 0:
+            msg = f"{path}: no pose found: {first}, more than {tolerance}"
+            raise BagError(msg)
         notes.append(
-            f"{path}: {dropped} of {point_stamps.size} points on {point_topic} have no "
-            f"{joint_topic} message within {tolerance_ns} ns and were dropped"
+            f"{path}: {unpaired.size} of {point_stamps.size} points on {point_topic} have no "
+            f"{joint_topic} message within {tolerance} and were dropped ({first})"
         )
     if truncated:
         notes.append(

@@ -13,7 +13,9 @@ hands this campaign to the same ``app.evaluate`` as the command line's ``evaluat
 
 from __future__ import annotations
 
+import dataclasses
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,9 +34,84 @@ from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipelin
 from robocal_uncertainty.pipeline.collector import CollectorSettings, LogCallback, StaticPoseCollector
 from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
-__all__ = ["ReplayResult", "replay_bag"]
+__all__ = ["ReplayResult", "StillIntervals", "auto_collector_settings", "replay_bag", "still_intervals"]
 
 _NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class StillIntervals:
+    """Intervals in which no joint moved by more than the motion threshold.
+
+    Attributes
+    ----------
+    starts_ns, ends_ns : ndarray of int64, shape (n,) [ns]
+        Stamps of the first and last joint state of each interval (maximal, in time order).
+    """
+
+    starts_ns: np.ndarray
+    ends_ns: np.ndarray
+
+    @property
+    def durations_s(self) -> np.ndarray:
+        """Durations, shape (n,) [s]."""
+        return (self.ends_ns - self.starts_ns) / _NS_PER_S
+
+    def typical_dwell_s(self) -> float:
+        """Median duration of the dwells: the intervals at least a quarter as long as the
+        longest (short still spells at the ends of moves are not dwells); 0 when none."""
+        d = self.durations_s
+        if d.size == 0 or d.max() <= 0:
+            return 0.0
+        return float(np.median(d[d >= 0.25 * d.max()]))
+
+
+def still_intervals(stamps_ns: np.ndarray, positions: np.ndarray, threshold: float) -> StillIntervals:
+    """Split a joint stream into maximal still intervals (greedy, in time order).
+
+    Parameters
+    ----------
+    stamps_ns : ndarray of int64, shape (n,) [ns]
+        Increasing stamps of the joint states.
+    positions : ndarray, shape (n, n_joints) [rad]
+    threshold : float [rad]
+        Largest peak-to-peak range of any joint inside an interval.
+    """
+    starts: list[int] = []
+    ends: list[int] = []
+    if len(stamps_ns):
+        lo = hi = positions[0].copy()
+        first = 0
+        for i in range(1, len(stamps_ns)):
+            q = positions[i]
+            lo_i, hi_i = np.minimum(lo, q), np.maximum(hi, q)
+            if float((hi_i - lo_i).max()) > threshold:
+                starts.append(int(stamps_ns[first]))
+                ends.append(int(stamps_ns[i - 1]))
+                first, lo, hi = i, q.copy(), q.copy()
+            else:
+                lo, hi = lo_i, hi_i
+        starts.append(int(stamps_ns[first]))
+        ends.append(int(stamps_ns[-1]))
+    return StillIntervals(np.array(starts, dtype=np.int64), np.array(ends, dtype=np.int64))
+
+
+def auto_collector_settings(settings: CollectorSettings, still: StillIntervals) -> CollectorSettings:
+    """`settings` with the window and guards shortened for a recording with short dwells.
+
+    The window becomes at most 0.4 and each guard at most 0.25 of the typical dwell (see
+    :meth:`StillIntervals.typical_dwell_s`), so that a dwell holds a static window and
+    averaged data between its guards; recordings whose dwells are long enough keep
+    `settings` unchanged (with the defaults: dwells of 1.25 s and more).
+    """
+    dwell = still.typical_dwell_s()
+    if dwell <= 0:
+        return settings
+    window = min(settings.window_s, round(0.4 * dwell, 3))
+    guard = min(settings.guard_s, round(0.25 * dwell, 3))
+    if window <= 0:
+        return settings
+    return dataclasses.replace(settings, window_s=window, guard_s=guard)
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +136,11 @@ class ReplayResult:
         Tracker frame used.
     truncated : bool
         The bag ended without its footer (recorded by a process that was killed).
+    collector : CollectorSettings
+        The static detection settings used (with ``auto_window``: as adapted).
+    diagnosis : str
+        When no static pose was found: the likely cause in one line (naming the option to
+        change); empty otherwise.
     """
 
     samples: tuple[CalibrationSample, ...]
@@ -69,6 +151,8 @@ class ReplayResult:
     message_counts: dict[str, int]
     tracker_frame_id: str
     truncated: bool
+    collector: CollectorSettings = dataclasses.field(default_factory=CollectorSettings)
+    diagnosis: str = ""
 
 
 def _stamp(header: Any) -> int:
@@ -88,6 +172,7 @@ def replay_bag(
     campaign_path: str | Path | None = None,
     calibrate: bool = True,
     log: LogCallback | None = None,
+    auto_window: bool = False,
 ) -> ReplayResult:
     """Replay a raw bag: detect static poses, build the campaign, optionally calibrate.
 
@@ -111,6 +196,9 @@ def replay_bag(
         Identify the parameters.
     log : callable, optional
         ``log(cause, message)`` for dropped messages and rejected dwells (throttled).
+    auto_window : bool
+        Shorten the window and guards of `collector` to the recording's dwells (see
+        :func:`auto_collector_settings`).
 
     Returns
     -------
@@ -152,9 +240,11 @@ def replay_bag(
             msg = f"{path}: no decodable message on {point_topic}"
             raise BagError(msg)
         tracker_frame_id = frames.most_common(1)[0][0]
-    pose_collector = StaticPoseCollector.from_settings(
-        model.joint_names, tracker_frame_id, collector or CollectorSettings(), log=log
-    )
+    settings = collector or CollectorSettings()
+    still = _still_of(events, model.joint_names, settings.joint_motion_threshold)
+    if auto_window:
+        settings = auto_collector_settings(settings, still)
+    pose_collector = StaticPoseCollector.from_settings(model.joint_names, tracker_frame_id, settings, log=log)
     pipeline = CalibrationPipeline(model, options=options, min_samples=min_samples, campaign_path=campaign_path)
     with pipeline:
         samples: list[CalibrationSample] = []
@@ -188,4 +278,82 @@ def replay_bag(
         message_counts=counts,
         tracker_frame_id=tracker_frame_id,
         truncated=bag.truncated,
+        collector=settings,
+        diagnosis="" if samples else _diagnose(bag, events, model, tracker_frame_id, settings, still, pose_collector),
+    )
+
+
+def _joint_matrix(events: list[tuple[bool, Any]], joint_names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps [ns] and positions [rad] of the joint states that carry every joint of the robot."""
+    stamps: list[int] = []
+    rows: list[list[float]] = []
+    for is_joint, message in events:
+        if not is_joint:
+            continue
+        index = {str(n): i for i, n in enumerate(message.name)}
+        if all(n in index for n in joint_names) and len(message.position) == len(message.name):
+            stamps.append(_stamp(message.header))
+            rows.append([float(message.position[index[n]]) for n in joint_names])
+    t = np.array(stamps, dtype=np.int64)
+    q = np.array(rows, dtype=np.float64).reshape(len(rows), len(joint_names))
+    ok = np.isfinite(q).all(axis=1)
+    if t.size > 1:
+        ok[1:] &= np.diff(t) > 0
+    return t[ok], q[ok]
+
+
+def _still_of(events: list[tuple[bool, Any]], joint_names: Sequence[str], threshold: float) -> StillIntervals:
+    stamps, positions = _joint_matrix(events, joint_names)
+    return still_intervals(stamps, positions, threshold)
+
+
+def _diagnose(
+    bag: Any,
+    events: list[tuple[bool, Any]],
+    model: RobotModel,
+    tracker_frame_id: str,
+    settings: CollectorSettings,
+    still: StillIntervals,
+    pose_collector: StaticPoseCollector,
+) -> str:
+    """The likely reason why a replay found no static pose, in one line."""
+    from robocal_uncertainty.bagio.campaign_format import METADATA_NAME
+
+    if METADATA_NAME in bag.contents.metadata:
+        return "this is a campaign file (one joint reading per pose), not a raw recording: use 'evaluate' on it"
+    joints = [m for is_joint, m in events if is_joint]
+    points = [m for is_joint, m in events if not is_joint]
+    if not joints:
+        return "the bag has no joint state"
+    names = sorted({str(n) for m in joints for n in m.name})
+    missing = [n for n in model.joint_names if n not in names]
+    if missing:
+        return (
+            f"no joint state carries the joints of robot {model.name} ({', '.join(missing)} missing; the bag has "
+            f"{', '.join(names)}): wrong --robot?"
+        )
+    frames = Counter(str(m.header.frame_id) for m in points)
+    if frames and tracker_frame_id not in frames:
+        seen = ", ".join(f"{f} ({c})" for f, c in frames.most_common())
+        return f"no tracker point is in frame {tracker_frame_id!r} (points by frame: {seen}): check --tracker-frame"
+    durations = still.durations_s
+    if durations.size == 0:
+        return "the joint states cannot be read"
+    i = int(np.argmax(durations))
+    point_stamps = np.array(sorted(_stamp(m.header) for m in points), dtype=np.int64)
+    inside = int(
+        np.searchsorted(point_stamps, still.ends_ns[i], side="right")
+        - np.searchsorted(point_stamps, still.starts_ns[i], side="left")
+    )
+    longest = float(durations[i])
+    if longest < settings.window_s:
+        hint = f"try --window-s {max(round(0.4 * longest, 2), 0.01):g}"
+    elif pose_collector.rejected_dwells:
+        hint = f"{pose_collector.rejected_dwells} dwells had fewer than --min-points {settings.min_points} points"
+    else:
+        hint = "the tracker points scatter more than --tracker-scatter-threshold-m; check the points"
+    return (
+        f"the longest still window of the joints was {longest:.3g} s with {inside} tracker points "
+        f"(--window-s {settings.window_s:g}, --joint-motion-threshold-rad {settings.joint_motion_threshold:g}); "
+        f"{hint}"
     )

@@ -319,7 +319,9 @@ def test_dropped_points_are_recorded_in_the_metadata(tmp_path: Path) -> None:
     assert campaign.n_poses == 3
     assert campaign.metadata["points_dropped"] == 1
     assert campaign.metadata["warnings"] == [
-        f"{path}: 1 of 4 points on /tracker/point have no /joint_states message within 0 ns and were dropped"
+        f"{path}: 1 of 4 points on /tracker/point have no /joint_states message within the pairing tolerance "
+        "of 0 ms and were dropped (pose 4 of 4: the /joint_states message nearest to its /tracker/point stamp "
+        "is 1 ms away)"
     ]
 
 
