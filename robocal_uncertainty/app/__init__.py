@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from robocal_uncertainty.app.bag_replay import ReplayEvaluation, replay
     from robocal_uncertainty.app.evaluation import Evaluation, evaluate
     from robocal_uncertainty.app.forward_kinematics import ToolPoints, tool_points
+    from robocal_uncertainty.app.pose_suggestion import PoseSuggestion, Suggestions, suggest_poses
     from robocal_uncertainty.app.simulation import SimulationFiles, simulate
     from robocal_uncertainty.app.validation import validate
     from robocal_uncertainty.uncertainty.options import EvaluationOptions
@@ -28,12 +29,15 @@ if TYPE_CHECKING:
 __all__ = [
     "Evaluation",
     "EvaluationOptions",
+    "PoseSuggestion",
     "ReplayEvaluation",
     "SimulationFiles",
+    "Suggestions",
     "ToolPoints",
     "evaluate",
     "replay",
     "simulate",
+    "suggest_poses",
     "tool_points",
     "validate",
 ]
