@@ -159,3 +159,48 @@ def test_suggested_poses_beat_random_poses(arm: RobotModel) -> None:
             / u(with_simulated_pose(campaign, arm, calibration.estimate, random))
         )
     assert max(ratios) < 1.0 and np.mean(ratios) < 0.97, ratios
+
+
+def test_service_request_and_response_match_the_srv(arm: RobotModel, case) -> None:
+    from rosbags.typesys import get_types_from_msg
+
+    from robocal_uncertainty.app.pose_suggestion import service_arguments, service_response
+
+    request_text, response_text = (REPO / "srv" / "SuggestPoses.srv").read_text(encoding="utf-8").split("\n---\n")
+    (_, (_, request_fields)), *_ = get_types_from_msg(request_text, "robocal_uncertainty/srv/Req").items()
+    (_, (_, response_fields)), *_ = get_types_from_msg(response_text, "robocal_uncertainty/srv/Res").items()
+    defaults = service_arguments(
+        n_joints=6, count=0, candidates=[], candidate_count=0, monte_carlo_check=0, trials=0, seed=3
+    )
+    assert defaults == {
+        "candidates": None,
+        "n_candidates": 500,
+        "count": 5,
+        "monte_carlo_check": 0,
+        "trials": 2000,
+        "seed": 3,
+    }
+    assert {"count", "candidates", "candidate_count", "monte_carlo_check", "trials", "seed"} == {
+        name for name, _ in request_fields
+    }
+    campaign, calibration, _, candidates = case
+    given = service_arguments(
+        n_joints=6,
+        count=2,
+        candidates=candidates[:10].reshape(-1),
+        candidate_count=0,
+        monte_carlo_check=0,
+        trials=0,
+        seed=1,
+    )
+    np.testing.assert_array_equal(given["candidates"], candidates[:10])
+    with pytest.raises(InputError, match="multiple of the 6 joints"):
+        service_arguments(
+            n_joints=6, count=1, candidates=[0.0] * 7, candidate_count=0, monte_carlo_check=0, trials=0, seed=0
+        )
+    result = suggest_poses(arm, campaign, TEST_JOINTS, calibration=calibration, **given)
+    fields = service_response(result)
+    assert set(fields) == {name for name, _ in response_fields}
+    assert fields["success"] and len(fields["joint_positions"]) == 2 * 6 and len(fields["predicted_u"]) == 2
+    assert np.isnan(fields["monte_carlo_current_u"]) and all(np.isnan(fields["monte_carlo_u"]))
+    assert fields["frame_id"] == "base_link" and "2 pose(s) from 10 candidates" in fields["message"]

@@ -38,6 +38,7 @@ RANK = {
     "errors": 0,
     "_lazy": 0,
     "msg": 0,  # interfaces rosidl generates in a colcon build
+    "srv": 0,
     "core": 1,
     "montecarlo": 1,
     "uncertainty": 2,

@@ -53,6 +53,8 @@ __all__ = [
     "Suggestions",
     "linearize",
     "rank_candidates",
+    "service_arguments",
+    "service_response",
     "suggest_poses",
     "with_simulated_pose",
 ]
@@ -463,3 +465,69 @@ def suggest_poses(
         trials=trials if monte_carlo_check else 0,
         seed=seed,
     )
+
+
+DEFAULT_COUNT = 5
+DEFAULT_CANDIDATES = 500
+DEFAULT_TRIALS = 2000
+
+
+def service_arguments(
+    *,
+    n_joints: int,
+    count: int,
+    candidates: ArrayLike,
+    candidate_count: int,
+    monte_carlo_check: int,
+    trials: int,
+    seed: int,
+) -> dict[str, object]:
+    """Keyword arguments of :func:`suggest_poses` from a ``SuggestPoses`` request's fields.
+
+    Zeros mean the defaults (5 suggestions, 500 sampled candidates, 2000 trials); an empty
+    `candidates` means sampling; a non-empty one holds `n_joints` values per configuration.
+
+    Raises
+    ------
+    InputError
+        `candidates` is not a whole number of configurations.
+    """
+    flat = np.asarray(candidates, dtype=np.float64).reshape(-1)
+    if flat.size % n_joints:
+        msg = f"candidates: {flat.size} values are not a multiple of the {n_joints} joints"
+        raise InputError(msg)
+    return {
+        "candidates": flat.reshape(-1, n_joints) if flat.size else None,
+        "n_candidates": int(candidate_count) or DEFAULT_CANDIDATES,
+        "count": int(count) or DEFAULT_COUNT,
+        "monte_carlo_check": int(monte_carlo_check),
+        "trials": int(trials) or DEFAULT_TRIALS,
+        "seed": int(seed),
+    }
+
+
+def service_response(result: Suggestions) -> dict[str, object]:
+    """The fields of a ``SuggestPoses`` response (see ``srv/SuggestPoses.srv``) for `result`."""
+    nan = float("nan")
+    n = len(result.suggestions)
+    message = (
+        f"{n} pose(s) from {len(result.candidates)} candidates: first-order RMS u_pos "
+        f"{result.current_u_m * 1e6:.2f} -> {result.suggestions[-1].predicted_u_m * 1e6:.2f} um"
+        if n
+        else "no candidate"
+    )
+    if result.monte_carlo_current_u_m is not None:
+        message += f"; Monte Carlo ({result.trials} trials) now {result.monte_carlo_current_u_m * 1e6:.2f} um"
+    return {
+        "success": bool(n),
+        "message": message,
+        "joint_names": list(result.joint_names),
+        "joint_positions": [float(v) for s in result.suggestions for v in s.joint_positions],
+        "current_u": float(result.current_u_m),
+        "predicted_u": [float(s.predicted_u_m) for s in result.suggestions],
+        "monte_carlo_current_u": nan
+        if result.monte_carlo_current_u_m is None
+        else float(result.monte_carlo_current_u_m),
+        "monte_carlo_u": [nan if s.monte_carlo_u_m is None else float(s.monte_carlo_u_m) for s in result.suggestions],
+        "frame_id": result.frame_id,
+    }

@@ -7,6 +7,8 @@ request (``~/calibrate``, ``std_srvs/Trigger``). Each calibration is published a
 ``robocal_uncertainty/CalibrationResult`` (reliable, transient local, depth 1: a late
 subscriber gets the latest) and written to ``calibration_file`` (YAML, SI units stated;
 default ``<campaign>.calibration.yaml`` next to the campaign), replacing it atomically.
+Its health (samples, condition number, residual RMS, lambda, convergence, time since the last
+calibration; OK/WARN/ERROR) goes to ``/diagnostics`` every ``diagnostics_period_s``.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
@@ -33,10 +36,18 @@ from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
-from robocal_uncertainty.nodes.common import CauseLogger, campaign_file, load_model, run_node, to_ros
+from robocal_uncertainty.nodes.common import (
+    CauseLogger,
+    campaign_file,
+    diagnostic_array,
+    load_model,
+    run_node,
+    to_ros,
+)
 from robocal_uncertainty.nodes.parameters import (
     BASE_UNKNOWN,
     CAMPAIGN_PATH_READ,
+    DIAGNOSTICS_PERIOD,
     READ_CAMPAIGN_AT_START,
     ROBOT_CONFIG,
     ParamSpec,
@@ -44,7 +55,12 @@ from robocal_uncertainty.nodes.parameters import (
     lambda_text,
     parse_lambda,
 )
-from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
+from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_qos
+from robocal_uncertainty.pipeline.diagnostics import (
+    DiagnosticStatus,
+    DiagnosticThresholds,
+    calibration_status,
+)
 from robocal_uncertainty.pipeline.sample_store import SampleStore
 from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
@@ -84,6 +100,25 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         low=1,
         high=100_000,
     ),
+    DIAGNOSTICS_PERIOD,
+    ParamSpec(
+        "condition_warn",
+        1e4,
+        "Condition number of the scaled identification Jacobian above which /diagnostics warns",
+        "dimensionless",
+        True,
+        1.0,
+        1e300,
+    ),
+    ParamSpec(
+        "residual_rms_warn_m",
+        1e-4,
+        "Residual RMS after calibration above which /diagnostics warns",
+        "m",
+        True,
+        1e-12,
+        1.0,
+    ),
 )
 
 
@@ -119,6 +154,13 @@ class CalibrationNode(Node):
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
         self.create_service(Trigger, "~/calibrate", self._calibrate_service)
         self.create_timer(0.5, self._after_parameter_change)
+        self._last_calibration_ns: int | None = None
+        self._last_error: str | None = None
+        self._thresholds = DiagnosticThresholds(
+            condition_warn=p["condition_warn"], residual_rms_warn_m=p["residual_rms_warn_m"]
+        )
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        self.create_timer(p["diagnostics_period_s"], self._publish_diagnostics)
         self._maybe_calibrate()
 
     def _note_change(self, parameters: list[Parameter]) -> None:
@@ -176,11 +218,14 @@ class CalibrationNode(Node):
             result = self.store.pipeline(options=options, min_samples=min_samples).calibrate()
         except CalibError as err:
             self.calibrated_count = n  # retry after the next `recalibrate_every` samples
+            self._last_error = str(err)
             self._causes.warning("calibration_failed", f"calibration from {n} samples failed: {err}")
             return None
         self.calibrated_count = n
         self.latest = result
+        self._last_error = None
         stamp = self.get_clock().now().nanoseconds
+        self._last_calibration_ns = stamp
         self._result_pub.publish(to_ros(calibration_to_msg(result, stamp_ns=stamp), CalibrationResultMsg))
         self.get_logger().info(
             f"calibrated from {n} samples: residual RMS {result.rms_before * 1e3:.4f} -> "
@@ -191,6 +236,27 @@ class CalibrationNode(Node):
         except OSError as err:
             self.get_logger().error(f"cannot write {self.calibration_path}: {err}")
         return result
+
+    def diagnostic_status(self) -> DiagnosticStatus:
+        """The calibration's health (rules in :mod:`robocal_uncertainty.pipeline.diagnostics`)."""
+        latest = self.latest
+        return calibration_status(
+            name=f"{self.get_name()}: identification",
+            hardware_id=self.model.name,
+            now_ns=self.get_clock().now().nanoseconds,
+            samples=len(self.store),
+            min_samples=int(self.get_parameter("min_samples").value),
+            last_calibration_ns=self._last_calibration_ns,
+            condition_number=None if latest is None else float(latest.condition_number),
+            residual_rms_m=None if latest is None else float(latest.rms_after),
+            lambda_=None if latest is None else float(latest.lambda_),
+            converged=None if latest is None else bool(latest.converged),
+            error=self._last_error,
+            thresholds=self._thresholds,
+        )
+
+    def _publish_diagnostics(self) -> None:
+        self._diagnostics_pub.publish(diagnostic_array(self, [self.diagnostic_status()]))
 
     def _write(self, result: IdentificationResult) -> None:
         data = calibration_to_dict(result, robot=self.robot_config)

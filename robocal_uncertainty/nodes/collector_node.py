@@ -9,7 +9,14 @@ file, so no sample taken before a crash is lost), then published on ``robocal/sa
 
 Bad messages (NaN, unknown or missing joints, wrong frame, stamps going backwards, ...) are
 counted per cause, logged at most once per cause per ``log_throttle_s`` and dropped; the
-counts are on ``robocal/collector_status`` (JSON in a ``std_msgs/String``, transient local).
+counts are on ``robocal/collector_status`` (JSON in a ``std_msgs/String``, transient local)
+and, with OK/WARN/ERROR and the time since the last sample and input, on ``/diagnostics``
+(``diagnostic_msgs/DiagnosticArray`` every ``diagnostics_period_s``; rules in
+:mod:`robocal_uncertainty.pipeline.diagnostics`).
+
+A static dwell gives its sample as soon as it is complete (static through ``guard_s +
+average_s + guard_s``), so the last pose of a campaign is taken while the arm is still
+there, exactly as ``replay`` takes it.
 
 Services (``std_srvs/Trigger``): ``~/capture_now`` takes the current static pose at once;
 ``~/clear`` forgets the data of the current window/dwell (e.g. after the arm was bumped;
@@ -35,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from rclpy.subscription import Subscription
@@ -46,11 +54,20 @@ from robocal_uncertainty.bagio.messages import sample_to_msg
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
-from robocal_uncertainty.nodes.common import CauseLogger, campaign_file, load_model, run_node, stamp_ns, to_ros
-from robocal_uncertainty.nodes.parameters import ParamSpec, declare_parameters, non_empty, positive
-from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos, sensor_qos
+from robocal_uncertainty.nodes.common import (
+    CauseLogger,
+    campaign_file,
+    diagnostic_array,
+    load_model,
+    run_node,
+    stamp_ns,
+    to_ros,
+)
+from robocal_uncertainty.nodes.parameters import DIAGNOSTICS_PERIOD, ParamSpec, declare_parameters, non_empty, positive
+from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_qos, sensor_qos
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import CollectorSettings, StaticPoseCollector
+from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus, DiagnosticThresholds, collector_status
 from robocal_uncertainty.pipeline.stream_merge import StreamMerger
 
 __all__ = ["PARAMETERS", "CollectorNode", "main"]
@@ -156,6 +173,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "campaign)",
     ),
     ParamSpec("status_period_s", 1.0, "Period of the collector_status update (when changed)", "s", True, 0.05, 3600.0),
+    DIAGNOSTICS_PERIOD,
+    ParamSpec(
+        "input_timeout_s",
+        2.0,
+        "An input stream silent for longer is reported on /diagnostics (WARN)",
+        "s",
+        True,
+        0.01,
+        3600.0,
+    ),
 )
 
 
@@ -215,6 +242,11 @@ class CollectorNode(Node):
             self.create_timer(period, lambda: self._merger.release(time.monotonic_ns()))
         self._last_status = ""
         self.create_timer(p["status_period_s"], self._publish_status)
+        self._last_input_ns: dict[str, int | None] = {"joint_states": None, "tracker_points": None}
+        self._last_sample_ns: int | None = None
+        self._thresholds = DiagnosticThresholds(input_timeout_s=p["input_timeout_s"])
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        self.create_timer(p["diagnostics_period_s"], self._publish_diagnostics)
         self._publish_status()
         self.get_logger().info(
             f"collecting joints {list(self.model.joint_names)} and tracker points in frame {frame_id!r}; "
@@ -236,7 +268,9 @@ class CollectorNode(Node):
         self._push(_POINTS, msg, 0)
 
     def _push(self, stream: int, msg: Any, source_ns: int) -> None:
-        self.received["joint_states" if stream == _JOINTS else "tracker_points"] += 1
+        name = "joint_states" if stream == _JOINTS else "tracker_points"
+        self.received[name] += 1
+        self._last_input_ns[name] = self.get_clock().now().nanoseconds
         arrival = time.monotonic_ns()
         self._merger.push(stream, source_ns or arrival, arrival, msg)
 
@@ -268,6 +302,7 @@ class CollectorNode(Node):
             return False
         self._sample_pub.publish(to_ros(sample_to_msg(sample), CalibrationSampleMsg))
         self.published += 1
+        self._last_sample_ns = self.get_clock().now().nanoseconds
         point_mm = ", ".join(f"{v * 1e3:.3f}" for v in sample.point)
         self.get_logger().info(
             f"sample {self.recorder.n_samples}: point ({point_mm}) mm from {sample.tracker_point_count} points, "
@@ -347,6 +382,26 @@ class CollectorNode(Node):
         if text != self._last_status:
             self._last_status = text
             self._status_pub.publish(String(data=text))
+
+    def diagnostic_status(self) -> DiagnosticStatus:
+        """The collector's health (rules in :mod:`robocal_uncertainty.pipeline.diagnostics`)."""
+        return collector_status(
+            name=f"{self.get_name()}: static-pose collector",
+            hardware_id=self.model.name,
+            now_ns=self.get_clock().now().nanoseconds,
+            samples=self.recorder.n_samples,
+            received=self.received,
+            dropped=self.collector.dropped,
+            rejected_dwells=self.collector.rejected_dwells,
+            record_failures=self.record_failures,
+            last_sample_ns=self._last_sample_ns,
+            last_input_ns=self._last_input_ns,
+            static=self.collector.is_static,
+            thresholds=self._thresholds,
+        )
+
+    def _publish_diagnostics(self) -> None:
+        self._diagnostics_pub.publish(diagnostic_array(self, [self.diagnostic_status()]))
 
     def destroy_node(self) -> None:
         self.recorder.close()

@@ -22,20 +22,27 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from visualization_msgs.msg import Marker, MarkerArray
 
 from robocal_uncertainty.core import load_robot_model
 from robocal_uncertainty.core.robot_config import resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import CalibError
+from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus as Status
+from robocal_uncertainty.pipeline.markers import MarkerSpec
 from robocal_uncertainty.pipeline.sample_store import SampleStore
 
 __all__ = [
     "CauseLogger",
     "SampleStore",
     "campaign_file",
+    "diagnostic_array",
     "load_model",
+    "marker_array",
     "robot_config_path",
     "run_node",
     "stamp_ns",
@@ -93,6 +100,55 @@ def to_ros(source: Any, ros_type: type) -> Any:
             setattr(out, name, list(value))
         else:
             setattr(out, name, value)
+    return out
+
+
+def diagnostic_array(node: Node, statuses: Iterable[Status]) -> DiagnosticArray:
+    """``diagnostic_msgs/DiagnosticArray`` of ROS-free statuses, stamped now (node clock)."""
+    out = DiagnosticArray()
+    out.header.stamp = node.get_clock().now().to_msg()
+    for status in statuses:
+        item = DiagnosticStatus()
+        item.level = bytes([int(status.level)])
+        item.name = status.name
+        item.message = status.message
+        item.hardware_id = status.hardware_id
+        item.values = [KeyValue(key=key, value=value) for key, value in status.values]
+        out.status.append(item)
+    return out
+
+
+_MARKER_TYPES = {"sphere": Marker.SPHERE, "sphere_list": Marker.SPHERE_LIST, "text": Marker.TEXT_VIEW_FACING}
+
+
+def marker_array(specs: Iterable[MarkerSpec], stamp: Any) -> MarkerArray:
+    """``visualization_msgs/MarkerArray`` of ROS-free marker descriptions.
+
+    The first marker is a DELETEALL, so markers of an earlier result with more test
+    configurations or points do not linger in RViz.
+    """
+    out = MarkerArray()
+    clear = Marker()
+    clear.action = Marker.DELETEALL
+    out.markers.append(clear)
+    for spec in specs:
+        marker = Marker()
+        marker.header.stamp = stamp
+        marker.header.frame_id = spec.frame_id
+        marker.ns = spec.namespace
+        marker.id = int(spec.marker_id)
+        marker.type = _MARKER_TYPES[spec.kind]
+        marker.action = Marker.ADD
+        position = marker.pose.position
+        position.x, position.y, position.z = (float(v) for v in spec.position)
+        orientation = marker.pose.orientation
+        orientation.x, orientation.y, orientation.z, orientation.w = (float(v) for v in spec.orientation)
+        marker.scale.x, marker.scale.y, marker.scale.z = (float(v) for v in spec.scale)
+        marker.color.r, marker.color.g, marker.color.b, marker.color.a = (float(v) for v in spec.color)
+        marker.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in spec.points]
+        marker.text = spec.text
+        marker.frame_locked = True
+        out.markers.append(marker)
     return out
 
 

@@ -23,6 +23,7 @@ from robocal_uncertainty.errors import ConfigError
 __all__ = [
     "BASE_UNKNOWN",
     "CAMPAIGN_PATH_READ",
+    "DIAGNOSTICS_PERIOD",
     "READ_CAMPAIGN_AT_START",
     "ROBOT_CONFIG",
     "Check",
@@ -235,4 +236,7 @@ CAMPAIGN_PATH_READ = ParamSpec(
 )
 READ_CAMPAIGN_AT_START = ParamSpec(
     "read_campaign_at_start", True, "Start from the samples already in the campaign file", read_only=True
+)
+DIAGNOSTICS_PERIOD = ParamSpec(
+    "diagnostics_period_s", 1.0, "Period of the /diagnostics status", "s", True, 0.05, 3600.0
 )

@@ -9,7 +9,9 @@
 * Results (``robocal/calibration``, ``robocal/uncertainty``, ``robocal/pose_with_covariance``)
   and status: reliable, transient local, keep last: a subscriber started later still gets
   the latest result. Depth 1 for one message per result; the per-test-configuration
-  uncertainty topics keep one message per configuration (the latest full set).
+  uncertainty topics keep one message per configuration (the latest full set); the RViz
+  markers (``robocal/uncertainty_markers``) are one latched MarkerArray.
+* ``/diagnostics``: reliable, volatile, depth 10, as diagnostic_updater publishes it.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 
-__all__ = ["SAMPLE_QOS", "SAMPLE_QUEUE_DEPTH", "latched_qos", "sensor_qos"]
+__all__ = ["DIAGNOSTICS_QOS", "SAMPLE_QOS", "SAMPLE_QUEUE_DEPTH", "latched_qos", "sensor_qos"]
 
 SAMPLE_QUEUE_DEPTH = 100
 
@@ -32,6 +34,16 @@ SAMPLE_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
+
+
+DIAGNOSTICS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""``/diagnostics``: what diagnostic_updater uses (reliable, volatile, depth 10); periodic, so
+no need for transient local."""
 
 
 def sensor_qos(depth: int | None = None) -> QoSProfile:

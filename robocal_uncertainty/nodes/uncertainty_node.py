@@ -27,7 +27,17 @@ late joiner gets the latest full set):
   ``orientation_variance_rad2`` (default 1e6 rad^2, "unknown" by the usual large-variance
   convention), cross terms 0.
 * ``robocal/uncertainty_status``: ``std_msgs/String`` JSON (state, trials done, target,
-  sample count); progress is also logged every ``progress_period_s``.
+  sample count, ``sample_to_result_s``: from the newest sample's stamp to publication);
+  progress is also logged every ``progress_period_s``.
+* ``robocal/uncertainty_markers``: ``visualization_msgs/MarkerArray`` for RViz, latched: per
+  test configuration the JCGM 102 coverage ellipsoid, magnified (``marker_scale``, the scale
+  written in its label), and the campaign's measured points, in the result's frame
+  (:mod:`robocal_uncertainty.pipeline.markers`).
+* ``/diagnostics``: ``diagnostic_msgs/DiagnosticArray`` every ``diagnostics_period_s`` (state,
+  trials, Monte Carlo convergence, largest u, evaluation time; OK/WARN/ERROR).
+
+Service ``~/suggest_poses`` (``robocal_uncertainty/srv/SuggestPoses``): next-best calibration
+poses for the latest evaluated campaign (:func:`robocal_uncertainty.app.suggest_poses`).
 """
 
 from __future__ import annotations
@@ -48,14 +58,19 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
 
 from robocal_uncertainty.app import Evaluation, evaluate
+from robocal_uncertainty.app.pose_suggestion import service_arguments, service_response, suggest_poses
 from robocal_uncertainty.bagio.messages import msg_to_sample, uncertainty_to_msgs
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError, ConfigError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
@@ -64,7 +79,9 @@ from robocal_uncertainty.msg import PoseUncertainty as PoseUncertaintyMsg
 from robocal_uncertainty.nodes.common import (
     CauseLogger,
     campaign_file,
+    diagnostic_array,
     load_model,
+    marker_array,
     run_node,
     stamp_ns,
     to_ros,
@@ -72,13 +89,17 @@ from robocal_uncertainty.nodes.common import (
 from robocal_uncertainty.nodes.parameters import (
     BASE_UNKNOWN,
     CAMPAIGN_PATH_READ,
+    DIAGNOSTICS_PERIOD,
     READ_CAMPAIGN_AT_START,
     ROBOT_CONFIG,
     ParamSpec,
     declare_parameters,
 )
-from robocal_uncertainty.nodes.qos import SAMPLE_QOS, latched_qos
+from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_qos
+from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus, uncertainty_status
+from robocal_uncertainty.pipeline.markers import uncertainty_markers
 from robocal_uncertainty.pipeline.sample_store import SampleStore
+from robocal_uncertainty.srv import SuggestPoses
 from robocal_uncertainty.uncertainty import (
     CalibrationUncertainty,
     EvaluationOptions,
@@ -234,6 +255,19 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         low=0.0,
         high=1e12,
     ),
+    DIAGNOSTICS_PERIOD,
+    ParamSpec(
+        "marker_scale",
+        0.0,
+        "Magnification of the coverage ellipsoids in robocal/uncertainty_markers; 0 = the power of ten drawing "
+        "the largest at about marker_size_m (the scale is written in each marker's label)",
+        "",
+        low=0.0,
+        high=1e12,
+    ),
+    ParamSpec(
+        "marker_size_m", 0.05, "Drawn size of the largest ellipsoid with marker_scale 0", "m", low=1e-4, high=10.0
+    ),
 )
 
 
@@ -299,6 +333,11 @@ class UncertaintyNode(Node):
             PoseWithCovarianceStamped, "robocal/pose_with_covariance", latched_qos(depth)
         )
         self._status_pub = self.create_publisher(String, "robocal/uncertainty_status", latched_qos())
+        self._marker_pub = self.create_publisher(MarkerArray, "robocal/uncertainty_markers", latched_qos())
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        self._health: dict[str, Any] = {"state": "idle"}
+        self._evaluated: tuple[Campaign, IdentificationResult, EvaluationOptions] | None = None
+        self.create_service(SuggestPoses, "~/suggest_poses", self._suggest_poses)
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
         self.create_subscription(CalibrationResultMsg, "robocal/calibration", self._on_calibration, latched_qos())
 
@@ -312,6 +351,7 @@ class UncertaintyNode(Node):
         self._worker = threading.Thread(target=self._work, name="robocal_monte_carlo", daemon=True)
         self._worker.start()
         self.create_timer(0.25, self._after_parameter_change)
+        self.create_timer(p["diagnostics_period_s"], self._publish_diagnostics)
         self._status({"state": "idle", "samples": len(self.store)})
         self.get_logger().info(f"evaluating {depth} test configuration(s) of {self.model.name} on each new calibration")
 
@@ -433,11 +473,12 @@ class UncertaintyNode(Node):
         self._status({"state": "running", "done": 0, "target": job.options.trials, "sample_count": n})
         pipeline = SampleStore.pipeline_of(self.model, job.samples, options=job.options)
         try:
+            calibration = pipeline.calibrate()
             evaluation = evaluate(
                 self.model,
                 pipeline.campaign,
                 job.options,
-                calibration=pipeline.calibrate(),
+                calibration=calibration,
                 workers=int(self.get_parameter("workers").value),
                 progress=progress,
             )
@@ -456,8 +497,24 @@ class UncertaintyNode(Node):
             self._causes.warning("input_warning", warning)
         self._check_same_calibration(result, job.calibration)
         self._publish(result, job.calibration)
+        campaign = pipeline.campaign
+        assert campaign is not None  # pipeline_of holds the job's samples
+        self._publish_markers(result, campaign, job.calibration)
+        self._evaluated = (campaign, calibration, job.options)
         self.completed += 1
         elapsed = time.monotonic() - started
+        # Latency: from the newest sample's stamp (when the pose was taken) to publication.
+        newest = max(sample.stamp_ns for sample in job.samples)
+        latency = (self.get_clock().now().nanoseconds - newest) / 1e9
+        self._health = {
+            "state": "done",
+            "trials": result.n_trials,
+            "converged": result.converged,
+            "max_u": max(float(a.standard_uncertainty) for pose in result.poses for a in pose.axes),
+            "finished_ns": self.get_clock().now().nanoseconds,
+            "elapsed_s": elapsed,
+            "latency_s": latency,
+        }
         u = result.poses[0].axes
         self.get_logger().info(
             f"uncertainty of the {n}-sample calibration: {result.n_trials} trials in {elapsed:.1f} s; "
@@ -470,6 +527,7 @@ class UncertaintyNode(Node):
                 "trials": result.n_trials,
                 "converged": result.converged,
                 "elapsed_s": round(elapsed, 3),
+                "sample_to_result_s": round(latency, 3),
                 **_extras(evaluation),
             }
         )
@@ -509,7 +567,78 @@ class UncertaintyNode(Node):
             self._pose_pub.publish(out)
 
     def _status(self, state: dict[str, Any]) -> None:
+        if state.get("state") != "done":  # "done" carries the result; _run records it
+            self._health = {**self._health, "state": state.get("state", "idle"), "error": state.get("error")}
         self._status_pub.publish(String(data=json.dumps(state, sort_keys=True)))
+
+    def _publish_markers(self, result: CalibrationUncertainty, campaign: Campaign, msg: CalibrationResultMsg) -> None:
+        scale = float(self.get_parameter("marker_scale").value)
+        specs = uncertainty_markers(
+            result,
+            campaign_points=campaign.points,
+            campaign_frame=campaign.frame,
+            scale=scale or None,
+            target_size_m=float(self.get_parameter("marker_size_m").value),
+        )
+        self._marker_pub.publish(marker_array(specs, msg.header.stamp))
+
+    def diagnostic_status(self) -> DiagnosticStatus:
+        """The evaluation's health (rules in :mod:`robocal_uncertainty.pipeline.diagnostics`)."""
+        health = self._health
+        return uncertainty_status(
+            name=f"{self.get_name()}: Monte Carlo",
+            hardware_id=self.model.name,
+            now_ns=self.get_clock().now().nanoseconds,
+            state=str(health.get("state", "idle")),
+            samples=len(self.store),
+            trials=health.get("trials"),
+            converged=health.get("converged"),
+            max_standard_uncertainty_m=health.get("max_u"),
+            last_evaluation_ns=health.get("finished_ns"),
+            last_evaluation_s=health.get("elapsed_s"),
+            error=health.get("error"),
+        )
+
+    def _publish_diagnostics(self) -> None:
+        self._diagnostics_pub.publish(diagnostic_array(self, [self.diagnostic_status()]))
+
+    def _suggest_poses(self, request: SuggestPoses.Request, response: SuggestPoses.Response) -> SuggestPoses.Response:
+        """Next-best poses for the latest evaluated campaign (blocks this node's callbacks
+        while it runs: milliseconds for the ranking, plus any Monte Carlo checks asked for)."""
+        evaluated = self._evaluated
+        if evaluated is None:
+            response.success = False
+            response.message = "no evaluated calibration yet"
+            return response
+        campaign, calibration, options = evaluated
+        try:
+            arguments = service_arguments(
+                n_joints=self.model.n_joints,
+                count=request.count,
+                candidates=list(request.candidates),
+                candidate_count=request.candidate_count,
+                monte_carlo_check=request.monte_carlo_check,
+                trials=request.trials,
+                seed=request.seed,
+            )
+            result = suggest_poses(
+                self.model,
+                campaign,
+                self.test_joints,
+                settings=options.uncertainty,
+                calibration=calibration,
+                lambda_=options.lambda_,
+                frame=options.output_frame,
+                **arguments,  # type: ignore[arg-type]
+            )
+        except CalibError as err:
+            response.success = False
+            response.message = str(err)
+            return response
+        for name, value in service_response(result).items():
+            setattr(response, name, value)
+        self.get_logger().info(f"suggest_poses: {response.message}")
+        return response
 
     def destroy_node(self) -> None:
         with self._wake:
