@@ -16,11 +16,24 @@ if TYPE_CHECKING:
         residual_stats,
     )
     from robocal_uncertainty.core.joint_limits import check_joint_limits
-    from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+    from robocal_uncertainty.core.kinematics import (
+        forward_points,
+        forward_points_and_jacobian,
+        forward_poses,
+        forward_poses_and_jacobian,
+    )
     from robocal_uncertainty.core.observability import Observability, structural_observability
     from robocal_uncertainty.core.regularization import LCurve, lcurve
     from robocal_uncertainty.core.robot_config import load_robot_model, robot_model_from_dict
     from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
+    from robocal_uncertainty.core.rotation import (
+        chordal_mean,
+        euler_to_matrix,
+        quaternion_from_matrix,
+        quaternion_to_matrix,
+        rotation_exp,
+        rotation_log,
+    )
     from robocal_uncertainty.core.sample import CalibrationSample
     from robocal_uncertainty.core.simulation import (
         EncoderNoise,
@@ -49,14 +62,22 @@ __all__ = [
     "TrackerNoise",
     "UnmodelledErrors",
     "check_joint_limits",
+    "chordal_mean",
+    "euler_to_matrix",
     "fit_rigid_base",
     "forward_points",
     "forward_points_and_jacobian",
+    "forward_poses",
+    "forward_poses_and_jacobian",
     "identify",
     "lcurve",
     "load_robot_model",
+    "quaternion_from_matrix",
+    "quaternion_to_matrix",
     "residual_stats",
     "robot_model_from_dict",
+    "rotation_exp",
+    "rotation_log",
     "simulate_campaign",
     "simulate_measurements",
     "structural_observability",

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
 
-__all__ = ["forward_points", "forward_points_and_jacobian"]
+__all__ = ["forward_points", "forward_points_and_jacobian", "forward_poses", "forward_poses_and_jacobian"]
 
 Array = NDArray[np.float64]
 
@@ -120,8 +120,8 @@ def _rotate(base_cols: Array, v: Array) -> Array:
     return np.asarray(base_cols[0] * v[0] + base_cols[1] * v[1] + base_cols[2] * v[2], dtype=np.float64)
 
 
-def _points_in_base(layout: ParameterLayout, p: Array, q: Array, shape: tuple[int, ...]) -> tuple[Array, Array, Array]:
-    """Point in the base frame as three component arrays; the hot path of the Monte Carlo.
+def _frame_in_base(layout: ParameterLayout, p: Array, q: Array) -> tuple[tuple[Array, ...], ...]:
+    """Last frame in the base frame: its x, y, z columns and origin, each three component arrays.
 
     Keeps the nine rotation entries as separate arrays and updates them with fused
     expressions: fewer temporaries than the component-first stacks used for the Jacobian.
@@ -154,6 +154,12 @@ def _points_in_base(layout: ParameterLayout, p: Array, q: Array, shape: tuple[in
         x2, y2 = ct * x2 + st * y2, ct * y2 - st * x2
         d = p[..., idx["d"]]
         o0, o1, o2 = o0 + d * z0, o1 + d * z1, o2 + d * z2
+    return (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), (o0, o1, o2)
+
+
+def _points_in_base(layout: ParameterLayout, p: Array, q: Array, shape: tuple[int, ...]) -> tuple[Array, Array, Array]:
+    """Point in the base frame as three component arrays; the hot path of the Monte Carlo."""
+    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), (o0, o1, o2) = _frame_in_base(layout, p, q)
     t0 = layout.tool_index
     tx, ty, tz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
     return (
@@ -239,3 +245,92 @@ def forward_points_and_jacobian(
     ez[2] = 1.0
     jac[b0 + 5] = _cross(ez, rel_world)
     return np.moveaxis(world, 0, -1), np.moveaxis(jac, (0, 1), (-1, -2))
+
+
+def forward_poses(
+    model_or_layout: RobotModel | ParameterLayout, params: Array, joint_positions: Array
+) -> tuple[Array, Array]:
+    """Tool point and tool orientation for every (parameter set, pose) pair.
+
+    The tool frame is the last modified-DH frame (the flange frame of the model) translated
+    to the tool point: the model has no tool rotation, so its orientation is the flange's.
+
+    Parameters
+    ----------
+    model_or_layout, params, joint_positions
+        As for :func:`forward_points`.
+
+    Returns
+    -------
+    points : ndarray, shape (..., n_poses, 3) [m]
+        Equal, bit for bit, to :func:`forward_points`.
+    rotations : ndarray, shape (..., n_poses, 3, 3)
+        ``world_R_tool``: columns are the tool frame's axes in the measurement frame.
+    """
+    layout = model_or_layout.layout if isinstance(model_or_layout, RobotModel) else model_or_layout
+    p, q, shape = _prepare(layout, params, joint_positions)
+    cols = _frame_in_base(layout, p, q)
+    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), (o0, o1, o2) = cols
+    t0 = layout.tool_index
+    tx, ty, tz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
+    px = np.broadcast_to(o0 + tx * x0 + ty * y0 + tz * z0, shape)
+    py = np.broadcast_to(o1 + tx * x1 + ty * y1 + tz * z1, shape)
+    pz = np.broadcast_to(o2 + tx * x2 + ty * y2 + tz * z2, shape)
+    base_cols, translation, _ = _base(p, layout)
+    points = np.empty((*shape, 3))
+    rotations = np.empty((*shape, 3, 3))
+    for i in range(3):
+        points[..., i] = base_cols[0][i] * px + base_cols[1][i] * py + base_cols[2][i] * pz + translation[i]
+        for c in range(3):
+            col = cols[c]
+            rotations[..., i, c] = np.broadcast_to(
+                base_cols[0][i] * col[0] + base_cols[1][i] * col[1] + base_cols[2][i] * col[2], shape
+            )
+    return points, rotations
+
+
+def forward_poses_and_jacobian(
+    model_or_layout: RobotModel | ParameterLayout, params: Array, joint_positions: Array
+) -> tuple[Array, Array, Array]:
+    """Tool poses and their Jacobian (linear and angular) with respect to every parameter.
+
+    Returns
+    -------
+    points : ndarray, shape (..., n_poses, 3) [m]
+    rotations : ndarray, shape (..., n_poses, 3, 3)
+        ``world_R_tool``.
+    jacobian : ndarray, shape (..., n_poses, 6, n_params) [m/m, m/rad; rad/m, rad/rad]
+        Rows 0-2: d point / d parameter; rows 3-5: angular velocity per unit parameter, in the
+        measurement (world) frame: ``R(p + dp) ~ exp([J_w dp]x) R(p)``.
+    """
+    layout = model_or_layout.layout if isinstance(model_or_layout, RobotModel) else model_or_layout
+    p, q, shape = _prepare(layout, params, joint_positions)
+    point, last_cols, _, motions = _chain(layout, p, q, shape, keep_axes=True)
+    base_cols, translation, base_axes = _base(p, layout)
+    rel_world = _rotate(base_cols, point)
+    world = rel_world + translation
+    jac = np.zeros((layout.size, 6, *shape))
+    for k, (kind, axis, pivot) in enumerate(motions):
+        if kind == "rot":
+            jac[k, :3] = _rotate(base_cols, _cross(axis, point - pivot))
+            jac[k, 3:] = _rotate(base_cols, np.broadcast_to(axis, (3, *shape)))
+        else:
+            jac[k, :3] = _rotate(base_cols, np.broadcast_to(axis, (3, *shape)))
+    t0 = layout.tool_index
+    for i in range(3):
+        jac[t0 + i, :3] = _rotate(base_cols, last_cols[i])
+    b0 = layout.base_index
+    for i in range(3):
+        jac[b0 + i, i] = 1.0
+    ez = np.zeros((3, *shape))
+    ez[2] = 1.0
+    for i, axis in enumerate((base_axes[0], base_axes[1], ez)):
+        axis_b = np.broadcast_to(axis, (3, *shape))
+        jac[b0 + 3 + i, :3] = _cross(axis_b, rel_world)
+        jac[b0 + 3 + i, 3:] = axis_b
+    rot = np.stack([_rotate(base_cols, last_cols[c]) for c in range(3)], axis=1)  # (comp, col, ...)
+    return (
+        np.moveaxis(world, 0, -1),
+        np.moveaxis(rot, (0, 1), (-2, -1)),
+        np.moveaxis(jac, (0, 1), (-1, -2)),
+    )

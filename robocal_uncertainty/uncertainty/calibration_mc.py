@@ -1,7 +1,25 @@
-"""Monte Carlo uncertainty of a calibrated arm's tool position (JCGM 101).
+"""Monte Carlo uncertainty of a calibrated arm's tool pose (JCGM 101).
 
 A trial perturbs the campaign according to the enabled sources, re-identifies the
-parameters, and evaluates the tool point at every requested joint configuration.
+parameters, and evaluates the tool pose at every requested joint configuration: the tool
+point and, unless switched off, the tool orientation.
+
+Orientation (3 extra columns per test configuration): a trial stores the rotation vector
+``log(R_trial R_cal^T)`` [rad] of its tool rotation relative to the calibrated one, i.e. a
+rotation about the **fixed x, y, z axes of the output frame** (the ROS convention of the
+orientation block of ``geometry_msgs/PoseWithCovariance``). After the run the mean
+orientation is the chordal L2 mean (SVD projection of the mean rotation matrix) and the
+reported deviations are re-expressed about it, ``log(R_trial R_mean^T)``.
+
+Rotation components the campaign cannot determine are found by estimability, not from the
+spread of the trials: a parameter the measurements cannot identify (e.g. the joint-6 offset
+when only points on joint 6's axis are measured) is held at its nominal value in every trial,
+so the trials show *no* spread along its direction although the data say nothing about it.
+A rotation about a unit axis ``u`` is determined when ``u^T J_w dp = 0`` for every parameter
+change ``dp`` the measurements cannot see (the null space of the candidates' measurement
+Jacobian on the structural probe poses of
+:func:`~robocal_uncertainty.core.observability.structural_observability`); ``J_w`` is the
+angular Jacobian of the tool at the test configuration.
 Trials run in blocks with independent seeded streams (see
 :mod:`robocal_uncertainty.montecarlo.engine`), so the result is the same whatever the
 chunk size or the number of workers.
@@ -20,14 +38,20 @@ from scipy import stats
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
-from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.kinematics import (
+    forward_points,
+    forward_points_and_jacobian,
+    forward_poses,
+    forward_poses_and_jacobian,
+)
 from robocal_uncertainty.core.measurement import POSITION_AXES, joint_columns, row_weights, stack_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
+from robocal_uncertainty.core.rotation import chordal_mean, quaternion_from_matrix, rotation_exp, rotation_log
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, run_trials
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
 from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
-from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary
+from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary, summarize
 from robocal_uncertainty.montecarlo.validation import validate_gum
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy
 from robocal_uncertainty.uncertainty.reidentification import (
@@ -47,9 +71,11 @@ from robocal_uncertainty.uncertainty.sources import (
 
 __all__ = [
     "OUTPUT_FRAMES",
+    "ROTATION_AXES",
     "CalibrationTrials",
     "CalibrationUncertainty",
     "GumPose",
+    "OrientationUncertainty",
     "PoseUncertainty",
     "evaluate_uncertainty",
     "prepare_calibration_trials",
@@ -61,6 +87,12 @@ _SUB_BATCH = 256
 _N_AXES = len(POSITION_AXES)
 OutputFrame = Literal["measurement", "base"]
 OUTPUT_FRAMES: tuple[str, ...] = ("measurement", "base")
+ROTATION_AXES: tuple[str, str, str] = ("rx", "ry", "rz")
+"""Rotation deviations about the fixed x, y, z axes of the output frame."""
+UNDETERMINED_VARIANCE = 1.0e6
+"""Variance [rad^2] published for an undetermined rotation direction (ROS "unknown")."""
+_ESTIMABLE_RTOL = 1e-6
+_NULL_RTOL = 1e-7
 """``measurement``: the frame of the campaign's points (the tracker's, or the base when the
 campaign is in the base frame); ``base``: the robot base frame."""
 
@@ -117,6 +149,8 @@ class PoseUncertainty:
     region : EllipsoidalRegion or None
         JCGM 102 hyper-ellipsoidal 3-D coverage region (None if degenerate).
     gum : GumPose
+    orientation : OrientationUncertainty or None
+        The tool orientation; None when the evaluation was asked for positions only.
     """
 
     joint_positions: Array
@@ -125,6 +159,91 @@ class PoseUncertainty:
     axes: tuple[OutputSummary, ...]
     region: EllipsoidalRegion | None
     gum: GumPose
+    orientation: OrientationUncertainty | None = None
+
+    @property
+    def pose_covariance(self) -> Array | None:
+        """6x6 covariance of (x, y, z, rx, ry, rz) [m^2, m rad, rad^2], or None without orientation."""
+        return None if self.orientation is None else self.orientation.pose_covariance
+
+
+@dataclass(frozen=True)
+class OrientationUncertainty:
+    """Uncertainty statement of the tool orientation at one joint configuration.
+
+    Deviations are rotation vectors about the fixed x, y, z axes of the output frame
+    (``R_trial = exp([delta]x) R_mean``), the ROS convention of
+    ``geometry_msgs/PoseWithCovariance``.
+
+    Attributes
+    ----------
+    mean_rotation : ndarray, shape (3, 3)
+        Chordal L2 mean of the trials' tool rotations, ``output_R_tool``.
+    mean_quaternion : ndarray, shape (4,)
+        The same as a unit quaternion (x, y, z, w), w >= 0.
+    calibrated_rotation : ndarray, shape (3, 3)
+        Tool rotation of the calibrated model (the GUM estimate).
+    covariance : ndarray, shape (3, 3) [rad^2]
+        Monte Carlo covariance of the deviations from the mean (ddof=1).
+    axes : tuple of OutputSummary, length 3
+        Per-axis (rx, ry, rz) summaries of the deviations from the mean [rad]: standard and
+        expanded uncertainty, coverage intervals, histogram.
+    pose_covariance : ndarray, shape (6, 6) [m^2, m rad, rad^2]
+        Covariance of (x, y, z, rx, ry, rz): position, rotation and their correlation. Its
+        position block is :attr:`PoseUncertainty.covariance`.
+    determined : tuple of bool, length 3
+        Per axis: whether the campaign determines the rotation about it. An undetermined
+        axis has no uncertainty statement (its Monte Carlo numbers are not reported).
+    undetermined_directions : ndarray, shape (n_undetermined, 3)
+        Unit axes (output frame) of the rotations the data cannot determine; empty if none.
+    gum : GumPose
+        First-order propagation of the smooth sources through the angular Jacobian,
+        about :attr:`calibrated_rotation` [rad], validated against the Monte Carlo
+        deviations from the same rotation.
+    """
+
+    mean_rotation: Array
+    mean_quaternion: Array
+    calibrated_rotation: Array
+    covariance: Array
+    axes: tuple[OutputSummary, ...]
+    pose_covariance: Array
+    determined: tuple[bool, ...]
+    undetermined_directions: Array
+    gum: GumPose
+
+    @property
+    def fully_determined(self) -> bool:
+        """True when every rotation axis is determined."""
+        return all(self.determined)
+
+    def ros_covariance(
+        self, position_covariance: Array, *, undetermined_variance: float = UNDETERMINED_VARIANCE
+    ) -> Array:
+        """6x6 covariance for ``geometry_msgs/PoseWithCovariance`` (row-major x, y, z, rx, ry, rz).
+
+        The determined part of the Monte Carlo covariance is kept; along each undetermined
+        direction ``u`` the rotation gets `undetermined_variance` [rad^2] (``+ s u u^T``) and no
+        correlation, so only the components that overlap an undetermined direction are huge.
+
+        Parameters
+        ----------
+        position_covariance : ndarray, shape (3, 3) [m^2]
+        undetermined_variance : float [rad^2]
+
+        Returns
+        -------
+        ndarray, shape (6, 6) [m^2, m rad, rad^2]
+        """
+        out = np.array(self.pose_covariance, dtype=np.float64, copy=True)
+        out[:3, :3] = position_covariance
+        u = np.asarray(self.undetermined_directions, dtype=np.float64).reshape(-1, 3)
+        if u.shape[0]:
+            proj = np.eye(6)
+            proj[3:, 3:] -= u.T @ u
+            out = proj @ out @ proj.T
+            out[3:, 3:] += undetermined_variance * (u.T @ u)
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,11 +326,19 @@ class CalibrationTrials:
     sources: tuple[Source, ...]
     gauss_newton_iterations: int
     solver: ChordSolver | None = None
+    reference_rotations: Array | None = None
+
+    @property
+    def orientation(self) -> bool:
+        """Whether trial rows end with the rotation deviations of every test configuration."""
+        return self.reference_rotations is not None
 
     @property
     def n_outputs(self) -> int:
-        """Columns of a trial row: x, y, z per test configuration, then the parameters."""
-        return _N_AXES * self.test_joints.shape[0] + self.x_hat.size
+        """Columns of a trial row: x, y, z per test configuration, the parameters, then (with
+        orientation) rx, ry, rz per test configuration [rad], ``log(R_trial R_ref^T)``."""
+        n_rot = _N_AXES * self.test_joints.shape[0] if self.orientation else 0
+        return _N_AXES * self.test_joints.shape[0] + self.x_hat.size + n_rot
 
     def __call__(self, rng: np.random.Generator, n: int) -> Array:
         """Model values of n trials, shape (n, d n_test + k)."""
@@ -261,13 +388,19 @@ class CalibrationTrials:
                     iterations=self.gauss_newton_iterations,
                 )
             params = self.problem.parameters(x)
-            out[sl, dim * n_test :] = params[:, self.problem.estimated]
+            out[sl, dim * n_test : dim * n_test + self.x_hat.size] = params[:, self.problem.estimated]
             if self.drop_base:
                 # Positions in the robot base frame: the identified base does not enter.
                 b0 = self.problem.layout.base_index
                 params[:, b0 : b0 + 6] = 0.0
             qt = self.test_joints[None] + batch.test_joints if batch.test_joints is not None else self.test_joints
-            pos = forward_points(self.problem.layout, params, qt)
+            if self.reference_rotations is None:
+                pos = forward_points(self.problem.layout, params, qt)
+            else:
+                pos, rot = forward_poses(self.problem.layout, params, qt)
+                # Deviation about the fixed axes of the output frame: exp([d]x) = R R_ref^T.
+                dev = rotation_log(rot @ np.swapaxes(self.reference_rotations, -1, -2))
+                out[sl, dim * n_test + self.x_hat.size :] = dev.reshape(t, dim * n_test)
             if batch.predictions is not None:
                 # Row-vector form of R_out e: model errors live in the measurement frame.
                 pos = pos + batch.predictions @ self.output_rotation.T
@@ -315,11 +448,13 @@ class _Prepared:
     frame_id: str
 
 
-def _field_sensitivities(prep: _Prepared) -> tuple[dict[str, Array], Array]:
+def _field_sensitivities(prep: _Prepared, *, angular: bool = False) -> tuple[dict[str, Array], Array]:
     """First-order sensitivity of the outputs to each additive batch field, and y = f(E[X]).
 
-    Outputs are the d components of the predicted measurement at every test
-    configuration; the identification is linearised at the calibration (x = H b).
+    Outputs are the tool position (x, y, z) at every test configuration or, with `angular`,
+    the rotation deviation (rx, ry, rz) about the calibrated tool rotation (then y = 0),
+    through the angular Jacobian of the tool; the identification is linearised at the
+    calibration (x = H b). Model errors (the predictions field) move positions only.
     """
     problem = prep.problem
     layout = problem.layout
@@ -345,7 +480,12 @@ def _field_sensitivities(prep: _Prepared) -> tuple[dict[str, Array], Array]:
     b0 = layout.base_index
     if trials.drop_base:
         p_out[b0 : b0 + 6] = 0.0
-    y, gy = forward_points_and_jacobian(layout, p_out, prep.test_joints)
+    if angular:
+        _, _, g6 = forward_poses_and_jacobian(layout, p_out, prep.test_joints)
+        gy = np.ascontiguousarray(g6[:, 3:, :])
+        y = np.zeros((n_test, dim))
+    else:
+        y, gy = forward_points_and_jacobian(layout, p_out, prep.test_joints)
     if trials.drop_base:
         gy[:, :, b0 : b0 + 6] = 0.0
     n_out = dim * n_test
@@ -358,7 +498,8 @@ def _field_sensitivities(prep: _Prepared) -> tuple[dict[str, Array], Array]:
     s_pred = np.zeros((n_test, dim, n_test, dim))
     for i in range(n_test):
         s_test[i, :, i, :] = gy[i][:, theta_cols]
-        s_pred[i, :, i, :] = trials.output_rotation
+        if not angular:
+            s_pred[i, :, i, :] = trials.output_rotation
     fields = {
         "points": s_points,
         "joints": s_joints.reshape(n_out, n_poses * n_joints),
@@ -368,12 +509,12 @@ def _field_sensitivities(prep: _Prepared) -> tuple[dict[str, Array], Array]:
     return fields, y.reshape(n_out)
 
 
-def _gum(prep: _Prepared, coverage: float) -> GumResult | None:
+def _gum(prep: _Prepared, coverage: float, *, angular: bool = False) -> GumResult | None:
     """GUM (JCGM 100) propagation of the smooth sources' distributions; None if there is none."""
     smooth = [src for src in prep.trials.sources if src.smooth and src.distribution is not None]
     if not smooth:
         return None
-    fields, y0 = _field_sensitivities(prep)
+    fields, y0 = _field_sensitivities(prep, angular=angular)
     inputs = {}
     columns = []
     for src in smooth:
@@ -388,16 +529,21 @@ def _gum(prep: _Prepared, coverage: float) -> GumResult | None:
     return propagate_gum(estimate, inputs, coverage=coverage, sensitivities=sensitivities)
 
 
-def _gum_poses(prep: _Prepared, summary: Summary, coverage: float, n_dig: int) -> list[GumPose]:
-    """Per test configuration: the GUM statement and its JCGM 101 §8 validation."""
+def _gum_poses(
+    prep: _Prepared, summary: Summary, coverage: float, n_dig: int, *, angular: bool = False
+) -> list[GumPose]:
+    """Per test configuration: the GUM statement and its JCGM 101 §8 validation.
+
+    With `angular`, `summary` holds the rotation deviations about the calibrated rotation.
+    """
     dim = _N_AXES
     n_test = prep.test_joints.shape[0]
     n_out = dim * n_test
     applicable = all(src.smooth for src in prep.trials.sources)
-    gum = _gum(prep, coverage)
+    gum = _gum(prep, coverage, angular=angular)
     k_norm = float(stats.norm.ppf(0.5 + coverage / 2.0))
     if gum is None:
-        _, y_all = _field_sensitivities(prep)
+        _, y_all = _field_sensitivities(prep, angular=angular)
         cov_all = np.zeros((n_out, n_out))
     else:
         y_all = np.array([o.estimate for o in gum.outputs])
@@ -444,6 +590,114 @@ def _gum_poses(prep: _Prepared, summary: Summary, coverage: float, n_dig: int) -
     return out
 
 
+def _calibrated_rotations(calibration: IdentificationResult, test_q: Array, *, drop_base: bool) -> Array:
+    """Tool rotations of the calibrated model at the test configurations, shape (n_test, 3, 3)."""
+    layout = calibration.model.layout
+    p_out = calibration.estimate.copy()
+    if drop_base:
+        p_out[layout.base_index : layout.base_index + 6] = 0.0
+    _, rot = forward_poses(layout, p_out, test_q)
+    return rot
+
+
+def undetermined_rotations(prep: _Prepared) -> list[Array]:
+    """Per test configuration, the unit axes (output frame) of rotations the data cannot fix.
+
+    See the module docstring: the null space ``N`` of the candidates' whitened measurement
+    Jacobian on the structural probe poses (columns normalised, singular values below
+    1e-7 of the largest) holds the parameter changes the measurements cannot see; the
+    directions ``u`` with ``u^T J_w N != 0`` (left singular vectors of ``J_w N`` above 1e-6
+    of the norm of ``J_w``) are undetermined.
+
+    Returns
+    -------
+    list of ndarray, each shape (n_undetermined, 3)
+    """
+    calibration = prep.calibration
+    model = calibration.model
+    layout = model.layout
+    measurement = calibration.measurement
+    cand = np.flatnonzero(calibration.candidates)
+    rng = np.random.default_rng(20231101)  # the probe poses of structural_observability
+    lo, hi = model.joint_limits[:, 0], model.joint_limits[:, 1]
+    probe = rng.uniform(lo, hi, size=(200, model.n_joints))
+    _, jac = measurement.predict_and_jacobian(layout, calibration.estimate, probe)
+    a_mat = stack_jacobian(measurement, jac)[:, cand]
+    norms = np.linalg.norm(a_mat, axis=0)
+    scale = np.where(norms > 1e-9 * norms.max(), norms, 1.0)
+    a_mat = np.where(norms > 1e-9 * norms.max(), a_mat / scale, 0.0)
+    _, sv, vt = np.linalg.svd(a_mat, full_matrices=True)
+    rank = int(np.sum(sv > _NULL_RTOL * sv[0]))
+    null = vt[rank:].T  # (n_cand, n_null), normalised parameter coordinates
+    p_out = calibration.estimate.copy()
+    b0 = layout.base_index
+    if prep.trials.drop_base:
+        p_out[b0 : b0 + 6] = 0.0
+    _, _, g6 = forward_poses_and_jacobian(layout, p_out, prep.test_joints)
+    j_w = g6[:, 3:, :]
+    if prep.trials.drop_base:
+        j_w[:, :, b0 : b0 + 6] = 0.0
+    j_w = j_w[:, :, cand] / scale
+    out = []
+    for i in range(prep.test_joints.shape[0]):
+        if null.shape[1] == 0:
+            out.append(np.zeros((0, 3)))
+            continue
+        m_mat = j_w[i] @ null
+        u, sm, _ = np.linalg.svd(m_mat, full_matrices=False)
+        ref = max(float(np.linalg.norm(j_w[i], 2)), np.finfo(float).tiny)
+        out.append(u[:, sm > _ESTIMABLE_RTOL * ref].T.copy())
+    return out
+
+
+def _orientation_uncertainty(
+    prep: _Prepared,
+    samples: Array,
+    pos_summaries: Summary,
+    coverage: float,
+    n_dig: int,
+) -> list[OrientationUncertainty]:
+    """Orientation statements from the rotation columns (deviations from the calibrated rotations)."""
+    dim = _N_AXES
+    n_test = prep.test_joints.shape[0]
+    k = prep.trials.x_hat.size
+    raw = samples[:, dim * n_test + k :]
+    ref = prep.trials.reference_rotations
+    assert ref is not None
+    # The GUM is about the calibrated rotation: validate it against deviations from it.
+    raw_summary = summarize(raw, coverage)
+    gums = _gum_poses(prep, raw_summary, coverage, n_dig, angular=True)
+    undetermined = undetermined_rotations(prep)
+    out = []
+    for i in range(n_test):
+        dev_ref = raw[:, dim * i : dim * (i + 1)]
+        # Chordal mean: R_mean = proj(mean_t exp(d_t)) R_ref; deviations about it.
+        mean_dev = chordal_mean(rotation_exp(dev_ref))
+        mean_rot = mean_dev @ ref[i]
+        dev = rotation_log(rotation_exp(dev_ref) @ mean_dev.T)
+        rot_summary = summarize(dev, coverage)
+        pos = samples[:, dim * i : dim * (i + 1)]
+        pose_cov = np.cov(np.hstack((pos, dev)), rowvar=False, ddof=1)
+        pose_cov[:3, :3] = pos_summaries.covariance[dim * i : dim * (i + 1), dim * i : dim * (i + 1)]
+        pose_cov[3:, 3:] = rot_summary.covariance
+        dirs = undetermined[i]
+        determined = tuple(bool(np.linalg.norm(dirs[:, a]) <= _ESTIMABLE_RTOL) for a in range(dim))
+        out.append(
+            OrientationUncertainty(
+                mean_rotation=mean_rot,
+                mean_quaternion=quaternion_from_matrix(mean_rot),
+                calibrated_rotation=ref[i],
+                covariance=rot_summary.covariance,
+                axes=rot_summary.outputs,
+                pose_covariance=pose_cov,
+                determined=determined,
+                undetermined_directions=dirs,
+                gum=gums[i],
+            )
+        )
+    return out
+
+
 def _prepare(
     model: RobotModel,
     campaign: Campaign,
@@ -452,6 +706,8 @@ def _prepare(
     calibration: IdentificationResult | None,
     lambda_: str | float,
     frame: str,
+    *,
+    orientation: bool = False,
 ) -> _Prepared:
     if frame not in OUTPUT_FRAMES:
         msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
@@ -533,6 +789,7 @@ def _prepare(
         solver=None
         if settings.jacobian == "exact"
         else ChordSolver.at(problem, calibration.estimate, campaign.joint_positions),
+        reference_rotations=_calibrated_rotations(calibration, test_q, drop_base=drop_base) if orientation else None,
     )
     return _Prepared(
         trials=trials,
@@ -594,8 +851,9 @@ def evaluate_uncertainty(
     progress: Callable[[int, int | None], None] | None = None,
     frame: str = "measurement",
     executor: object | None = None,
+    orientation: bool = True,
 ) -> CalibrationUncertainty:
-    """Monte Carlo uncertainty of the calibrated tool position at test configurations.
+    """Monte Carlo uncertainty of the calibrated tool pose at test configurations.
 
     Parameters
     ----------
@@ -639,6 +897,10 @@ def evaluate_uncertainty(
         Runs the trial blocks instead of local processes: anything with a
         ``concurrent.futures``-style ``submit`` (a process pool, a ``dask.distributed``
         Client). Never changes the result.
+    orientation : bool
+        Also evaluate the tool orientation (3 more columns per test configuration, see the
+        module docstring); positions and parameters are the same either way, bit for bit.
+        The adaptive procedure monitors the positions only.
 
     Returns
     -------
@@ -654,7 +916,7 @@ def evaluate_uncertainty(
         msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
         raise ConfigError(msg)
     test_q, n_trials = _validate_inputs(model, test_joint_positions, coverage, trials)
-    prep = _prepare(model, campaign, test_q, settings, calibration, lambda_, frame)
+    prep = _prepare(model, campaign, test_q, settings, calibration, lambda_, frame, orientation=orientation)
     calibration = prep.calibration
     trial_block = prep.trials
     dim = _N_AXES
@@ -676,9 +938,14 @@ def evaluate_uncertainty(
         executor=executor,
         progress=progress,
     )
-    summary = result.summary(coverage)
     n_test = test_q.shape[0]
+    # Positions and parameters: the same columns (and numbers) with or without orientation.
+    samples = result.samples[:, : dim * n_test + prep.problem.estimated.size]
+    summary = summarize(samples, coverage)
     gum = _gum_poses(prep, summary, coverage, n_dig)
+    orientations = (
+        _orientation_uncertainty(prep, result.samples, summary, coverage, n_dig) if orientation else [None] * n_test
+    )
     poses = []
     warns: list[str] = list(calibration.warnings)
     for i in range(n_test):
@@ -697,6 +964,7 @@ def evaluate_uncertainty(
                 axes=tuple(axes),
                 region=region,
                 gum=gum[i],
+                orientation=orientations[i],
             )
         )
     if result.adaptive is not None and not result.adaptive.converged:
@@ -715,7 +983,7 @@ def evaluate_uncertainty(
         seed=seed,
         block_size=block_size,
         adaptive=result.adaptive,
-        samples=result.samples,
+        samples=samples,
         lambda_star=calibration.lambda_,
         lambda_range=prep.lambda_range,
         frame=frame,  # type: ignore[arg-type]
