@@ -45,7 +45,14 @@ seconds apart)."""
 def _load_robot(name: str, *, base_known: bool | None = None) -> Any:
     from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
 
-    model = load_robot_model(resolve_robot_config(name))
+    path = resolve_robot_config(name)
+    try:
+        model = load_robot_model(path)
+    except ConfigError as err:
+        if str(path) in str(err) or Path(path).name in str(err):
+            raise
+        msg = f"robot config {path}: {err}"  # every message names the file it is about
+        raise ConfigError(msg) from err
     if base_known is not None:
         model = replace(model, base_known=base_known)
     return model
@@ -1224,8 +1231,8 @@ def _build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_validate)
 
     p = sub.add_parser("map", help="uncertainty map over the workspace: u at many configurations, where it is weakest")
-    p.add_argument("campaign")
-    p.add_argument("--robot", required=True)
+    p.add_argument("campaign", help="campaign: .mcap file or rosbag2 directory")
+    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--configurations", type=int, default=1000, help="uniform random configurations (default %(default)s)"
