@@ -27,10 +27,12 @@ from typing import Any
 import numpy as np
 
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.rotation import quaternion_from_matrix
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.montecarlo import CoverageInterval, OutputSummary
 from robocal_uncertainty.report.configurations import ConfigurationSummary, summarize_configurations
 from robocal_uncertainty.uncertainty.calibration_mc import (
+    ROTATION_AXES,
     CalibrationUncertainty,
     PoseUncertainty,
 )
@@ -58,6 +60,12 @@ UNITS: dict[str, str] = {
     "_m": "metre",
     "_m2": "square metre (covariances of positions)",
     "_rad": "radian",
+    "_rad2": "square radian (covariances of rotation deviations)",
+    "_m_rad": "metre radian (position-rotation covariances)",
+    "orientation": (
+        "rotation deviations are rotation vectors about the fixed x, y, z axes of the output frame "
+        "(R = exp([d]x) R_mean, the ROS PoseWithCovariance convention); quaternions are (x, y, z, w)"
+    ),
     "_pct": "percent",
     "_m_per_m": "metre per metre of distance (tracker MPE slope)",
     "parameters": (
@@ -153,6 +161,56 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
     }
 
 
+def _rotation_axis(name: str, axis: OutputSummary, determined: bool) -> dict[str, Any]:
+    """One rotation axis in radians; an undetermined axis carries no numbers."""
+    if not determined:
+        return {"axis": name, "determined": False}
+    out = _axis(name, axis)
+    out = {k[:-2] + "_rad" if k.endswith("_m") else k: v for k, v in out.items()}
+    for interval in out["intervals"].values():
+        interval["low_rad"] = interval.pop("low_m")
+        interval["high_rad"] = interval.pop("high_m")
+    out["determined"] = True
+    return out
+
+
+def _orientation(pose: PoseUncertainty) -> dict[str, Any] | None:
+    o = pose.orientation
+    if o is None:
+        return None
+    det = o.determined
+    gum = o.gum
+    return {
+        "deviation_frame": "fixed x, y, z axes of the output frame (rotation vector of R_trial R_mean^T)",
+        "mean_quaternion_xyzw": o.mean_quaternion,
+        "mean_rotation_matrix": o.mean_rotation,
+        "calibrated_quaternion_xyzw": quaternion_from_matrix(o.calibrated_rotation),
+        "determined": list(det),
+        "undetermined_directions": o.undetermined_directions,
+        "undetermined_reason": (
+            None
+            if o.fully_determined
+            else "the measurements cannot see a parameter change that rotates the tool about these axes "
+            "(estimability test on the identification Jacobian); no uncertainty is stated about them"
+        ),
+        "standard_uncertainty_rad": [a.standard_uncertainty if d else None for a, d in zip(o.axes, det)],
+        "expanded_uncertainty_rad": [a.expanded_uncertainty if d else None for a, d in zip(o.axes, det)],
+        "covariance_rad2": o.covariance,
+        "pose_covariance_m_rad": o.pose_covariance,
+        "ros_pose_covariance": o.ros_covariance(pose.covariance),
+        "axes": [_rotation_axis(n, a, d) for n, a, d in zip(ROTATION_AXES, o.axes, det)],
+        "gum": {
+            "applicable": gum.applicable,
+            "about": "calibrated orientation",
+            "standard_uncertainty_rad": gum.standard_uncertainty,
+            "covariance_rad2": gum.covariance,
+            "expanded_uncertainty_rad": gum.expanded_uncertainty,
+            "coverage_factor": gum.coverage_factor,
+            "validated": list(gum.validated),
+        },
+    }
+
+
 def _pose(
     index: int, pose: PoseUncertainty, result: CalibrationUncertainty, summary: ConfigurationSummary
 ) -> dict[str, Any]:
@@ -189,6 +247,7 @@ def _pose(
             "delta_m": gum.delta,
         },
         "region": None,
+        "orientation": _orientation(pose),
     }
     if result.adaptive is not None:
         cols = slice(3 * index, 3 * index + 3)
