@@ -14,6 +14,7 @@ from robocal_uncertainty.core import identify, load_robot_model
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
 
 JOINTS = [str(v) for v in PAPER_TEST_JOINTS_DEG]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +54,7 @@ def test_evaluate_report_equals_api(campaign_file: Path, tmp_path: Path) -> None
     ]
     assert main(argv) == 0
     report = json.loads((out / "report.json").read_text())
-    model = load_robot_model("config/paper_arm.yaml")
+    model = load_robot_model(ROOT / "config" / "paper_arm.yaml")
     campaign = read_campaign(campaign_file)
     api = evaluate_uncertainty(
         model,
@@ -91,7 +92,7 @@ def test_demo_prints_table2_and_writes_report(tmp_path: Path, capsys: pytest.Cap
 
 def test_import_csv_and_calibrate_real_ur10(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     campaign = tmp_path / "ur10.mcap"
-    csv = Path("test/data/ur10_laser_tracker/measurements_iso_cubes.csv")
+    csv = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
     assert main(["import-csv", str(csv), "--out", str(campaign)]) == 0
     assert main(["calibrate", str(campaign), "--robot", "ur10", "--json", str(tmp_path / "cal.json")]) == 0
     out = capsys.readouterr().out

@@ -16,6 +16,7 @@ from robocal_uncertainty.cli import PAPER_TEST_JOINTS_DEG, main
 from robocal_uncertainty.core import Campaign
 
 JOINTS = [str(v) for v in PAPER_TEST_JOINTS_DEG]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +139,7 @@ def test_calibrate_refuses_a_campaign_recorded_in_degrees(
 
 def test_real_ur10_campaign_is_within_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     campaign = tmp_path / "ur10.mcap"
-    csv = Path("test/data/ur10_laser_tracker/measurements_iso_cubes.csv")
+    csv = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
     assert main(["import-csv", str(csv), "--out", str(campaign)]) == 0
     assert main(["calibrate", str(campaign), "--robot", "ur10"]) == 0
     assert capsys.readouterr().err == ""
