@@ -51,7 +51,7 @@ from robocal_uncertainty.report.table2 import (
     round_to_uncertainty,
     table2_rows,
 )
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, PoseUncertainty
 from robocal_uncertainty.uncertainty.sources import SOURCE_DESCRIPTIONS
 from robocal_uncertainty.uncertainty.sweeps import Sweep
 
@@ -278,7 +278,40 @@ def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) 
                     f"(a trivariate normal would give {r.normal_coverage_factor:.3f})."
                 )
             )
+        blocks += _orientation(pose)
     return blocks
+
+
+def _mrad(value: float) -> str:
+    return format_significant(value * 1e3)
+
+
+def _orientation(pose: PoseUncertainty) -> list[_Block]:
+    """Orientation of one test configuration: mean quaternion, per-axis statement in mrad."""
+    o = pose.orientation
+    if o is None:
+        return []
+    quat = ", ".join(f"{v:.6f}" for v in o.mean_quaternion)
+    text = (
+        f"Tool orientation: mean (chordal L2) quaternion (x, y, z, w) = ({quat}). Deviations are "
+        "rotations about the fixed x, y, z axes of the output frame (ROS PoseWithCovariance), in mrad."
+    )
+    if not o.fully_determined:
+        dirs = "; ".join("(" + ", ".join(f"{c:+.3f}" for c in d) + ")" for d in o.undetermined_directions)
+        text += (
+            f" The campaign cannot determine the rotation about {dirs} (output frame): no parameter the "
+            "measurements see moves it, so the axes that overlap it are reported as undetermined."
+        )
+    rows: list[tuple[str, ...]] = []
+    labels = (
+        ("u / mrad", lambda j: _mrad(o.axes[j].standard_uncertainty)),
+        ("U / mrad", lambda j: _mrad(o.axes[j].expanded_uncertainty)),
+        ("interval / mrad", lambda j: f"[{_mrad(o.axes[j].interval.low)}, {_mrad(o.axes[j].interval.high)}]"),
+        ("GUM u / mrad", lambda j: _mrad(float(o.gum.standard_uncertainty[j]))),
+    )
+    for label, cell in labels:
+        rows.append((label, *(cell(j) if o.determined[j] else "undetermined" for j in range(3))))
+    return [_Para(text), _table(("Quantity", "rx", "ry", "rz"), rows)]
 
 
 def _budget(budget: Mapping[str, CalibrationUncertainty], indices: Sequence[int]) -> list[_Block]:

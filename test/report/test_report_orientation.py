@@ -31,3 +31,13 @@ def test_orientation_block_states_units_and_undetermined_axes(setup, tmp_path) -
     assert u @ ros[3:, 3:] @ u > 1e5
     assert np.array(block["pose_covariance_m_rad"]).shape == (6, 6)
     assert len(block["gum"]["standard_uncertainty_rad"]) == 3
+
+
+def test_markdown_report_has_orientation_rows_in_mrad(setup, tmp_path) -> None:
+    from robocal_uncertainty.report import write_report
+
+    out = write_report(tmp_path, setup.result, robot_name="paper_arm", embed_images=False)
+    md = (out / "report.md").read_text(encoding="utf-8")
+    assert "Tool orientation: mean (chordal L2) quaternion" in md
+    assert "| u / mrad | undetermined | undetermined | undetermined |" in md
+    assert "cannot determine the rotation about" in md
