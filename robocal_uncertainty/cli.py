@@ -414,7 +414,9 @@ def _uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Sequ
     )
 
 
-def _evaluation_options(args: argparse.Namespace, sources: Sequence[str], test_joints: NDArray[np.float64]) -> Any:
+def _evaluation_options(
+    args: argparse.Namespace, sources: Sequence[str], test_joints: NDArray[np.float64] | None
+) -> Any:
     """The :class:`EvaluationOptions` of the parsed uncertainty arguments."""
     from robocal_uncertainty.uncertainty import EvaluationOptions, parse_sources
 
@@ -857,7 +859,6 @@ _POSITIVE_INTS = (
     "min_poses",
     "subset_size",
     "poses",
-    "configurations",
     "block_size",
     "train_poses",
 )

@@ -90,7 +90,7 @@ def small_campaign_options(
     k = int(calibration.estimated.sum())
     fewest = math.ceil(k / dim)
     notes: list[str] = []
-    changes: dict[str, int] = {}
+    changes: dict[str, Any] = {}
     default_min = max(math.ceil(40 / dim), math.ceil(1.5 * k / dim))
     uses_min = "n_poses" in sources or "pose_choice" in sources or options.sweeps
     if settings.min_poses is None and uses_min and default_min > n_poses:

@@ -296,7 +296,7 @@ def _joint_matrix(events: list[tuple[bool, Any]], joint_names: Sequence[str]) ->
             rows.append([float(message.position[index[n]]) for n in joint_names])
     t = np.array(stamps, dtype=np.int64)
     q = np.array(rows, dtype=np.float64).reshape(len(rows), len(joint_names))
-    ok = np.isfinite(q).all(axis=1)
+    ok: np.ndarray = np.asarray(np.isfinite(q).all(axis=1))
     if t.size > 1:
         ok[1:] &= np.diff(t) > 0
     return t[ok], q[ok]
