@@ -32,14 +32,15 @@ ROOT = Path(__file__).resolve().parents[1]
 ROTOR37 = ROOT / "test" / "inspection" / "data" / "nasa_rotor37_blade_geometry.dat"
 INSTRUMENT = ROOT / "config" / "instruments" / "cmm_seed.yaml"
 
-# The seed's published Monte Carlo results (value, standard uncertainty) in mm / µm / degrees;
+# The seed's published Monte Carlo results (value, standard uncertainty) in mm / µm
+# (twist: degrees / millidegrees);
 # its Table 1 (chord) and Table 2 (profile) survive only as captions, so only the GUM chord
 # budget is known for the chord: U95 = 4.686 µm with u3 = 2.087 µm repeatability.
 SEED = {
     "max_thickness": (30.365, 1.76),
     "axial_offset": (-0.1013, 0.089),
     "circumferential_offset": (0.0538, 0.045),
-    "twist_angle": (0.0512, 0.00031),
+    "twist_angle": (0.0512, 0.31),
 }
 
 
@@ -87,7 +88,8 @@ def main() -> None:
         out = result.monte_carlo.outputs[j]
         gum = result.gum.outputs[j]
         angle = name == "twist_angle"
-        value_scale, u_scale = (math.degrees(1.0), math.degrees(1.0)) if angle else (1e3, 1e6)
+        # Twist: value in degrees, uncertainties in millidegrees (the seed's u is 0.31 m°).
+        value_scale, u_scale = (math.degrees(1.0), 1e3 * math.degrees(1.0)) if angle else (1e3, 1e6)
         seed = SEED.get(name)
         seed_text = "" if seed is None else f"{seed[0]:g}, {seed[1]:g}"
         print(
@@ -95,7 +97,7 @@ def main() -> None:
             f"{out.expanded_uncertainty * u_scale:10.5f} {gum.standard_uncertainty * u_scale:10.5f} "
             f"{'yes' if result.validation[j].validated else 'no ':3s} {seed_text}"
         )
-    print("units: value mm (twist °), u and U95 µm (twist °)")
+    print("units: value mm (twist °), u and U95 µm (twist m°); seed column likewise")
     budget = result.gum.sensitivities[1] * 1e6
     u_c = float(np.sqrt((budget**2).sum()))
     print(

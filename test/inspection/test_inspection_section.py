@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import CASCADE, ellipse, stadium
+from scipy.spatial import Voronoi, cKDTree
 
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements, point_error_sources
@@ -241,3 +242,18 @@ def test_real_blades_with_simulated_cmm_noise(blade: str, rotor37_curve: Nominal
     assert measured[:2] == pytest.approx(truth[:2], abs=10e-6)
     assert measured[5:] == pytest.approx(truth[5:], abs=15e-6)
     assert np.array_equal(np.bincount(result.segmentation.labels, minlength=4) > 0, [True] * 4)
+
+
+def test_max_thickness_is_the_largest_inscribed_circle_of_the_real_blade(rotor37_curve: NominalCurve) -> None:
+    # Largest inscribed circle of the nominal curve: the Voronoi vertex of 20 000 curve points
+    # farthest from its sites among those inside the section.
+    dense = rotor37_curve.point(np.linspace(0.0, rotor37_curve.period, 20_000, endpoint=False))
+    vertices = Voronoi(dense).vertices
+    vertices = vertices[np.abs(vertices - dense.mean(axis=0)).max(axis=1) < 0.3]
+    inside = vertices[rotor37_curve.closest(vertices).distance < 0]
+    diameter = 2.0 * float(cKDTree(dense).query(inside)[0].max())
+    cloud = simulate_section_scan(rotor37_curve, 1836)
+    thickness = evaluate_section(cloud, rotor37_curve).parameters.max_thickness
+    # The seed's algorithm on 1 836 points is within 0.1 µm of the inscribed-circle diameter.
+    assert thickness == pytest.approx(diameter, abs=0.1e-6)
+    assert diameter == pytest.approx(30.367e-3, abs=1e-6)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.inspection.cmm_model import SOURCE_NAMES, CmmInstrument
+from robocal_uncertainty.inspection.cmm_model import SOURCE_NAMES, CmmInstrument, point_displacements
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
@@ -22,6 +22,7 @@ from robocal_uncertainty.inspection.section_mc import (
 )
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, block_rng, run_trials
+from robocal_uncertainty.montecarlo.summary import summarize
 
 TRUE_OFFSET = (-0.1013e-3, 0.0538e-3)  # the seed's measured offsets [m]
 TRUE_TWIST = np.deg2rad(0.0512)  # the seed's measured twist [rad]
@@ -190,3 +191,30 @@ def test_adaptive_trial_count(small_scan: PointCloud, rotor37_curve: NominalCurv
     report = result.monte_carlo.adaptive
     assert report is not None and report.converged
     assert result.monte_carlo.n_trials % 2000 == 0
+
+
+@pytest.mark.slow
+def test_coverage_over_200_simulated_scans(rotor37_curve: NominalCurve) -> None:
+    """Issue 9: over 200 simulated scans the 95 % intervals contain the true parameter 95 ± 3 %.
+
+    Holds for the offsets and the twist (linear in the errors). The max/min-defined parameters
+    are biased by the very noise the Monte Carlo adds again (the seed's method perturbs the
+    measured cloud), so their intervals miss the truth more often: measured on this scenario,
+    chord 89.5 %, thickness 72 %, profiles 0 % (the noise range adds to every measured profile).
+    """
+    true_cloud = simulate_section_scan(rotor37_curve, 1836, offset=TRUE_OFFSET, twist=TRUE_TWIST, form_amplitude=5e-6)
+    clean = evaluate_section(true_cloud, rotor37_curve)
+    truth = clean.parameters.as_array()
+    true_sources = section_sources(clean, CmmInstrument(), probe_vectors=true_cloud.probe_vectors)
+    scans = 200
+    hits = np.zeros(9)
+    for k in range(scans):
+        rng = np.random.default_rng(np.random.SeedSequence(77, spawn_key=(k,)))
+        noisy = clean.points + point_displacements(true_sources, rng)[0]
+        evaluation = evaluate_section(noisy, rotor37_curve)
+        sources = section_sources(evaluation, CmmInstrument())
+        block = SectionTrials(build_frozen_model(evaluation, sources), sources, (0, 1, 2, 3))
+        summary = summarize(run_trials(block, seed=k, n_trials=2000, block_size=2000).samples, 0.95, bins=10)
+        hits += [out.probabilistically_symmetric.contains(t) for out, t in zip(summary.outputs, truth)]
+    coverage = hits / scans
+    assert ((coverage[2:5] >= 0.92) & (coverage[2:5] <= 0.98)).all(), coverage
