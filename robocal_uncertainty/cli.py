@@ -216,25 +216,30 @@ def _print_calibration(result: Any) -> None:
         f"  residual RMS {result.rms_before * 1e3:.4f} mm -> {result.rms_after * 1e3:.4f} mm, "
         f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm"
     )
+    from robocal_uncertainty.report.table2 import format_significant, round_to_uncertainty
+
     print("  parameter            nominal        estimate   1st-order std")
     kinds = result.model.layout.kinds
     for i, name in enumerate(result.parameter_names):
         if not result.estimated[i]:
             continue
-        if kinds[i] == "length":
-            print(
-                f"  {name:<16} {result.nominal[i] * 1e3:12.4f} mm {result.estimate[i] * 1e3:12.4f} mm "
-                f"{result.linearized_std[i] * 1e6:9.2f} um"
-            )
-        else:
-            print(
-                f"  {name:<16} {np.degrees(result.nominal[i]):12.5f} deg {np.degrees(result.estimate[i]):11.5f} deg "
-                f"{np.degrees(result.linearized_std[i]) * 1e3:8.3f} mdeg"
-            )
+        scale, unit, uscale, uunit = (
+            (1e3, "mm", 1e6, "um")
+            if kinds[i] == "length"
+            else (float(np.degrees(1.0)), "deg", float(np.degrees(1.0)) * 1e3, "mdeg")
+        )
+        u = float(result.linearized_std[i])
+        print(
+            f"  {name:<16} {result.nominal[i] * scale:12.6g} {unit:<3} "
+            f"{round_to_uncertainty(result.estimate[i] * scale, u * scale):>12} {unit:<3} "
+            f"{format_significant(u * uscale):>8} {uunit}"
+        )
     if result.dependencies:
         print("  not identifiable from position data (kept at nominal):")
+        from robocal_uncertainty.core.observability import describe_dependency
+
         for dep in result.dependencies:
-            print(f"    {dep}")
+            print(f"    {describe_dependency(dep)}")
     for warning in result.warnings:
         print(f"  warning: {warning}")
 

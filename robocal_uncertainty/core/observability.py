@@ -11,6 +11,7 @@ choice is deterministic and matches common practice (keep the base yaw, drop the
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,7 +20,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.measurement import POINT, MeasurementType, stack_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
 
-__all__ = ["Observability", "structural_observability"]
+__all__ = ["Observability", "describe_dependency", "structural_observability"]
 
 _STRUCTURAL_TOL = 1e-7
 _N_PROBE_POSES = 200
@@ -43,6 +44,25 @@ class Observability:
     candidates: NDArray[np.bool_]
     identifiable: NDArray[np.bool_]
     dependencies: tuple[str, ...]
+
+
+def describe_dependency(dependency: str) -> str:
+    """Readable form of one `Observability.dependencies` line, for consoles and reports.
+
+    ``"joint3.d = 1 * joint2.d"`` becomes ``"joint3.d and joint2.d act alike (column of
+    joint3.d = 1 × column of joint2.d): only their combination is identifiable"``; other
+    lines come back unchanged.
+    """
+    name, sep, rhs = dependency.partition(" = ")
+    if not sep:
+        return dependency
+    terms = re.findall(r"([+-]?\s*[0-9.eE+-]+) \* (\S+)", rhs)
+    if not terms:
+        return dependency
+    others = [other for _, other in terms]
+    expr = " ".join(f"{coef.strip()} × column of {other}" for coef, other in terms).replace(" -", " − ")
+    subject = f"{name} and {' and '.join(others)}" if len(others) == 1 else f"{name}, {', '.join(others)}"
+    return f"{subject} act alike (column of {name} = {expr}): only their combination is identifiable"
 
 
 def _probe_poses(model: RobotModel) -> NDArray[np.float64]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import base64
 import html
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.observability import describe_dependency
 from robocal_uncertainty.report.configurations import (
     DETAIL_LIMIT,
     ConfigurationSummary,
@@ -45,6 +47,7 @@ from robocal_uncertainty.report.plots import (
     plot_uncertainty_vs_reach,
 )
 from robocal_uncertainty.report.table2 import (
+    RELATIVE_NOTE,
     budget_rows,
     format_significant,
     gum_verdict,
@@ -269,6 +272,7 @@ def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) 
         )
         rows = [(label, *cells) for label, cells in table2_rows(pose, "mm")]
         blocks.append(_table(("Quantity", "x", "y", "z"), rows))
+        blocks.append(_Para(RELATIVE_NOTE))
         if pose.region is not None:
             r = pose.region
             blocks.append(
@@ -476,12 +480,13 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
         reasons = []
         for name in missing:
             why = [d for d in cal.dependencies if d.split(" ", 1)[0] == name]
-            reasons.append(f"{name}: {'; '.join(why) if why else 'not identifiable from position data'}")
+            text = "; ".join(describe_dependency(d) for d in why)
+            reasons.append(f"{name}: {text or 'not identifiable from position data'}")
         blocks.append(_Heading(3, "Not identifiable (kept at nominal)"))
         blocks.append(_List(tuple(reasons)))
     others = [d for d in cal.dependencies if d.split(" ", 1)[0] not in missing]
     if others:
-        blocks.append(_Para("Other dependencies: " + "; ".join(others)))
+        blocks.append(_Para("Other dependencies: " + "; ".join(describe_dependency(d) for d in others)))
     return blocks
 
 
@@ -555,10 +560,19 @@ def _render_md(blocks: Sequence[_Block]) -> str:
 _CSS = (
     "body{font-family:sans-serif;max-width:70em;margin:2em auto;padding:0 1em;color:#222}"
     "table{border-collapse:collapse;margin:1em 0}"
-    "th,td{border:1px solid #aaa;padding:.25em .6em;text-align:right}"
-    "th:first-child,td:first-child{text-align:left}th{background:#eee}"
+    "th,td{border:1px solid #aaa;padding:.25em .6em;text-align:right;vertical-align:top}"
+    "th:first-child,td:first-child,td.text{text-align:left}th{background:#eee}"
     "img{max-width:100%}figure{margin:1em 0}figcaption{font-style:italic}"
 )
+
+
+_NUMERIC = re.compile(r"^[\s(]*[-+−]?[0-9.]+([eE][-+]?[0-9]+)?([\s,/]+[-+−]?[0-9.]+)*[)\s]*[a-zµ%°]*$")
+
+
+def _html_cell(text: str) -> str:
+    """A table cell: numbers right-aligned (the CSS default), text such as descriptions left."""
+    style = "" if _NUMERIC.match(text) else ' class="text"'
+    return f"<td{style}>{html.escape(text)}</td>"
 
 
 def _render_html(blocks: Sequence[_Block], title: str, directory: Path, embed: bool) -> str:
@@ -577,7 +591,7 @@ def _render_html(blocks: Sequence[_Block], title: str, directory: Path, embed: b
             out.append("<ul>" + "".join(f"<li>{e(i)}</li>" for i in b.items) + "</ul>")
         elif isinstance(b, _Table):
             head = "".join(f"<th>{e(h)}</th>" for h in b.header)
-            body = "".join("<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in b.rows)
+            body = "".join("<tr>" + "".join(_html_cell(c) for c in row) + "</tr>" for row in b.rows)
             out.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
         else:
             src = b.file

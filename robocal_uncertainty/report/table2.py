@@ -24,6 +24,7 @@ from robocal_uncertainty.uncertainty.calibration_mc import (
 
 __all__ = [
     "LENGTH_UNITS",
+    "RELATIVE_NOTE",
     "SEED_TABLE2",
     "SeedTable2Axis",
     "budget_rows",
@@ -149,6 +150,13 @@ def pose_header(result: CalibrationUncertainty, index: int) -> list[str]:
     ]
 
 
+RELATIVE_NOTE = (
+    "Relative expanded uncertainty = 100 U / |output value|: it depends on where the frame origin "
+    "lies (the same U reads smaller far from it); compare U."
+)
+"""Footnote to the relative expanded uncertainty row of Table 2."""
+
+
 def table2_rows(pose: PoseUncertainty, unit: str = "mm") -> list[tuple[str, list[str]]]:
     """Rows of Table 2 for one pose: (label with unit, [x, y, z] cells)."""
     s = _scale(unit)
@@ -207,6 +215,7 @@ def format_table2(result: CalibrationUncertainty, *, unit: str = "mm") -> str:
         lines = pose_header(result, i)
         rows = [[label, *cells] for label, cells in table2_rows(pose, unit)]
         lines.extend(_grid(["Quantity", "x", "y", "z"], rows))
+        lines.append(RELATIVE_NOTE)
         blocks.append("\n".join(lines))
     return "\n\n".join(blocks) + "\n"
 

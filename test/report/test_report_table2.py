@@ -123,3 +123,23 @@ def test_format_budget(setup):
     u_um = [a.standard_uncertainty * 1e6 for a in result.poses[0].axes]
     row = next(line for line in text.splitlines() if line.startswith("tracker"))
     assert row.split()[1:4] == [round_to_uncertainty(u, u) for u in u_um]
+
+
+def test_round_to_uncertainty_keeps_two_significant_digits_of_u() -> None:
+    from robocal_uncertainty.report.table2 import format_significant, round_to_uncertainty
+
+    assert round_to_uncertainty(206.176, 8.3) == "206.2"
+    assert round_to_uncertainty(1708870.0, 45000.0) == "1710000"
+    assert round_to_uncertainty(0.4597, 0.0083) == "0.4597"
+    assert format_significant(206.176) == "210"
+
+
+def test_describe_dependency_reads_as_columns() -> None:
+    from robocal_uncertainty.core.observability import describe_dependency
+
+    text = describe_dependency("joint3.d = 1 * joint2.d")
+    assert text == (
+        "joint3.d and joint2.d act alike (column of joint3.d = 1 × column of joint2.d): "
+        "only their combination is identifiable"
+    )
+    assert describe_dependency("joint6.theta does not move the measured point").endswith("point")
