@@ -5,44 +5,49 @@
 the batched Monte Carlo under the CMM model (``load_instrument``) with the GUM comparison.
 """
 
-from robocal_uncertainty.inspection.cmm_model import (
-    SOURCE_NAMES,
-    CmmInstrument,
-    ErrorSource,
-    load_instrument,
-    point_displacements,
-    point_error_sources,
-    seed_instrument,
-)
-from robocal_uncertainty.inspection.nominal_curve import ClosestPoints, NominalCurve
-from robocal_uncertainty.inspection.point_cloud import (
-    LENGTH_UNITS,
-    NominalSection,
-    PointCloud,
-    read_cascade_profile,
-    read_nominal_section,
-    read_point_cloud,
-    read_rotor37_section,
-)
-from robocal_uncertainty.inspection.registration import Registration, register_to_nominal
-from robocal_uncertainty.inspection.section import (
-    PARAMETER_NAMES,
-    PARAMETER_UNITS,
-    SectionEvaluation,
-    SectionOptions,
-    SectionParameters,
-    chord_length,
-    evaluate_section,
-    max_thickness,
-    profile_deviations,
-)
-from robocal_uncertainty.inspection.section_mc import (
-    SectionUncertainty,
-    full_section_trials,
-    section_uncertainty,
-)
-from robocal_uncertainty.inspection.segmentation import REGIONS, Segmentation, segment_section
-from robocal_uncertainty.inspection.simulate import simulate_section_scan
+from typing import TYPE_CHECKING
+
+from robocal_uncertainty._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.inspection.cmm_model import (
+        SOURCE_NAMES,
+        CmmInstrument,
+        ErrorSource,
+        load_instrument,
+        point_displacements,
+        point_error_sources,
+        seed_instrument,
+    )
+    from robocal_uncertainty.inspection.nominal_curve import ClosestPoints, NominalCurve
+    from robocal_uncertainty.inspection.point_cloud import (
+        LENGTH_UNITS,
+        NominalSection,
+        PointCloud,
+        read_cascade_profile,
+        read_nominal_section,
+        read_point_cloud,
+        read_rotor37_section,
+    )
+    from robocal_uncertainty.inspection.registration import Registration, register_to_nominal
+    from robocal_uncertainty.inspection.section import (
+        PARAMETER_NAMES,
+        PARAMETER_UNITS,
+        SectionEvaluation,
+        SectionOptions,
+        SectionParameters,
+        chord_length,
+        evaluate_section,
+        max_thickness,
+        profile_deviations,
+    )
+    from robocal_uncertainty.inspection.section_mc import (
+        SectionUncertainty,
+        full_section_trials,
+        section_uncertainty,
+    )
+    from robocal_uncertainty.inspection.segmentation import REGIONS, Segmentation, segment_section
+    from robocal_uncertainty.inspection.simulate import simulate_section_scan
 
 __all__ = [
     "LENGTH_UNITS",
@@ -80,3 +85,4 @@ __all__ = [
     "segment_section",
     "simulate_section_scan",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)
