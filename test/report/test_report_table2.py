@@ -129,7 +129,7 @@ def test_round_to_uncertainty_keeps_two_significant_digits_of_u() -> None:
     from robocal_uncertainty.report.table2 import format_significant, round_to_uncertainty
 
     assert round_to_uncertainty(206.176, 8.3) == "206.2"
-    assert round_to_uncertainty(1708870.0, 45000.0) == "1710000"
+    assert round_to_uncertainty(1708870.0, 45000.0) == "1709000"
     assert round_to_uncertainty(0.4597, 0.0083) == "0.4597"
     assert format_significant(206.176) == "210"
 
