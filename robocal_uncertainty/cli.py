@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.errors import CalibError, ConfigError, InputError
+from robocal_uncertainty.uncertainty.sources import sources_help
 
 __all__ = ["PAPER_TEST_JOINTS_DEG", "main"]
 
@@ -537,6 +538,28 @@ def _print_evaluation(
     print(f"report written to {path}")
 
 
+def _add_noise_args(p: argparse.ArgumentParser) -> None:
+    """The tracker and encoder noise models, shared by simulate and the Monte Carlo commands."""
+    p.add_argument(
+        "--tracker-noise-um",
+        type=float,
+        default=5.0,
+        help="tracker error half-width a per coordinate, um (default %(default)s, uniform)",
+    )
+    p.add_argument(
+        "--tracker-noise-um-per-m",
+        type=float,
+        default=0.0,
+        help="distance-proportional part b of the MPE a + b L, um/m (default %(default)s)",
+    )
+    p.add_argument(
+        "--encoder-noise-deg",
+        type=float,
+        default=0.005,
+        help="encoder error half-width, deg (default %(default)s, uniform)",
+    )
+
+
 def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> None:
     p.add_argument(
         "--trials",
@@ -572,24 +595,7 @@ def _add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) ->
         type=int,
         help="pose count of the 'pose_choice' source (default: 33/53 of the campaign's poses)",
     )
-    p.add_argument(
-        "--tracker-noise-um",
-        type=float,
-        default=5.0,
-        help="tracker error half-width a per coordinate, um (default %(default)s, uniform)",
-    )
-    p.add_argument(
-        "--tracker-noise-um-per-m",
-        type=float,
-        default=0.0,
-        help="distance-proportional part b of the MPE a + b L, um/m (default %(default)s)",
-    )
-    p.add_argument(
-        "--encoder-noise-deg",
-        type=float,
-        default=0.005,
-        help="encoder error half-width, deg (default %(default)s, uniform)",
-    )
+    _add_noise_args(p)
     p.add_argument(
         "--workers", type=int, default=1, help="worker processes (never changes the result; default %(default)s)"
     )
@@ -1091,21 +1097,7 @@ def _build_parser() -> argparse.ArgumentParser:
         default="base",
         help="points in the robot base frame or in a tracker frame with an unknown base (default %(default)s)",
     )
-    p.add_argument(
-        "--tracker-noise-um",
-        type=float,
-        default=5.0,
-        help="tracker error half-width a, um (uniform; default %(default)s)",
-    )
-    p.add_argument(
-        "--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m (default %(default)s)"
-    )
-    p.add_argument(
-        "--encoder-noise-deg",
-        type=float,
-        default=0.005,
-        help="encoder error half-width, deg (uniform; default %(default)s)",
-    )
+    _add_noise_args(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated robot, poses and noise (default 0)")
     _add_force_arg(p, "the campaign and truth files")
     p.set_defaults(func=_cmd_simulate)
@@ -1166,7 +1158,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--sources",
         default="tracker,encoder",
-        help="comma list of tracker, encoder, lambda, n_poses, pose_choice, residual, or all (default %(default)s)",
+        help=f"comma list of {sources_help()} (default %(default)s)",
     )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     _add_force_arg(p, "an earlier report in --out")
@@ -1181,9 +1173,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
     _add_base_unknown_arg(p)
     _add_test_joint_args(p)
-    p.add_argument(
-        "--sources", default="tracker,encoder", help="comma list of uncertainty sources, or all (default %(default)s)"
-    )
+    p.add_argument("--sources", default="tracker,encoder", help=f"comma list of {sources_help()} (default %(default)s)")
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     _add_force_arg(p, "an earlier report in --out and the --campaign-out file")
     p.add_argument("--joint-topic", default="/joint_states", help="sensor_msgs/JointState topic (default %(default)s)")
@@ -1229,7 +1219,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--sources",
         default="tracker,encoder,residual",
-        help="sources of the statement under test (default %(default)s)",
+        help=f"sources of the statement under test: {sources_help()} (default %(default)s)",
     )
     p.add_argument("--out", default="robocal_validation", help="report directory (default %(default)s)")
     _add_force_arg(p, "an earlier report in --out")
@@ -1251,7 +1241,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--within-campaign", action="store_true", help="sample inside the campaign's joint span, not the joint limits"
     )
-    p.add_argument("--sources", default="tracker,encoder", help="comma list of sources, or all (default %(default)s)")
+    p.add_argument("--sources", default="tracker,encoder", help=f"comma list of {sources_help()} (default %(default)s)")
     p.add_argument("--trials", type=int, default=10_000, help="Monte Carlo trials (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="root seed of the trials and of random configurations")
     p.add_argument(
