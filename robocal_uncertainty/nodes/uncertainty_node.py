@@ -105,6 +105,7 @@ from robocal_uncertainty.uncertainty import (
     EvaluationOptions,
     UncertaintySettings,
     parse_sources,
+    sources_help,
 )
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
@@ -185,7 +186,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "sources",
         "tracker,encoder",
-        "Comma list of uncertainty sources: tracker, encoder, lambda, n_poses, pose_choice, residual, or all",
+        f"Comma list of uncertainty sources: {sources_help()}",
         check=_sources,
     ),
     ParamSpec(
