@@ -22,9 +22,10 @@ matplotlib.use("Agg")
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.axis import Axis
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator, NullFormatter
+from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
@@ -138,7 +139,7 @@ def plot_axis_histograms(
     s = _unit_scale(unit)
     samples = _pose_samples(result, pose) * s
     p = result.poses[pose]
-    fig = _figure(12.0, 3.8)
+    fig = _figure(12.0, 4.2)
     for j, name in enumerate(_AXES):
         ax = fig.add_subplot(1, 3, j + 1)
         col = samples[:, j]
@@ -174,14 +175,26 @@ def plot_axis_histograms(
         ax.set_ylabel(f"density / {unit}⁻¹")
         ax.set_title(f"{name}: u = {summary.standard_uncertainty * s:.3g} {unit}")
         if j == 0:
-            ax.legend(fontsize=7, loc="upper left")
+            # One legend below the axes, so that it never hides the histograms.
+            handles, labels = ax.get_legend_handles_labels()
+            fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=len(labels), frameon=False)
     pct = 100 * result.coverage_probability
     fig.suptitle(
         f"Tool position, test configuration {pose + 1}: {result.n_trials} trials, p = {pct:g} %",
         fontsize=10,
     )
-    _margins(fig, left=0.7, top=0.65, wspace=0.32)
+    _margins(fig, left=0.7, top=0.65, bottom=0.85, wspace=0.32)
     return _save(fig, path)
+
+
+def _log_ticks(axis: Axis) -> None:
+    """Readable ticks on a log axis: labelled 1-2-5 ticks when it spans under two decades."""
+    axis.axes.autoscale_view()
+    lo, hi = sorted(axis.get_view_interval())
+    if lo > 0 and hi / lo < 100.0:
+        axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(NullFormatter())
 
 
 def plot_lcurve(calibration: IdentificationResult, path: str | Path) -> Path:
@@ -217,20 +230,21 @@ def plot_lcurve(calibration: IdentificationResult, path: str | Path) -> Path:
         (lc.gcv_index, "s", "tab:green", f"GCV λ = {lc.gcv_lambda:.3g}"),
         (chosen, "*", "tab:red", f"chosen λ = {lam:.3g} ({calibration.lambda_method})"),
     )
-    for idx, marker, color, label in marks:
+    # Nested sizes: when two marks fall on the same point (corner = chosen) all stay visible.
+    for (idx, marker, color, label), size in zip(marks, (15, 10, 6)):
         if ok[idx]:
             ax.loglog(
                 rho[idx],
                 eta[idx],
                 marker,
                 color=color,
-                ms=9,
+                ms=size,
                 mfc="none",
-                mew=1.8,
+                mew=1.6,
                 label=label,
             )
     for axis in (ax.xaxis, ax.yaxis):
-        axis.set_minor_formatter(NullFormatter())
+        _log_ticks(axis)
     ax.set_xlabel("residual norm ‖b − A x_λ‖ / µm")
     ax.set_ylabel("solution norm ‖x_λ‖ (scaled)")
     ax.set_title("L-curve")
@@ -314,6 +328,7 @@ def plot_parameter_distributions(
         ax.axvline((cal.estimate[i] - cal.nominal[i]) * scale, color="tab:red", lw=1.0)
         ax.set_title(name, fontsize=8)
         ax.set_xlabel(f"δ / {unit}", fontsize=7)
+        ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.tick_params(labelsize=6)
         ax.set_yticks([])
     fig.suptitle(
@@ -544,21 +559,8 @@ def plot_uncertainty_vs_reach(
 
     The reach is the distance of the tool from the origin of the robot base frame
     (:attr:`ConfigurationSummary.reach`), in mm. u(x), u(y), u(z) and u_pos are drawn
-    as points, the worst configuration ringed.
-
-    Parameters
-    ----------
-    result : CalibrationUncertainty
-    path : str or Path
-        PNG file to write.
-    summary : ConfigurationSummary, optional
-        Of `result`; computed when omitted.
-    unit : {"µm", "um", "mm", "m"}
-        Display unit of the uncertainties.
-
-    Returns
-    -------
-    Path
+    as points, the worst configuration ringed. Parameters and return value as in
+    :func:`plot_configuration_summary`.
     """
     s = _unit_scale(unit)
     summary = summary or summarize_configurations(result)

@@ -12,7 +12,7 @@ the number of equations) from :class:`~robocal_uncertainty.uncertainty.options.E
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -109,6 +109,7 @@ def sweep_lambda(
     frame: str = "measurement",
     workers: int = 1,
     executor: Any | None = None,
+    progress: Callable[[int, int | None], None] | None = None,
 ) -> Array:
     """Standard uncertainty of the tool position with lambda fixed at each value (Fig. 7).
 
@@ -139,6 +140,8 @@ def sweep_lambda(
     workers, executor
         Passed to ``evaluate_uncertainty``; they never change the result (`executor` only
         when given).
+    progress : callable (done, total), optional
+        Called after each point with the trials done and the total.
 
     Returns
     -------
@@ -159,20 +162,39 @@ def sweep_lambda(
             cal = calibration
         else:
             cal = identify(model, campaign, lambda_=float(lam))
-        res = evaluate_uncertainty(
-            model,
-            campaign,
-            test_joints,
-            settings=fixed,
-            calibration=cal,
-            trials=trials,
-            seed=seed,
-            frame=frame,
-            workers=workers,
-            **_executor(executor),
-        )
-        out[i] = [a.standard_uncertainty for a in res.poses[pose].axes]
+        out[i] = _point_u(model, campaign, test_joints, fixed, cal, trials, seed, frame, workers, executor, pose)
+        if progress is not None:
+            progress((i + 1) * trials, lams.size * trials)
     return out
+
+
+def _point_u(
+    model: RobotModel,
+    campaign: Campaign,
+    test_joints: ArrayLike,
+    settings: UncertaintySettings,
+    calibration: IdentificationResult,
+    trials: int,
+    seed: int,
+    frame: str,
+    workers: int,
+    executor: Any | None,
+    pose: int,
+) -> list[float]:
+    """u(x), u(y), u(z) of test configuration `pose` for one sweep point."""
+    res = evaluate_uncertainty(
+        model,
+        campaign,
+        test_joints,
+        settings=settings,
+        calibration=calibration,
+        trials=trials,
+        seed=seed,
+        frame=frame,
+        workers=workers,
+        **_executor(executor),
+    )
+    return [a.standard_uncertainty for a in res.poses[pose].axes]
 
 
 def sweep_equations(
@@ -189,6 +211,7 @@ def sweep_equations(
     frame: str = "measurement",
     workers: int = 1,
     executor: Any | None = None,
+    progress: Callable[[int, int | None], None] | None = None,
 ) -> Array:
     """Standard uncertainty when each trial re-identifies from n random poses (Figs. 8-9).
 
@@ -218,6 +241,8 @@ def sweep_equations(
     workers, executor
         Passed to ``evaluate_uncertainty``; they never change the result (`executor` only
         when given).
+    progress : callable (done, total), optional
+        Called after each point with the trials done and the total.
 
     Returns
     -------
@@ -243,19 +268,11 @@ def sweep_equations(
     out = np.empty((counts_f.size, 3))
     for i, n in enumerate(counts_f.astype(int)):
         point = dataclasses.replace(settings, sources=sources, subset_size=int(n))
-        res = evaluate_uncertainty(
-            model,
-            campaign,
-            test_joints,
-            settings=point,
-            calibration=calibration,
-            trials=trials,
-            seed=seed,
-            frame=frame,
-            workers=workers,
-            **_executor(executor),
+        out[i] = _point_u(
+            model, campaign, test_joints, point, calibration, trials, seed, frame, workers, executor, pose
         )
-        out[i] = [a.standard_uncertainty for a in res.poses[pose].axes]
+        if progress is not None:
+            progress((i + 1) * trials, counts_f.size * trials)
     return out
 
 
@@ -267,6 +284,7 @@ def evaluate_sweeps(
     *,
     workers: int = 1,
     executor: Any | None = None,
+    progress: Callable[[int, int | None], None] | None = None,
 ) -> tuple[Sweep, ...]:
     """The report's sweeps: u against lambda (seed Fig. 7) and against the number of equations (Figs. 8-9).
 
@@ -286,6 +304,8 @@ def evaluate_sweeps(
         Must have ``test_joints``.
     workers, executor
         Passed through; they never change the result.
+    progress : callable (done, total), optional
+        Called after each point with the trials done over both sweeps and their total.
 
     Returns
     -------
@@ -313,8 +333,17 @@ def evaluate_sweeps(
         "workers": workers,
         "executor": executor,
     }
-    u_lam = sweep_lambda(model, campaign, calibration, options.test_joints, lambdas, **common)
-    u_eq = sweep_equations(model, campaign, calibration, options.test_joints, counts, **common)
+    total = (lambdas.size + counts.size) * trials
+
+    def _shifted(offset: int) -> Callable[[int, int | None], None] | None:
+        if progress is None:
+            return None
+        return lambda done, _total: progress(offset + done, total)
+
+    u_lam = sweep_lambda(model, campaign, calibration, options.test_joints, lambdas, progress=_shifted(0), **common)
+    u_eq = sweep_equations(
+        model, campaign, calibration, options.test_joints, counts, progress=_shifted(lambdas.size * trials), **common
+    )
     return (
         Sweep(
             name="lambda",
