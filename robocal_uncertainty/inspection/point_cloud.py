@@ -83,11 +83,14 @@ class PointCloud:
         Unit probe (approach) vectors, dimensionless; None when the export has none.
     source : str
         Where the points came from (a path, a topic), for messages and reports.
+    frame_id : str
+        Coordinate frame of the points (a PointCloud2 header's ``frame_id``); empty for files.
     """
 
     points: NDArray[np.float64]
     probe_vectors: NDArray[np.float64] | None = None
     source: str = ""
+    frame_id: str = ""
 
     def __post_init__(self) -> None:
         name = self.source or "point cloud"
