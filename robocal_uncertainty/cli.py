@@ -183,7 +183,7 @@ class _Progress:
         desc = {"budget": "budget (each source alone)", "sweeps": "sweeps (u vs lambda, vs equations)"}.get(
             phase, phase
         )
-        bar = self._bar(phase, desc, total, "trial" if phase == "budget" else "step")
+        bar = self._bar(phase, desc, total, "trial")
         bar.update(done - bar.n)
         if total is not None and done >= total:
             self.close(phase)

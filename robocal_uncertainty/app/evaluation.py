@@ -20,6 +20,7 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty.budget import evaluate_budget
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.options import EvaluationOptions, Progress, evaluate_campaign
 from robocal_uncertainty.uncertainty.sweeps import Sweep, evaluate_sweeps
@@ -28,8 +29,8 @@ __all__ = ["Evaluation", "PhaseProgress", "evaluate", "small_campaign_options"]
 
 PhaseProgress = Callable[[str, int, "int | None"], None]
 """``phase_progress(phase, done, total)`` of the phases after the main run: ``"budget"``
-(trials done over all single-source runs, of ``total``) and ``"sweeps"`` (0 of 1 when it
-starts, 1 of 1 when it ends)."""
+(trials done over all single-source runs, of ``total``) and ``"sweeps"`` (trials done over
+all sweep points, of ``total``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,41 +115,6 @@ def small_campaign_options(
     return adapted, tuple(notes)
 
 
-def _budget(
-    model: RobotModel,
-    campaign: Campaign,
-    calibration: IdentificationResult,
-    options: EvaluationOptions,
-    *,
-    workers: int,
-    executor: Any | None,
-    phase_progress: PhaseProgress | None,
-) -> Mapping[str, CalibrationUncertainty]:
-    """Each source alone, ``options.budget_trials`` trials each (as
-    :func:`~robocal_uncertainty.uncertainty.budget.evaluate_budget`), with progress."""
-    sources = options.uncertainty.sources
-    if len(sources) < 2:
-        return MappingProxyType({})
-    total = len(sources) * options.budget_trials
-    out: dict[str, CalibrationUncertainty] = {}
-    for i, source in enumerate(sources):
-        alone = dataclasses.replace(
-            options,
-            uncertainty=dataclasses.replace(options.uncertainty, sources=(source,)),
-            trials=options.budget_trials,
-        )
-        done_before = i * options.budget_trials
-
-        def progress(done: int, _target: int | None, before: int = done_before) -> None:
-            if phase_progress is not None:
-                phase_progress("budget", before + done, total)
-
-        out[source] = evaluate_campaign(
-            model, campaign, alone, calibration=calibration, workers=workers, executor=executor, progress=progress
-        )
-    return MappingProxyType(out)
-
-
 def evaluate(
     model: RobotModel,
     campaign: Campaign,
@@ -212,16 +178,26 @@ def evaluate(
     )
     budget: Mapping[str, CalibrationUncertainty] = MappingProxyType({})
     if options.budget:
-        budget = _budget(
-            model, campaign, calibration, options, workers=workers, executor=executor, phase_progress=phase_progress
+        budget = evaluate_budget(
+            model,
+            campaign,
+            calibration,
+            options,
+            workers=workers,
+            executor=executor,
+            progress=None if phase_progress is None else (lambda d, t: phase_progress("budget", d, t)),
         )
     sweeps: tuple[Sweep, ...] = ()
     if options.sweeps:
-        if phase_progress is not None:
-            phase_progress("sweeps", 0, 1)
-        sweeps = evaluate_sweeps(model, campaign, calibration, options, workers=workers, executor=executor)
-        if phase_progress is not None:
-            phase_progress("sweeps", 1, 1)
+        sweeps = evaluate_sweeps(
+            model,
+            campaign,
+            calibration,
+            options,
+            workers=workers,
+            executor=executor,
+            progress=None if phase_progress is None else (lambda d, t: phase_progress("sweeps", d, t)),
+        )
         short = [sw for sw in sweeps if sw.name == "equations" and len(sw.values) < 2]
         if short:
             sweeps = tuple(sw for sw in sweeps if sw not in short)

@@ -8,7 +8,7 @@ the combined uncertainty that source alone produces.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any
 
@@ -29,6 +29,7 @@ def evaluate_budget(
     *,
     workers: int = 1,
     executor: Any | None = None,
+    progress: Callable[[int, int | None], None] | None = None,
 ) -> Mapping[str, CalibrationUncertainty]:
     """Each source of ``options.uncertainty`` alone, ``options.budget_trials`` trials each.
 
@@ -43,6 +44,8 @@ def evaluate_budget(
         Must have ``test_joints``; its ``trials`` is replaced by ``budget_trials``.
     workers, executor
         Passed through; they never change the result.
+    progress : callable (done, total), optional
+        Trials done over all the sources and their total, as the runs go.
 
     Returns
     -------
@@ -53,14 +56,22 @@ def evaluate_budget(
     sources = options.uncertainty.sources
     if len(sources) < 2:
         return MappingProxyType({})
+    total = len(sources) * options.budget_trials
     out = {}
-    for source in sources:
+    for i, source in enumerate(sources):
         alone = dataclasses.replace(
             options,
             uncertainty=dataclasses.replace(options.uncertainty, sources=(source,)),
             trials=options.budget_trials,
         )
+        hook = None
+        if progress is not None:
+            before = i * options.budget_trials
+
+            def hook(done: int, _target: int | None, before: int = before) -> None:
+                progress(before + done, total)
+
         out[source] = evaluate_campaign(
-            model, campaign, alone, calibration=calibration, workers=workers, executor=executor
+            model, campaign, alone, calibration=calibration, workers=workers, executor=executor, progress=hook
         )
     return MappingProxyType(out)
