@@ -101,6 +101,10 @@ class IdentificationResult:
     warnings : tuple of str
     measurement : MeasurementType
         The campaign's measurement type (what `residuals` are).
+    rotation_rms_before, rotation_rms_after : float [rad]
+        For measurements holding an orientation: RMS over the poses of the rotation residual
+        angle before and after calibration (`rms_before` etc. are then the position part);
+        NaN otherwise.
     """
 
     model: RobotModel
@@ -133,6 +137,8 @@ class IdentificationResult:
     effective_parameters: float
     warnings: tuple[str, ...] = field(default=())
     measurement: MeasurementType = POINT
+    rotation_rms_before: float = float("nan")
+    rotation_rms_after: float = float("nan")
 
     @property
     def success(self) -> bool:
@@ -372,8 +378,11 @@ def identify(
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
         msg = f"max_iterations must be a positive integer, got {max_iterations!r}"
         raise ConfigError(msg)
-    layout = model.layout
     measurement = campaign.measurement
+    if measurement.measures_orientation:
+        # Orientation data identify the tool frame's rotation in the flange frame.
+        model = model.with_tool_rotation()
+    layout = model.layout
     q = campaign.joint_positions
     measured = campaign.points
     p0 = model.parameter_vector()
@@ -398,6 +407,10 @@ def identify(
         )
         raise IdentifiabilityError(msg)
     penalized = est < b0  # the base (last six parameters) is never regularised
+    r0 = layout.tool_rotation_index
+    if r0 is not None:
+        # Nor is the tool rotation: like the base, a mounting the nominal model says little about.
+        penalized &= (est < r0) | (est >= r0 + 3)
 
     pred0, jac0_poses = measurement.predict_and_jacobian(layout, p0, q)
     jac0 = stack_jacobian(measurement, jac0_poses, est)
@@ -411,7 +424,8 @@ def identify(
             f"(vary the joints more; weakest direction involves {weak})"
         )
         raise IdentifiabilityError(msg)
-    rms_before, max_before = residual_stats(measurement.residual(measured, pred0))
+    residuals0 = measurement.residual(measured, pred0)
+    rms_before, max_before = residual_stats(_position_part(measurement, residuals0))
 
     solve = partial(
         _gauss_newton,
@@ -439,7 +453,7 @@ def identify(
         if base is not None:
             restarts = 1
             x_restart = solution.x.copy()
-            base_cols = ~penalized
+            base_cols = est >= b0
             x_restart[base_cols] = (base - p0[b0 : b0 + 6])[est[base_cols] - b0] * scale[base_cols]
             second = solve(x_restart)
             if second.status == 0 or _final_rms(layout, measurement, second.params, q, measured) < _final_rms(
@@ -450,7 +464,7 @@ def identify(
 
     pred, jac = measurement.predict_and_jacobian(layout, p, q)
     residuals = measurement.residual(measured, pred)
-    rms_after, max_after = residual_stats(residuals)
+    rms_after, max_after = residual_stats(_position_part(measurement, residuals))
     if status != 0 and not accept_unconverged:
         msg = (
             f"identification did not converge in {max_iterations} iterations"
@@ -514,7 +528,21 @@ def identify(
         effective_parameters=dof_used,
         warnings=tuple(warns),
         measurement=measurement,
+        rotation_rms_before=_rotation_rms(measurement, residuals0),
+        rotation_rms_after=_rotation_rms(measurement, residuals),
     )
+
+
+def _position_part(measurement: MeasurementType, residuals: Array) -> Array:
+    """The position components (the first three) of orientation-holding residuals; else all."""
+    return residuals[..., :3] if measurement.measures_orientation else residuals
+
+
+def _rotation_rms(measurement: MeasurementType, residuals: Array) -> float:
+    """RMS rotation residual angle [rad] (components 3-5) for orientation data; NaN otherwise."""
+    if not measurement.measures_orientation:
+        return float("nan")
+    return residual_stats(residuals[..., 3:6])[0]
 
 
 def _final_rms(

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
 
 __all__ = ["forward_points", "forward_points_and_jacobian", "forward_poses", "forward_poses_and_jacobian"]
 
@@ -114,6 +114,26 @@ def _base(p: Array, layout: ParameterLayout) -> tuple[Array, Array, Array]:
     roll_axis = col0
     pitch_axis = np.stack((-syw, cyw, zero))
     return np.stack((col0, col1, col2)), translation, np.stack((roll_axis, pitch_axis))
+
+
+def _tool_rotation(layout: ParameterLayout, p: Array) -> tuple[Array, Array] | None:
+    """Tool rotation ``Rz(rz) Ry(ry) Rx(rx)`` in the flange frame and its parameter axes.
+
+    Returns None when the layout has no tool rotation; else two arrays of shape
+    (..., 3, 3): the rotation, and as columns the flange-frame axes about which
+    ``tool.rx``, ``tool.ry``, ``tool.rz`` turn the tool frame (``Rz Ry e_x``, ``Rz e_y``, ``e_z``).
+    """
+    r0 = layout.tool_rotation_index
+    if r0 is None:
+        return None
+    rx, ry, rz = p[..., r0], p[..., r0 + 1], p[..., r0 + 2]
+    rotation = rpy_to_matrix(np.stack((rx, ry, rz), axis=-1))
+    cz, sz = np.cos(rz), np.sin(rz)
+    axes = np.zeros((*rx.shape, 3, 3))
+    axes[..., :, 0] = rotation[..., :, 0]
+    axes[..., 0, 1], axes[..., 1, 1] = -sz, cz
+    axes[..., 2, 2] = 1.0
+    return rotation, axes
 
 
 def _rotate(base_cols: Array, v: Array) -> Array:
@@ -235,6 +255,9 @@ def forward_points_and_jacobian(
     t0 = layout.tool_index
     for i in range(3):
         jac[t0 + i] = _rotate(base_cols, last_cols[i])
+    r0 = layout.tool_rotation_index
+    if r0 is not None:
+        jac[r0 : r0 + 3] = 0.0  # the tool rotation does not move the point
     b0 = layout.base_index
     for i in range(3):
         jac[b0 + i] = 0.0
@@ -253,7 +276,8 @@ def forward_poses(
     """Tool point and tool orientation for every (parameter set, pose) pair.
 
     The tool frame is the last modified-DH frame (the flange frame of the model) translated
-    to the tool point: the model has no tool rotation, so its orientation is the flange's.
+    to the tool point and, when the layout has a tool rotation, rotated by it; without one its
+    orientation is the flange's.
 
     Parameters
     ----------
@@ -286,6 +310,9 @@ def forward_poses(
             rotations[..., i, c] = np.broadcast_to(
                 base_cols[0][i] * col[0] + base_cols[1][i] * col[1] + base_cols[2][i] * col[2], shape
             )
+    tool = _tool_rotation(layout, p)
+    if tool is not None:
+        rotations = np.asarray(rotations @ tool[0], dtype=np.float64)
     return points, rotations
 
 
@@ -298,7 +325,7 @@ def forward_poses_and_jacobian(
     -------
     points : ndarray, shape (..., n_poses, 3) [m]
     rotations : ndarray, shape (..., n_poses, 3, 3)
-        ``world_R_tool``.
+        ``world_R_tool`` (the tool rotation applied when the layout has one).
     jacobian : ndarray, shape (..., n_poses, 6, n_params) [m/m, m/rad; rad/m, rad/rad]
         Rows 0-2: d point / d parameter; rows 3-5: angular velocity per unit parameter, in the
         measurement (world) frame: ``R(p + dp) ~ exp([J_w dp]x) R(p)``.
@@ -329,8 +356,12 @@ def forward_poses_and_jacobian(
         jac[b0 + 3 + i, :3] = _cross(axis_b, rel_world)
         jac[b0 + 3 + i, 3:] = axis_b
     rot = np.stack([_rotate(base_cols, last_cols[c]) for c in range(3)], axis=1)  # (comp, col, ...)
-    return (
-        np.moveaxis(world, 0, -1),
-        np.moveaxis(rot, (0, 1), (-2, -1)),
-        np.moveaxis(jac, (0, 1), (-1, -2)),
-    )
+    flange = np.moveaxis(rot, (0, 1), (-2, -1))
+    jacobian = np.moveaxis(jac, (0, 1), (-1, -2))
+    tool = _tool_rotation(layout, p)
+    r0 = layout.tool_rotation_index
+    if tool is not None and r0 is not None:
+        # Tool rotation parameters turn the tool frame about flange axes, seen in the world.
+        jacobian[..., 3:, r0 : r0 + 3] = flange @ tool[1]
+        flange = flange @ tool[0]
+    return np.moveaxis(world, 0, -1), np.asarray(flange, dtype=np.float64), jacobian

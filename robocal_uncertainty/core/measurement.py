@@ -118,6 +118,15 @@ class MeasurementType(ABC):
         """
         return None
 
+    @property
+    def measures_orientation(self) -> bool:
+        """Whether the values hold an orientation (then the tool rotation is identifiable).
+
+        False by default; the identification adds ``tool.rx, tool.ry, tool.rz`` to the model's
+        parameters when it is true.
+        """
+        return False
+
     @abstractmethod
     def predict(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> Array:
         """Predicted values for every (parameter set, pose) pair.

@@ -10,12 +10,15 @@ Per joint ``i`` (Craig's row ``i``), the link transform is::
 
 ``beta`` is Hayati's extra rotation about y, used where consecutive axes are (nearly) parallel
 and the common normal, hence ``d``, is ill-defined. It is present only for joints that enable it.
-The measured point is ``world_T_base @ base_T_n @ tool_point``.
+The measured point is ``world_T_base @ base_T_n @ tool_point``. When the model has a tool
+rotation (``tool_rotation``; needed only by measurements of orientation), the measured frame is
+``base_T_n`` rotated by ``Rz(rz) Ry(ry) Rx(rx)`` (fixed axes of the flange frame, the URDF rpy
+form) and moved to the tool point; the point itself does not depend on that rotation.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -76,12 +79,18 @@ class ParameterLayout:
     """Names and positions of every model parameter in the flat parameter vector.
 
     The vector holds, in this order: for each joint its ``alpha, a, theta, d`` and, where
-    enabled, ``beta``; then ``tool.x, tool.y, tool.z``; then
+    enabled, ``beta``; then ``tool.x, tool.y, tool.z``; when `tool_rotation` is true,
+    ``tool.rx, tool.ry, tool.rz`` (the tool frame's rotation in the flange frame,
+    ``Rz(rz) Ry(ry) Rx(rx)`` [rad]); then
     ``base.x, base.y, base.z, base.roll, base.pitch, base.yaw``.
+
+    Without `tool_rotation` (the default) the layout is exactly the point-only layout: the
+    tool rotation does not move a measured point, so it exists only for orientation data.
     """
 
     n_joints: int
     has_beta: tuple[bool, ...]
+    tool_rotation: bool = False
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -91,6 +100,8 @@ class ParameterLayout:
             fields = KINEMATIC_FIELDS if self.has_beta[j] else KINEMATIC_FIELDS[:4]
             out.extend(f"joint{j + 1}.{f}" for f in fields)
         out.extend(("tool.x", "tool.y", "tool.z"))
+        if self.tool_rotation:
+            out.extend(("tool.rx", "tool.ry", "tool.rz"))
         out.extend(("base.x", "base.y", "base.z", "base.roll", "base.pitch", "base.yaw"))
         return tuple(out)
 
@@ -102,7 +113,7 @@ class ParameterLayout:
             group, field = name.split(".")
             if group.startswith("joint"):
                 kinds.append(_FIELD_KIND[field])
-            elif group == "tool" or field in ("x", "y", "z"):
+            elif field in ("x", "y", "z"):
                 kinds.append("length")
             else:
                 kinds.append("angle")
@@ -111,7 +122,7 @@ class ParameterLayout:
     @property
     def size(self) -> int:
         """Length of the parameter vector."""
-        return 4 * self.n_joints + sum(self.has_beta) + 9
+        return 4 * self.n_joints + sum(self.has_beta) + 9 + (3 if self.tool_rotation else 0)
 
     def joint_slices(self) -> tuple[dict[str, int], ...]:
         """Per joint, the index of each of its fields in the vector."""
@@ -129,9 +140,14 @@ class ParameterLayout:
         return 4 * self.n_joints + sum(self.has_beta)
 
     @property
+    def tool_rotation_index(self) -> int | None:
+        """Index of ``tool.rx`` (``tool.ry``, ``tool.rz`` follow), or None without tool rotation."""
+        return self.tool_index + 3 if self.tool_rotation else None
+
+    @property
     def base_index(self) -> int:
         """Index of ``base.x``; then y, z, roll, pitch, yaw."""
-        return self.tool_index + 3
+        return self.tool_index + (6 if self.tool_rotation else 3)
 
     def index(self, name: str) -> int:
         """Index of the parameter called `name`."""
@@ -176,6 +192,13 @@ class RobotModel:
         True when ``world_T_base`` is known (e.g. identity: points in the base frame).
     base_frame_id, measurement_frame_id : str
         TF names of the robot base and the measurement frame.
+    tool_rpy : ndarray, shape (3,) [rad]
+        Rotation ``Rz(rz) Ry(ry) Rx(rx)`` of the measured (tool) frame in the flange frame, as
+        ``(rx, ry, rz)``; zeros by default. Part of the parameter vector only when
+        `tool_rotation` is true.
+    tool_rotation : bool
+        Whether the parameter vector carries ``tool.rx, tool.ry, tool.rz`` (orientation
+        measurements); False keeps the point-only layout.
     """
 
     name: str
@@ -193,6 +216,8 @@ class RobotModel:
     base_known: bool = True
     base_frame_id: str = "base_link"
     measurement_frame_id: str = "laser_tracker"
+    tool_rpy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    tool_rotation: bool = False
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -212,7 +237,7 @@ class RobotModel:
             msg = f"joint_limits must be {n} pairs [lower, upper] with lower < upper"
             raise ConfigError(msg)
         object.__setattr__(self, "joint_limits", limits)
-        for field_name in ("tool_point", "base_xyz", "base_rpy"):
+        for field_name in ("tool_point", "base_xyz", "base_rpy", "tool_rpy"):
             value = np.asarray(getattr(self, field_name), dtype=np.float64)
             if value.shape != (3,) or not np.isfinite(value).all():
                 msg = f"{field_name} must be 3 finite numbers, got {value.tolist()}"
@@ -229,7 +254,7 @@ class RobotModel:
     @property
     def layout(self) -> ParameterLayout:
         """Layout of the flat parameter vector."""
-        return ParameterLayout(self.n_joints, self.has_beta)
+        return ParameterLayout(self.n_joints, self.has_beta, self.tool_rotation)
 
     def parameter_vector(self) -> NDArray[np.float64]:
         """Flatten the model into its parameter vector, shape (n_params,) [m, rad]."""
@@ -239,6 +264,9 @@ class RobotModel:
             for field_name, k in idx.items():
                 p[k] = getattr(self, field_name)[j]
         p[layout.tool_index : layout.tool_index + 3] = self.tool_point
+        r0 = layout.tool_rotation_index
+        if r0 is not None:
+            p[r0 : r0 + 3] = self.tool_rpy
         p[layout.base_index : layout.base_index + 3] = self.base_xyz
         p[layout.base_index + 3 : layout.base_index + 6] = self.base_rpy
         return p
@@ -254,13 +282,20 @@ class RobotModel:
         for j, idx in enumerate(layout.joint_slices()):
             for field_name, k in idx.items():
                 fields[field_name][j] = p[k]
+        r0 = layout.tool_rotation_index
+        tool_rpy = self.tool_rpy.copy() if r0 is None else p[r0 : r0 + 3].copy()
         return replace(
             self,
             tool_point=p[layout.tool_index : layout.tool_index + 3].copy(),
+            tool_rpy=tool_rpy,
             base_xyz=p[layout.base_index : layout.base_index + 3].copy(),
             base_rpy=p[layout.base_index + 3 : layout.base_index + 6].copy(),
             **fields,
         )
+
+    def with_tool_rotation(self) -> RobotModel:
+        """This model with ``tool.rx, tool.ry, tool.rz`` in its parameter vector (itself if so)."""
+        return self if self.tool_rotation else replace(self, tool_rotation=True)
 
     def world_T_base(self) -> NDArray[np.float64]:
         """Homogeneous transform measurement frame <- robot base, shape (4, 4) [m]."""

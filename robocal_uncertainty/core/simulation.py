@@ -7,15 +7,18 @@ distance (the blade seed's form); encoder noise uniform within +-0.005 deg.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.campaign import Campaign
-from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.kinematics import forward_points, forward_poses
+from robocal_uncertainty.core.measurement import POINT, MeasurementType
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_from_matrix, rpy_to_matrix
+from robocal_uncertainty.core.rotation import rotation_exp
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
@@ -154,6 +157,12 @@ class SimulationSettings:
         Poses are drawn uniformly inside the joint limits shrunk by this margin.
     unmodelled : UnmodelledErrors
         Model inadequacy (none by default).
+    orientation_std : float [rad], optional
+        When given, the campaign is 6-DOF (:class:`PoseMeasurement`): the true model gets a
+        tool rotation (uniform within the angle error range about the nominal), and each
+        measured orientation is the true one turned by a normal rotation vector of this
+        standard deviation per axis (drawn after everything else, so the positions equal
+        those of the point-only campaign of the same seed). None (default): points only.
     """
 
     n_poses: int = 53
@@ -165,8 +174,12 @@ class SimulationSettings:
     errors: ParameterErrorRanges = field(default_factory=ParameterErrorRanges)
     joint_margin: float = float(np.radians(5.0))
     unmodelled: UnmodelledErrors = field(default_factory=UnmodelledErrors)
+    orientation_std: float | None = None
 
     def __post_init__(self) -> None:
+        if self.orientation_std is not None and not (np.isfinite(self.orientation_std) and self.orientation_std > 0):
+            msg = f"orientation_std must be a positive finite number [rad], got {self.orientation_std!r}"
+            raise ConfigError(msg)
         if isinstance(self.n_poses, bool) or not isinstance(self.n_poses, int) or self.n_poses < 1:
             msg = f"n_poses must be a positive integer, got {self.n_poses!r}"
             raise ConfigError(msg)
@@ -214,7 +227,8 @@ def draw_true_parameters(model: RobotModel, errors: ParameterErrorRanges, *, rng
     for k, name in enumerate(layout.names):
         if name.startswith("base."):
             continue
-        half = errors.tool if name.startswith("tool.") else (errors.length if kinds[k] == "length" else errors.angle)
+        is_tool_point = name.startswith("tool.") and kinds[k] == "length"
+        half = errors.tool if is_tool_point else (errors.length if kinds[k] == "length" else errors.angle)
         p[k] += rng.uniform(-half, half)
     return p
 
@@ -300,10 +314,25 @@ def simulate_campaign(
     q_true = draw_joint_positions(model, settings.n_poses, rng=rng, margin=settings.joint_margin)
     readings, points, std = simulate_measurements(true_params, model, q_true, settings, rng=rng)
     true_model = model.with_parameters(true_params)
+    measurement: MeasurementType = POINT
+    values = points
+    if settings.orientation_std is not None:
+        # Drawn last: the robot, poses and points equal those of the point-only campaign.
+        half = settings.errors.angle
+        tool_rpy = model.tool_rpy + rng.uniform(-half, half, size=3)
+        true_model = replace(true_model.with_tool_rotation(), tool_rpy=tool_rpy)
+        deflected = q_true + settings.unmodelled.deflection(q_true)
+        _, true_rotations = forward_poses(true_model, true_model.parameter_vector(), deflected)
+        rot_noise = rng.normal(0.0, settings.orientation_std, size=(settings.n_poses, 3))
+        values = pose_values(points, rotation_exp(rot_noise) @ true_rotations)
+        pos_std = float(np.mean(std))
+        measurement = PoseMeasurement((pos_std,) * 3, (settings.orientation_std,) * 3)
+        std = np.concatenate((std, np.full((settings.n_poses, 3), settings.orientation_std)), axis=1)
     campaign = Campaign(
+        measurement=measurement,
         joint_names=model.joint_names,
         joint_positions=readings,
-        points=points,
+        points=values,
         frame=settings.frame,
         frame_id=frame_id,
         point_std=std,

@@ -1,0 +1,193 @@
+"""6-DOF measurements: the tool position and orientation in the measurement frame.
+
+A laser tracker with a 6-DOF probe (a T-Mac, three reflector nests) reports the probe's
+position and orientation. :class:`PoseMeasurement` stores one such value as **12 numbers**: the
+position ``(x, y, z)`` [m] followed by the rotation matrix ``world_R_tool`` row by row (a
+matrix, not a quaternion, so that the chordal mean, the residual and ``perturb`` are plain
+matrix algebra and no sign ambiguity exists).
+
+One pose gives **6 equations**:
+
+- rows 0-2, position residual ``p_measured - p_predicted`` [m];
+- rows 3-5, rotation residual ``log(R_measured R_predicted^T)`` [rad], a rotation vector about
+  the fixed x, y, z axes of the measurement frame (the convention of
+  :mod:`robocal_uncertainty.core.rotation` and of ROS pose covariances).
+
+Weighting: every row is whitened by its standard uncertainty, ``1 / u_x, 1 / u_y, 1 / u_z``
+[1/m] for the position and ``1 / u_rx, 1 / u_ry, 1 / u_rz`` [1/rad] for the rotation, so the
+least squares minimises ``sum (r_i / u_i)^2``: a rotation residual of one standard uncertainty
+weighs as much as a position residual of one. The identification is then a weighted least
+squares in dimensionless units; the report states both uncertainties (``weights``).
+
+The Jacobian comes from :func:`~robocal_uncertainty.core.kinematics.forward_poses_and_jacobian`:
+the angular rows are the world-frame angular velocity per unit parameter, which is the
+first-order change of the rotation residual (with the minus sign of the measurement contract).
+The tool rotation in the flange frame (``tool.rx, tool.ry, tool.rz``, present when the layout
+has ``tool_rotation``; the identification adds it for pose campaigns) moves only these rows:
+with points alone it is structurally unidentifiable, with poses it is estimated. Without it the
+measured frame is the flange frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.kinematics import forward_poses, forward_poses_and_jacobian
+from robocal_uncertainty.core.measurement import POSITION_AXES, MeasurementType
+from robocal_uncertainty.core.robot_model import ParameterLayout
+from robocal_uncertainty.core.rotation import rotation_exp, rotation_log
+from robocal_uncertainty.errors import ConfigError
+
+__all__ = ["ROTATION_AXES", "PoseMeasurement", "pose_values", "split_pose_values"]
+
+Array = NDArray[np.float64]
+ROTATION_AXES: tuple[str, str, str] = ("rx", "ry", "rz")
+"""Components of a rotation residual: rotation vector about the measurement frame's x, y, z."""
+
+
+def pose_values(positions: Array, rotations: Array) -> Array:
+    """Stored pose values, shape (..., 12): position [m] then the rotation matrix row by row.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (..., 3) [m]
+    rotations : ndarray, shape (..., 3, 3)
+    """
+    pos = np.asarray(positions, dtype=np.float64)
+    rot = np.asarray(rotations, dtype=np.float64)
+    flat = rot.reshape(*rot.shape[:-2], 9)
+    shape = np.broadcast_shapes(pos.shape[:-1], flat.shape[:-1])
+    return np.concatenate((np.broadcast_to(pos, (*shape, 3)), np.broadcast_to(flat, (*shape, 9))), axis=-1)
+
+
+def split_pose_values(values: Array) -> tuple[Array, Array]:
+    """Positions (..., 3) [m] and rotation matrices (..., 3, 3) of stored pose values (..., 12)."""
+    v = np.asarray(values, dtype=np.float64)
+    return v[..., :3], v[..., 3:].reshape(*v.shape[:-1], 3, 3)
+
+
+def _positive_triple(name: str, value: object, unit: str) -> tuple[float, float, float]:
+    try:
+        out = tuple(float(s) for s in value)  # type: ignore[attr-defined]
+    except (TypeError, ValueError) as err:
+        msg = f"{name} must be three positive finite values [{unit}], got {value!r}"
+        raise ConfigError(msg) from err
+    if len(out) != 3 or not all(np.isfinite(s) and s > 0 for s in out):
+        msg = f"{name} must be three positive finite values [{unit}], got {value!r}"
+        raise ConfigError(msg)
+    return (out[0], out[1], out[2])
+
+
+@dataclass(frozen=True)
+class PoseMeasurement(MeasurementType):
+    """Tool position and orientation in the measurement frame: 6 equations per pose.
+
+    Parameters
+    ----------
+    position_std : tuple of 3 float [m]
+        Standard uncertainty of each measured coordinate (x, y, z).
+    rotation_std : tuple of 3 float [rad]
+        Standard uncertainty of the measured orientation about the measurement frame's x, y, z
+        axes (components of the rotation residual).
+    """
+
+    position_std: tuple[float, float, float]
+    rotation_std: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_std", _positive_triple("position_std", self.position_std, "m"))
+        object.__setattr__(self, "rotation_std", _positive_triple("rotation_std", self.rotation_std, "rad"))
+
+    @property
+    def name(self) -> str:
+        """``"pose"``."""
+        return "pose"
+
+    @property
+    def quantity(self) -> str:
+        """``"measured pose"``."""
+        return "measured pose"
+
+    @property
+    def dimension(self) -> int:
+        """6: x, y, z [m], rx, ry, rz [rad]."""
+        return 6
+
+    @property
+    def value_size(self) -> int:
+        """12: position [m] and the rotation matrix row by row."""
+        return 12
+
+    @property
+    def component_names(self) -> tuple[str, ...]:
+        """``("x", "y", "z", "rx", "ry", "rz")``."""
+        return POSITION_AXES + ROTATION_AXES
+
+    @property
+    def component_units(self) -> tuple[str, ...]:
+        """``("m", "m", "m", "rad", "rad", "rad")``."""
+        return ("m",) * 3 + ("rad",) * 3
+
+    @property
+    def std(self) -> Array:
+        """Standard uncertainty per residual component, shape (6,) [m, m, m, rad, rad, rad]."""
+        return np.asarray(self.position_std + self.rotation_std, dtype=np.float64)
+
+    @property
+    def weights(self) -> Array:
+        """``1 / std`` per component [1/m, 1/rad]."""
+        return 1.0 / self.std
+
+    @property
+    def measures_orientation(self) -> bool:
+        """True: the tool rotation in the flange frame becomes identifiable."""
+        return True
+
+    def predict(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> Array:
+        """Tool poses as stored values, shape (..., n_poses, 12)."""
+        points, rotations = forward_poses(layout, params, joint_positions)
+        return pose_values(points, rotations)
+
+    def predict_and_jacobian(
+        self, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> tuple[Array, Array]:
+        """Tool poses (..., n_poses, 12) and the (..., n_poses, 6, n_params) Jacobian."""
+        points, rotations, jac = forward_poses_and_jacobian(layout, params, joint_positions)
+        return pose_values(points, rotations), jac
+
+    def residual(self, measured: Array, predicted: Array) -> Array:
+        """``(p_m - p_p, log(R_m R_p^T))``, shape (..., n_poses, 6) [m, rad]."""
+        pm, rm = split_pose_values(measured)
+        pp, rp = split_pose_values(predicted)
+        return np.concatenate((pm - pp, rotation_log(rm @ np.swapaxes(rp, -1, -2))), axis=-1)
+
+    def perturb(self, values: Array, errors: Array) -> Array:
+        """``(p + e_p, exp([e_r]x) R)``: the inverse of :meth:`residual`."""
+        p, r = split_pose_values(values)
+        e = np.asarray(errors, dtype=np.float64)
+        return pose_values(p + e[..., :3], rotation_exp(e[..., 3:]) @ r)
+
+    def instrument_covariance(self, position_std: Array) -> Array:
+        """Covariance from the instrument's **position** noise only, shape (n_poses, 6, 6).
+
+        The rotation block is zero: the orientation noise is its own Monte Carlo source
+        (``tracker_orientation``), drawn from `rotation_std`.
+        """
+        std = np.asarray(position_std, dtype=np.float64)
+        out = np.zeros((std.shape[0], 6, 6))
+        out[:, 0, 0] = out[:, 1, 1] = out[:, 2, 2] = std**2
+        return out
+
+    def rotation_covariance(self, n_poses: int) -> Array:
+        """Covariance of the orientation noise per pose, shape (n_poses, 6, 6) [rad^2], position block zero."""
+        out = np.zeros((n_poses, 6, 6))
+        for i, s in enumerate(self.rotation_std):
+            out[:, 3 + i, 3 + i] = s * s
+        return out
+
+    def positions(self, values: Array) -> Array:
+        """The position part of the values [m]."""
+        return np.asarray(values, dtype=np.float64)[..., :3]
