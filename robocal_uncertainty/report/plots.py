@@ -434,7 +434,7 @@ def plot_uncertainty_vs(
         raise InputError(msg)
     order = np.argsort(x)
     x, u = x[order], u[order] * s
-    fig = _figure(6.8, 4.2)
+    fig = _figure(6.8, 4.5)
     ax = fig.add_subplot(1, 1, 1)
     for j, (name, color) in enumerate(zip(_AXES, ("tab:blue", "tab:orange", "tab:green"))):
         ax.plot(x, u[:, j], "o-", color=color, ms=4, label=f"u({name})")
@@ -446,9 +446,10 @@ def plot_uncertainty_vs(
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"standard uncertainty / {unit}")
     ax.set_title(title or f"Uncertainty vs {xlabel}")
-    ax.legend(fontsize=8)
+    # Legend below the axes: flat curves (u against lambda) run through any corner.
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=5, frameon=False)
     ax.grid(alpha=0.3)
-    _margins(fig)
+    _margins(fig, bottom=0.95)
     return _save(fig, path)
 
 
