@@ -228,21 +228,8 @@ def sweep_equations(
     test_joints : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
     pose_counts : sequence of int, length n_points
         Poses per subset, each between ceil(n_identifiable / 3) and the campaign size.
-    trials : int
-        Monte Carlo trials per point.
-    seed : int
-        Root seed used for every point.
-    settings : UncertaintySettings, optional
-        Sources and their models (default: tracker and encoder).
-    pose : int
-        Which test configuration to report.
-    frame : {"measurement", "base"}
-        Frame of the output positions.
-    workers, executor
-        Passed to ``evaluate_uncertainty``; they never change the result (`executor` only
-        when given).
-    progress : callable (done, total), optional
-        Called after each point with the trials done and the total.
+    trials, seed, settings, pose, frame, workers, executor, progress
+        As for :func:`sweep_lambda`.
 
     Returns
     -------
