@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from robocal_uncertainty.app.evaluation import Evaluation, evaluate
     from robocal_uncertainty.app.forward_kinematics import ToolPoints, tool_points
     from robocal_uncertainty.app.pose_suggestion import PoseSuggestion, Suggestions, suggest_poses
+    from robocal_uncertainty.app.section_inspection import SectionInspection, inspect_section, section_demo
     from robocal_uncertainty.app.simulation import SimulationFiles, simulate
     from robocal_uncertainty.app.validation import validate
     from robocal_uncertainty.uncertainty.options import EvaluationOptions
@@ -31,11 +32,14 @@ __all__ = [
     "EvaluationOptions",
     "PoseSuggestion",
     "ReplayEvaluation",
+    "SectionInspection",
     "SimulationFiles",
     "Suggestions",
     "ToolPoints",
     "evaluate",
+    "inspect_section",
     "replay",
+    "section_demo",
     "simulate",
     "suggest_poses",
     "tool_points",

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from robocal_uncertainty._lazy import lazy_exports
 
 if TYPE_CHECKING:
+    from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS, BiasCorrection, bias_corrections
     from robocal_uncertainty.inspection.cmm_model import (
         SOURCE_NAMES,
         CmmInstrument,
@@ -51,10 +52,12 @@ if TYPE_CHECKING:
 
 __all__ = [
     "LENGTH_UNITS",
+    "MAX_MIN_PARAMETERS",
     "PARAMETER_NAMES",
     "PARAMETER_UNITS",
     "REGIONS",
     "SOURCE_NAMES",
+    "BiasCorrection",
     "ClosestPoints",
     "CmmInstrument",
     "ErrorSource",
@@ -67,6 +70,7 @@ __all__ = [
     "SectionParameters",
     "SectionUncertainty",
     "Segmentation",
+    "bias_corrections",
     "chord_length",
     "evaluate_section",
     "full_section_trials",

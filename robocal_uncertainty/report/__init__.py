@@ -31,6 +31,11 @@ if TYPE_CHECKING:
         plot_uncertainty_vs,
         plot_uncertainty_vs_reach,
     )
+    from robocal_uncertainty.report.section_report import (
+        SectionReportFiles,
+        format_section_table,
+        write_section_report,
+    )
     from robocal_uncertainty.report.table2 import (
         format_budget,
         format_table2,
@@ -46,9 +51,11 @@ __all__ = [
     "REPORT_FORMAT_VERSION",
     "ConfigurationSummary",
     "MapReportFiles",
+    "SectionReportFiles",
     "Sweep",
     "WeakestRegion",
     "format_budget",
+    "format_section_table",
     "format_table2",
     "plot_axis_histograms",
     "plot_configuration_summary",
@@ -69,5 +76,6 @@ __all__ = [
     "write_map_report",
     "write_report",
     "write_report_json",
+    "write_section_report",
 ]
 __getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)
