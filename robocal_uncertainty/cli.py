@@ -290,12 +290,18 @@ def _cmd_import_csv(args: argparse.Namespace) -> int:
         joint_columns = [name.strip() for name in args.joint_columns.split(",") if name.strip()]
         if not joint_columns:
             raise ConfigError("--joint-columns needs a comma list of column names")
+    orientation_columns = None
+    if args.orientation_columns is not None:
+        orientation_columns = [name.strip() for name in args.orientation_columns.split(",") if name.strip()]
     campaign = read_tracker_csv(
         args.csv,
         length_unit=args.length_unit,
         angle_unit=args.angle_unit,
         skip_invalid=args.skip_invalid,
         joint_columns=joint_columns,
+        orientation_columns=orientation_columns,
+        orientation_unit=args.orientation_unit,
+        orientation_convention=args.orientation_convention,
     )
     write_campaign(args.out, campaign, overwrite=args.force)
     skipped = campaign.metadata.get("skipped_rows") or []
@@ -805,7 +811,7 @@ def _cmd_section(args: argparse.Namespace) -> int:
         raise ConfigError(
             "--demo uses the shipped Rotor 37 scenario: --nominal, --unit, --topic, --message do not apply"
         )
-    trials = args.trials if args.trials is not None else (100_000 if args.demo else 1_000_000)
+    trials = _trials(args.trials) if args.trials is not None else (100_000 if args.demo else 1_000_000)
     adaptive = AdaptiveSettings() if trials == "auto" else None
     count = None if trials == "auto" else int(trials)
     progress, finish = _timed_progress(not args.no_progress, "section")
@@ -1197,6 +1203,17 @@ def _build_parser() -> argparse.ArgumentParser:
         help="comma list of the joint column names, in joint order (default: columns named *joint* or q1, q2, ...)",
     )
     p.add_argument("--skip-invalid", action="store_true", help="drop invalid rows instead of failing (default: fail)")
+    p.add_argument(
+        "--orientation-columns",
+        help="comma list of the three Euler-angle columns of a 6-DOF probe, in the convention's order "
+        "(ipa profile: measurement_rx,measurement_ry,measurement_rz; default: points only)",
+    )
+    p.add_argument("--orientation-unit", help="unit of orientation columns whose header states none: rad, deg")
+    p.add_argument(
+        "--orientation-convention",
+        help="Euler convention of the orientation columns: intrinsic_xyz, extrinsic_xyz, intrinsic_zyx, "
+        "intrinsic_zyz (ipa: intrinsic_xyz; giving it alone reads the ipa orientations)",
+    )
     _add_force_arg(p, "the campaign file")
     p.set_defaults(func=_cmd_import_csv)
 
@@ -1359,9 +1376,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--topic", help="PointCloud2 topic of a bag (default: its only PointCloud2 topic)")
     p.add_argument("--message", type=int, help="0-based message index in the topic (default: all messages joined)")
     p.add_argument(
-        "--trials",
-        type=_trials,
-        help="Monte Carlo trials, or auto (JCGM 101 7.9) (default 1000000, the seed's; --demo 100000)",
+        "--trials", help="Monte Carlo trials, or auto (JCGM 101 7.9) (default 1000000, the seed's; --demo 100000)"
     )
     p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
     p.add_argument(

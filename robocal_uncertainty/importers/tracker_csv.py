@@ -20,6 +20,23 @@ Profiles
 ``auto`` (default)
     ``ipa`` when the header has all its joint and measurement columns, else ``generic``.
 
+Orientation (6-DOF probes)
+--------------------------
+With `orientation_columns` (three names, the Euler angles in the order of the convention) the
+campaign is a 6-DOF campaign (:class:`~robocal_uncertainty.core.pose_measurement.PoseMeasurement`).
+Their unit is the header's or `orientation_unit`, their convention `orientation_convention`
+(one of :data:`~robocal_uncertainty.core.rotation.EULER_CONVENTIONS`): neither has a default for
+the ``generic`` profile, a missing one is an error. The ``ipa`` profile reads
+``measurement_rx/ry/rz`` in degrees, intrinsic XYZ (``Rx(rx) Ry(ry) Rz(rz)``; established
+against the UR10 kinematics in ``test/importers/test_ur10_orientation_convention.py``); a
+different stated unit or convention is an error. Standard deviation columns of the angles
+(``<prefix>std_<name>``, ``std_<name>`` or ``<name>_std``; ``measurement_std_rx`` ... for
+``ipa``) are propagated to standard deviations of the rotation about the tracker frame's fixed
+x, y, z axes (the residual's components) through the Euler angles' Jacobian, uncorrelated
+angles assumed. The measurement's weights are the median over the poses of each axis'
+standard deviation (position and rotation), so position and orientation residuals count in
+units of their typical instrument uncertainty.
+
 Units: lengths m, mm, um (also µm); angles rad, deg. Lengths are converted exactly from
 their decimal text (see :mod:`~robocal_uncertainty.importers.units`).
 
@@ -41,6 +58,9 @@ from typing import Literal
 import numpy as np
 
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.core.measurement import POINT, MeasurementType
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values
+from robocal_uncertainty.core.rotation import EULER_CONVENTIONS, euler_to_matrix, rotation_log
 from robocal_uncertainty.errors import CampaignError, InputError
 from robocal_uncertainty.importers.units import (
     ANGLE_UNITS,
@@ -50,7 +70,7 @@ from robocal_uncertainty.importers.units import (
     to_si,
 )
 
-__all__ = ["IPA_JOINTS", "Profile", "read_tracker_csv"]
+__all__ = ["IPA_JOINTS", "IPA_ORIENTATION", "Profile", "read_tracker_csv"]
 
 Profile = Literal["auto", "ipa", "generic"]
 
@@ -65,6 +85,10 @@ IPA_JOINTS: tuple[str, ...] = (
 _IPA_POINT = ("measurement_x", "measurement_y", "measurement_z")
 _IPA_STD = ("measurement_std_x", "measurement_std_y", "measurement_std_z")
 _IPA_FRAME_ID = "laser_tracker"
+IPA_ORIENTATION: tuple[str, str, str] = ("measurement_rx", "measurement_ry", "measurement_rz")
+"""The ipa series' orientation columns: degrees, intrinsic XYZ Euler angles."""
+_IPA_ORIENTATION_UNIT = "deg"
+_IPA_CONVENTION = "intrinsic_xyz"
 
 _HEADER_CELL = re.compile(r"^\s*(?P<name>[^\[\(]*?)\s*(?:[\[\(]\s*(?P<unit>[^\]\)]*?)\s*[\]\)])?\s*$")
 _PREFIX = r"(?:(?:point|measurement|meas|tracker)_)?"
@@ -79,7 +103,7 @@ class _Column:
 
     index: int
     name: str
-    role: Literal["joint", "point", "std"]
+    role: Literal["joint", "point", "std", "angle", "angle_std"]
     key: str
     unit: str
 
@@ -92,9 +116,12 @@ def _split_header(cell: str) -> tuple[str, str | None]:
     return match.group("name"), (unit if unit else None)
 
 
-def _resolve_unit(path: Path, name: str, stated: str | None, given: str | None, kind: UnitKind) -> str:
+def _resolve_unit(
+    path: Path, name: str, stated: str | None, given: str | None, kind: UnitKind, *, option: str | None = None
+) -> str:
     supported = ", ".join(LENGTH_UNITS if kind == "length" else ANGLE_UNITS)
-    argument = f"the {kind} unit (import-csv --{kind}-unit)"
+    option = option or f"{kind}-unit"
+    argument = f"the {kind} unit (import-csv --{option})"
     if stated is None and given is None:
         msg = (
             f"{path}: column {name!r} has no unit; write it in the header as "
@@ -107,7 +134,7 @@ def _resolve_unit(path: Path, name: str, stated: str | None, given: str | None, 
         msg = f"{path}: column {name!r} has unsupported {kind} unit {bad!r} (supported: {supported})"
         raise InputError(msg)
     if len(set(units)) > 1:
-        msg = f"{path}: column {name!r} states unit {stated!r} but {kind} unit {given!r} was given (--{kind}-unit)"
+        msg = f"{path}: column {name!r} states unit {stated!r} but {kind} unit {given!r} was given (--{option})"
         raise InputError(msg)
     return str(units[0])
 
@@ -181,6 +208,64 @@ def _generic_columns(
     return columns, ignored
 
 
+def _orientation_columns(
+    path: Path,
+    header: list[str],
+    names: tuple[str, ...],
+    unit: str | None,
+    fixed_unit: str | None,
+) -> list[_Column]:
+    """The three angle columns and, when all present, their std columns."""
+    if len(names) != 3 or len(set(names)) != 3:
+        msg = f"{path}: orientation columns must be three distinct names, got {list(names)}"
+        raise InputError(msg)
+    if fixed_unit is not None and unit is not None and canonical_unit(unit, "angle") != fixed_unit:
+        msg = f"{path}: the ipa profile has orientations in {fixed_unit}, got --orientation-unit {unit}"
+        raise InputError(msg)
+    given = fixed_unit or unit
+    cells = {_split_header(cell)[0]: (i, _split_header(cell)[1]) for i, cell in enumerate(header)}
+    out: list[_Column] = []
+    for k, name in enumerate(names):
+        if name not in cells:
+            msg = f"{path}: orientation column {name!r} not in the header"
+            raise InputError(msg)
+        index, stated = cells[name]
+        angle_unit = _resolve_unit(path, name, stated, given, "angle", option="orientation-unit")
+        out.append(_Column(index, name, "angle", "xyz"[k], angle_unit))
+    stds: list[_Column] = []
+    for k, name in enumerate(names):
+        prefix, _, short = name.rpartition("_")
+        candidates = [f"{prefix}_std_{short}" if prefix else f"std_{short}", f"std_{name}", f"{name}_std"]
+        found = [c for c in candidates if c in cells]
+        if found:
+            index, stated = cells[found[0]]
+            std_unit = _resolve_unit(path, found[0], stated, given, "angle", option="orientation-unit")
+            stds.append(_Column(index, found[0], "angle_std", "xyz"[k], std_unit))
+    if stds and len(stds) != 3:
+        msg = f"{path}: orientation std columns must be given for all three angles, found {[c.name for c in stds]}"
+        raise InputError(msg)
+    return out + stds
+
+
+def _rotation_std(angles: np.ndarray, angle_std: np.ndarray, convention: str) -> np.ndarray:
+    """Std [rad] of the rotation about the fixed x, y, z axes from uncorrelated Euler-angle stds.
+
+    ``Sigma = J diag(s^2) J^T`` with ``J[:, k] = d log(R(a) R(a0)^T) / d a_k`` (central
+    differences, step 1e-6 rad); returns ``sqrt(diag(Sigma))``, shape (n, 3).
+    """
+    h = 1e-6
+    base = euler_to_matrix(angles, convention)
+    jac = np.empty((angles.shape[0], 3, 3))
+    for k in range(3):
+        step = np.zeros(3)
+        step[k] = h
+        plus = rotation_log(euler_to_matrix(angles + step, convention) @ np.swapaxes(base, -1, -2))
+        minus = rotation_log(euler_to_matrix(angles - step, convention) @ np.swapaxes(base, -1, -2))
+        jac[:, :, k] = (plus - minus) / (2 * h)
+    cov = jac @ (angle_std[:, :, None] ** 2 * np.swapaxes(jac, -1, -2))
+    return np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+
+
 def _read_rows(path: Path) -> tuple[str, list[list[str]], list[int]]:
     """Return the separator, the rows (header first) and each row's line number."""
     try:
@@ -217,6 +302,9 @@ def read_tracker_csv(
     joint_columns: tuple[str, ...] | list[str] | None = None,
     frame: PointFrame | None = None,
     frame_id: str | None = None,
+    orientation_columns: tuple[str, ...] | list[str] | None = None,
+    orientation_unit: str | None = None,
+    orientation_convention: str | None = None,
 ) -> Campaign:
     """Read a tracker CSV into a campaign with joint positions [rad] and points [m].
 
@@ -237,6 +325,14 @@ def read_tracker_csv(
     frame, frame_id : optional
         Frame of the points; ``ipa``: ``"tracker"``/``"laser_tracker"`` (fixed);
         ``generic``: default ``"tracker"`` and ``"tracker"`` (``"base_link"`` for base).
+    orientation_columns : sequence of 3 str, optional
+        Euler-angle columns of a 6-DOF probe (see the module documentation); ``ipa``: must
+        be :data:`IPA_ORIENTATION` (or pass ``orientation_convention``/``orientation_unit``
+        alone to read them). None: points only.
+    orientation_unit : {"rad", "deg"}, optional
+        Unit of the angle columns whose header states none.
+    orientation_convention : str, optional
+        Euler convention of the angles; required with generic orientation columns.
 
     Returns
     -------
@@ -277,10 +373,50 @@ def read_tracker_csv(
             columns.sort(key=lambda c: (c.role != "joint", order.get(c.name, 0)))
         frame = frame or "tracker"
         frame_id = frame_id or ("base_link" if frame == "base" else "tracker")
+    wants_orientation = orientation_columns is not None or (
+        profile == "ipa" and (orientation_unit is not None or orientation_convention is not None)
+    )
+    if wants_orientation:
+        if profile == "ipa":
+            names_o = tuple(orientation_columns) if orientation_columns is not None else IPA_ORIENTATION
+            if names_o != IPA_ORIENTATION:
+                msg = f"{path}: the ipa profile's orientation columns are {list(IPA_ORIENTATION)}, got {list(names_o)}"
+                raise InputError(msg)
+            if orientation_convention not in (None, _IPA_CONVENTION):
+                msg = (
+                    f"{path}: the ipa profile's orientations are {_IPA_CONVENTION} Euler angles, "
+                    f"got --orientation-convention {orientation_convention}"
+                )
+                raise InputError(msg)
+            orientation_convention = _IPA_CONVENTION
+            fixed: str | None = _IPA_ORIENTATION_UNIT
+        else:
+            fixed = None
+            if orientation_convention is None:
+                msg = (
+                    f"{path}: orientation columns need their Euler convention "
+                    f"(import-csv --orientation-convention: {', '.join(EULER_CONVENTIONS)})"
+                )
+                raise InputError(msg)
+        if orientation_convention not in EULER_CONVENTIONS:
+            msg = (
+                f"{path}: unknown orientation convention {orientation_convention!r} "
+                f"(supported: {', '.join(EULER_CONVENTIONS)})"
+            )
+            raise InputError(msg)
+        assert orientation_columns is not None or profile == "ipa"
+        names_used = tuple(orientation_columns) if orientation_columns is not None else IPA_ORIENTATION
+        o_columns = _orientation_columns(path, header, names_used, orientation_unit, fixed)
+        o_indices = {c.index for c in o_columns}
+        ignored = [name for name in ignored if name not in {c.name for c in o_columns}]
+        columns = [c for c in columns if c.index not in o_indices] + o_columns
     joints = [c for c in columns if c.role == "joint"]
     axes = {c.role + c.key: c for c in columns if c.role != "joint"}
     has_std = "stdx" in axes
+    has_angle_std = "angle_stdx" in axes
     q_rows, p_rows, s_rows, kept, skipped = [], [], [], [], []
+    a_rows: list[list[float]] = []
+    as_rows: list[list[float]] = []
     for data_row, (row, line) in enumerate(zip(rows[1:], lines[1:], strict=True)):
         try:
             values = _parse_row(row, header, columns, separator)
@@ -294,6 +430,10 @@ def read_tracker_csv(
         p_rows.append([values[axes["point" + a].index] for a in "xyz"])
         if has_std:
             s_rows.append([values[axes["std" + a].index] for a in "xyz"])
+        if wants_orientation:
+            a_rows.append([values[axes["angle" + a].index] for a in "xyz"])
+            if has_angle_std:
+                as_rows.append([values[axes["angle_std" + a].index] for a in "xyz"])
         kept.append(data_row)
     if not kept:
         msg = f"{path}: no valid data row ({len(skipped)} skipped)"
@@ -307,14 +447,40 @@ def read_tracker_csv(
         "units": {c.name: c.unit for c in columns},
         "ignored_columns": ignored,
     }
+    points = np.array(p_rows, dtype=np.float64)
+    point_std = np.array(s_rows, dtype=np.float64) if has_std else None
+    measurement: MeasurementType = POINT
+    if wants_orientation:
+        assert orientation_convention is not None
+        angles = np.array(a_rows, dtype=np.float64)
+        points = pose_values(points, euler_to_matrix(angles, orientation_convention))
+        metadata["orientation_convention"] = orientation_convention
+        if point_std is None or not has_angle_std:
+            msg = (
+                f"{path}: a 6-DOF campaign needs the standard deviations of the position and of the "
+                "orientation (std columns) to weigh the two kinds of residual"
+            )
+            raise InputError(msg)
+        rot_std = _rotation_std(angles, np.array(as_rows, dtype=np.float64), orientation_convention)
+        point_std = np.concatenate((point_std, rot_std), axis=1)
+        median = np.median(point_std, axis=0)
+        if not (median > 0).all():
+            msg = f"{path}: the median standard deviation of each axis must be positive, got {median.tolist()}"
+            raise InputError(msg)
+        measurement = PoseMeasurement(
+            (float(median[0]), float(median[1]), float(median[2])),
+            (float(median[3]), float(median[4]), float(median[5])),
+        )
+        metadata["weights_std"] = {"position_m": median[:3].tolist(), "rotation_rad": median[3:].tolist()}
     return Campaign(
         joint_names=tuple(c.name for c in joints),
         joint_positions=np.array(q_rows, dtype=np.float64),
-        points=np.array(p_rows, dtype=np.float64),
+        points=points,
         frame=frame,
         frame_id=frame_id,
-        point_std=np.array(s_rows, dtype=np.float64) if has_std else None,
+        point_std=point_std,
         metadata=metadata,
+        measurement=measurement,
     )
 
 
@@ -338,7 +504,7 @@ def _parse_row(row: list[str], header: list[str], columns: list[_Column], separa
         except ValueError as err:
             msg = f"column {column.name!r}: {err}"
             raise ValueError(msg) from None
-        if column.role == "std" and value < 0:
+        if column.role in ("std", "angle_std") and value < 0:
             msg = f"column {column.name!r}: negative standard deviation {text!r}"
             raise ValueError(msg)
         values[column.index] = value
