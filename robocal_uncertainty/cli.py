@@ -973,6 +973,7 @@ _INTERNAL_WORDS = (
     # Names the library's messages use for what the command line calls otherwise.
     (r"\(pass overwrite=True to replace it\)", "(give --force to replace it)"),
     (r"\badaptive\.max_trials\b", "--max-trials"),
+    (r"or give the unit explicitly\)", "or give --unit)"),
     (r"\blambda_range\b", "--lambda-range"),
     (r"\bmin_poses\b", "--min-poses"),
     (r"\bsubset_size\b", "--subset-size"),

@@ -1,0 +1,130 @@
+"""``robocal-uncertainty section``: a small cloud end to end (file and PointCloud2 bag), the
+report equals the API for the same seed, and every bad input ends in one line."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal_uncertainty.app.section_inspection import inspect_section, load_section_nominal
+from robocal_uncertainty.bagio.point_cloud2 import encode_point_cloud2, write_point_cloud2_mcap
+from robocal_uncertainty.cli import main
+from robocal_uncertainty.inspection.point_cloud import PointCloud
+from robocal_uncertainty.inspection.simulate import simulate_section_scan
+
+TRIALS = "3000"
+
+
+@pytest.fixture(scope="module")
+def scan() -> PointCloud:
+    curve = load_section_nominal("rotor37")
+    return simulate_section_scan(curve, 400, offset=(-0.1e-3, 0.05e-3), twist=math.radians(0.05), form_amplitude=5e-6)
+
+
+@pytest.fixture(scope="module")
+def cloud_file(scan: PointCloud, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("section") / "scan.txt"
+    assert scan.probe_vectors is not None
+    rows = np.column_stack([scan.points * 1e3, scan.probe_vectors])
+    np.savetxt(path, rows, fmt="%.9f", header="unit: mm\nx y z i j k")
+    return path
+
+
+def test_section_report_equals_api(cloud_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "report"
+    argv = ["section", str(cloud_file), "--nominal", "rotor37", "--trials", TRIALS, "--seed", "4", "--out", str(out)]
+    assert main([*argv, "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "400 points" in text and "maximum thickness" in text and "profile, suction side" in text
+    assert "under-cover" in text
+    assert sorted(p.name for p in out.iterdir()) == [
+        "section.csv",
+        "section.json",
+        "section.md",
+        "section_histograms.png",
+    ]
+    data = json.loads((out / "section.json").read_text())
+    api = inspect_section(cloud_file, "rotor37", trials=int(TRIALS), seed=4)
+    assert data["units"] == {"length": "m", "angle": "rad"}
+    assert data["n_trials"] == 3000 and data["seed"] == 4
+    for row, mc in zip(data["parameters"], api.result.monte_carlo.outputs):
+        assert row["u"] == pytest.approx(mc.standard_uncertainty, rel=1e-12)
+        assert row["symmetric_interval"] == pytest.approx(
+            [mc.probabilistically_symmetric.low, mc.probabilistically_symmetric.high], rel=1e-12
+        )
+    # The same command again refuses the non-empty report directory, then replaces it with --force.
+    assert main(argv) == 1
+    assert "exists and is not empty (give --force" in capsys.readouterr().err
+    assert main([*argv, "--force", "--no-progress"]) == 0
+
+
+def test_section_from_a_point_cloud2_bag(scan: PointCloud, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = write_point_cloud2_mcap(
+        tmp_path / "scan.mcap", [encode_point_cloud2(1, "blade", scan.points, scan.probe_vectors, float64=True)]
+    )
+    out = tmp_path / "report"
+    assert main(["section", str(bag), "--nominal", "rotor37", "--trials", "2000", "--out", str(out)]) == 0
+    assert "frame blade" in capsys.readouterr().out
+    data = json.loads((out / "section.json").read_text())
+    assert data["frame_id"] == "blade" and data["n_points"] == 400
+
+
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        ([], "section needs --nominal"),
+        (["--nominal", "rotor37:14"], r"needs a surface K in 1\.\.13"),
+        (["--nominal", "nowhere.txt"], "is neither a file nor a shipped blade"),
+        (["--nominal", "rotor37", "--instrument", "nope.yaml"], "is neither a file nor a shipped instrument"),
+        (["--nominal", "rotor37", "--trials", "0"], "--trials must be a positive integer"),
+        (["--nominal", "rotor37", "--workers", "0"], "--workers must be a positive integer"),
+        (["--nominal", "rotor37", "--seed", "-1"], "--seed must be an integer >= 0"),
+        (["--nominal", "rotor37", "--topic", "/points"], "apply to bags only"),
+        (["--nominal", "rotor37", "--demo"], "CLOUD file or bag, or --demo"),
+    ],
+)
+def test_bad_options_end_in_one_line(
+    cloud_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], match: str
+) -> None:
+    status = main(["section", str(cloud_file), "--trials", "10", "--out", str(tmp_path / "r"), *extra])
+    err = capsys.readouterr().err.strip()
+    assert status == 1, err
+    assert len(err.splitlines()) == 1
+    assert err.startswith("robocal-uncertainty section: error:")
+    assert match in err or __import__("re").search(match, err), err
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        ("", "no data rows|empty|no point"),
+        ("1 2 3\n4 5 6\n", "unit"),
+        ("# unit: mm\n1 2 3\nnan 5 6\n", "NaN|finite|nan"),
+        ("# unit: mm\n1 2 3\n4 5 6\n7 8 9\n", "at least|too few|points"),
+    ],
+)
+def test_bad_clouds_end_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str, match: str
+) -> None:
+    path = tmp_path / "bad.txt"
+    path.write_text(content)
+    status = main(["section", str(path), "--nominal", "rotor37", "--trials", "10", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err.strip()
+    assert status == 1, err
+    assert len(err.splitlines()) == 1
+    assert __import__("re").search(match, err, flags=2), err
+
+
+def test_other_section_than_the_nominal_is_refused(
+    scan: PointCloud, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "other.txt"
+    other = simulate_section_scan(load_section_nominal("cascade"), 300)
+    np.savetxt(path, other.points * 1e3, header="unit: mm")
+    status = main(["section", str(path), "--nominal", "rotor37", "--trials", "10", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err.strip()
+    assert status == 1 and len(err.splitlines()) == 1, err
