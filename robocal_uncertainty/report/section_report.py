@@ -288,19 +288,22 @@ def _plot(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], p
 
     fig, axes = plt.subplots(3, 3, figsize=(13, 10))
     for j, (name, ax) in enumerate(zip(PARAMETER_NAMES, axes.ravel())):
-        vu, vf, _, _ = _display(name)
+        vu, vf, uu, uf = _display(name)
         output = result.monte_carlo.outputs[j]
         hist = output.histogram
-        edges = hist.edges * vf
-        ax.stairs(hist.counts, edges, fill=True, alpha=0.6)
+        y = corrections[j].measured
+        ax.stairs(hist.counts, (hist.edges - y) * uf, fill=True, alpha=0.6)
         iv = output.probabilistically_symmetric
         for x in (iv.low, iv.high):
-            ax.axvline(x * vf, color="C1", linestyle="--", linewidth=1)
-        ax.axvline(corrections[j].measured * vf, color="k", linewidth=1)
+            ax.axvline((x - y) * uf, color="C1", linestyle="--", linewidth=1)
+        ax.axvline(0.0, color="k", linewidth=1)
         ax.set_title(f"{_LABELS[name]}", fontsize=10)
-        ax.set_xlabel(vu)
-        ax.ticklabel_format(axis="x", useOffset=True, style="plain")
-    fig.suptitle(f"Monte Carlo values ({result.monte_carlo.n_trials} trials); black: measured, dashed: 95 % interval")
+        digits = _decimals(output.standard_uncertainty * vf)
+        ax.set_xlabel(f"{uu} from the measured {y * vf:.{digits}f} {vu}")
+    fig.suptitle(
+        f"Monte Carlo values ({result.monte_carlo.n_trials} trials) about the measured value (black); "
+        "dashed: 95 % interval"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
