@@ -45,6 +45,7 @@ from robocal_uncertainty.core.kinematics import (
     forward_poses_and_jacobian,
 )
 from robocal_uncertainty.core.measurement import POSITION_AXES, joint_columns, row_weights, stack_jacobian
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import chordal_mean, quaternion_from_matrix, rotation_exp, rotation_log
 from robocal_uncertainty.errors import ConfigError, InputError
@@ -715,6 +716,7 @@ def _prepare(
     campaign = campaign.reorder_joints(model.joint_names)
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_)
+    model = calibration.model  # its layout (a tool rotation when the data hold orientations)
     layout = model.layout
     problem = BatchProblem.from_calibration(calibration)
     x_hat = problem.scaled_deviation(calibration.estimate)
@@ -773,6 +775,7 @@ def _prepare(
         lambda_range=lambda_range,
         min_poses=min_poses,
         subset_size=subset_size,
+        rotation_std=np.asarray(measurement.rotation_std) if isinstance(measurement, PoseMeasurement) else None,
     )
     trials = CalibrationTrials(
         problem=problem,
@@ -917,6 +920,7 @@ def evaluate_uncertainty(
         raise ConfigError(msg)
     test_q, n_trials = _validate_inputs(model, test_joint_positions, coverage, trials)
     prep = _prepare(model, campaign, test_q, settings, calibration, lambda_, frame, orientation=orientation)
+    model = prep.calibration.model
     calibration = prep.calibration
     trial_block = prep.trials
     dim = _N_AXES

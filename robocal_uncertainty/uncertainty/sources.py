@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import (
+    CorrelatedNormal,
     Distribution,
     Empirical,
     IndependentCopies,
@@ -78,6 +79,9 @@ class TrialContext:
         Range of the ``lambda`` source.
     min_poses, subset_size : int
         Pose counts of the ``n_poses`` and ``pose_choice`` sources.
+    rotation_std : ndarray, shape (3,) [rad] or None
+        Standard uncertainty of a measured orientation about the measurement frame's x, y, z
+        axes (the rotation components 3-5 of a 6-DOF measurement); None for points.
     """
 
     n_poses: int
@@ -90,6 +94,12 @@ class TrialContext:
     lambda_range: tuple[float, float] | None
     min_poses: int
     subset_size: int
+    rotation_std: Array | None = None
+
+    @property
+    def rotation_components(self) -> tuple[int, ...]:
+        """Components of a measurement that are rotations (3, 4, 5 for a pose; none for a point)."""
+        return (3, 4, 5) if self.rotation_std is not None else ()
 
 
 @dataclass(eq=False)
@@ -275,7 +285,26 @@ class PoseChoiceSource:
 def _tracker(settings: UncertaintySettings, ctx: TrialContext) -> Source:
     d = ctx.measurement_dimension
     half = np.repeat(settings.tracker_noise.half_width(ctx.distances), d)
+    rotations = list(ctx.rotation_components)
+    if rotations:
+        # Position components only: the orientation noise is the tracker_orientation source.
+        half = half.reshape(ctx.n_poses, d)
+        half[:, rotations] = 0.0
+        half = half.reshape(-1)
     return AdditiveSource("tracker", IndependentRectangular(half), (("points", (ctx.n_poses, d)),))
+
+
+def _tracker_orientation(settings: UncertaintySettings, ctx: TrialContext) -> Source:
+    d = ctx.measurement_dimension
+    segments = (("points", (ctx.n_poses, d)),)
+    if ctx.rotation_std is None:
+        # Points carry no orientation: a source of zeros keeps "all" valid for every campaign.
+        return AdditiveSource("tracker_orientation", IndependentRectangular(np.zeros(ctx.n_poses * d)), segments)
+    var = np.zeros((ctx.n_poses, d))
+    var[:, list(ctx.rotation_components)] = np.asarray(ctx.rotation_std, dtype=np.float64) ** 2
+    return AdditiveSource(
+        "tracker_orientation", CorrelatedNormal(np.zeros(var.size), np.diag(var.reshape(-1))), segments
+    )
 
 
 def _encoder(settings: UncertaintySettings, ctx: TrialContext) -> Source:
@@ -376,6 +405,13 @@ for _spec in (
         "on the data and a resampled residual added to each prediction",
         True,
         _residual,
+    ),
+    SourceSpec(
+        "tracker_orientation",
+        "laser-tracker orientation noise on every measured orientation (6-DOF campaigns; normal, "
+        "the measurement's per-axis rotation std; zero for points)",
+        True,
+        _tracker_orientation,
     ),
 ):
     register_source(_spec)

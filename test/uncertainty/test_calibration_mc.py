@@ -198,7 +198,15 @@ def test_unknown_source_names_are_refused() -> None:
         parse_sources("tracker,thermal")
     with pytest.raises(ConfigError, match="unknown uncertainty source"):
         UncertaintySettings(sources=("magic",))
-    assert parse_sources("all") == ("tracker", "encoder", "lambda", "n_poses", "pose_choice", "residual")
+    assert parse_sources("all") == (
+        "tracker",
+        "encoder",
+        "lambda",
+        "n_poses",
+        "pose_choice",
+        "residual",
+        "tracker_orientation",
+    )
 
 
 def test_residual_source_reflects_real_robot_scatter() -> None:

@@ -140,8 +140,8 @@ def test_gum_from_source_distributions_equals_a_dense_first_order_propagation(tr
 
 
 def test_registry_refuses_taken_names_and_lists_every_builtin() -> None:
-    assert SOURCES == ("tracker", "encoder", "lambda", "n_poses", "pose_choice", "residual")
-    assert [SOURCE_REGISTRY[s].smooth for s in SOURCES] == [True, True, False, False, False, True]
+    assert SOURCES == ("tracker", "encoder", "lambda", "n_poses", "pose_choice", "residual", "tracker_orientation")
+    assert [SOURCE_REGISTRY[s].smooth for s in SOURCES] == [True, True, False, False, False, True, True]
     with pytest.raises(ConfigError, match="taken"):
         register_source(SourceSpec("tracker", "again", True, _zero_source))
     with pytest.raises(ConfigError, match="unknown uncertainty source"):
