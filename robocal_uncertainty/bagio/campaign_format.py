@@ -8,6 +8,13 @@ the same header stamp:
   ``header.frame_id``;
 * ``/tracker/point_std`` - ``geometry_msgs/msg/Vector3Stamped`` (only when the instrument
   reports it): standard deviation of each coordinate of the point [m].
+* 6-DOF campaigns only: ``/tracker/pose`` - ``geometry_msgs/msg/PoseStamped``: the measured
+  position (equal to the point) and orientation (unit quaternion x, y, z, w) of the probe in
+  ``header.frame_id``; ``/tracker/orientation_std`` - ``geometry_msgs/msg/Vector3Stamped``:
+  standard deviation [rad] of the orientation about the frame's fixed x, y, z axes. The
+  record's ``measurement`` entry (``{"type": "pose", "position_std": [3 m],
+  "rotation_std": [3 rad]}``) gives the weights; files without it (all earlier files) are
+  point campaigns, and a point-only reader still finds ``/tracker/point``.
 
 One MCAP metadata record named ``robocal_campaign`` is written when the file is opened, so
 it survives a crash. Its ``campaign`` entry is a JSON object holding the format version,
@@ -30,8 +37,10 @@ __all__ = [
     "FORMAT_VERSION",
     "JOINT_TOPIC",
     "METADATA_NAME",
+    "ORIENTATION_STD_TOPIC",
     "POINT_STD_TOPIC",
     "POINT_TOPIC",
+    "POSE_TOPIC",
     "UNITS",
     "CampaignHeader",
     "parse_header",
@@ -42,6 +51,8 @@ METADATA_NAME = "robocal_campaign"
 JOINT_TOPIC = "/joint_states"
 POINT_TOPIC = "/tracker/point"
 POINT_STD_TOPIC = "/tracker/point_std"
+POSE_TOPIC = "/tracker/pose"
+ORIENTATION_STD_TOPIC = "/tracker/orientation_std"
 UNITS: dict[str, str] = {"joint_positions": "rad", "points": "m", "point_std": "m", "stamps": "ns"}
 """Units of every quantity in a campaign file (stamps: ns since the epoch)."""
 
@@ -72,6 +83,11 @@ class CampaignHeader:
         The campaign's free-form metadata (JSON-serialisable; numpy values become lists).
     joint_topic, point_topic, point_std_topic : str
         Topic names used in the file.
+    measurement : dict or None
+        ``{"type": "pose", "position_std": [...], "rotation_std": [...]}`` for 6-DOF
+        campaigns (SI units); None for points.
+    pose_topic, orientation_std_topic : str
+        Topics of the 6-DOF messages.
     """
 
     frame: PointFrame
@@ -82,6 +98,9 @@ class CampaignHeader:
     joint_topic: str = JOINT_TOPIC
     point_topic: str = POINT_TOPIC
     point_std_topic: str = POINT_STD_TOPIC
+    measurement: dict[str, object] | None = None
+    pose_topic: str = POSE_TOPIC
+    orientation_std_topic: str = ORIENTATION_STD_TOPIC
 
     def to_record(self) -> dict[str, str]:
         """Return the MCAP metadata record (string map) describing this header.
@@ -91,7 +110,7 @@ class CampaignHeader:
         InputError
             If the metadata is not JSON-serialisable or holds NaN/inf.
         """
-        content = {
+        content: dict[str, object] = {
             "format": METADATA_NAME,
             "format_version": FORMAT_VERSION,
             "units": UNITS,
@@ -106,6 +125,13 @@ class CampaignHeader:
             "stamps_synthetic": self.stamps_synthetic,
             "metadata": self.metadata,
         }
+        if self.measurement is not None:
+            # Only for 6-DOF campaigns: point campaigns keep the record they always had.
+            content["measurement"] = self.measurement
+            topics = content["topics"]
+            assert isinstance(topics, dict)
+            topics["pose"] = self.pose_topic
+            topics["orientation_std"] = self.orientation_std_topic
         try:
             text = json.dumps(content, allow_nan=False, default=_to_json, sort_keys=True)
         except (TypeError, ValueError) as err:
@@ -154,6 +180,10 @@ def parse_header(record: dict[str, str], where: str) -> CampaignHeader:
         raise BagError(msg)
     topics = _field(content, "topics", dict, where)
     frame_literal: PointFrame = "base" if frame == "base" else "tracker"
+    measurement = content.get("measurement")
+    if measurement is not None and not (isinstance(measurement, dict) and measurement.get("type") == "pose"):
+        msg = f"{where}: campaign measurement {measurement!r} is not a pose measurement record"
+        raise BagError(msg)
     return CampaignHeader(
         frame=frame_literal,
         frame_id=_field(content, "frame_id", str, where),
@@ -163,4 +193,7 @@ def parse_header(record: dict[str, str], where: str) -> CampaignHeader:
         joint_topic=str(topics.get("joint_states", JOINT_TOPIC)),
         point_topic=str(topics.get("point", POINT_TOPIC)),
         point_std_topic=str(topics.get("point_std", POINT_STD_TOPIC)),
+        measurement=measurement,
+        pose_topic=str(topics.get("pose", POSE_TOPIC)),
+        orientation_std_topic=str(topics.get("orientation_std", ORIENTATION_STD_TOPIC)),
     )

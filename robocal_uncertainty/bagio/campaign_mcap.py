@@ -29,11 +29,14 @@ from numpy.typing import ArrayLike, NDArray
 from robocal_uncertainty.bagio.campaign_format import (
     JOINT_TOPIC,
     METADATA_NAME,
+    ORIENTATION_STD_TOPIC,
     POINT_STD_TOPIC,
     POINT_TOPIC,
+    POSE_TOPIC,
     CampaignHeader,
 )
 from robocal_uncertainty.bagio.campaign_reader import read_campaign
+from robocal_uncertainty.bagio.pose_messages import POSE_STAMPED, encode_pose_stamped
 from robocal_uncertainty.bagio.ros_messages import (
     JOINT_STATE,
     POINT_STAMPED,
@@ -45,6 +48,8 @@ from robocal_uncertainty.bagio.ros_messages import (
     stamp_parts,
 )
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
+from robocal_uncertainty.core.rotation import quaternion_from_matrix, quaternion_to_matrix
 from robocal_uncertainty.errors import CampaignError, InputError
 
 __all__ = ["CampaignRecorder", "read_campaign", "write_campaign"]
@@ -112,6 +117,7 @@ class CampaignRecorder:
         overwrite: bool = False,
         fsync: bool = True,
         stamps_synthetic: bool = False,
+        measurement: PoseMeasurement | None = None,
     ) -> None:
         names = tuple(str(n) for n in joint_names)
         if not names or len(set(names)) != len(names) or not all(names):
@@ -128,8 +134,16 @@ class CampaignRecorder:
             joint_names=names,
             stamps_synthetic=stamps_synthetic,
             metadata=dict(metadata or {}),
+            measurement=None
+            if measurement is None
+            else {
+                "type": "pose",
+                "position_std": list(measurement.position_std),
+                "rotation_std": list(measurement.rotation_std),
+            },
         )
         record = header.to_record()
+        self._poses = measurement is not None
         self.path = Path(path)
         self._names = names
         self._frame_id = frame_id
@@ -152,6 +166,9 @@ class CampaignRecorder:
             self._writer.add_metadata(METADATA_NAME, record)
             self._joint_channel = self._channel(JOINT_TOPIC, JOINT_STATE)
             self._point_channel = self._channel(POINT_TOPIC, POINT_STAMPED)
+            if self._poses:
+                self._pose_channel = self._channel(POSE_TOPIC, POSE_STAMPED)
+                self._orientation_std_channel = self._channel(ORIENTATION_STD_TOPIC, VECTOR3_STAMPED)
             self._sync()
         except OSError as err:
             self._stream.close()
@@ -184,6 +201,8 @@ class CampaignRecorder:
         joint_positions: ArrayLike,
         point: ArrayLike,
         point_std: ArrayLike | None = None,
+        orientation: ArrayLike | None = None,
+        orientation_std: ArrayLike | None = None,
     ) -> None:
         """Write one pose and flush it to disk.
 
@@ -197,6 +216,11 @@ class CampaignRecorder:
             Measured point in ``frame_id``.
         point_std : array_like, shape (3,) [m], optional
             Standard deviation of each coordinate; give it for every pose or for none.
+        orientation : array_like, shape (4,), optional
+            6-DOF recorders only (required there): measured orientation, unit quaternion
+            ``(x, y, z, w)`` in ``frame_id``.
+        orientation_std : array_like, shape (3,) [rad], optional
+            6-DOF recorders only (required there): standard deviation about x, y, z.
 
         Raises
         ------
@@ -230,7 +254,32 @@ class CampaignRecorder:
             self._with_std = std is not None
             if std is not None:
                 self._std_channel = self._channel(POINT_STD_TOPIC, VECTOR3_STAMPED)
+        quaternion = rot_std = None
+        if self._poses:
+            if orientation is None or orientation_std is None:
+                msg = f"a 6-DOF campaign needs an orientation and its std for every pose (pose {self.n_poses})"
+                raise InputError(msg)
+            quaternion = _vector("orientation", orientation, 4)
+            quaternion_to_matrix(quaternion, name="orientation")  # unit and finite, one-line error
+            rot_std = _vector("orientation_std", orientation_std, 3)
+            if (rot_std < 0).any():
+                msg = f"orientation_std must be non-negative, got {rot_std.tolist()}"
+                raise InputError(msg)
+        elif orientation is not None or orientation_std is not None:
+            msg = "orientation given to a point campaign recorder (create it with a PoseMeasurement)"
+            raise InputError(msg)
         sequence = self.n_poses
+        if quaternion is not None and rot_std is not None:
+            self._writer.add_message(
+                self._orientation_std_channel,
+                stamp,
+                encode_vector3_stamped(stamp, self._frame_id, rot_std),
+                stamp,
+                sequence,
+            )
+            self._writer.add_message(
+                self._pose_channel, stamp, encode_pose_stamped(stamp, self._frame_id, xyz, quaternion), stamp, sequence
+            )
         self._writer.add_message(self._joint_channel, stamp, encode_joint_state(stamp, self._names, q), stamp, sequence)
         if std is not None:
             self._writer.add_message(
@@ -301,6 +350,19 @@ def write_campaign(path: str | Path, campaign: Campaign, *, overwrite: bool = Fa
         repeated = int(values[counts > 1][0])
         msg = f"campaign stamps_ns must be unique to be written, {repeated} ns repeats"
         raise InputError(msg)
+    measurement = campaign.measurement
+    positions, point_std = campaign.points, campaign.point_std
+    quaternions = rotation_std = None
+    if isinstance(measurement, PoseMeasurement):
+        positions, rotations = split_pose_values(campaign.points)
+        quaternions = quaternion_from_matrix(rotations)
+        if campaign.point_std is None:
+            rotation_std = np.broadcast_to(np.asarray(measurement.rotation_std), (campaign.n_poses, 3))
+        else:
+            point_std, rotation_std = campaign.point_std[:, :3], campaign.point_std[:, 3:]
+    elif measurement.value_size != 3:
+        msg = f"campaign files store points and poses, not {measurement.quantity}s"
+        raise InputError(msg)
     with CampaignRecorder(
         path,
         joint_names=campaign.joint_names,
@@ -310,11 +372,14 @@ def write_campaign(path: str | Path, campaign: Campaign, *, overwrite: bool = Fa
         overwrite=overwrite,
         fsync=False,
         stamps_synthetic=synthetic,
+        measurement=measurement if isinstance(measurement, PoseMeasurement) else None,
     ) as recorder:
         for i in range(campaign.n_poses):
             recorder.append(
                 int(stamps[i]),
                 campaign.joint_positions[i],
-                campaign.points[i],
-                None if campaign.point_std is None else campaign.point_std[i],
+                positions[i],
+                None if point_std is None else point_std[i],
+                None if quaternions is None else quaternions[i],
+                None if rotation_std is None else rotation_std[i],
             )

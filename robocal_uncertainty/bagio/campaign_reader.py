@@ -18,6 +18,12 @@ a warning; unpaired joint states are ignored. Joint positions are mapped by
 
 Without the metadata record the frame comes from the points' ``header.frame_id``: ``"base"``
 when it equals `base_frame_id`, ``"tracker"`` otherwise.
+
+6-DOF campaigns (the record's ``measurement`` entry is a pose): each point is joined, by its
+stamp, with the ``geometry_msgs/msg/PoseStamped`` on the pose topic and the orientation
+standard deviation on ``/tracker/orientation_std``; the campaign then holds
+:class:`~robocal_uncertainty.core.pose_measurement.PoseMeasurement` values. A quaternion that
+is NaN or not of unit norm (tolerance 1e-6) is an error naming the file and stamp.
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ from robocal_uncertainty.bagio.campaign_format import (
 )
 from robocal_uncertainty.bagio.mcap_stream import RawMessage
 from robocal_uncertainty.bagio.pairing import pair_by_stamp
+from robocal_uncertainty.bagio.pose_messages import POSE_STAMPED, decode_pose_stamped
 from robocal_uncertainty.bagio.ros_messages import (
     DECODE_ERRORS,
     JOINT_STATE,
@@ -50,6 +57,9 @@ from robocal_uncertainty.bagio.ros_messages import (
     decode_vector_stamped,
 )
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.core.measurement import POINT, MeasurementType
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values
+from robocal_uncertainty.core.rotation import quaternion_to_matrix
 from robocal_uncertainty.errors import BagError, CampaignError, InputError
 
 __all__ = ["READ_WARNINGS_KEY", "read_campaign"]
@@ -146,6 +156,52 @@ def _point_std(
         msg = f"{path}: no {topic} message for the point at stamp {missing[0]} ns"
         raise BagError(msg)
     return np.array([by_stamp[int(s)] for s in stamps], dtype=np.float64).reshape(-1, 3)
+
+
+def _poses(
+    bag: Bag,
+    header: CampaignHeader,
+    points: NDArray[np.float64],
+    stamps: NDArray[np.int64],
+    std: NDArray[np.float64] | None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], MeasurementType]:
+    """Pose values (n, 12), stds (n, 6) and the measurement of a 6-DOF campaign file."""
+    path = bag.path
+    record = header.measurement or {}
+    try:
+        measurement = PoseMeasurement(
+            tuple(record["position_std"]),  # type: ignore[arg-type]
+            tuple(record["rotation_std"]),  # type: ignore[arg-type]
+        )
+    except (KeyError, TypeError, InputError) as err:
+        msg = f"{path}: invalid pose measurement record {record!r}: {err}"
+        raise BagError(msg) from err
+    orientation: dict[int, NDArray[np.float64]] = {}
+    for index, message in enumerate(bag.topic_messages(header.pose_topic, POSE_STAMPED)):
+        try:
+            reading = decode_pose_stamped(message.data)
+        except DECODE_ERRORS as err:
+            msg = f"{path}: cannot decode {POSE_STAMPED} #{index} on {header.pose_topic}: {err}"
+            raise BagError(msg) from err
+        orientation[reading.stamp_ns] = reading.quaternion
+    missing = [int(s) for s in stamps if int(s) not in orientation]
+    if missing:
+        msg = f"{path}: no {header.pose_topic} message for the point at stamp {missing[0]} ns"
+        raise BagError(msg)
+    quaternions = np.array([orientation[int(s)] for s in stamps], dtype=np.float64).reshape(-1, 4)
+    try:
+        rotations = quaternion_to_matrix(quaternions, name=f"orientation on {header.pose_topic}")
+    except InputError as err:
+        msg = f"{path}: {err}"
+        raise BagError(msg) from err
+    rot_readings = _decode_vectors(
+        bag.topic_messages(header.orientation_std_topic, VECTOR3_STAMPED), VECTOR3_STAMPED, path
+    )
+    rot_std = _point_std(rot_readings, stamps, header.orientation_std_topic, path)
+    assert rot_std is not None
+    if std is None:
+        std = np.broadcast_to(np.asarray(measurement.position_std), (stamps.size, 3))
+    return pose_values(points, rotations), np.concatenate((std, rot_std), axis=1), measurement
 
 
 def _decode_all(
@@ -322,16 +378,22 @@ def read_campaign(
     metadata.pop(READ_WARNINGS_KEY, None)
     if notes:
         metadata[READ_WARNINGS_KEY] = notes
+    values = np.array([p.xyz for p in kept], dtype=np.float64).reshape(-1, 3)
+    std = _point_std(stds, stamps, point_std_topic, path)
+    measurement: MeasurementType = POINT
+    if header is not None and header.measurement is not None:
+        values, std, measurement = _poses(bag, header, values, stamps, std)
     try:
         return Campaign(
             joint_names=names,
             joint_positions=positions[joint_index],
-            points=np.array([p.xyz for p in kept], dtype=np.float64),
+            points=values,
             frame=frame,
             frame_id=frame_id,
-            point_std=_point_std(stds, stamps, point_std_topic, path),
+            point_std=std,
             stamps_ns=None if header is not None and header.stamps_synthetic else stamps,
             metadata=metadata,
+            measurement=measurement,
         )
     except InputError as err:
         if isinstance(err, CampaignError):
