@@ -55,8 +55,7 @@ __all__ = [
 ROTOR37_SCALE = 7.14
 """Scale of the shipped Rotor 37 nominal: surface 2 then has the seed's maximum thickness."""
 
-DEMO_SCENARIO = {
-    "nominal": "rotor37",
+DEMO_SCENARIO: dict[str, float] = {
     "n_points": 1836,
     "axial_offset_m": -0.1013e-3,
     "circumferential_offset_m": 0.0538e-3,

@@ -219,7 +219,7 @@ def read_point_cloud2(path: str | Path, topic: str | None = None, *, message: in
     for k, item in enumerate(raw):
         where = f"{bag.path}: {topic} message {k if message is None else message}"
         try:
-            decoded = ros_typestore().deserialize_cdr(item.data, POINT_CLOUD2)
+            decoded: Any = ros_typestore().deserialize_cdr(item.data, POINT_CLOUD2)
         except DECODE_ERRORS as err:
             msg = f"{where}: cannot decode PointCloud2: {err}"
             raise BagError(msg) from err
