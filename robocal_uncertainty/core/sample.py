@@ -53,6 +53,13 @@ class CalibrationSample:
         Number of joint states averaged.
     tracker_point_count : int
         Number of tracker points averaged.
+    orientation : ndarray, shape (4,), optional
+        6-DOF trackers: chordal L2 mean of the measured orientations over the window, unit
+        quaternion ``(x, y, z, w)`` in `frame_id`; None for points.
+    orientation_covariance : ndarray, shape (3, 3) [rad^2], optional
+        Covariance of the MEAN orientation: scatter covariance (ddof=1) of the individual
+        rotation deviations ``log(R_i R_mean^T)`` (about the fixed x, y, z axes) divided by
+        the number of poses; given with `orientation`.
 
     Raises
     ------
@@ -69,6 +76,8 @@ class CalibrationSample:
     point_covariance: NDArray[np.float64]
     joint_state_count: int
     tracker_point_count: int
+    orientation: NDArray[np.float64] | None = None
+    orientation_covariance: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.joint_names)
@@ -89,6 +98,18 @@ class CalibrationSample:
         if (np.diag(cov) < 0).any():
             raise InputError("point_covariance has a negative variance")
         object.__setattr__(self, "point_covariance", cov)
+        if (self.orientation is None) != (self.orientation_covariance is None):
+            raise InputError("orientation and orientation_covariance must be given together")
+        if self.orientation is not None and self.orientation_covariance is not None:
+            quat = _array("orientation", self.orientation, (4,))
+            if abs(float(np.linalg.norm(quat)) - 1.0) > 1e-6:
+                msg = f"orientation is not a unit quaternion: norm {float(np.linalg.norm(quat)):.6g}"
+                raise InputError(msg)
+            object.__setattr__(self, "orientation", quat)
+            rot_cov = _array("orientation_covariance", self.orientation_covariance, (3, 3))
+            if (np.diag(rot_cov) < 0).any():
+                raise InputError("orientation_covariance has a negative variance")
+            object.__setattr__(self, "orientation_covariance", rot_cov)
         for name in ("joint_state_count", "tracker_point_count"):
             value = getattr(self, name)
             if isinstance(value, bool) or int(value) != value or value < 1:
@@ -108,7 +129,14 @@ class CalibrationSample:
             other.tracker_point_count,
         ) and all(
             np.array_equal(getattr(self, name), getattr(other, name))
-            for name in ("joint_positions", "joint_position_std", "point", "point_covariance")
+            for name in (
+                "joint_positions",
+                "joint_position_std",
+                "point",
+                "point_covariance",
+                "orientation",
+                "orientation_covariance",
+            )
         )
 
     __hash__ = None  # type: ignore[assignment]  # holds arrays: not hashable

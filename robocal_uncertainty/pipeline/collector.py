@@ -25,6 +25,14 @@ message whose window is not static. Each dwell gives at most ONE
 * :meth:`flush` (end of the stream) and :meth:`capture_now` emit a dwell that is not
   complete yet at once, over ``[start + guard_s, latest message]``.
 
+6-DOF trackers (:meth:`StaticPoseCollector.add_tracker_pose`, a
+``geometry_msgs/PoseStamped`` stream in place of the points): the window is static only if,
+besides, every entry of the measured rotation matrices spans at most
+``orientation_scatter_threshold`` [rad] (an entry moves by at most the rotation angle, so
+this bounds the orientation scatter in rad), and the sample carries the chordal L2 mean of
+the orientations (the SVD projection of the mean matrix, not an average of angles or
+quaternion components) with the covariance of the mean rotation deviation.
+
 The guards drop the tail of the arrival and the start of the departure, where the arm
 moves by less than the thresholds. Too few data in the averaged span (fewer than two
 joint states or `min_points` tracker points, e.g. the beam was blocked) rejects the dwell.
@@ -48,6 +56,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
+from robocal_uncertainty.core.measurement import POINT, MeasurementType
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values
+from robocal_uncertainty.core.rotation import (
+    chordal_mean,
+    quaternion_from_matrix,
+    quaternion_to_matrix,
+    rotation_log,
+)
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import ConfigError, InputError
 
@@ -70,11 +86,13 @@ DROP_CAUSES: tuple[str, ...] = (
     "length_mismatch",
     "wrong_frame",
     "backwards_time",
+    "bad_quaternion",
 )
 """Why a message is dropped: NaN/inf values; a joint name the collector does not know; a
 configured joint absent; a joint name given twice; names and positions (or a point) of
 the wrong length; a point in another frame than the tracker frame; a stamp not after the
-previous accepted one of the same stream."""
+previous accepted one of the same stream; a tracker orientation that is not a unit
+quaternion (tolerance 1e-6)."""
 
 _NS_PER_S = 1_000_000_000
 
@@ -114,6 +132,9 @@ class CollectorSettings:
     ignore_extra_joints : bool
         Accept joint states carrying joints beyond the configured ones (e.g. a gripper)
         and ignore those; when False such messages are dropped as ``unknown_joint``.
+    orientation_scatter_threshold : float [rad]
+        6-DOF trackers: largest peak-to-peak range of any rotation-matrix entry over a
+        static window (an entry moves by at most the rotation angle).
     """
 
     window_s: float = 0.5
@@ -124,13 +145,14 @@ class CollectorSettings:
     average_s: float = 1.0
     log_throttle_s: float = 5.0
     ignore_extra_joints: bool = False
+    orientation_scatter_threshold: float = 2e-3
 
     def __post_init__(self) -> None:
         _seconds_to_ns("window_s", self.window_s, positive=True)
         _seconds_to_ns("guard_s", self.guard_s, positive=False)
         _seconds_to_ns("average_s", self.average_s, positive=True)
         _seconds_to_ns("log_throttle_s", self.log_throttle_s, positive=False)
-        for name in ("joint_motion_threshold", "tracker_scatter_threshold"):
+        for name in ("joint_motion_threshold", "tracker_scatter_threshold", "orientation_scatter_threshold"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
                 msg = f"{name} must be a positive number, got {value!r}"
@@ -299,6 +321,7 @@ class StaticPoseCollector:
         log_throttle_s: float = 5.0,
         ignore_extra_joints: bool = False,
         log: LogCallback | None = None,
+        orientation_scatter_threshold: float = 2e-3,
     ) -> None:
         names = tuple(str(n) for n in joint_names)
         if not names or len(set(names)) != len(names) or not all(names):
@@ -316,6 +339,7 @@ class StaticPoseCollector:
             average_s=average_s,
             log_throttle_s=log_throttle_s,
             ignore_extra_joints=ignore_extra_joints,
+            orientation_scatter_threshold=orientation_scatter_threshold,
         )
         self.joint_names = names
         self.tracker_frame_id = tracker_frame_id
@@ -340,6 +364,9 @@ class StaticPoseCollector:
         """Samples emitted (complete, short, captured or flushed dwells)."""
         self._joint_still = _StillTracker(joint_motion_threshold, self._window_ns)
         self._point_still = _StillTracker(tracker_scatter_threshold, self._window_ns)
+        # 6-DOF: rotation matrices (row-major, 9 columns) stamped like the points.
+        self._rotations = _Series(9)
+        self._rotation_still = _StillTracker(orientation_scatter_threshold, self._window_ns)
         # The column order of the last accepted joint-state names (robots repeat them).
         self._last_names: tuple[str, ...] | None = None
         self._last_order: list[int] = []
@@ -366,6 +393,7 @@ class StaticPoseCollector:
             log_throttle_s=settings.log_throttle_s,
             ignore_extra_joints=settings.ignore_extra_joints,
             log=log,
+            orientation_scatter_threshold=settings.orientation_scatter_threshold,
         )
 
     # -- state -----------------------------------------------------------------------------
@@ -465,6 +493,53 @@ class StaticPoseCollector:
         self._point_still.push(point)
         return self._update(stamp)
 
+    def add_tracker_pose(
+        self, stamp_ns: int, frame_id: str, xyz: ArrayLike, quaternion: ArrayLike
+    ) -> CalibrationSample | None:
+        """Take one ``geometry_msgs/PoseStamped`` from a 6-DOF tracker (instead of points).
+
+        Parameters
+        ----------
+        stamp_ns : int
+            Header stamp [ns since the epoch].
+        frame_id : str
+            Header frame id; must be the configured tracker frame.
+        xyz : array_like, shape (3,) [m]
+            Measured position.
+        quaternion : array_like, shape (4,)
+            Measured orientation ``(x, y, z, w)``; a non-unit one is dropped
+            (``bad_quaternion``), NaN as ``nan``.
+
+        Returns
+        -------
+        CalibrationSample or None
+            The sample of a dwell this message ended, if any.
+        """
+        stamp = int(stamp_ns)
+        q = np.array(quaternion, dtype=np.float64).reshape(-1)
+        if q.size != 4:
+            return self._drop("length_mismatch", stamp, f"tracker orientation has {q.size} components, expected 4")
+        if not np.isfinite(q).all():
+            return self._drop("nan", stamp, f"tracker orientation has NaN or inf components {q.tolist()}")
+        if abs(float(np.linalg.norm(q)) - 1.0) > 1e-6:
+            return self._drop(
+                "bad_quaternion", stamp, f"tracker orientation is not a unit quaternion (norm {np.linalg.norm(q):.6g})"
+            )
+        point = np.array(xyz, dtype=np.float64).reshape(-1)
+        accepted = (
+            (self._last_point is None or stamp > self._last_point)
+            and frame_id == self.tracker_frame_id
+            and point.size == 3
+            and bool(np.isfinite(point).all())
+        )
+        if accepted:
+            # Stored before the point, whose update then sees the orientation in the window;
+            # a rejected position is dropped by add_tracker_point with its own cause.
+            rotation = quaternion_to_matrix(q).reshape(9)
+            self._rotations.append(stamp, rotation)
+            self._rotation_still.push(rotation)
+        return self.add_tracker_point(stamp, frame_id, point)
+
     def capture_now(self) -> CalibrationSample | None:
         """Emit the current dwell now (data up to the latest message, no trailing guard).
 
@@ -498,8 +573,10 @@ class StaticPoseCollector:
         self._captured = False
         self._joints.clear()
         self._points.clear()
+        self._rotations.clear()
         self._joint_still.reset()
         self._point_still.reset()
+        self._rotation_still.reset()
         return sample
 
     # -- internals -------------------------------------------------------------------------
@@ -529,7 +606,11 @@ class StaticPoseCollector:
         if len(joints) - i0 < 2 or not self._joint_still.still(joints, i0, now):
             return False
         k0 = points.index(lo)
-        return len(points) - k0 < 2 or self._point_still.still(points, k0, now)
+        if len(points) - k0 >= 2 and not self._point_still.still(points, k0, now):
+            return False
+        rotations = self._rotations
+        r0 = rotations.index(lo)
+        return len(rotations) - r0 < 2 or self._rotation_still.still(rotations, r0, now)
 
     def _prune(self, now: int) -> None:
         """Drop data no window can need: keep one joint state at or before the window start."""
@@ -538,6 +619,7 @@ class StaticPoseCollector:
         if i > 0:
             self._joints.drop_front(i)
         self._points.drop_front(self._points.index(lo))
+        self._rotations.drop_front(self._rotations.index(lo))
 
     def _prune_dwell(self, now: int) -> None:
         """Inside a dwell, drop data between the averaged span and the last window."""
@@ -546,7 +628,7 @@ class StaticPoseCollector:
         if not self._captured:
             keep_until = self._dwell_start + self._guard_ns + self._average_ns
         keep_from = now - self._window_ns - self._guard_ns
-        for series in (self._joints, self._points):
+        for series in (self._joints, self._points, self._rotations):
             i0, i1 = series.index(keep_until, "right"), series.index(keep_from)
             # Amortised: only compact once the unneeded middle is as large as the rest.
             if i1 - i0 >= max(256, len(series) // 2):
@@ -601,8 +683,19 @@ class StaticPoseCollector:
         x = points.values[k0:k1]
         first = int(min(joints.stamps[i0], points.stamps[k0]))
         last = int(max(joints.stamps[i1 - 1], points.stamps[k1 - 1]))
+        orientation = orientation_cov = None
+        rotations = self._rotations
+        m0, m1 = rotations.index(t0), rotations.index(t1, "right")
+        if m1 - m0 >= 2:
+            r = rotations.values[m0:m1].reshape(-1, 3, 3)
+            mean = chordal_mean(r)
+            deviations = rotation_log(r @ mean.T)
+            orientation = quaternion_from_matrix(mean)
+            orientation_cov = np.cov(deviations, rowvar=False, ddof=1) / (m1 - m0)
         self.emitted += 1
         return CalibrationSample(
+            orientation=orientation,
+            orientation_covariance=orientation_cov,
             stamp_ns=first + (last - first) // 2,
             frame_id=self.tracker_frame_id,
             joint_names=self.joint_names,
@@ -655,13 +748,34 @@ def samples_to_campaign(
         if sample.frame_id != first.frame_id:
             msg = f"sample {i} is in frame {sample.frame_id!r}, sample 0 in {first.frame_id!r}"
             raise InputError(msg)
+    points = np.array([s.point for s in samples])
+    point_std = np.array([s.point_std for s in samples])
+    measurement: MeasurementType = POINT
+    with_orientation = [s.orientation is not None for s in samples]
+    if any(with_orientation):
+        if not all(with_orientation):
+            missing = with_orientation.index(False)
+            msg = f"sample {missing} has no orientation while others have: mixed point and 6-DOF samples"
+            raise InputError(msg)
+        quaternions = np.array([s.orientation for s in samples], dtype=np.float64)
+        rot_std = np.sqrt(np.array([np.diag(np.asarray(s.orientation_covariance)) for s in samples]))
+        points = pose_values(points, quaternion_to_matrix(quaternions))
+        point_std = np.concatenate((point_std, rot_std), axis=1)
+        # Weights: the median standard uncertainty of each axis' mean over the samples
+        # (floored at 1e-12 so that noise-free data stay usable).
+        median = np.maximum(np.median(point_std, axis=0), 1e-12)
+        measurement = PoseMeasurement(
+            (float(median[0]), float(median[1]), float(median[2])),
+            (float(median[3]), float(median[4]), float(median[5])),
+        )
     return Campaign(
         joint_names=first.joint_names,
         joint_positions=np.array([s.joint_positions for s in samples]),
-        points=np.array([s.point for s in samples]),
+        points=points,
         frame=frame,
         frame_id=first.frame_id,
-        point_std=np.array([s.point_std for s in samples]),
+        point_std=point_std,
         stamps_ns=np.array([s.stamp_ns for s in samples], dtype=np.int64),
         metadata=dict(metadata or {}),
+        measurement=measurement,
     )

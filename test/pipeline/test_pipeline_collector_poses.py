@@ -1,0 +1,82 @@
+"""The static-pose collector with a 6-DOF tracker: orientation scatter check in rad, chordal
+mean of the orientations, 6-DOF campaign from the samples, bad quaternions dropped."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
+from robocal_uncertainty.core.rotation import quaternion_from_matrix, quaternion_to_matrix, rotation_exp, rotation_log
+from robocal_uncertainty.pipeline.collector import StaticPoseCollector, samples_to_campaign
+
+NAMES = ("j1", "j2")
+MS = 1_000_000
+
+
+def _run(collector: StaticPoseCollector, dwells: list[tuple[np.ndarray, np.ndarray]], rot_noise: float) -> list:  # type: ignore[type-arg]
+    """Each dwell: 2 s static at joint q with orientation R, 100 Hz, then a 0.5 s move."""
+    rng = np.random.default_rng(0)
+    samples = []
+    t = 0
+    for q, rotation in dwells:
+        for k in range(200):
+            t += 10 * MS
+            samples.append(collector.add_joint_state(t, NAMES, q))
+            noisy = rotation_exp(rng.normal(0.0, rot_noise, 3)) @ rotation
+            samples.append(
+                collector.add_tracker_pose(t + MS, "tracker", q.sum() * np.ones(3), quaternion_from_matrix(noisy))
+            )
+        for k in range(50):
+            t += 10 * MS
+            samples.append(collector.add_joint_state(t, NAMES, q + 0.01 * (k + 1)))
+    samples.append(collector.flush())
+    return [s for s in samples if s is not None]
+
+
+def test_orientations_are_averaged_on_the_rotation_group() -> None:
+    rotations = [rotation_exp(np.array([0.3, -1.0, 2.9])), rotation_exp(np.array([0.0, 0.2, -0.1]))]
+    dwells = [(np.array([0.1, 0.2]), rotations[0]), (np.array([0.5, -0.3]), rotations[1])]
+    samples = _run(StaticPoseCollector(NAMES, tracker_frame_id="tracker"), dwells, rot_noise=1e-4)
+    assert len(samples) == 2
+    for sample, rotation in zip(samples, rotations, strict=True):
+        assert sample.orientation is not None
+        error = rotation_log(quaternion_to_matrix(sample.orientation) @ rotation.T)
+        assert np.linalg.norm(error) < 5e-5  # 100 readings of 0.1 mrad: ~1e-5 rad
+        std = np.sqrt(np.diag(sample.orientation_covariance))
+        np.testing.assert_allclose(std, 1e-5, rtol=0.3)
+    campaign = samples_to_campaign(samples, frame="tracker")
+    assert isinstance(campaign.measurement, PoseMeasurement)
+    _, rot = split_pose_values(campaign.points)
+    np.testing.assert_allclose(rot[0], rotations[0], atol=1e-4)
+    assert campaign.point_std is not None
+    assert campaign.point_std.shape == (2, 6)
+
+
+def test_orientation_scatter_vetoes_a_static_window() -> None:
+    dwells = [(np.array([0.1, 0.2]), np.eye(3))]
+    # 5 mrad scatter with a 0.5 mrad threshold: never static, no sample.
+    noisy = StaticPoseCollector(NAMES, tracker_frame_id="tracker", orientation_scatter_threshold=5e-4)
+    assert _run(noisy, dwells, rot_noise=5e-3) == []
+    # The same scatter passes a 0.1 rad threshold.
+    loose = StaticPoseCollector(NAMES, tracker_frame_id="tracker", orientation_scatter_threshold=0.1)
+    assert len(_run(loose, dwells, rot_noise=5e-3)) == 1
+
+
+def test_bad_quaternions_are_dropped_and_counted() -> None:
+    collector = StaticPoseCollector(NAMES, tracker_frame_id="tracker")
+    assert collector.add_tracker_pose(1, "tracker", [0, 0, 0], [0, 0, 0, 2]) is None
+    assert collector.add_tracker_pose(2, "tracker", [0, 0, 0], [np.nan, 0, 0, 1]) is None
+    assert collector.dropped["bad_quaternion"] == 1
+    assert collector.dropped["nan"] == 1
+
+
+def test_point_samples_keep_the_point_campaign() -> None:
+    collector = StaticPoseCollector(NAMES, tracker_frame_id="tracker")
+    samples = []
+    for k in range(300):
+        samples.append(collector.add_joint_state(k * 10 * MS, NAMES, [0.1, 0.2]))
+        samples.append(collector.add_tracker_point(k * 10 * MS + MS, "tracker", [1.0, 2.0, 3.0]))
+    samples.append(collector.flush())
+    kept = [s for s in samples if s is not None]
+    assert kept[0].orientation is None
+    assert samples_to_campaign(kept, frame="tracker").measurement.name == "point"
