@@ -40,7 +40,9 @@ __all__ = [
     "message_definition",
     "msg_to_sample",
     "pose_uncertainty_to_msg",
+    "pose_with_covariance",
     "robocal_typestore",
+    "ros_pose_covariance",
     "sample_to_msg",
     "uncertainty_to_msgs",
 ]
@@ -206,6 +208,42 @@ def calibration_to_msg(
     )
 
 
+def ros_pose_covariance(pose: PoseUncertainty, *, undetermined_variance: float = 1e6) -> NDArray[np.float64]:
+    """6x6 covariance of ``geometry_msgs/PoseWithCovariance`` for one configuration [m^2, m rad, rad^2].
+
+    Rows and columns x, y, z, rotation about the fixed x, y, z axes. With an orientation
+    statement: :meth:`OrientationUncertainty.ros_covariance` (huge `undetermined_variance`
+    [rad^2] only along the undetermined rotation directions); without one (no orientation
+    evaluated) the rotation block is `undetermined_variance` times the identity.
+    """
+    if pose.orientation is None:
+        out = np.zeros((6, 6))
+        out[:3, :3] = pose.covariance
+        out[3:, 3:] = np.eye(3) * undetermined_variance
+        return out
+    return np.asarray(
+        pose.orientation.ros_covariance(pose.covariance, undetermined_variance=undetermined_variance), dtype=np.float64
+    )
+
+
+def pose_with_covariance(
+    pose: PoseUncertainty, *, undetermined_variance: float = 1e6
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Position (3,) [m], orientation quaternion (x, y, z, w) and the 6x6 ROS covariance.
+
+    The ROS-free content of ``robocal/pose_with_covariance``: the mean orientation when the
+    Monte Carlo evaluated one, else the identity (with `undetermined_variance` on the rotation).
+    """
+    quaternion = (
+        np.array([0.0, 0.0, 0.0, 1.0]) if pose.orientation is None else np.asarray(pose.orientation.mean_quaternion)
+    )
+    return (
+        np.asarray(pose.mean, dtype=np.float64),
+        quaternion,
+        ros_pose_covariance(pose, undetermined_variance=undetermined_variance),
+    )
+
+
 def pose_uncertainty_to_msg(
     pose: PoseUncertainty,
     *,
@@ -249,7 +287,50 @@ def pose_uncertainty_to_msg(
     def per_axis(values: list[float | None]) -> NDArray[np.float64]:
         return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
 
-    return robocal_typestore().types[POSE_UNCERTAINTY](
+    orientation = pose.orientation
+    nan3 = np.full(3, np.nan)
+    types = robocal_typestore().types
+    if orientation is None:
+        quaternion = types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+        rot_cov = np.zeros(9)
+        rot = dict.fromkeys(("u", "U", "sl", "sh", "hl", "hh"), nan3)
+        undetermined = np.zeros(3, dtype=bool)
+        pose_cov = np.zeros(36)
+    else:
+        q = orientation.mean_quaternion
+        quaternion = types["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+        rot_cov = _f64(orientation.covariance).reshape(-1)
+        determined = orientation.determined
+        rot_axes = orientation.axes
+
+        def rot_axis(values: list[float | None]) -> NDArray[np.float64]:
+            return np.array(
+                [np.nan if v is None or not ok else v for v, ok in zip(values, determined, strict=True)],
+                dtype=np.float64,
+            )
+
+        rot = {
+            "u": rot_axis([a.standard_uncertainty for a in rot_axes]),
+            "U": rot_axis([a.expanded_uncertainty for a in rot_axes]),
+            "sl": rot_axis([a.probabilistically_symmetric.low for a in rot_axes]),
+            "sh": rot_axis([a.probabilistically_symmetric.high for a in rot_axes]),
+            "hl": rot_axis([a.shortest.low for a in rot_axes]),
+            "hh": rot_axis([a.shortest.high for a in rot_axes]),
+        }
+        undetermined = ~np.array(determined, dtype=bool)
+        pose_cov = ros_pose_covariance(pose).reshape(-1)
+    return types[POSE_UNCERTAINTY](
+        has_orientation=orientation is not None,
+        mean_orientation=quaternion,
+        orientation_covariance=rot_cov,
+        orientation_standard_uncertainty=rot["u"],
+        orientation_expanded_uncertainty=rot["U"],
+        orientation_symmetric_low=rot["sl"],
+        orientation_symmetric_high=rot["sh"],
+        orientation_shortest_low=rot["hl"],
+        orientation_shortest_high=rot["hh"],
+        orientation_undetermined=undetermined,
+        pose_covariance=pose_cov,
         header=_header(stamp_ns, frame_id),
         joint_names=[str(n) for n in joint_names],
         joint_positions=_f64(pose.joint_positions),

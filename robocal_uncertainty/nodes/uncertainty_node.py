@@ -21,11 +21,13 @@ late joiner gets the latest full set):
 * ``robocal/uncertainty``: ``robocal_uncertainty/PoseUncertainty``, one per configuration.
 * ``robocal/pose_with_covariance``: ``geometry_msgs/PoseWithCovarianceStamped``, one per
   configuration, in the frame set by ``output_frame`` (default: the frame of the campaign's points,
-  e.g. the tracker's; ``base``: the robot base frame): position = Monte Carlo mean; orientation = identity
-  and NOT estimated. Covariance (6x6 row-major over x, y, z, rot x, rot y, rot z): the 3x3
-  position covariance [m^2] in the top-left block; the orientation block is diagonal with
-  ``orientation_variance_rad2`` (default 1e6 rad^2, "unknown" by the usual large-variance
-  convention), cross terms 0.
+  e.g. the tracker's; ``base``: the robot base frame): position = Monte Carlo mean; orientation =
+  the chordal mean of the Monte Carlo tool rotations. Covariance (6x6 row-major over x, y, z,
+  rot x, rot y, rot z about the fixed axes, ROS convention): the full Monte Carlo pose
+  covariance [m^2, m rad, rad^2] with the position-rotation correlation; only along rotation
+  directions the campaign cannot determine (e.g. about the tool axis from points only) the
+  variance is ``orientation_variance_rad2`` (default 1e6 rad^2, "unknown"), without
+  correlation (``bagio.messages.pose_with_covariance``).
 * ``robocal/uncertainty_status``: ``std_msgs/String`` JSON (state, trials done, target,
   sample count, ``sample_to_result_s``: from the newest sample's stamp to publication);
   progress is also logged every ``progress_period_s``.
@@ -67,7 +69,7 @@ from visualization_msgs.msg import MarkerArray
 
 from robocal_uncertainty.app import Evaluation, evaluate
 from robocal_uncertainty.app.pose_suggestion import service_arguments, service_response, suggest_poses
-from robocal_uncertainty.bagio.messages import msg_to_sample, uncertainty_to_msgs
+from robocal_uncertainty.bagio.messages import msg_to_sample, pose_with_covariance, uncertainty_to_msgs
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
@@ -251,7 +253,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "orientation_variance_rad2",
         1e6,
-        "Variance put on the (not estimated) orientation of pose_with_covariance",
+        "Variance put on the undetermined rotation directions of pose_with_covariance",
         "rad^2",
         low=0.0,
         high=1e12,
@@ -559,11 +561,11 @@ class UncertaintyNode(Node):
             out = PoseWithCovarianceStamped()
             out.header.stamp = msg.header.stamp
             out.header.frame_id = frame_id
-            out.pose.pose.position.x, out.pose.pose.position.y, out.pose.pose.position.z = (float(v) for v in pose.mean)
-            out.pose.pose.orientation.w = 1.0
-            covariance = np.zeros((6, 6))
-            covariance[:3, :3] = pose.covariance
-            covariance[3:, 3:] = np.eye(3) * variance
+            # The full 6x6 (ROS convention, rad^2): huge variance only along undetermined rotations.
+            position, quaternion, covariance = pose_with_covariance(pose, undetermined_variance=variance)
+            out.pose.pose.position.x, out.pose.pose.position.y, out.pose.pose.position.z = (float(v) for v in position)
+            o = out.pose.pose.orientation
+            o.x, o.y, o.z, o.w = (float(v) for v in quaternion)
             out.pose.covariance = covariance.reshape(-1).tolist()
             self._pose_pub.publish(out)
 
