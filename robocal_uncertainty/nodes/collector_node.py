@@ -2,7 +2,11 @@
 
 Subscribes ``/joint_states`` (``sensor_msgs/JointState``) and ``/tracker/point``
 (``geometry_msgs/PointStamped``), both with the sensor-data QoS (remap them in the launch
-file). Messages are merged back into publication order (:mod:`.stream_merge`) and fed to a
+file). With ``tracker_pose_topic`` set (a 6-DOF tracker), that topic
+(``geometry_msgs/PoseStamped``) is subscribed instead of ``/tracker/point``: the collector
+checks the orientation scatter (``orientation_scatter_threshold_rad``) and averages the
+orientations (chordal mean) of each dwell. Messages are merged back into publication order
+(:mod:`.stream_merge`) and fed to a
 :class:`~robocal_uncertainty.pipeline.collector.StaticPoseCollector`. Each sample is first
 appended to the campaign MCAP (flushed and fsynced per pose; a restart resumes from the
 file, so no sample taken before a crash is lost), then published on ``robocal/samples``.
@@ -43,7 +47,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
@@ -91,6 +95,21 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "header.frame_id of valid tracker points (others are dropped as wrong_frame); "
         "empty = the robot model's base frame (tracker reporting base coordinates)",
         read_only=True,
+    ),
+    ParamSpec(
+        "tracker_pose_topic",
+        "",
+        "6-DOF tracker: geometry_msgs/PoseStamped topic subscribed instead of /tracker/point; empty = points",
+        read_only=True,
+    ),
+    ParamSpec(
+        "orientation_scatter_threshold_rad",
+        2e-3,
+        "6-DOF tracker: largest peak-to-peak range of any rotation-matrix entry over a static window",
+        "rad",
+        True,
+        1e-9,
+        3.2,
     ),
     ParamSpec(
         "campaign_path",
@@ -204,6 +223,7 @@ class CollectorNode(Node):
             average_s=p["average_s"],
             log_throttle_s=p["log_throttle_s"],
             ignore_extra_joints=p["ignore_extra_joints"],
+            orientation_scatter_threshold=p["orientation_scatter_threshold_rad"],
         )
         self.collector = StaticPoseCollector.from_settings(
             self.model.joint_names, frame_id, settings, log=self._causes.warning
@@ -228,12 +248,15 @@ class CollectorNode(Node):
         self._sample_pub = self.create_publisher(CalibrationSampleMsg, "robocal/samples", SAMPLE_QOS)
         self._status_pub = self.create_publisher(String, "robocal/collector_status", latched_qos())
         depth = p["input_queue_depth"]
+        pose_topic = p["tracker_pose_topic"]
+        tracker_type: Any = PoseStamped if pose_topic else PointStamped
+        tracker_topic = pose_topic or "/tracker/point"
         if _HAS_MESSAGE_INFO:
             self.create_subscription(JointState, "/joint_states", self._on_joint_state_info, sensor_qos(depth))
-            self.create_subscription(PointStamped, "/tracker/point", self._on_point_info, sensor_qos(depth))
+            self.create_subscription(tracker_type, tracker_topic, self._on_point_info, sensor_qos(depth))
         else:
             self.create_subscription(JointState, "/joint_states", self._on_joint_state, sensor_qos(depth))
-            self.create_subscription(PointStamped, "/tracker/point", self._on_point, sensor_qos(depth))
+            self.create_subscription(tracker_type, tracker_topic, self._on_point, sensor_qos(depth))
         self.create_service(Trigger, "~/capture_now", self._capture_now)
         self.create_service(Trigger, "~/clear", self._clear)
         self.create_service(Trigger, "~/save_copy", self._save_copy)
@@ -258,13 +281,13 @@ class CollectorNode(Node):
     def _on_joint_state_info(self, msg: JointState, info: dict[str, int]) -> None:
         self._push(_JOINTS, msg, info.get("source_timestamp", 0))
 
-    def _on_point_info(self, msg: PointStamped, info: dict[str, int]) -> None:
+    def _on_point_info(self, msg: PointStamped | PoseStamped, info: dict[str, int]) -> None:
         self._push(_POINTS, msg, info.get("source_timestamp", 0))
 
     def _on_joint_state(self, msg: JointState) -> None:
         self._push(_JOINTS, msg, 0)
 
-    def _on_point(self, msg: PointStamped) -> None:
+    def _on_point(self, msg: PointStamped | PoseStamped) -> None:
         self._push(_POINTS, msg, 0)
 
     def _push(self, stream: int, msg: Any, source_ns: int) -> None:
@@ -280,6 +303,11 @@ class CollectorNode(Node):
             if stream == _JOINTS:
                 sample = self.collector.add_joint_state(
                     stamp_ns(msg.header), list(msg.name), np.asarray(msg.position, dtype=np.float64)
+                )
+            elif hasattr(msg, "pose"):  # PoseStamped from a 6-DOF tracker
+                p, o = msg.pose.position, msg.pose.orientation
+                sample = self.collector.add_tracker_pose(
+                    stamp_ns(msg.header), str(msg.header.frame_id), (p.x, p.y, p.z), (o.x, o.y, o.z, o.w)
                 )
             else:
                 point = msg.point
