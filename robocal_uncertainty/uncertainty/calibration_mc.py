@@ -269,6 +269,9 @@ class CalibrationUncertainty:
     adaptive : AdaptiveReport or None
     samples : ndarray, shape (n_trials, 3 n_test + k)
         Positions (output frame) then parameters, per trial.
+    rotation_samples : ndarray, shape (n_trials, 3 n_test) [rad], or None
+        With orientation: per trial and test configuration, the rotation deviation
+        ``log(R_trial R_calibrated^T)`` about the output frame's fixed axes.
     lambda_star : float
         Lambda of the calibration (scaled units).
     lambda_range : (float, float) or None
@@ -299,6 +302,7 @@ class CalibrationUncertainty:
     frame_id: str
     model_adequacy: ModelAdequacy
     warnings: tuple[str, ...] = field(default=())
+    rotation_samples: Array | None = None
 
     @property
     def converged(self) -> bool:
@@ -401,10 +405,14 @@ class CalibrationTrials:
                 pos, rot = forward_poses(self.problem.layout, params, qt)
                 # Deviation about the fixed axes of the output frame: exp([d]x) = R R_ref^T.
                 dev = rotation_log(rot @ np.swapaxes(self.reference_rotations, -1, -2))
+                if batch.predictions is not None and batch.predictions.shape[-1] == 2 * dim:
+                    # 6-DOF model errors: their rotation part (small) moves the orientation.
+                    dev = dev + batch.predictions[..., dim:] @ self.output_rotation.T
                 out[sl, dim * n_test + self.x_hat.size :] = dev.reshape(t, dim * n_test)
             if batch.predictions is not None:
-                # Row-vector form of R_out e: model errors live in the measurement frame.
-                pos = pos + batch.predictions @ self.output_rotation.T
+                # Row-vector form of R_out e: model errors live in the measurement frame
+                # (their position part for 6-DOF measurements).
+                pos = pos + batch.predictions[..., :dim] @ self.output_rotation.T
             out[sl, : dim * n_test] = pos.reshape(t, dim * n_test)
         return out
 
@@ -496,16 +504,20 @@ def _field_sensitivities(prep: _Prepared, *, angular: bool = False) -> tuple[dic
     m_dim = measurement.dimension
     s_joints = -np.einsum("opc,pcj->opj", s_points.reshape(n_out, n_poses, m_dim), jac[..., theta_cols])
     s_test = np.zeros((n_test, dim, n_test, n_joints))
-    s_pred = np.zeros((n_test, dim, n_test, dim))
+    # Model errors (the residual source) have the measurement's components: positions move
+    # positions and, for 6-DOF measurements, rotations move rotations.
+    s_pred = np.zeros((n_test, dim, n_test, m_dim))
     for i in range(n_test):
         s_test[i, :, i, :] = gy[i][:, theta_cols]
         if not angular:
-            s_pred[i, :, i, :] = trials.output_rotation
+            s_pred[i, :, i, :dim] = trials.output_rotation
+        elif m_dim == 2 * dim:
+            s_pred[i, :, i, dim:] = trials.output_rotation
     fields = {
         "points": s_points,
         "joints": s_joints.reshape(n_out, n_poses * n_joints),
         "test_joints": s_test.reshape(n_out, n_test * n_joints),
-        "predictions": s_pred.reshape(n_out, n_test * dim),
+        "predictions": s_pred.reshape(n_out, n_test * m_dim),
     }
     return fields, y.reshape(n_out)
 
@@ -994,4 +1006,5 @@ def evaluate_uncertainty(
         frame_id=prep.frame_id,
         model_adequacy=prep.adequacy,
         warnings=tuple(warns),
+        rotation_samples=result.samples[:, dim * n_test + prep.problem.estimated.size :] if orientation else None,
     )

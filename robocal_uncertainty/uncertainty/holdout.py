@@ -27,9 +27,11 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.measurement import POSITION_AXES
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
@@ -168,6 +170,11 @@ class HoldoutValidation:
     seed : int
     mode : str
         ``"split"``, ``"k-fold"`` or ``"campaign"`` (a second campaign held out).
+    orientation_axes : tuple of AxisValidation
+        6-DOF held-out measurements: the same statistics for the rotation about the frame's
+        fixed x, y, z axes (``rx, ry, rz``; errors ``log(R_measured R_predicted^T)`` [rad],
+        predictive distribution with the ``tracker_orientation`` noise when enabled); empty
+        for points.
     """
 
     coverage_probability: float
@@ -182,6 +189,7 @@ class HoldoutValidation:
     sources: tuple[str, ...]
     seed: int
     mode: str
+    orientation_axes: tuple[AxisValidation, ...] = ()
 
     @property
     def n_held_out(self) -> int:
@@ -229,6 +237,39 @@ def _tracker_distances(points: Array, campaign: Campaign, settings: UncertaintyS
     origin = np.zeros(len(AXES)) if campaign.frame == "tracker" else np.asarray(settings.tracker_xyz)
     distances: Array = np.linalg.norm(points - origin, axis=1)
     return distances
+
+
+def _orientation_fold(
+    result: CalibrationUncertainty,
+    held: Campaign,
+    settings: UncertaintySettings,
+    levels: Array,
+    rng: np.random.Generator,
+) -> tuple[Array, Array, NDArray[np.bool_]]:
+    """Held-out rotation errors [rad], predictive std [rad] and inside flags (L, n, 3).
+
+    The Monte Carlo rows end with each held-out configuration's rotation deviation from the
+    calibrated rotation; the measured deviation is compared with their distribution (plus the
+    instrument's orientation noise when ``tracker_orientation`` is enabled).
+    """
+    n_held = held.n_poses
+    if result.rotation_samples is None:
+        raise InputError("the Monte Carlo gave no orientation for the held-out configurations")
+    dev = result.rotation_samples.reshape(-1, n_held, 3)
+    measurement = held.measurement
+    if isinstance(measurement, PoseMeasurement) and "tracker_orientation" in settings.sources:
+        dev = dev + rng.normal(0.0, 1.0, dev.shape) * np.asarray(measurement.rotation_std)
+    reference = np.stack([pose.orientation.calibrated_rotation for pose in result.poses if pose.orientation])
+    if reference.shape[0] != n_held:
+        raise InputError("the Monte Carlo gave no orientation for the held-out configurations")
+    _, measured_rot = split_pose_values(held.points)
+    measured = rotation_log(measured_rot @ np.swapaxes(reference, -1, -2))
+    mean = dev.mean(axis=0)
+    std = dev.std(axis=0, ddof=1)
+    tails = np.concatenate(((1.0 - levels) / 2.0, (1.0 + levels) / 2.0))
+    q = np.quantile(dev, tails, axis=0)
+    lo, hi = q[: levels.size], q[levels.size :]
+    return measured - mean, std, (measured[None] >= lo) & (measured[None] <= hi)
 
 
 def validate_holdout(
@@ -311,6 +352,9 @@ def validate_holdout(
         mode = "k-fold" if len(splits) > 1 else "split"
 
     errors, stds, inside, region_inside = [], [], [], []
+    rot_errors: list[Array] = []
+    rot_stds: list[Array] = []
+    rot_inside: list[NDArray[np.bool_]] = []
     fold_results = []
     for f, (train, held) in enumerate(folds):
         calibration = identify(model, train, lambda_=lambda_)
@@ -346,6 +390,11 @@ def validate_holdout(
         errors.append(held_points - mean)
         stds.append(std)
         region_inside.append(_inside_regions(pred, held_points, levels_arr))
+        if held.measurement.measures_orientation:
+            rot_stats = _orientation_fold(result, held, settings, levels_arr, rng)
+            rot_errors.append(rot_stats[0])
+            rot_stds.append(rot_stats[1])
+            rot_inside.append(rot_stats[2])
         adequacy = result.model_adequacy
         fold_results.append(
             FoldResult(
@@ -379,7 +428,23 @@ def validate_holdout(
         )
         for a in range(len(AXES))
     )
+    orientation_axes: tuple[AxisValidation, ...] = ()
+    if rot_errors:
+        r_err = np.concatenate(rot_errors)
+        r_sd = np.concatenate(rot_stds)
+        r_ins = np.concatenate(rot_inside, axis=1)
+        orientation_axes = tuple(
+            AxisValidation(
+                axis=name,
+                rms_error=float(np.sqrt(np.mean(r_err[:, a] ** 2))),
+                normalized_rms=float(np.sqrt(np.mean((r_err[:, a] / r_sd[:, a]) ** 2))),
+                inside_fraction=float(r_ins[at, :, a].mean()),
+                reliability=r_ins[:, :, a].mean(axis=1),
+            )
+            for a, name in enumerate(("rx", "ry", "rz"))
+        )
     return HoldoutValidation(
+        orientation_axes=orientation_axes,
         coverage_probability=float(coverage),
         levels=levels_arr,
         axes=axes,
