@@ -217,6 +217,17 @@ def _print_calibration(result: Any) -> None:
         f"  residual RMS {result.rms_before * 1e3:.4f} mm -> {result.rms_after * 1e3:.4f} mm, "
         f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm"
     )
+    if result.measurement.measures_orientation:
+        std = result.measurement.std
+        print(
+            f"  rotation residual RMS {result.rotation_rms_before * 1e3:.4f} mrad -> "
+            f"{result.rotation_rms_after * 1e3:.4f} mrad (position RMS above: the position part)"
+        )
+        print(
+            "  weighting: each residual divided by its standard uncertainty, position "
+            f"({', '.join(f'{v * 1e6:.3g}' for v in std[:3])}) um, rotation "
+            f"({', '.join(f'{v * 1e6:.3g}' for v in std[3:])}) urad"
+        )
     from robocal_uncertainty.report.table2 import format_significant, round_to_uncertainty
 
     print("  parameter            nominal        estimate   1st-order std")
@@ -236,7 +247,7 @@ def _print_calibration(result: Any) -> None:
             f"{format_significant(u * uscale):>8} {uunit}"
         )
     if result.dependencies:
-        print("  not identifiable from position data (kept at nominal):")
+        print(f"  not identifiable from the {result.measurement.quantity}s (kept at nominal):")
         from robocal_uncertainty.core.observability import describe_dependency
 
         for dep in result.dependencies:

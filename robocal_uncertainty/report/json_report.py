@@ -314,7 +314,27 @@ def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
         "base_initialised": calibration.base_initialised,
         "n_poses": calibration.n_poses,
         "warnings": list(calibration.warnings),
+        "measurement": _measurement(calibration),
     }
+
+
+def _measurement(calibration: IdentificationResult) -> dict[str, Any]:
+    """What each pose measured and how its residual components were weighted."""
+    m = calibration.measurement
+    weights = m.weights
+    out: dict[str, Any] = {
+        "type": m.name,
+        "components": list(m.component_names),
+        "units": list(m.component_units),
+        "weighting": "unweighted (every component weight 1 in its unit)"
+        if weights is None
+        else "each residual component divided by its standard uncertainty (std, in its unit)",
+        "std": None if weights is None else (1.0 / weights).tolist(),
+    }
+    if m.measures_orientation:
+        out["rotation_rms_before_rad"] = calibration.rotation_rms_before
+        out["rotation_rms_after_rad"] = calibration.rotation_rms_after
+    return out
 
 
 def _settings(result: CalibrationUncertainty) -> dict[str, Any]:
