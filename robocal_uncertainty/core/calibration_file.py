@@ -114,7 +114,9 @@ def apply_calibration(model: RobotModel, data: dict[str, Any], *, where: str = "
 
     The calibration must come from the same robot: its ``model_name`` must equal
     ``model.name``, its ``joint_names`` (when present; files before they were written lack
-    them) ``model.joint_names``, and it must give exactly the model's parameters.
+    them) ``model.joint_names``, and it must give exactly the model's parameters (plus
+    ``tool.rx, tool.ry, tool.rz`` when it was identified from orientation data: the returned
+    model then carries the tool rotation).
 
     Parameters
     ----------
@@ -133,12 +135,15 @@ def apply_calibration(model: RobotModel, data: dict[str, Any], *, where: str = "
     """
     _check_identity(model, data, where)
     robot = data["model_name"]
-    p = model.parameter_vector()
-    names = model.layout.names
     entries = data.get("parameters")
     if not isinstance(entries, list):
         msg = f"{where} has no 'parameters' list"
         raise ConfigError(msg)
+    if any(isinstance(entry, dict) and entry.get("name") == "tool.rx" for entry in entries):
+        # Calibrated with orientation data: the tool rotation is part of the calibration.
+        model = model.with_tool_rotation()
+    p = model.parameter_vector()
+    names = model.layout.names
     seen: set[str] = set()
     for entry in entries:
         name = entry.get("name") if isinstance(entry, dict) else None

@@ -128,3 +128,15 @@ def test_6dof_simulation_keeps_the_point_only_positions() -> None:
     poses = simulate_campaign(nominal, SimulationSettings(frame="tracker", orientation_std=1e-4), seed=5).campaign
     assert poses.points.shape == (53, 12)
     np.testing.assert_array_equal(poses.points[:, :3], points)
+
+
+def test_calibration_file_of_a_6dof_calibration_applies_the_tool_rotation(tmp_path: Path) -> None:
+    from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration, write_calibration
+
+    nominal = load_robot_model(UR10)
+    sim = simulate_campaign(nominal, SimulationSettings(frame="tracker", orientation_std=1e-4), seed=3)
+    res = identify(nominal, sim.campaign)
+    write_calibration(tmp_path / "cal.json", res, robot="ur10")
+    model = apply_calibration(nominal, read_calibration(tmp_path / "cal.json"))
+    assert model.tool_rotation
+    np.testing.assert_array_equal(model.parameter_vector(), res.estimate)
