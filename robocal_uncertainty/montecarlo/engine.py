@@ -342,6 +342,13 @@ def _reduce_chunk(
 _ChunkTask = Callable[..., list[Any]]
 
 
+def _fixed_blocks(total: int, block_size: int) -> tuple[int, Callable[[int], int]]:
+    """Number of blocks of a fixed run of `total` trials and each block's size (the last one short)."""
+    n_blocks = math.ceil(total / block_size)
+    last = total - (n_blocks - 1) * block_size
+    return n_blocks, lambda b: last if b == n_blocks - 1 else block_size
+
+
 def _iter_blocks(
     trial_block: TrialBlock | StagedTrialBlock,
     seed: int,
@@ -540,13 +547,12 @@ def run_trials(
     collector = _Collector(nonfinite)
     if adaptive is None:
         total = _check_int("n_trials", n_trials, 1)
-        n_blocks = math.ceil(total / block_size)
-        last = total - (n_blocks - 1) * block_size
+        n_blocks, sizes = _fixed_blocks(total, block_size)
         blocks: list[NDArray[np.float64]] = []
         stream = _iter_blocks(
             trial_block,
             seed,
-            lambda b: last if b == n_blocks - 1 else block_size,
+            sizes,
             n_blocks,
             chunk_blocks,
             workers,
@@ -815,12 +821,11 @@ def reduce_trials(
         msg = f"reduction must be a Reduction, got {type(reduction).__name__}"
         raise ConfigError(msg)
     total = _check_int("n_trials", n_trials, 1)
-    n_blocks = math.ceil(total / block_size)
-    last = total - (n_blocks - 1) * block_size
+    n_blocks, sizes = _fixed_blocks(total, block_size)
     stream = _iter_blocks(
         trial_block,
         seed,
-        lambda b: last if b == n_blocks - 1 else block_size,
+        sizes,
         n_blocks,
         chunk_blocks,
         workers,
