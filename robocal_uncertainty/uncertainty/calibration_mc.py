@@ -423,10 +423,11 @@ def _validate_inputs(
     q = np.asarray(test_joint_positions, dtype=np.float64)
     if q.ndim == 1:
         q = q[None, :]
-    if q.ndim != 2 or q.shape[1] != model.n_joints:
+    if q.ndim != 2 or q.shape[1] != model.n_joints or q.shape[0] == 0:
         msg = (
             f"test joints must have {model.n_joints} values per configuration "
-            f"({', '.join(model.joint_names)}), got shape {np.shape(test_joint_positions)}"
+            f"({', '.join(model.joint_names)}) and at least one configuration, "
+            f"got shape {np.shape(test_joint_positions)}"
         )
         raise ConfigError(msg)
     if not np.isfinite(q).all():

@@ -479,6 +479,14 @@ def parse_sources(text: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
     return tuple(dict.fromkeys(names))
 
 
+def _is_numeric(value: object) -> bool:
+    try:
+        np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
 @dataclass(frozen=True)
 class UncertaintySettings:
     """What a calibration Monte Carlo perturbs and how.
@@ -536,6 +544,11 @@ class UncertaintySettings:
         if self.jacobian not in ("frozen", "exact"):
             msg = f"jacobian must be 'frozen' or 'exact', got {self.jacobian!r}"
             raise ConfigError(msg)
-        if self.gauss_newton_iterations < 1:
-            msg = f"gauss_newton_iterations must be >= 1, got {self.gauss_newton_iterations}"
+        iterations = self.gauss_newton_iterations
+        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
+            msg = f"gauss_newton_iterations must be an integer >= 1, got {iterations!r}"
+            raise ConfigError(msg)
+        xyz = np.asarray(self.tracker_xyz, dtype=np.float64) if _is_numeric(self.tracker_xyz) else None
+        if xyz is None or xyz.shape != (3,) or not np.isfinite(xyz).all():
+            msg = f"tracker_xyz must be 3 finite coordinates [m], got {self.tracker_xyz!r}"
             raise ConfigError(msg)

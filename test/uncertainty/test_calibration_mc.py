@@ -175,6 +175,7 @@ def test_positions_are_in_the_identified_base_frame_for_tracker_campaigns() -> N
         ({"coverage": 1.0}, r"coverage probability must be in \(0, 1\)"),
         ({"coverage": 0.0}, r"coverage probability must be in \(0, 1\)"),
         ({"test_joint_positions": np.zeros(5)}, "test joints must have 6 values"),
+        ({"test_joint_positions": np.zeros((0, 6))}, "at least one configuration"),
         (
             {"settings": UncertaintySettings(sources=("lambda",), lambda_range=(10.0, 20.0))},
             "excludes the calibration's optimum",
@@ -190,6 +191,22 @@ def test_bad_settings_give_one_line_errors(paper, kwargs, match) -> None:
     call = {"test_joint_positions": TEST_JOINTS, "trials": 100, **kwargs}
     with pytest.raises(ConfigError, match=match) as info:
         evaluate_uncertainty(model, sim.campaign, call.pop("test_joint_positions"), **call)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"tracker_xyz": (np.nan, 0.0, 0.0)}, "tracker_xyz must be 3 finite"),
+        ({"tracker_xyz": (1.0, 2.0)}, "tracker_xyz must be 3 finite"),
+        ({"tracker_xyz": ("a", 0.0, 0.0)}, "tracker_xyz must be 3 finite"),
+        ({"gauss_newton_iterations": "3"}, "gauss_newton_iterations must be an integer"),
+        ({"gauss_newton_iterations": 0}, "gauss_newton_iterations must be an integer"),
+    ],
+)
+def test_bad_uncertainty_settings_give_one_line_errors(kwargs, match) -> None:
+    with pytest.raises(ConfigError, match=match) as info:
+        UncertaintySettings(**kwargs)
     assert "\n" not in str(info.value)
 
 
