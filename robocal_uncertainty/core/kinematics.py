@@ -179,7 +179,14 @@ def _frame_in_base(layout: ParameterLayout, p: Array, q: Array) -> tuple[tuple[A
 
 def _points_in_base(layout: ParameterLayout, p: Array, q: Array, shape: tuple[int, ...]) -> tuple[Array, Array, Array]:
     """Point in the base frame as three component arrays; the hot path of the Monte Carlo."""
-    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), (o0, o1, o2) = _frame_in_base(layout, p, q)
+    return _tool_point(layout, p, _frame_in_base(layout, p, q), shape)
+
+
+def _tool_point(
+    layout: ParameterLayout, p: Array, frame: tuple[tuple[Array, ...], ...], shape: tuple[int, ...]
+) -> tuple[Array, Array, Array]:
+    """Tool point in the base frame, three component arrays, from :func:`_frame_in_base`'s output."""
+    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), (o0, o1, o2) = frame
     t0 = layout.tool_index
     tx, ty, tz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
     return (
@@ -294,12 +301,7 @@ def forward_poses(
     layout = model_or_layout.layout if isinstance(model_or_layout, RobotModel) else model_or_layout
     p, q, shape = _prepare(layout, params, joint_positions)
     cols = _frame_in_base(layout, p, q)
-    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), (o0, o1, o2) = cols
-    t0 = layout.tool_index
-    tx, ty, tz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
-    px = np.broadcast_to(o0 + tx * x0 + ty * y0 + tz * z0, shape)
-    py = np.broadcast_to(o1 + tx * x1 + ty * y1 + tz * z1, shape)
-    pz = np.broadcast_to(o2 + tx * x2 + ty * y2 + tz * z2, shape)
+    px, py, pz = _tool_point(layout, p, cols, shape)
     base_cols, translation, _ = _base(p, layout)
     points = np.empty((*shape, 3))
     rotations = np.empty((*shape, 3, 3))
