@@ -686,9 +686,10 @@ def _orientation_uncertainty(
     for i in range(n_test):
         dev_ref = raw[:, dim * i : dim * (i + 1)]
         # Chordal mean: R_mean = proj(mean_t exp(d_t)) R_ref; deviations about it.
-        mean_dev = chordal_mean(rotation_exp(dev_ref))
+        rot_ref = rotation_exp(dev_ref)
+        mean_dev = chordal_mean(rot_ref)
         mean_rot = mean_dev @ ref[i]
-        dev = rotation_log(rotation_exp(dev_ref) @ mean_dev.T)
+        dev = rotation_log(rot_ref @ mean_dev.T)
         rot_summary = summarize(dev, coverage)
         pos = samples[:, dim * i : dim * (i + 1)]
         pose_cov = np.cov(np.hstack((pos, dev)), rowvar=False, ddof=1)
