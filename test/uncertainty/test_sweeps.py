@@ -59,19 +59,21 @@ def test_sweep_lambda_shape(setup):
     # At the calibration's own lambda the sweep reuses it: same numbers as a direct call.
     direct = evaluate_uncertainty(setup.model, setup.campaign, setup.test_joints, calibration=cal, trials=200, seed=3)
     np.testing.assert_array_equal(u[0], [a.standard_uncertainty for a in direct.poses[0].axes])
+    # Tikhonov shrinkage: the variance of the estimate falls as lambda grows (same trials).
+    assert np.linalg.norm(u[1]) < np.linalg.norm(u[0])
 
 
 def test_sweep_bad_inputs(setup):
     args = (setup.model, setup.campaign, setup.result.calibration, setup.test_joints)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="pose_counts must be integers"):
         sweep_equations(*args, [10.5], trials=50)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="subset_size = 2 must lie between"):
         sweep_equations(*args, [2], trials=50)  # fewer poses than identifiable / 3
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="lambdas must be >= 0"):
         sweep_lambda(*args, [-1.0], trials=50)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="pose index 1 out of range"):
         sweep_lambda(*args, [1.0], trials=50, pose=1)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=r"must have shape \(3, 3\)"):
         Sweep("x", "x", np.arange(3.0), np.zeros((2, 3)))
 
 
