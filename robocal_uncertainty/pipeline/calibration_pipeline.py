@@ -26,7 +26,9 @@ from robocal_uncertainty.bagio.campaign_mcap import CampaignRecorder, read_campa
 from robocal_uncertainty.bagio.campaign_reader import READ_WARNINGS_KEY
 from robocal_uncertainty.core.campaign import Campaign, PointFrame
 from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values, split_pose_values
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.rotation import quaternion_from_matrix, quaternion_to_matrix
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
 from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
@@ -73,6 +75,13 @@ class CalibrationPipeline:
     ``base_frame_id``, ``"tracker"`` otherwise (the base transform is then identified).
     Resuming replaces the file with :func:`os.replace` while the new recorder writes to
     it (POSIX semantics).
+
+    6-DOF samples (with an orientation, from a tracker pose stream) make a 6-DOF campaign:
+    positions and orientations, ``point_std`` (n, 6) with the rotation standard
+    uncertainties sqrt(diag(orientation_covariance)) [rad], recorded as a pose campaign. Its
+    weighting (:class:`PoseMeasurement`) is the first sample's standard uncertainties
+    (floored at 1e-12), fixed when the file is created and read back on resume. Point and
+    6-DOF samples cannot be mixed.
     """
 
     def __init__(
@@ -106,6 +115,9 @@ class CalibrationPipeline:
         self._points: list[Array] = []
         self._point_std: list[Array] = []
         self._with_std = True
+        self._orientations: list[Array] = []
+        self._rotation_std: list[Array] = []
+        self._measurement: PoseMeasurement | None = None
         self._recorder: CampaignRecorder | None = None
         self._closed = False
         self._calibration: IdentificationResult | None = None
@@ -134,15 +146,22 @@ class CalibrationPipeline:
         """The campaign so far (model joint order), None before the first sample."""
         if not self._stamps or self._frame_id is None:
             return None
+        points = np.array(self._points)
+        point_std = np.array(self._point_std) if self._with_std else None
+        if self._measurement is not None:
+            points = pose_values(points, quaternion_to_matrix(np.array(self._orientations)))
+            if point_std is not None:
+                point_std = np.concatenate((point_std, np.array(self._rotation_std)), axis=1)
         return Campaign(
             joint_names=self.model.joint_names,
             joint_positions=np.array(self._joints),
-            points=np.array(self._points),
+            points=points,
             frame=self.frame,
             frame_id=self._frame_id,
-            point_std=np.array(self._point_std) if self._with_std else None,
+            point_std=point_std,
             stamps_ns=np.array(self._stamps, dtype=np.int64),
             metadata=dict(self._metadata),
+            **({} if self._measurement is None else {"measurement": self._measurement}),
         )
 
     # -- input -----------------------------------------------------------------------------
@@ -171,13 +190,37 @@ class CalibrationPipeline:
         if sample.stamp_ns in self._stamps:
             msg = f"a sample with stamp {sample.stamp_ns} ns is already in the campaign"
             raise InputError(msg)
+        pose = sample.orientation is not None
+        if self._stamps and pose != (self._measurement is not None):
+            kind = "6-DOF" if self._measurement is not None else "point"
+            msg = f"sample {'with' if pose else 'without'} an orientation, the campaign is a {kind} campaign"
+            raise InputError(msg)
         order = [sample.joint_names.index(n) for n in names]
         q = np.array(sample.joint_positions[order])
         std = np.array(sample.point_std)
+        rotation_std = None
+        if pose:
+            rotation_std = np.sqrt(np.diag(np.asarray(sample.orientation_covariance, dtype=np.float64)))
+            if self._measurement is None:
+                floor = np.maximum(np.concatenate((std, rotation_std)), 1e-12)
+                self._measurement = PoseMeasurement(
+                    (float(floor[0]), float(floor[1]), float(floor[2])),
+                    (float(floor[3]), float(floor[4]), float(floor[5])),
+                )
         if self.campaign_path is not None:
             if self._recorder is None:
                 self._recorder = self._open_recorder(self.campaign_path, sample.frame_id)
-            self._recorder.append(sample.stamp_ns, q, sample.point, std if self._with_std else None)
+            self._recorder.append(
+                sample.stamp_ns,
+                q,
+                sample.point,
+                std if self._with_std else None,
+                **({} if not pose else {"orientation": sample.orientation, "orientation_std": rotation_std}),
+            )
+        if pose:
+            assert sample.orientation is not None and rotation_std is not None
+            self._orientations.append(np.array(sample.orientation, dtype=np.float64))
+            self._rotation_std.append(rotation_std)
         self._frame_id = sample.frame_id
         self._stamps.append(sample.stamp_ns)
         self._joints.append(q)
@@ -221,6 +264,7 @@ class CalibrationPipeline:
             metadata=self._metadata,
             overwrite=overwrite,
             fsync=self._fsync,
+            measurement=self._measurement,
         )
 
     def _resume(self, path: Path) -> None:
@@ -237,15 +281,29 @@ class CalibrationPipeline:
         self._metadata = {k: v for k, v in campaign.metadata.items() if k != READ_WARNINGS_KEY}
         self._frame_id = campaign.frame_id
         self._with_std = campaign.point_std is not None
+        positions, orientations, rotation_std = campaign.points, None, None
+        if isinstance(campaign.measurement, PoseMeasurement):
+            self._measurement = campaign.measurement
+            positions, rotations = split_pose_values(campaign.points)
+            orientations = quaternion_from_matrix(rotations)
+            if campaign.point_std is None:
+                rotation_std = np.broadcast_to(np.asarray(campaign.measurement.rotation_std), (campaign.n_poses, 3))
+            else:
+                rotation_std = campaign.point_std[:, 3:]
         temporary = path.with_name(path.name + ".resume")
         recorder = self._open_recorder(temporary, campaign.frame_id, overwrite=True)
         try:
             for i in range(campaign.n_poses):
-                std = None if campaign.point_std is None else campaign.point_std[i]
-                recorder.append(int(campaign.stamps_ns[i]), campaign.joint_positions[i], campaign.points[i], std)
+                std = None if campaign.point_std is None else campaign.point_std[i, :3]
+                extra = {}
+                if orientations is not None and rotation_std is not None:
+                    extra = {"orientation": orientations[i], "orientation_std": rotation_std[i]}
+                    self._orientations.append(np.array(orientations[i]))
+                    self._rotation_std.append(np.array(rotation_std[i]))
+                recorder.append(int(campaign.stamps_ns[i]), campaign.joint_positions[i], positions[i], std, **extra)
                 self._stamps.append(int(campaign.stamps_ns[i]))
                 self._joints.append(np.array(campaign.joint_positions[i]))
-                self._points.append(np.array(campaign.points[i]))
+                self._points.append(np.array(positions[i]))
                 if std is not None:
                     self._point_std.append(np.array(std))
             os.replace(temporary, path)

@@ -3,10 +3,17 @@ mean of the orientations, 6-DOF campaign from the samples, bad quaternions dropp
 
 from __future__ import annotations
 
-import numpy as np
+import dataclasses
 
+import numpy as np
+import pytest
+
+from robocal_uncertainty.bagio.campaign_mcap import read_campaign
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
 from robocal_uncertainty.core.rotation import quaternion_from_matrix, quaternion_to_matrix, rotation_exp, rotation_log
+from robocal_uncertainty.core.sample import CalibrationSample
+from robocal_uncertainty.errors import InputError
+from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import StaticPoseCollector, samples_to_campaign
 
 NAMES = ("j1", "j2")
@@ -80,3 +87,60 @@ def test_point_samples_keep_the_point_campaign() -> None:
     kept = [s for s in samples if s is not None]
     assert kept[0].orientation is None
     assert samples_to_campaign(kept, frame="tracker").measurement.name == "point"
+
+
+def _pose_samples(joint_names: tuple[str, ...], n: int, seed: int) -> list[CalibrationSample]:
+    rng = np.random.default_rng(seed)
+    samples = []
+    for i in range(n):
+        rot_cov = np.diag(rng.uniform(1e-11, 1e-9, 3))
+        samples.append(
+            CalibrationSample(
+                stamp_ns=(i + 1) * 1_000_000_000,
+                frame_id="tracker",
+                joint_names=joint_names,
+                joint_positions=rng.uniform(-1.0, 1.0, len(joint_names)),
+                joint_position_std=np.full(len(joint_names), 1e-5),
+                point=rng.uniform(-1.0, 1.0, 3),
+                point_covariance=np.diag(rng.uniform(1e-12, 1e-10, 3)),
+                joint_state_count=100,
+                tracker_point_count=100,
+                orientation=quaternion_from_matrix(rotation_exp(rng.normal(0.0, 1.0, 3))),
+                orientation_covariance=rot_cov,
+            )
+        )
+    return samples
+
+
+def test_the_calibration_pipeline_records_and_resumes_6dof_samples(tmp_path, paper_arm) -> None:
+    """The collector node records 6-DOF samples through CalibrationPipeline: the campaign
+    (in memory, on file and resumed) keeps every orientation and its standard uncertainty."""
+    samples = _pose_samples(paper_arm.joint_names, 5, seed=3)
+    path = tmp_path / "campaign.mcap"
+    with CalibrationPipeline(paper_arm, campaign_path=path, fsync=False) as pipeline:
+        for sample in samples[:3]:
+            pipeline.add_sample(sample)
+        live = pipeline.campaign
+    assert live is not None and isinstance(live.measurement, PoseMeasurement)
+    positions, rotations = split_pose_values(live.points)
+    for i, sample in enumerate(samples[:3]):
+        np.testing.assert_array_equal(positions[i], sample.point)
+        np.testing.assert_allclose(rotations[i], quaternion_to_matrix(sample.orientation), atol=1e-15)
+        assert live.point_std is not None
+        np.testing.assert_array_equal(live.point_std[i, 3:], np.sqrt(np.diag(sample.orientation_covariance)))
+    on_file = read_campaign(path)
+    assert on_file.measurement == live.measurement
+    np.testing.assert_allclose(on_file.points, live.points, atol=1e-12)
+    resumed = CalibrationPipeline(paper_arm, campaign_path=path, fsync=False)
+    for sample in samples[3:]:
+        resumed.add_sample(sample)
+    resumed.close()
+    whole = read_campaign(path)
+    assert whole.n_poses == 5 and whole.measurement == live.measurement
+    np.testing.assert_allclose(whole.points[:3], live.points, atol=1e-12)
+    np.testing.assert_allclose(
+        split_pose_values(whole.points)[1][4], quaternion_to_matrix(samples[4].orientation), atol=1e-12
+    )
+    point_sample = dataclasses.replace(samples[0], stamp_ns=99, orientation=None, orientation_covariance=None)
+    with pytest.raises(InputError, match="orientation"):
+        CalibrationPipeline(paper_arm, campaign_path=path, fsync=False).add_sample(point_sample)
