@@ -20,7 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from robocal_uncertainty.bagio.campaign_mcap import read_campaign
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.rotation import quaternion_from_matrix
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
@@ -81,7 +83,8 @@ class SampleStore:
 
         A pose carries no per-reading statistics: it becomes a sample with the point
         covariance diag(point_std^2) (so ``point_std`` is the recorded one exactly),
-        zero joint scatter and counts of 1.
+        zero joint scatter and counts of 1. A 6-DOF campaign's poses keep their orientation,
+        with the covariance diag(rotation_std^2).
         """
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -89,19 +92,30 @@ class SampleStore:
         if campaign.stamps_ns is None:
             msg = f"campaign {path} has no pose stamps; cannot merge it with live samples"
             raise InputError(msg)
+        positions, orientations, rotation_std = campaign.points, None, None
+        if isinstance(campaign.measurement, PoseMeasurement):
+            positions, rotations = split_pose_values(campaign.points)
+            orientations = quaternion_from_matrix(rotations)
+            rotation_std = (
+                np.broadcast_to(np.asarray(campaign.measurement.rotation_std), (campaign.n_poses, 3))
+                if campaign.point_std is None
+                else campaign.point_std[:, 3:]
+            )
         added = 0
         for i in range(campaign.n_poses):
-            std = np.zeros(3) if campaign.point_std is None else campaign.point_std[i]
+            std = np.zeros(3) if campaign.point_std is None else campaign.point_std[i, :3]
             sample = CalibrationSample(
                 stamp_ns=int(campaign.stamps_ns[i]),
                 frame_id=campaign.frame_id,
                 joint_names=campaign.joint_names,
                 joint_positions=campaign.joint_positions[i],
                 joint_position_std=np.zeros(len(campaign.joint_names)),
-                point=campaign.points[i],
+                point=positions[i],
                 point_covariance=np.diag(np.square(std)),
                 joint_state_count=1,
                 tracker_point_count=1,
+                orientation=None if orientations is None else orientations[i],
+                orientation_covariance=None if rotation_std is None else np.diag(np.square(rotation_std[i])),
             )
             added += self.add(sample)
         return added, tuple(str(w.message) for w in caught)

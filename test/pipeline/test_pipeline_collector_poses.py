@@ -15,6 +15,7 @@ from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import StaticPoseCollector, samples_to_campaign
+from robocal_uncertainty.pipeline.sample_store import SampleStore
 
 NAMES = ("j1", "j2")
 MS = 1_000_000
@@ -144,3 +145,28 @@ def test_the_calibration_pipeline_records_and_resumes_6dof_samples(tmp_path, pap
     point_sample = dataclasses.replace(samples[0], stamp_ns=99, orientation=None, orientation_covariance=None)
     with pytest.raises(InputError, match="orientation"):
         CalibrationPipeline(paper_arm, campaign_path=path, fsync=False).add_sample(point_sample)
+
+
+def test_the_sample_store_reads_6dof_campaign_files_with_their_orientations(tmp_path, paper_arm) -> None:
+    samples = _pose_samples(paper_arm.joint_names, 4, seed=5)
+    path = tmp_path / "campaign.mcap"
+    with CalibrationPipeline(paper_arm, campaign_path=path, fsync=False) as pipeline:
+        for sample in samples:
+            pipeline.add_sample(sample)
+        recorded = pipeline.campaign
+    store = SampleStore(paper_arm)
+    assert store.load_campaign_file(path) == (4, ())
+    loaded = store.first()
+    for sample, back in zip(samples, loaded, strict=True):
+        assert back.orientation is not None and sample.orientation is not None
+        np.testing.assert_allclose(
+            quaternion_to_matrix(back.orientation), quaternion_to_matrix(sample.orientation), atol=1e-12
+        )
+        np.testing.assert_allclose(back.point, sample.point, atol=1e-15)
+        np.testing.assert_allclose(
+            np.sqrt(np.diag(back.orientation_covariance)), np.sqrt(np.diag(sample.orientation_covariance)), rtol=1e-12
+        )
+    rebuilt = store.pipeline().campaign
+    assert rebuilt is not None and recorded is not None
+    assert rebuilt.measurement == recorded.measurement
+    np.testing.assert_allclose(rebuilt.points, recorded.points, atol=1e-12)
