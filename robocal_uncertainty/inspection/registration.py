@@ -166,7 +166,10 @@ def register_to_nominal(
     for iteration in range(1, _MAX_ITERATIONS + 1):
         r = rotation(theta)
         local = (p - centre - t) @ r + centre  # R(-θ)(p - pivot - t) + pivot
-        near = curve.closest(local, start=u)
+        # Closest points from the global (dense-sample) start every iteration: warm-starting
+        # Newton at the previous feet lets feet of a large move (0.3° on a 300 mm blade)
+        # stay on a wrong local minimum, and the registration converged silently off.
+        near = curve.closest(local)
         u = near.parameter
         normal = near.normal @ r.T
         a = registration_jacobian(near.foot, normal, theta, centre)

@@ -114,6 +114,19 @@ def test_rigid_copy_of_the_real_blade(rotor37_curve: NominalCurve) -> None:
     assert reg.rms < NM
 
 
+@pytest.mark.parametrize(("offset", "twist_deg"), [((0.0, 1e-3), 0.3), ((1e-3, 0.0), 0.5), ((1e-3, -1e-3), -2.0)])
+def test_large_moves_of_the_real_blade_register_exactly(
+    rotor37_curve: NominalCurve, offset: tuple[float, float], twist_deg: float
+) -> None:
+    # A 300 mm blade moved by up to 1 mm and 2 degrees: the registration used to settle on a
+    # wrong local minimum (10-100 µm off, RMS below the mismatch limit) or refuse the cloud.
+    cloud = simulate_section_scan(rotor37_curve, 1836, offset=offset, twist=np.deg2rad(twist_deg))
+    reg = register_to_nominal(cloud.xy[::-1], rotor37_curve)
+    assert reg.offset == pytest.approx(offset, abs=NM)
+    assert reg.twist == pytest.approx(np.deg2rad(twist_deg), abs=1e-9)
+    assert reg.rms < NM
+
+
 def test_twist_about_a_stated_pivot() -> None:
     points = stadium(5e-3, 50e-3, 40, 100)
     curve = NominalCurve(NominalSection(points, "stadium"))
