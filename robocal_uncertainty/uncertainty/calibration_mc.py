@@ -478,11 +478,11 @@ def _field_sensitivities(prep: _Prepared, *, angular: bool = False) -> tuple[dic
     n_test, n_joints = prep.test_joints.shape
     _, jac = measurement.predict_and_jacobian(layout, calibration.estimate, q)
     weights = row_weights(measurement, n_poses)
+    # stack_jacobian already whitens the rows (W A): the weights must not enter twice.
     a_mat = stack_jacobian(measurement, jac, est) / problem.scale
-    if weights is not None:
-        a_mat = a_mat * weights[:, None]
     lam = calibration.lambda_
-    # x = H b: the linearised (weighted) Tikhonov solution for the stacked residual b.
+    # x = H b: the linearised (weighted) Tikhonov solution for the stacked residual b,
+    # H = (A^T W^2 A + lam^2 P)^-1 A^T W^2.
     h = np.linalg.solve(a_mat.T @ a_mat + lam**2 * np.diag(problem.penalty_mask), a_mat.T)
     if weights is not None:
         h = h * weights[None, :]
