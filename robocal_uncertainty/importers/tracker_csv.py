@@ -321,7 +321,8 @@ def read_tracker_csv(
         Drop rows with empty, non-numeric, NaN/inf or negative-std values, or a wrong field
         count (listed in ``metadata["skipped_rows"]``) instead of raising.
     joint_columns : sequence of str, optional
-        ``generic``: names (without unit) of the joint columns, in the wanted order.
+        ``generic``: names (without unit) of the joint columns, in the wanted order;
+        ``ipa``: must be :data:`IPA_JOINTS` (anything else is an error, never ignored).
     frame, frame_id : optional
         Frame of the points; ``ipa``: ``"tracker"``/``"laser_tracker"`` (fixed);
         ``generic``: default ``"tracker"`` and ``"tracker"`` (``"base_link"`` for base).
@@ -358,6 +359,12 @@ def read_tracker_csv(
     if profile == "auto":
         profile = "ipa" if set(IPA_JOINTS + _IPA_POINT + _IPA_STD) <= cells else "generic"
     if profile == "ipa":
+        if joint_columns is not None and tuple(joint_columns) != IPA_JOINTS:
+            msg = (
+                f"{path}: the ipa profile's joint columns are {list(IPA_JOINTS)}, "
+                f"got --joint-columns {list(joint_columns)}"
+            )
+            raise InputError(msg)
         columns = _ipa_columns(path, header, length_unit, angle_unit)
         used = {c.index for c in columns}
         ignored = [cell.strip() for i, cell in enumerate(header) if i not in used]

@@ -88,6 +88,17 @@ def test_ipa_profile_has_fixed_units(ur10_dir: Path) -> None:
         read_tracker_csv(ur10_dir / "measurements_iso_cubes.csv", angle_unit="deg")
 
 
+def test_ipa_profile_refuses_other_joint_columns(ur10_dir: Path) -> None:
+    """--joint-columns on an ipa file is checked, not silently ignored (wrong names = error)."""
+    path = ur10_dir / "measurements_iso_cubes.csv"
+    with pytest.raises(InputError, match=r"ipa profile's joint columns are .* got --joint-columns \['a', 'b'\]"):
+        read_tracker_csv(path, joint_columns=["a", "b"])
+    reordered = list(IPA_JOINTS[::-1])
+    with pytest.raises(InputError, match="ipa profile's joint columns"):
+        read_tracker_csv(path, joint_columns=reordered)
+    assert read_tracker_csv(path, joint_columns=list(IPA_JOINTS)).joint_names == IPA_JOINTS
+
+
 # --------------------------------------------------------------------- generic tables
 
 
