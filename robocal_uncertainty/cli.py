@@ -17,6 +17,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse
 import json
+import re
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -1073,6 +1074,16 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ConfigError(msg)
     if getattr(args, "trials", None) == "auto" and args.command == "validate":
         raise ConfigError("validate needs a fixed number of --trials, not auto")
+    dask = getattr(args, "dask", None)
+    if dask is not None and not _DASK_ADDRESS.match(dask.strip()):
+        msg = f"--dask must be 'local' or a scheduler address such as tcp://host:8786, got {dask!r}"
+        raise ConfigError(msg)
+
+
+_DASK_ADDRESS = re.compile(
+    r"^(?:local|inproc://\S+|(?:[a-z][a-z0-9+.-]*://)?(?:\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):\d{1,5})$"
+)
+"""What ``--dask`` accepts: ``local`` or ``[scheme://]host:port`` (as ``distributed`` parses it)."""
 
 
 def _window_arg(text: str) -> float | None:

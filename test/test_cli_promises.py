@@ -127,6 +127,14 @@ def test_readme_documents_the_exit_status() -> None:
         (["--lambda-range", "5", "1"], "--lambda-range needs 0 <= LOW < HIGH, got 5 1"),
         (["--lambda", "big"], "--lambda must be 'auto', 'gcv' or a number, got 'big'"),
         (["--pairing-tolerance-ms", "-1"], "--pairing-tolerance-ms must be a finite number >= 0 ms, got -1"),
+        (
+            ["--dask", "nonsense"],
+            "--dask must be 'local' or a scheduler address such as tcp://host:8786, got 'nonsense'",
+        ),
+        (
+            ["--dask", "tcp://host"],
+            "--dask must be 'local' or a scheduler address such as tcp://host:8786, got 'tcp://host'",
+        ),
     ],
 )
 def test_bad_options_are_refused_before_any_work(
@@ -136,6 +144,15 @@ def test_bad_options_are_refused_before_any_work(
     assert main(_evaluate(campaign12, "--out", str(out), "--no-progress", *extra)) == 1
     assert _error(capsys, "evaluate") == message
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "address", ["local", "tcp://127.0.0.1:8786", "127.0.0.1:8786", "tls://sched.lan:8786", "tcp://[::1]:8786"]
+)
+def test_dask_addresses_distributed_accepts_pass_the_early_check(address: str) -> None:
+    from robocal_uncertainty.cli import _DASK_ADDRESS
+
+    assert _DASK_ADDRESS.match(address)
 
 
 def test_min_poses_below_identifiable_names_the_flag(
