@@ -1116,9 +1116,47 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_output_file(args.json, force=force, option="--json")
     if getattr(args, "campaign_out", None):
         check_output_file(args.campaign_out, force=force, option="--campaign-out")
-        if Path(args.campaign_out).resolve() == Path(args.bag).resolve():
-            msg = f"--campaign-out {args.campaign_out} is the bag being replayed"
-            raise ConfigError(msg)
+    _check_outputs_are_not_inputs(args)
+
+
+_INPUTS = (
+    ("csv", "the tracker CSV being imported"),
+    ("campaign", "the campaign being read"),
+    ("bag", "the bag being replayed"),
+    ("validation_campaign", "the --validation-campaign"),
+    ("calibration", "the --calibration being applied"),
+    ("robot", "the --robot config"),
+    ("joints_file", "the --joints-file"),
+    ("test_joints_file", "the --test-joints-file"),
+    ("from_file", "the --from-file"),
+    ("cloud", "the point cloud being read"),
+    ("nominal", "the --nominal section"),
+    ("instrument", "the --instrument config"),
+)
+"""Input paths of the commands (attribute, words): no output file may be one of them."""
+
+
+def _check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
+    """Refuse an output file that is one of the command's inputs: even with --force,
+    replacing it would destroy the data the command reads."""
+    from robocal_uncertainty.app.simulation import truth_path
+
+    outputs: list[tuple[str, str]] = []
+    if args.command in ("simulate", "import-csv"):
+        outputs.append(("--out", str(args.out)))
+        if args.command == "simulate":
+            outputs.append(("truth file", str(truth_path(args.out))))
+    for dest, option in (("json", "--json"), ("campaign_out", "--campaign-out")):
+        if getattr(args, dest, None):
+            outputs.append((option, str(getattr(args, dest))))
+    for option, out in outputs:
+        if not Path(out).exists():
+            continue
+        for dest, words in _INPUTS:
+            given = getattr(args, dest, None)
+            if isinstance(given, str) and Path(given).exists() and os.path.samefile(out, given):
+                msg = f"{option} {out} is {words}"
+                raise ConfigError(msg)
 
 
 def _check_campaign_counts(args: argparse.Namespace, n_poses: int) -> None:

@@ -240,6 +240,68 @@ def test_existing_output_file_is_refused_without_force(
     assert target.read_bytes() != before[0]
 
 
+@pytest.mark.parametrize("command", ["import-csv", "calibrate", "fk", "replay"])
+def test_force_never_replaces_an_input(
+    campaign12: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    """--force replaces earlier outputs, never the file the command reads (one line, exit 1)."""
+    csv = tmp_path / "table.csv"
+    csv.write_bytes((DATA / "ur10_laser_tracker" / "measurements_iso_cubes.csv").read_bytes())
+    campaign = tmp_path / "c.mcap"
+    campaign.write_bytes(campaign12.read_bytes())
+    calibration = tmp_path / "cal.json"
+    assert main(["calibrate", str(campaign), "--robot", "paper_arm", "--json", str(calibration)]) == 0
+    bag = tmp_path / "raw.mcap"
+    bag.write_bytes(TRACKER_BAG.read_bytes())
+    capsys.readouterr()
+    argv, target, words = {
+        "import-csv": (["import-csv", str(csv), "--out", "./table.csv"], csv, "--out ./table.csv is the tracker CSV"),
+        "calibrate": (
+            ["calibrate", str(campaign), "--robot", "paper_arm", "--json", str(campaign)],
+            campaign,
+            f"--json {campaign} is the campaign being read",
+        ),
+        "fk": (
+            [
+                "fk",
+                "--robot",
+                "paper_arm",
+                "--calibration",
+                str(calibration),
+                "--joints",
+                *JOINTS,
+                "--degrees",
+                "--json",
+                str(calibration),
+            ],
+            calibration,
+            f"--json {calibration} is the --calibration being applied",
+        ),
+        "replay": (
+            [
+                "replay",
+                str(bag),
+                "--robot",
+                "paper_arm",
+                "--test-joints",
+                *JOINTS,
+                "--degrees",
+                *QUICK,
+                "--out",
+                str(tmp_path / "rep"),
+                "--campaign-out",
+                str(bag),
+            ],
+            bag,
+            f"--campaign-out {bag} is the bag being replayed",
+        ),
+    }[command]
+    before = _untouched(target)
+    assert main([*argv, "--force"]) == 1
+    assert _error(capsys, command).startswith(words)
+    assert _untouched(target) == before
+
+
 @pytest.mark.parametrize(
     ("make", "message"),
     [
