@@ -474,7 +474,12 @@ class StaticPoseCollector:
         CalibrationSample or None
             The sample of a dwell this message ended, if any.
         """
-        stamp = int(stamp_ns)
+        return self._add_point(int(stamp_ns), frame_id, xyz, None)
+
+    def _add_point(
+        self, stamp: int, frame_id: str, xyz: ArrayLike, rotation: NDArray[np.float64] | None
+    ) -> CalibrationSample | None:
+        """Validate and store a tracker position (and, 6-DOF, its rotation matrix, 9 values)."""
         if self._last_point is not None and stamp <= self._last_point:
             return self._drop(
                 "backwards_time", stamp, f"tracker point stamp {stamp} ns is not after {self._last_point} ns"
@@ -489,6 +494,10 @@ class StaticPoseCollector:
         if not np.isfinite(point).all():
             return self._drop("nan", stamp, f"tracker point has NaN or inf coordinates {point.tolist()}")
         self._last_point = stamp
+        if rotation is not None:
+            # Stored with the point, so that its update sees the orientation in the window.
+            self._rotations.append(stamp, rotation)
+            self._rotation_still.push(rotation)
         self._points.append(stamp, point)
         self._point_still.push(point)
         return self._update(stamp)
@@ -525,20 +534,7 @@ class StaticPoseCollector:
             return self._drop(
                 "bad_quaternion", stamp, f"tracker orientation is not a unit quaternion (norm {np.linalg.norm(q):.6g})"
             )
-        point = np.array(xyz, dtype=np.float64).reshape(-1)
-        accepted = (
-            (self._last_point is None or stamp > self._last_point)
-            and frame_id == self.tracker_frame_id
-            and point.size == 3
-            and bool(np.isfinite(point).all())
-        )
-        if accepted:
-            # Stored before the point, whose update then sees the orientation in the window;
-            # a rejected position is dropped by add_tracker_point with its own cause.
-            rotation = quaternion_to_matrix(q).reshape(9)
-            self._rotations.append(stamp, rotation)
-            self._rotation_still.push(rotation)
-        return self.add_tracker_point(stamp, frame_id, point)
+        return self._add_point(stamp, frame_id, xyz, quaternion_to_matrix(q).reshape(9))
 
     def capture_now(self) -> CalibrationSample | None:
         """Emit the current dwell now (data up to the latest message, no trailing guard).
