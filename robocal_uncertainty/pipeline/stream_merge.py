@@ -59,24 +59,22 @@ class StreamMerger:
 
     def release(self, now_ns: int) -> None:
         """Release every message that can go at wall time `now_ns`."""
-        a, b = self._queues
-        while a or b:
-            if a and b:
-                stream = 0 if (a[0][0], a[0][1]) <= (b[0][0], b[0][1]) else 1
-            else:
-                stream = 0 if a else 1
-                if now_ns - self._queues[stream][0][2] < self.hold_ns:
-                    return
-            self._sink(stream, self._queues[stream].popleft()[3])
+        self._release(now_ns)
 
     def drain(self) -> None:
         """Release everything queued, in merged order."""
+        self._release(None)
+
+    def _release(self, now_ns: int | None) -> None:
+        """Release in merged order; a lone head waits out `hold_ns` unless `now_ns` is None."""
         a, b = self._queues
         while a or b:
             if a and b:
                 stream = 0 if (a[0][0], a[0][1]) <= (b[0][0], b[0][1]) else 1
             else:
                 stream = 0 if a else 1
+                if now_ns is not None and now_ns - self._queues[stream][0][2] < self.hold_ns:
+                    return
             self._sink(stream, self._queues[stream].popleft()[3])
 
     def clear(self) -> None:
