@@ -15,11 +15,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
 from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.bagio.bag import open_bag
-from robocal_uncertainty.bagio.ros_messages import DECODE_ERRORS, message_schema, ros_typestore, stamp_parts
+from robocal_uncertainty.bagio.raw_bag_simulator import RawRecord, write_raw_records
+from robocal_uncertainty.bagio.ros_messages import DECODE_ERRORS, ros_typestore, stamp_parts
 from robocal_uncertainty.errors import BagError, InputError
 from robocal_uncertainty.inspection.point_cloud import PointCloud
 
@@ -96,31 +96,13 @@ def write_point_cloud2_mcap(
 ) -> Path:
     """Write CDR ``PointCloud2`` payloads (from :func:`encode_point_cloud2`) to an MCAP file.
 
-    Log times are 1 s apart from t = 1 s [ns]. Raises BagError if the file exists (without
-    `overwrite`) or cannot be written.
+    Log times are 1 s apart from t = 1 s [ns]; written by
+    :func:`~robocal_uncertainty.bagio.raw_bag_simulator.write_raw_records`. Raises BagError if
+    the file exists (without `overwrite`) or cannot be written.
     """
-    out = Path(path)
-    try:
-        stream = out.open("wb" if overwrite else "xb")
-    except FileExistsError as err:
-        msg = f"point-cloud bag {out} exists already (pass overwrite=True to replace it)"
-        raise BagError(msg) from err
-    except OSError as err:
-        msg = f"cannot create point-cloud bag {out}: {err.strerror or err}"
-        raise BagError(msg) from err
-    with stream:
-        writer = Writer(stream, compression=CompressionType.NONE)
-        writer.start(profile="ros2", library="robocal_uncertainty")
-        schema = message_schema(POINT_CLOUD2)
-        schema_id = writer.register_schema(schema.name, schema.encoding, schema.text.encode("utf-8"))
-        channel = writer.register_channel(
-            topic, "cdr", schema_id, {"offered_qos_profiles": "", "topic_type_hash": schema.rihs01}
-        )
-        for k, data in enumerate(messages):
-            stamp = (k + 1) * 1_000_000_000
-            writer.add_message(channel, stamp, data, stamp, k + 1)
-        writer.finish()
-    return out
+    records = [RawRecord(topic, POINT_CLOUD2, (k + 1) * 1_000_000_000, data) for k, data in enumerate(messages)]
+    write_raw_records(path, records, overwrite=overwrite)
+    return Path(path)
 
 
 def _field_columns(message: Any, where: str) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
