@@ -10,7 +10,10 @@ With the bias taken as the same at the measured and at the true cloud, the Monte
 estimates it as ``b = mean - y`` and the distribution of ``y - truth`` as that of
 ``sample - y``, so the interval for the truth is the Monte Carlo interval reflected about the
 measured value, ``[2y - high, 2y - low]``, and the corrected estimate is ``y - b`` (the
-bootstrap "basic" interval, Davison & Hinkley 1997, §5.2). The slow coverage test compares
+bootstrap "basic" interval, Davison & Hinkley 1997, §5.2). The max/min parameters are
+lengths that cannot be negative (a profile deviation is max - min): their corrected estimate
+and interval limits are clipped at zero, so a nearly perfect profile (measured value below
+the bias) is stated as [0, ...] instead of an interval of negative deviations. The slow coverage test compares
 both intervals over simulated scans with a known truth.
 """
 
@@ -43,10 +46,11 @@ class BiasCorrection:
     bias : float
         Monte Carlo estimate of the noise bias, mean - measured [m or rad].
     estimate : float
-        measured - bias [m or rad].
+        measured - bias [m or rad]; at least 0 for :data:`MAX_MIN_PARAMETERS`.
     interval : CoverageInterval
         The probabilistically symmetric Monte Carlo interval reflected about ``measured``
-        (kind ``probabilistically_symmetric`` of the reflected distribution) [m or rad].
+        (kind ``probabilistically_symmetric`` of the reflected distribution) [m or rad];
+        limits clipped at 0 for :data:`MAX_MIN_PARAMETERS`.
     recommended : bool
         True for :data:`MAX_MIN_PARAMETERS` (state this interval), False for the linear
         parameters (offsets, twist: the JCGM 101 interval is unbiased; this one is shown
@@ -74,6 +78,10 @@ def bias_corrections(result: SectionUncertainty) -> tuple[BiasCorrection, ...]:
     for name, y, output in zip(PARAMETER_NAMES, measured, result.monte_carlo.outputs):
         mc = output.probabilistically_symmetric
         bias = float(output.estimate - y)
-        interval = CoverageInterval(float(2 * y - mc.high), float(2 * y - mc.low), mc.kind, mc.coverage_probability)
-        out.append(BiasCorrection(name, float(y), bias, float(y - bias), interval, name in MAX_MIN_PARAMETERS))
+        low, high, estimate = float(2 * y - mc.high), float(2 * y - mc.low), float(y - bias)
+        recommended = name in MAX_MIN_PARAMETERS
+        if recommended:  # non-negative lengths
+            low, high, estimate = max(low, 0.0), max(high, 0.0), max(estimate, 0.0)
+        interval = CoverageInterval(low, high, mc.kind, mc.coverage_probability)
+        out.append(BiasCorrection(name, float(y), bias, estimate, interval, recommended))
     return tuple(out)

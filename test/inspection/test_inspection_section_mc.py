@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.inspection.bias_correction import bias_corrections
 from robocal_uncertainty.inspection.cmm_model import SOURCE_NAMES, CmmInstrument, point_displacements
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud
@@ -128,6 +129,21 @@ def test_section_uncertainty_end_to_end(small_scan: PointCloud, rotor37_curve: N
         < probing_only.monte_carlo.outputs[0].standard_uncertainty
         < mc.outputs[0].standard_uncertainty
     )
+
+
+def test_bias_corrected_profiles_of_a_perfect_section_are_not_negative(rotor37_curve: NominalCurve) -> None:
+    # No form error: measured profiles ~0, Monte Carlo profiles ~5-8 µm; the reflected
+    # interval [2y - high, 2y - low] would be all negative and exclude the true 0.
+    cloud = simulate_section_scan(rotor37_curve, 400, offset=TRUE_OFFSET, twist=TRUE_TWIST)
+    result = section_uncertainty(cloud, rotor37_curve, seed=1, trials=400, block_size=200)
+    fixes = bias_corrections(result)
+    for fix in fixes[5:]:
+        assert fix.measured < 1e-9 < fix.bias
+        assert fix.estimate == 0.0 and fix.interval.low == 0.0
+        assert fix.interval.contains(0.0)
+    for fix in fixes[2:5]:  # linear parameters: the plain reflection, may be negative
+        mc = result.monte_carlo.outputs[PARAMETER_NAMES.index(fix.name)].probabilistically_symmetric
+        assert fix.interval.low == pytest.approx(2 * fix.measured - mc.high, abs=1e-18)
 
 
 def test_configuration_errors(small_scan: PointCloud, rotor37_curve: NominalCurve) -> None:
