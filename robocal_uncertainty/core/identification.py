@@ -255,6 +255,8 @@ class _Solution:
     curve: LCurve
     iterations: int
     status: int
+    predicted: Array
+    jacobian: Array
 
 
 def _objective(residual: Array, x: Array, penalized: NDArray[np.bool_], lam: float) -> float:
@@ -275,23 +277,26 @@ def _gauss_newton(
     x_start: Array,
     max_iterations: int,
     step_tolerance: float,
+    start: tuple[Array, Array] | None = None,
 ) -> _Solution:
     """Regularised Gauss-Newton with a backtracking line search on the objective.
 
     Lambda follows the L-curve (or GCV) of each linearisation while the iterate still moves;
     once the relative step falls below 1e-6 (or after half the iterations) it is frozen, so
     the last iterations minimise one fixed objective and the stopping test is meaningful.
+    `start`, when given, is the prediction and Jacobian at `x_start` (already computed by the
+    caller), so the first linearisation is not evaluated twice.
     """
 
-    def state(x: Array) -> tuple[Array, Array, Array]:
+    def state(x: Array, known: tuple[Array, Array] | None = None) -> tuple[Array, Array, Array, Array, Array]:
         p = p0.copy()
         p[est] += x / scale
-        pred, jac = measurement.predict_and_jacobian(layout, p, q)
+        pred, jac = measurement.predict_and_jacobian(layout, p, q) if known is None else known
         r, a_mat = stack_equations(measurement, measurement.residual(measured, pred), jac, est)
-        return p, r, a_mat / scale
+        return p, r, a_mat / scale, pred, jac
 
     x = x_start.copy()
-    p, r, a_mat = state(x)
+    p, r, a_mat, pred, jac = state(x, start)
     lam = fixed_lambda
     frozen = method == "fixed"
     curve: LCurve | None = None
@@ -309,11 +314,11 @@ def _gauss_newton(
         t = 1.0
         while True:
             x_try = x + t * step
-            p_try, r_try, a_try = state(x_try)
+            p_try, r_try, a_try, pred_try, jac_try = state(x_try)
             if _objective(r_try, x_try, penalized, lam) <= current or t < 1e-3:
                 break
             t *= 0.5
-        x, p, r, a_mat = x_try, p_try, r_try, a_try
+        x, p, r, a_mat, pred, jac = x_try, p_try, r_try, a_try, pred_try, jac_try
         relative = t * float(np.linalg.norm(step)) / (1.0 + float(np.linalg.norm(x)))
         if relative <= step_tolerance and frozen:
             status = 0
@@ -321,7 +326,9 @@ def _gauss_newton(
         if relative <= 1e-6 or iterations >= max_iterations // 2:
             frozen = True
     assert curve is not None  # max_iterations >= 1
-    return _Solution(params=p, x=x, lam=float(lam), curve=curve, iterations=iterations, status=status)
+    return _Solution(
+        params=p, x=x, lam=float(lam), curve=curve, iterations=iterations, status=status, predicted=pred, jacobian=jac
+    )
 
 
 def identify(
@@ -442,7 +449,7 @@ def identify(
         max_iterations=max_iterations,
         step_tolerance=step_tolerance,
     )
-    solution = solve(np.zeros(est.size))
+    solution = solve(np.zeros(est.size), start=(pred0, jac0_poses))
     restarts = 0
     if solution.status != 0 and campaign.frame != "base":
         # Restart once with the base re-fitted rigidly to the current kinematic estimate:
@@ -462,7 +469,8 @@ def identify(
                 solution = second
     status, lam, p, curve = solution.status, solution.lam, solution.params, solution.curve
 
-    pred, jac = measurement.predict_and_jacobian(layout, p, q)
+    # The last iterate's linearisation: no second evaluation of the chain at the solution.
+    pred, jac = solution.predicted, solution.jacobian
     residuals = measurement.residual(measured, pred)
     rms_after, max_after = residual_stats(_position_part(measurement, residuals))
     if status != 0 and not accept_unconverged:
