@@ -337,6 +337,7 @@ def _campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         campaign = read_campaign(args.campaign, stamp_tolerance_ns=round(tolerance_ms * 1e6))
+    _refuse_raw_recording(args.campaign, campaign)
     _check_campaign_counts(args, campaign.n_poses)
     notes = [str(w) for w in campaign.metadata.get("warnings") or ()]
     notes += [str(w.message) for w in caught if str(w.message) not in notes]
@@ -350,6 +351,27 @@ def _campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
         degrees_hint="the readings look like degrees (import-csv --angle-unit deg?)",
     )
     return campaign, model
+
+
+RAW_RECORDING_GAP_S = 0.25
+"""A campaign whose tracker points are typically closer in time than this is a raw recording:
+a robot cannot move to a new pose and settle that fast (the shipped raw bags stream points every
+5 ms; a campaign has one point per pose, seconds apart)."""
+
+
+def _refuse_raw_recording(path: str, campaign: Any) -> None:
+    """Refuse a raw recording read as a campaign: pairing every streamed tracker point with a
+    joint reading turns the motion between poses into "poses", and the calibration is nonsense."""
+    stamps = campaign.stamps_ns
+    if stamps is None or campaign.n_poses < 3:
+        return
+    gap_s = float(np.median(np.diff(np.sort(np.asarray(stamps, dtype=np.int64))))) / 1e9
+    if gap_s < RAW_RECORDING_GAP_S:
+        msg = (
+            f"{path}: {campaign.n_poses} tracker points, typically {gap_s * 1e3:.3g} ms apart: this is a raw "
+            "recording (a campaign has one point per static pose, seconds apart), not a campaign: use 'replay' on it"
+        )
+        raise InputError(msg)
 
 
 def _test_joints(args: argparse.Namespace, model: Any) -> NDArray[np.float64]:

@@ -496,6 +496,27 @@ def test_replay_of_a_campaign_file_says_use_evaluate(
     )
 
 
+@pytest.mark.parametrize("command", ["calibrate", "evaluate", "validate", "map"])
+def test_raw_recording_given_as_a_campaign_says_use_replay(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    """Pairing each streamed tracker point of a raw recording with a joint reading made
+    thousands of moving "poses" and a nonsense calibration (31 mm RMS) reported as a result."""
+    out = tmp_path / "r"
+    argv = {
+        "calibrate": ["calibrate", str(TRACKER_BAG), "--robot", "paper_arm"],
+        "evaluate": _evaluate(TRACKER_BAG, "--out", str(out), *QUICK),
+        "validate": ["validate", str(TRACKER_BAG), "--robot", "paper_arm", "--out", str(out), "--no-progress"],
+        "map": ["map", str(TRACKER_BAG), "--robot", "paper_arm", "--out", str(out), "--no-progress"],
+    }[command]
+    assert main(argv) == 1
+    assert _error(capsys, command) == (
+        f"{TRACKER_BAG}: 1588 tracker points, typically 5 ms apart: this is a raw recording (a campaign has "
+        "one point per static pose, seconds apart), not a campaign: use 'replay' on it"
+    )
+    assert not out.exists()
+
+
 # --------------------------------------------------------------------- messages
 
 
