@@ -92,6 +92,7 @@ class Campaign:
             raise InputError(msg)
         size, dim = self.measurement.value_size, self.measurement.dimension
         object.__setattr__(self, "points", _finite_array("points", self.points, (n, size)))
+        self.measurement.check_values(self.points)
         if self.frame not in ("base", "tracker"):
             msg = f"frame must be 'base' or 'tracker', got {self.frame!r}"
             raise InputError(msg)

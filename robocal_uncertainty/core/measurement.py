@@ -64,6 +64,18 @@ POSITION_AXES: tuple[str, str, str] = ("x", "y", "z")
 """Components of a position in the measurement frame."""
 
 
+def positive_triple(name: str, value: object, unit: str) -> tuple[float, float, float]:
+    """Three positive finite floats from `value`, or a one-line ConfigError naming `name` and `unit`."""
+    msg = f"{name} must be three positive finite values [{unit}], got {value!r}"
+    try:
+        out = tuple(float(s) for s in value)  # type: ignore[attr-defined]
+    except (TypeError, ValueError) as err:
+        raise ConfigError(msg) from err
+    if len(out) != 3 or not all(np.isfinite(s) and s > 0 for s in out):
+        raise ConfigError(msg)
+    return (out[0], out[1], out[2])
+
+
 def joint_columns(layout: ParameterLayout) -> list[int]:
     """Indices of the joint offsets ``theta_j`` in the parameter vector, in joint order.
 
@@ -206,6 +218,14 @@ class MeasurementType(ABC):
         """
         return np.eye(self.dimension) * (np.asarray(position_std, dtype=np.float64) ** 2)[:, None, None]
 
+    def check_values(self, values: Array) -> None:
+        """Raise :class:`~robocal_uncertainty.errors.InputError` when finite `values` are not valid.
+
+        Called by :class:`~robocal_uncertainty.core.campaign.Campaign` on its measured values
+        (shape (n_poses, value_size), already finite). Nothing to check by default.
+        """
+        _ = values
+
     def positions(self, values: Array) -> Array | None:
         """3-D positions in the measurement frame held by `values`, or None if they hold none.
 
@@ -297,11 +317,7 @@ class PointMeasurement(MeasurementType):
 
     def __post_init__(self) -> None:
         if self.std is not None:
-            std = tuple(float(s) for s in self.std)
-            if len(std) != len(POSITION_AXES) or not all(np.isfinite(s) and s > 0 for s in std):
-                msg = f"point std must be three positive finite values [m], got {self.std!r}"
-                raise ConfigError(msg)
-            object.__setattr__(self, "std", std)
+            object.__setattr__(self, "std", positive_triple("point std", self.std, "m"))
 
     @property
     def name(self) -> str:

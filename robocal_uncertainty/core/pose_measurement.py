@@ -36,16 +36,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.kinematics import forward_poses, forward_poses_and_jacobian
-from robocal_uncertainty.core.measurement import POSITION_AXES, MeasurementType
+from robocal_uncertainty.core.measurement import POSITION_AXES, MeasurementType, positive_triple
 from robocal_uncertainty.core.robot_model import ParameterLayout
 from robocal_uncertainty.core.rotation import rotation_exp, rotation_log
-from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.errors import InputError
 
 __all__ = ["ROTATION_AXES", "PoseMeasurement", "pose_values", "split_pose_values"]
 
 Array = NDArray[np.float64]
 ROTATION_AXES: tuple[str, str, str] = ("rx", "ry", "rz")
 """Components of a rotation residual: rotation vector about the measurement frame's x, y, z."""
+_ORTHONORMAL_TOL = 1e-6
 
 
 def pose_values(positions: Array, rotations: Array) -> Array:
@@ -69,18 +70,6 @@ def split_pose_values(values: Array) -> tuple[Array, Array]:
     return v[..., :3], v[..., 3:].reshape(*v.shape[:-1], 3, 3)
 
 
-def _positive_triple(name: str, value: object, unit: str) -> tuple[float, float, float]:
-    try:
-        out = tuple(float(s) for s in value)  # type: ignore[attr-defined]
-    except (TypeError, ValueError) as err:
-        msg = f"{name} must be three positive finite values [{unit}], got {value!r}"
-        raise ConfigError(msg) from err
-    if len(out) != 3 or not all(np.isfinite(s) and s > 0 for s in out):
-        msg = f"{name} must be three positive finite values [{unit}], got {value!r}"
-        raise ConfigError(msg)
-    return (out[0], out[1], out[2])
-
-
 @dataclass(frozen=True)
 class PoseMeasurement(MeasurementType):
     """Tool position and orientation in the measurement frame: 6 equations per pose.
@@ -98,8 +87,8 @@ class PoseMeasurement(MeasurementType):
     rotation_std: tuple[float, float, float]
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "position_std", _positive_triple("position_std", self.position_std, "m"))
-        object.__setattr__(self, "rotation_std", _positive_triple("rotation_std", self.rotation_std, "rad"))
+        object.__setattr__(self, "position_std", positive_triple("position_std", self.position_std, "m"))
+        object.__setattr__(self, "rotation_std", positive_triple("rotation_std", self.rotation_std, "rad"))
 
     @property
     def name(self) -> str:
@@ -187,6 +176,24 @@ class PoseMeasurement(MeasurementType):
         for i, s in enumerate(self.rotation_std):
             out[:, 3 + i, 3 + i] = s * s
         return out
+
+    def check_values(self, values: Array) -> None:
+        """Each stored rotation must be a proper rotation matrix (orthonormal within 1e-6, det +1).
+
+        A scaled, reflected or transposed-and-mangled matrix would otherwise enter the residual
+        ``log(R_m R_p^T)`` as some unrelated rotation and surface only as a failed iteration.
+        """
+        _, rot = split_pose_values(values)
+        gram = rot @ np.swapaxes(rot, -1, -2)
+        error = np.max(np.abs(gram - np.eye(3)), axis=(-2, -1))
+        bad = (error > _ORTHONORMAL_TOL) | (np.linalg.det(rot) <= 0.0)
+        if np.any(bad):
+            first = int(np.flatnonzero(bad.ravel())[0])
+            msg = (
+                f"measured orientation of pose {first} is not a rotation matrix "
+                f"(max |R R^T - I| = {error.ravel()[first]:.3g}, det = {np.linalg.det(rot).ravel()[first]:.6g})"
+            )
+            raise InputError(msg)
 
     def positions(self, values: Array) -> Array:
         """The position part of the values [m]."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import re
 from pathlib import Path
 
 import numpy as np
@@ -265,3 +266,38 @@ def test_numpy_integer_lambda_is_accepted(model, campaign: Campaign) -> None:
     a = identify(model, campaign, lambda_=np.int64(0))
     b = identify(model, campaign, lambda_=0.0)
     np.testing.assert_array_equal(a.estimate, b.estimate)
+
+
+@pytest.mark.parametrize(
+    ("edit", "pattern"),
+    [
+        (lambda r: 1.5 * r, r"pose 2 is not a rotation matrix .*det = 3\.375"),
+        (lambda r: -r, r"pose 2 is not a rotation matrix .*det = -1"),
+        (lambda r: r + 1e-3, r"pose 2 is not a rotation matrix"),
+    ],
+    ids=["scaled", "reflected", "skewed"],
+)
+def test_pose_campaign_rejects_non_rotation(edit, pattern: str) -> None:
+    from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values, split_pose_values
+    from robocal_uncertainty.core.rotation import rotation_exp
+
+    rng = np.random.default_rng(5)
+    rotations = rotation_exp(rng.normal(0.0, 1.0, (4, 3)))
+    rotations[2] = edit(rotations[2])
+    values = pose_values(rng.normal(0.0, 1.0, (4, 3)), rotations)
+    meas = PoseMeasurement((1e-5,) * 3, (1e-4,) * 3)
+    with pytest.raises(InputError) as excinfo:
+        Campaign(JOINTS, np.zeros((4, 6)), values, frame="base", frame_id="base", measurement=meas)
+    assert re.search(pattern, one_line(excinfo))
+    # A proper rotation with float round-off passes.
+    ok = pose_values(split_pose_values(values)[0], rotation_exp(rng.normal(0.0, 1.0, (4, 3))))
+    Campaign(JOINTS, np.zeros((4, 6)), ok, frame="base", frame_id="base", measurement=meas)
+
+
+@pytest.mark.parametrize("std", ["ab", (None, 1.0, 1.0), (1.0, 1.0), (0.0, 1.0, 1.0), (float("nan"), 1.0, 1.0)])
+def test_point_std_must_be_three_positive_numbers(std: object) -> None:
+    from robocal_uncertainty.core.measurement import PointMeasurement
+
+    with pytest.raises(ConfigError) as excinfo:
+        PointMeasurement(std)  # type: ignore[arg-type]
+    assert "point std must be three positive finite values [m]" in one_line(excinfo)
