@@ -328,29 +328,41 @@ def _cmd_import_csv(args: argparse.Namespace) -> int:
 def _campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
     """Read the campaign (its reader warnings printed as ``warning:`` lines) and the robot;
     refuse campaign joint readings outside the robot's joint limits."""
+    campaign = _read_campaign_checked(args, args.campaign)
+    _check_campaign_counts(args, campaign.n_poses)
+    model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
+    _check_campaign_joints(model, campaign, args.campaign)
+    return campaign, model
+
+
+def _read_campaign_checked(args: argparse.Namespace, path: str) -> Any:
+    """One campaign read as every command reads it: with ``--pairing-tolerance-ms``, a raw
+    recording refused, the reader's warnings printed as ``warning:`` lines."""
     import warnings
 
     from robocal_uncertainty.bagio import read_campaign
-    from robocal_uncertainty.core import check_joint_limits
 
     tolerance_ms = getattr(args, "pairing_tolerance_ms", DEFAULT_PAIRING_TOLERANCE_MS)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        campaign = read_campaign(args.campaign, stamp_tolerance_ns=round(tolerance_ms * 1e6))
-    _refuse_raw_recording(args.campaign, campaign)
-    _check_campaign_counts(args, campaign.n_poses)
+        campaign = read_campaign(path, stamp_tolerance_ns=round(tolerance_ms * 1e6))
+    _refuse_raw_recording(path, campaign)
     notes = [str(w) for w in campaign.metadata.get("warnings") or ()]
     notes += [str(w.message) for w in caught if str(w.message) not in notes]
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
-    model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
+    return campaign
+
+
+def _check_campaign_joints(model: Any, campaign: Any, path: str) -> None:
+    from robocal_uncertainty.core import check_joint_limits
+
     check_joint_limits(
         model,
         campaign.reorder_joints(model.joint_names).joint_positions,
-        what=f"{args.campaign}: campaign pose",
+        what=f"{path}: campaign pose",
         degrees_hint="the readings look like degrees (import-csv --angle-unit deg?)",
     )
-    return campaign, model
 
 
 RAW_RECORDING_GAP_S = 0.25
@@ -773,12 +785,14 @@ def _sources_arg(text: str) -> tuple[str, ...]:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import validate
-    from robocal_uncertainty.bagio import read_campaign
     from robocal_uncertainty.report.validation_report import format_validation, write_validation_report
 
     options = _evaluation_options(args, _sources_arg(args.sources), None)
     campaign, model = _campaign_and_robot(args)
-    validation_campaign = read_campaign(args.validation_campaign) if args.validation_campaign else None
+    validation_campaign = None
+    if args.validation_campaign:
+        validation_campaign = _read_campaign_checked(args, args.validation_campaign)
+        _check_campaign_joints(model, validation_campaign, args.validation_campaign)
     validation = validate(
         model,
         campaign,

@@ -413,6 +413,25 @@ def test_points_stamped_10_ms_after_the_joints_calibrate_by_default(
     )
 
 
+def test_validation_campaign_is_read_like_the_campaign(
+    campaign12: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--validation-campaign gets the same --pairing-tolerance-ms and raw-recording check as the
+    campaign (it was read with exact stamp matching only: a 10 ms lag found no pose)."""
+    bag = tmp_path / "lagged.mcap"
+    _campaign_bag(bag, [10_000_000] * 20)
+    argv = ["validate", str(campaign12), "--robot", "paper_arm", "--validation-campaign", str(bag)]
+    argv += ["--trials", "50", "--no-progress"]
+    assert main([*argv, "--out", str(tmp_path / "r1")]) == 0
+    assert "Traceback" not in capsys.readouterr().err
+    assert main([*argv, "--out", str(tmp_path / "r2"), "--pairing-tolerance-ms", "5"]) == 1
+    assert _error(capsys, "validate").startswith(f"{bag}: no pose found: pose 1 of 20")
+    argv[argv.index(str(bag))] = str(BASE_BAG)
+    assert main([*argv, "--out", str(tmp_path / "r3")]) == 1
+    assert _error(capsys, "validate").startswith(f"{BASE_BAG}: 3300 tracker points, typically 4 ms apart")
+    assert not (tmp_path / "r3").exists()
+
+
 def test_a_point_beyond_the_tolerance_is_named_with_its_gap(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / "late.mcap"
     lags = [10_000_000] * 20
