@@ -387,17 +387,32 @@ def _refuse_raw_recording(path: str, campaign: Any) -> None:
 
 
 def _test_joints(args: argparse.Namespace, model: Any) -> NDArray[np.float64]:
+    return _joint_configurations(
+        model,
+        args.test_joints_file,
+        args.test_joints,
+        degrees=args.degrees,
+        flag="--test-joints",
+        noun="test configuration",
+    )
+
+
+def _joint_configurations(
+    model: Any, path: str | None, values: Sequence[str] | None, *, degrees: bool, flag: str, noun: str
+) -> NDArray[np.float64]:
+    """Configurations [rad] from ``{flag}-file`` `path` or ``{flag}`` `values`, within the joint limits."""
     from robocal_uncertainty.core import check_joint_limits
 
-    if args.test_joints_file:
-        q = _read_joints_file(args.test_joints_file, model.n_joints, degrees=args.degrees)
-        what = f"{args.test_joints_file}: test configuration"
-    elif args.test_joints:
-        q = _parse_joint_values(args.test_joints, model.n_joints, degrees=args.degrees, what="--test-joints")
-        what = "--test-joints configuration"
+    if path:
+        q = _read_joints_file(path, model.n_joints, degrees=degrees)
+        what = f"{path}: {noun}"
+    elif values:
+        q = _parse_joint_values(values, model.n_joints, degrees=degrees, what=flag)
+        what = f"{flag} configuration"
     else:
-        raise ConfigError("give --test-joints or --test-joints-file")
-    check_joint_limits(model, q, what=what, degrees_hint=None if args.degrees else "did you mean --degrees?")
+        msg = f"give {flag} or {flag}-file"
+        raise ConfigError(msg)
+    check_joint_limits(model, q, what=what, degrees_hint=None if degrees else "did you mean --degrees?")
     return q
 
 
@@ -431,21 +446,14 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _cmd_fk(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import tool_points
-    from robocal_uncertainty.core import check_joint_limits
     from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration
 
     model = _load_robot(args.robot)
     if args.calibration:
         model = apply_calibration(model, read_calibration(args.calibration), where=f"calibration {args.calibration}")
-    if args.joints_file:
-        q = _read_joints_file(args.joints_file, model.n_joints, degrees=args.degrees)
-        what = f"{args.joints_file}: configuration"
-    elif args.joints:
-        q = _parse_joint_values(args.joints, model.n_joints, degrees=args.degrees, what="--joints")
-        what = "--joints configuration"
-    else:
-        raise ConfigError("give --joints or --joints-file")
-    check_joint_limits(model, q, what=what, degrees_hint=None if args.degrees else "did you mean --degrees?")
+    q = _joint_configurations(
+        model, args.joints_file, args.joints, degrees=args.degrees, flag="--joints", noun="configuration"
+    )
     points = tool_points(model, q, calibrated=bool(args.calibration), frame=args.frame)
     print(
         f"# tool point of the {points.model} {model.name} model in frame {points.frame_id} ({points.frame} frame), mm"

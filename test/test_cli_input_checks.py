@@ -102,6 +102,23 @@ def test_fk_joints_file_names_file_and_row(tmp_path: Path, capsys: pytest.Captur
     assert msg.startswith(f"{path}: configuration 2 of 2: joint joint6 = 3.49066 rad (200 deg)")
 
 
+def test_joints_missing_or_beyond_limits_read_alike_in_fk_and_evaluate(
+    paper_campaign: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """fk --joints[-file] and evaluate --test-joints[-file] share one reader: same messages."""
+    assert main(["fk", "--robot", "paper_arm"]) == 1
+    assert _error(capsys, "fk") == "give --joints or --joints-file"
+    out = tmp_path / "report"
+    evaluate = ["evaluate", str(paper_campaign), "--robot", "paper_arm", "--out", str(out), "--no-progress"]
+    assert main(evaluate) == 1
+    assert _error(capsys, "evaluate") == "give --test-joints or --test-joints-file"
+    path = tmp_path / "q.txt"
+    path.write_text(" ".join([*JOINTS[:5], "200"]) + "\n")
+    assert main([*evaluate, "--test-joints-file", str(path), "--degrees"]) == 1
+    assert _error(capsys, "evaluate").startswith(f"{path}: test configuration 1 of 1: joint joint6 = 3.49066 rad")
+    assert not out.exists()
+
+
 def test_evaluate_refuses_test_joints_beyond_limits(
     paper_campaign: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
