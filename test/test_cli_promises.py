@@ -325,6 +325,27 @@ def test_unwritable_json_is_refused_before_calibrating(
     assert _error(capsys, "calibrate") == message.format(p=path, parent=path.parent)
 
 
+def test_output_in_a_directory_that_refuses_files_fails_before_work(
+    campaign12: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A directory whose permission bits say writable but that refuses new files (a read-only
+    mount, /proc, anything when root) is found before the calibration, in one line; it was a
+    traceback after the work."""
+    from robocal_uncertainty.app import output_paths
+
+    def read_only(*args: object, **kwargs: object) -> None:
+        raise OSError(30, "Read-only file system")
+
+    monkeypatch.setattr(output_paths.tempfile, "TemporaryFile", read_only)
+    path = tmp_path / "cal.json"
+    assert main(["calibrate", str(campaign12), "--robot", "paper_arm", "--json", str(path)]) == 1
+    assert _error(capsys, "calibrate") == f"cannot write --json {path}: directory {tmp_path} is not writable"
+    out = tmp_path / "rep"
+    assert main(_evaluate(campaign12, "--out", str(out), *QUICK)) == 1
+    assert _error(capsys, "evaluate") == f"cannot write the report to --out {out}: directory {tmp_path} is not writable"
+    assert not path.exists() and not out.exists()
+
+
 def test_report_directory_rule(campaign12: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "report"
     fast = ["--trials", "100", "--budget-trials", "50", "--sweep-trials", "20", "--no-progress", "--histograms", "0"]

@@ -16,6 +16,7 @@ report is written (a run that fails keeps the earlier report).
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 from robocal_uncertainty.errors import ConfigError
@@ -49,6 +50,20 @@ def _where(option: str) -> str:
     return f"{option} " if option else ""
 
 
+def _writable(directory: Path) -> bool:
+    """Whether a file can be created in `directory`: the permission bits, then a real
+    (anonymous, removed at once) temporary file, for what the bits do not show (a read-only
+    mount, ``/proc``, or any directory when running as root)."""
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return False
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError:
+        return False
+    return True
+
+
 def _check_parent(path: Path, option: str) -> None:
     parent = path.parent if str(path.parent) else Path()
     probe = parent
@@ -60,7 +75,7 @@ def _check_parent(path: Path, option: str) -> None:
     if not parent.exists():
         msg = f"cannot write {_where(option)}{path}: directory {parent} does not exist"
         raise ConfigError(msg)
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not _writable(parent):
         msg = f"cannot write {_where(option)}{path}: directory {parent} is not writable"
         raise ConfigError(msg)
 
@@ -120,7 +135,7 @@ def check_report_directory(path: str | Path, *, force: bool, option: str = "--ou
                 "(give --force to replace the earlier report, or another --out)"
             )
             raise ConfigError(msg)
-        if not os.access(out, os.W_OK | os.X_OK):
+        if not _writable(out):
             msg = f"cannot write the report to {_where(option)}{out}: the directory is not writable"
             raise ConfigError(msg)
         return out
@@ -130,7 +145,7 @@ def check_report_directory(path: str | Path, *, force: bool, option: str = "--ou
     if not probe.is_dir():
         msg = f"cannot write the report to {_where(option)}{out}: {probe} is a file, not a directory"
         raise ConfigError(msg)
-    if not os.access(probe, os.W_OK | os.X_OK):
+    if not _writable(probe):
         msg = f"cannot write the report to {_where(option)}{out}: directory {probe} is not writable"
         raise ConfigError(msg)
     return out
