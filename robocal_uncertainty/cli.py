@@ -1513,6 +1513,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
+    except OSError as err:
+        # The checks before the work cannot foresee everything (a full disk, a directory
+        # removed or made read-only during the run): still one line, naming the file.
+        where = f" {err.filename}" if err.filename is not None else ""
+        print(
+            f"robocal-uncertainty {args.command}: error: cannot access{where}: {err.strerror or err}", file=sys.stderr
+        )
+        return 1
 
 
 if __name__ == "__main__":

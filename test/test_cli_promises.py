@@ -346,6 +346,21 @@ def test_output_in_a_directory_that_refuses_files_fails_before_work(
     assert not path.exists() and not out.exists()
 
 
+def test_write_failing_during_the_run_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A write that fails after the checks (disk full) ends in one line, exit 1, no traceback."""
+    path = tmp_path / "points.json"
+
+    def disk_full(self: Path, *args: object, **kwargs: object) -> None:
+        raise OSError(28, "No space left on device", str(self))
+
+    monkeypatch.setattr(Path, "write_text", disk_full)
+    assert main(["fk", "--robot", "paper_arm", "--joints", *JOINTS, "--degrees", "--json", str(path)]) == 1
+    captured = capsys.readouterr()
+    assert captured.err == f"robocal-uncertainty fk: error: cannot access {path}: No space left on device\n"
+
+
 def test_report_directory_rule(campaign12: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "report"
     fast = ["--trials", "100", "--budget-trials", "50", "--sweep-trials", "20", "--no-progress", "--histograms", "0"]
