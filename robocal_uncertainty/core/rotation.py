@@ -45,9 +45,27 @@ EULER_CONVENTIONS: tuple[str, ...] = ("intrinsic_xyz", "extrinsic_xyz", "intrins
 """
 
 
+def _vectors(value: Array, name: str) -> Array:
+    """`value` as float64 with a last axis of 3, or a one-line InputError."""
+    v = np.asarray(value, dtype=np.float64)
+    if v.shape[-1:] != (3,):
+        msg = f"{name} must have shape (..., 3), got {v.shape}"
+        raise InputError(msg)
+    return v
+
+
+def _matrices(value: Array, name: str) -> Array:
+    """`value` as float64 with two last axes of 3, or a one-line InputError."""
+    r = np.asarray(value, dtype=np.float64)
+    if r.shape[-2:] != (3, 3):
+        msg = f"{name} must have shape (..., 3, 3), got {r.shape}"
+        raise InputError(msg)
+    return r
+
+
 def skew(v: Array) -> Array:
     """Cross-product matrices, shape (..., 3, 3), of vectors (..., 3)."""
-    v = np.asarray(v, dtype=np.float64)
+    v = _vectors(v, "vector")
     out = np.zeros((*v.shape[:-1], 3, 3))
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
     out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
@@ -57,7 +75,7 @@ def skew(v: Array) -> Array:
 
 def rotation_exp(rotvec: Array) -> Array:
     """Rotation matrices ``exp([v]x)`` (Rodrigues), shape (..., 3, 3), of rotation vectors (..., 3) [rad]."""
-    v = np.asarray(rotvec, dtype=np.float64)
+    v = _vectors(rotvec, "rotation vector")
     theta2 = np.sum(v * v, axis=-1)
     theta = np.sqrt(theta2)
     small = theta2 < 1e-8
@@ -75,7 +93,7 @@ def rotation_log(rotation: Array) -> Array:
     Accurate for small angles (the antisymmetric part carries the information, no arccos of
     a number near 1) and near pi (the axis is taken from the symmetric part).
     """
-    r = np.asarray(rotation, dtype=np.float64)
+    r = _matrices(rotation, "rotation")
     w = np.stack((r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]), axis=-1)
     s = 0.5 * np.linalg.norm(w, axis=-1)  # sin(theta)
     c = 0.5 * (np.trace(r, axis1=-2, axis2=-1) - 1.0)  # cos(theta)
@@ -101,7 +119,7 @@ def rotation_log(rotation: Array) -> Array:
 
 def project_to_rotation(matrix: Array) -> Array:
     """Nearest rotation (Frobenius norm) to each 3x3 matrix, shape (..., 3, 3), via the SVD."""
-    u, _, vt = np.linalg.svd(np.asarray(matrix, dtype=np.float64))
+    u, _, vt = np.linalg.svd(_matrices(matrix, "matrix"))
     d = np.sign(np.linalg.det(u @ vt))
     d = np.where(d == 0, 1.0, d)
     u = u.copy()
@@ -190,9 +208,9 @@ def euler_to_matrix(angles: Array, convention: str) -> Array:
     Raises
     ------
     InputError
-        Unknown convention.
+        Unknown convention, or angles not of shape (..., 3).
     """
-    a = np.asarray(angles, dtype=np.float64)
+    a = _vectors(angles, "Euler angles")
     if convention not in EULER_CONVENTIONS:
         msg = f"Euler convention must be one of {', '.join(EULER_CONVENTIONS)}, got {convention!r}"
         raise InputError(msg)

@@ -185,3 +185,65 @@ def test_chordal_mean_of_a_symmetric_spread_is_the_centre() -> None:
 def test_bad_quaternions_give_one_line_errors(quat: list[float], match: str) -> None:
     with pytest.raises(InputError, match=match):
         quaternion_to_matrix(np.array(quat), name="tracker orientation")
+
+
+def test_rotation_helpers_match_scipy() -> None:
+    """exp, log, quaternions and every Euler convention against scipy's Rotation (independent code),
+    over uniform random rotations and angles within 1e-9 rad of 0 and of pi."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(7)
+    axes = rng.normal(size=(4000, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate(
+        (
+            rng.uniform(0.0, np.pi, 1000),
+            rng.uniform(0.0, 1e-9, 1000),
+            np.pi - rng.uniform(1e-12, 1e-9, 1000),
+            np.pi - rng.uniform(0.0, 0.2, 1000),
+        )
+    )
+    v = np.concatenate((Rotation.random(1000, random_state=3).as_rotvec(), axes * angles[:, None]))
+    reference = Rotation.from_rotvec(v)
+    matrices = reference.as_matrix()
+    np.testing.assert_allclose(rotation_exp(v), matrices, rtol=0, atol=5e-15)
+    log = rotation_log(matrices)
+    expected = reference.as_rotvec()
+    # At pi, v and -v are the same rotation: compare to whichever sign scipy chose.
+    flipped = np.linalg.norm(expected, axis=1) > np.pi - 1e-6
+    sign = np.where(flipped & (np.sum(log * expected, axis=1) < 0), -1.0, 1.0)
+    np.testing.assert_allclose(log, sign[:, None] * expected, rtol=0, atol=5e-15)
+    assert np.all(np.linalg.norm(log, axis=1) <= np.pi + 1e-15)
+    quat = quaternion_from_matrix(matrices)
+    expected_q = reference.as_quat()
+    expected_q *= np.where(expected_q[:, 3:] < 0, -1.0, 1.0)
+    assert np.all(quat[:, 3] >= 0)
+    # w = 0 exactly at pi leaves the sign free; elsewhere it is fixed by w >= 0.
+    q_sign = np.where((expected_q[:, 3] < 1e-8) & (np.sum(quat * expected_q, axis=1) < 0), -1.0, 1.0)
+    np.testing.assert_allclose(quat, q_sign[:, None] * expected_q, rtol=0, atol=5e-15)
+    np.testing.assert_allclose(quaternion_to_matrix(reference.as_quat()), matrices, rtol=0, atol=5e-15)
+    euler = rng.uniform(-np.pi, np.pi, (1000, 3))
+    for convention, seq in (
+        ("intrinsic_xyz", "XYZ"),
+        ("extrinsic_xyz", "xyz"),
+        ("intrinsic_zyx", "ZYX"),
+        ("intrinsic_zyz", "ZYZ"),
+    ):
+        np.testing.assert_allclose(
+            euler_to_matrix(euler, convention), Rotation.from_euler(seq, euler).as_matrix(), rtol=0, atol=5e-15
+        )
+    spread = Rotation.from_rotvec(rng.normal(0.0, 0.3, (50, 3))) * Rotation.from_rotvec([0.3, -1.0, 2.0])
+    np.testing.assert_allclose(chordal_mean(spread.as_matrix()), spread.mean().as_matrix(), rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: rotation_exp(np.zeros(2)), r"rotation vector must have shape \(\.\.\., 3\)"),
+        (lambda: rotation_log(np.eye(2)), r"rotation must have shape \(\.\.\., 3, 3\)"),
+        (lambda: euler_to_matrix(np.zeros(2), "intrinsic_xyz"), r"Euler angles must have shape"),
+    ],
+)
+def test_rotation_helpers_reject_wrong_shapes(call, match: str) -> None:
+    with pytest.raises(InputError, match=match):
+        call()
