@@ -385,6 +385,15 @@ def identify(
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
         msg = f"max_iterations must be a positive integer, got {max_iterations!r}"
         raise ConfigError(msg)
+    if (
+        isinstance(step_tolerance, (bool, np.bool_))
+        or not isinstance(step_tolerance, numbers.Real)
+        or not np.isfinite(step_tolerance)
+        or step_tolerance < 0
+    ):
+        # NaN or a negative tolerance can never be met: every call would end in a ConvergenceError.
+        msg = f"step_tolerance must be a finite non-negative number, got {step_tolerance!r}"
+        raise ConfigError(msg)
     measurement = campaign.measurement
     if measurement.measures_orientation:
         # Orientation data identify the tool frame's rotation in the flange frame.

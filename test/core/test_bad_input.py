@@ -301,3 +301,10 @@ def test_point_std_must_be_three_positive_numbers(std: object) -> None:
     with pytest.raises(ConfigError) as excinfo:
         PointMeasurement(std)  # type: ignore[arg-type]
     assert "point std must be three positive finite values [m]" in one_line(excinfo)
+
+
+@pytest.mark.parametrize("tol", [float("nan"), -1.0, "1e-10", True])
+def test_invalid_step_tolerance(model, campaign: Campaign, tol: object) -> None:
+    with pytest.raises(ConfigError) as excinfo:
+        identify(model, campaign, step_tolerance=tol)  # type: ignore[arg-type]
+    assert "step_tolerance must be a finite non-negative number" in one_line(excinfo)
