@@ -7,6 +7,7 @@ distance (the blade seed's form); encoder noise uniform within +-0.005 deg.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -37,6 +38,11 @@ __all__ = [
 Array = NDArray[np.float64]
 
 
+def _real(value: object) -> bool:
+    """A real number (not a bool): what the finiteness checks below may compare."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
 @dataclass(frozen=True)
 class TrackerNoise:
     """Tracker error per coordinate, uniform within +-(a + b * L).
@@ -53,7 +59,11 @@ class TrackerNoise:
     b: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.a) and np.isfinite(self.b)) or self.a < 0 or self.b < 0:
+        if (
+            not (_real(self.a) and _real(self.b))
+            or not (np.isfinite(self.a) and np.isfinite(self.b))
+            or min(self.a, self.b) < 0
+        ):
             msg = f"tracker noise a and b must be finite and >= 0, got a={self.a}, b={self.b}"
             raise ConfigError(msg)
 
@@ -83,7 +93,7 @@ class EncoderNoise:
     half_width: float = float(np.radians(0.005))
 
     def __post_init__(self) -> None:
-        if not np.isfinite(self.half_width) or self.half_width < 0:
+        if not _real(self.half_width) or not np.isfinite(self.half_width) or self.half_width < 0:
             msg = f"encoder noise half-width must be finite and >= 0, got {self.half_width}"
             raise ConfigError(msg)
 
@@ -124,7 +134,7 @@ class UnmodelledErrors:
     def __post_init__(self) -> None:
         for name in ("gear_amplitude", "compliance"):
             value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
+            if not _real(value) or not np.isfinite(value) or value < 0:
                 msg = f"{name} must be finite and >= 0, got {value}"
                 raise ConfigError(msg)
 
@@ -177,7 +187,8 @@ class SimulationSettings:
     orientation_std: float | None = None
 
     def __post_init__(self) -> None:
-        if self.orientation_std is not None and not (np.isfinite(self.orientation_std) and self.orientation_std > 0):
+        ostd = self.orientation_std
+        if ostd is not None and not (_real(ostd) and np.isfinite(ostd) and ostd > 0):
             msg = f"orientation_std must be a positive finite number [rad], got {self.orientation_std!r}"
             raise ConfigError(msg)
         if isinstance(self.n_poses, bool) or not isinstance(self.n_poses, int) or self.n_poses < 1:

@@ -308,3 +308,19 @@ def test_invalid_step_tolerance(model, campaign: Campaign, tol: object) -> None:
     with pytest.raises(ConfigError) as excinfo:
         identify(model, campaign, step_tolerance=tol)  # type: ignore[arg-type]
     assert "step_tolerance must be a finite non-negative number" in one_line(excinfo)
+
+
+def test_simulation_settings_reject_non_numbers() -> None:
+    from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise, UnmodelledErrors
+
+    for make in (
+        lambda: SimulationSettings(orientation_std="1e-4"),  # type: ignore[arg-type]
+        lambda: SimulationSettings(orientation_std=True),  # type: ignore[arg-type]
+        lambda: TrackerNoise(a="5e-6"),  # type: ignore[arg-type]
+        lambda: TrackerNoise(b=float("nan")),
+        lambda: EncoderNoise(half_width=None),  # type: ignore[arg-type]
+        lambda: UnmodelledErrors(compliance="0.1"),  # type: ignore[arg-type]
+    ):
+        with pytest.raises(ConfigError) as excinfo:
+            make()
+        one_line(excinfo)
