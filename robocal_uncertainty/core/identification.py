@@ -514,6 +514,9 @@ def identify(
         warns.append(f"ill-conditioned pose set: condition number {cond:.3g} of the scaled Jacobian")
     if status != 0:
         warns.append(IDENTIFICATION_MESSAGES[status] + " (accepted by the caller)")
+    mismatch = _weighting_mismatch(measurement, whitened.reshape(residuals.shape))
+    if mismatch is not None:
+        warns.append(mismatch)
     return IdentificationResult(
         model=model.with_parameters(p),
         parameter_names=layout.names,
@@ -547,6 +550,35 @@ def identify(
         measurement=measurement,
         rotation_rms_before=_rotation_rms(measurement, residuals0),
         rotation_rms_after=_rotation_rms(measurement, residuals),
+    )
+
+
+_WEIGHTING_MISMATCH = 30.0
+
+
+def _weighting_mismatch(measurement: MeasurementType, whitened: Array) -> str | None:
+    """A warning when the whitened residual scatter of metres and radians components differs by > 30x.
+
+    The weights say how much a rotation residual counts against a position residual; when the
+    stated standard uncertainties leave out a dominant error (typically the encoders, which
+    turn the tool as well as move it), one kind of equation outweighs the other by orders of
+    magnitude, the L-curve regularises the rest away and the calibration is worse than from the
+    positions alone, silently. `whitened` has shape (n_poses, dimension).
+    """
+    if measurement.weights is None:
+        return None
+    units = np.asarray(measurement.component_units)
+    rms = {u: float(np.sqrt(np.mean(whitened[:, units == u] ** 2))) for u in ("m", "rad") if np.any(units == u)}
+    if len(rms) < 2 or min(rms.values()) <= 0.0:
+        return None
+    ratio = max(rms.values()) / min(rms.values())
+    if ratio <= _WEIGHTING_MISMATCH:
+        return None
+    return (
+        f"the stated uncertainties do not match the residual scatter: whitened residual RMS "
+        f"{rms['m']:.3g} for positions and {rms['rad']:.3g} for rotations ({ratio:.3g}x apart), so one kind "
+        "of equation outweighs the other; state standard uncertainties that include every error "
+        "source (encoder noise turns the tool too)"
     )
 
 

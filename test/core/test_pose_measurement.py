@@ -140,3 +140,14 @@ def test_calibration_file_of_a_6dof_calibration_applies_the_tool_rotation(tmp_pa
     model = apply_calibration(nominal, read_calibration(tmp_path / "cal.json"))
     assert model.tool_rotation
     np.testing.assert_array_equal(model.parameter_vector(), res.estimate)
+
+
+def test_weights_that_contradict_the_scatter_are_reported() -> None:
+    """An orientation std far below the encoder-driven rotation scatter (1e-9 rad against ~1e-4 rad)
+    makes rotations outweigh positions ~1e4x: identify must say so rather than stay silent;
+    a consistent std gives no such warning."""
+    model = load_robot_model(PAPER)
+    for ostd, expected in ((1e-9, True), (1e-4, False)):
+        sim = simulate_campaign(model, SimulationSettings(n_poses=20, orientation_std=ostd), seed=3)
+        result = identify(model, sim.campaign)
+        assert any("do not match the residual scatter" in w for w in result.warnings) is expected, result.warnings
