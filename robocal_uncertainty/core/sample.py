@@ -6,6 +6,8 @@ it, ``bagio.messages`` converts it to and from the ``CalibrationSample`` message
 
 from __future__ import annotations
 
+import numbers
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +28,16 @@ def _array(name: str, value: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.fl
         raise InputError(msg)
     array.setflags(write=False)
     return array
+
+
+def _integer(name: str, value: object) -> int:
+    """`value` as an int when it is an integral number (not a bool), or a one-line InputError."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)):
+        return operator.index(value)
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    msg = f"{name} must be an integer, got {value!r}"
+    raise InputError(msg)
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,7 +97,7 @@ class CalibrationSample:
             msg = f"joint_names must be unique and non-empty, got {list(names)}"
             raise InputError(msg)
         object.__setattr__(self, "joint_names", names)
-        object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
+        object.__setattr__(self, "stamp_ns", _integer("stamp_ns", self.stamp_ns))
         n = len(names)
         q = _array("joint_positions", self.joint_positions, (n,))
         q_std = _array("joint_position_std", self.joint_position_std, (n,))
@@ -111,11 +123,11 @@ class CalibrationSample:
                 raise InputError("orientation_covariance has a negative variance")
             object.__setattr__(self, "orientation_covariance", rot_cov)
         for name in ("joint_state_count", "tracker_point_count"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < 1:
+            value = _integer(name, getattr(self, name))
+            if value < 1:
                 msg = f"{name} must be a positive integer, got {value!r}"
                 raise InputError(msg)
-            object.__setattr__(self, name, int(value))
+            object.__setattr__(self, name, value)
 
     def __eq__(self, other: object) -> bool:
         """Exact equality of every field (arrays element by element)."""

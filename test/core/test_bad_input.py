@@ -324,3 +324,26 @@ def test_simulation_settings_reject_non_numbers() -> None:
         with pytest.raises(ConfigError) as excinfo:
             make()
         one_line(excinfo)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("stamp_ns", "abc"), ("stamp_ns", None), ("stamp_ns", 1.5), ("joint_state_count", True)]
+)
+def test_calibration_sample_integers(field: str, value: object) -> None:
+    from robocal_uncertainty.core.sample import CalibrationSample
+
+    kwargs: dict[str, object] = {
+        "stamp_ns": 1_700_000_000_000_000_001,
+        "frame_id": "tracker",
+        "joint_names": ("a",),
+        "joint_positions": [0.0],
+        "joint_position_std": [0.0],
+        "point": [0.0, 0.0, 0.0],
+        "point_covariance": np.eye(3),
+        "joint_state_count": 3,
+        "tracker_point_count": 2,
+    }
+    assert CalibrationSample(**kwargs).stamp_ns == 1_700_000_000_000_000_001  # type: ignore[arg-type]
+    with pytest.raises(InputError) as excinfo:
+        CalibrationSample(**{**kwargs, field: value})  # type: ignore[arg-type]
+    assert f"{field} must be an integer" in one_line(excinfo)
