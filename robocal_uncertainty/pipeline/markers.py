@@ -29,6 +29,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal_uncertainty.core.rotation import quaternion_from_matrix as rotation_quaternion
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
 
@@ -96,25 +97,7 @@ def quaternion_from_matrix(rotation: Array) -> Array:
     if r.shape != (3, 3) or not np.allclose(r @ r.T, np.eye(3), atol=1e-9) or np.linalg.det(r) < 0:
         msg = f"rotation must be a proper 3x3 rotation matrix, got shape {r.shape}"
         raise InputError(msg)
-    # Shepperd's method: pivot on the largest of w, x, y, z for accuracy.
-    trace = float(np.trace(r))
-    candidates = [trace, r[0, 0], r[1, 1], r[2, 2]]
-    k = int(np.argmax(candidates))
-    if k == 0:
-        s = math.sqrt(1.0 + trace) * 2.0
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
-    elif k == 1:
-        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2.0
-        q = [0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
-    elif k == 2:
-        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2.0
-        q = [(r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
-    else:
-        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2.0
-        q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s]
-    out = np.array(q)
-    out /= np.linalg.norm(out)
-    return out if out[3] >= 0 else -out
+    return np.asarray(rotation_quaternion(r), dtype=np.float64)
 
 
 def ellipsoid_axes(covariance: Array, coverage_factor: float) -> tuple[Array, Array]:
