@@ -167,8 +167,11 @@ class FrozenSectionModel:
         out[:, 1] = np.sqrt(np.einsum("tki,tki->tk", ends, ends).max(axis=1))
         change = normal_shift @ self.solve_t  # (T, 3)
         out[:, 2:5] = self.base[2:5] + change
-        residual = normal_shift - change @ self.jacobian_t
-        residual += self.residual
+        # ``normal_shift - change @ jacobian_t`` column by column: a matmul with an inner
+        # dimension of 3 runs about 3x slower than three broadcast updates (profiled at 10^5 trials).
+        residual = normal_shift + self.residual
+        for k in range(3):
+            residual -= change[:, k, np.newaxis] * self.jacobian_t[k]
         for region, runs in enumerate(self.region_runs):
             high = np.max([residual[:, a:b].max(axis=1) for a, b in runs], axis=0)
             low = np.min([residual[:, a:b].min(axis=1) for a, b in runs], axis=0)
