@@ -54,6 +54,8 @@ __all__ = [
 _OPEN_GAP = 0.05
 """Largest gap between consecutive feet, as a fraction of the perimeter, of a closed section."""
 _MIN_POINTS = 20
+_SIZE_RATIO = (0.2, 5.0)
+"""Accepted range of measured over nominal extent; unit mix-ups are factors of 10 or more."""
 
 
 @dataclass(frozen=True)
@@ -341,6 +343,14 @@ def evaluate_section(
     xy = points.xy if isinstance(points, PointCloud) else as_points(points, "points")
     if xy.shape[0] < _MIN_POINTS:
         msg = f"a section needs at least {_MIN_POINTS} points, got {xy.shape[0]}"
+        raise InputError(msg)
+    size = float(np.ptp(xy, axis=0).max())
+    nominal_size = float(np.ptp(curve.section.points, axis=0).max())
+    if not _SIZE_RATIO[0] <= size / nominal_size <= _SIZE_RATIO[1]:
+        msg = (
+            f"the measured points span {size * 1e3:.4g} mm but the nominal section {nominal_size * 1e3:.4g} mm: "
+            "a different length unit (mm vs m?) or not this section"
+        )
         raise InputError(msg)
     first = register_to_nominal(xy, curve, pivot=opts.pivot)
     order = order_along_contour(first.parameter, curve.period)

@@ -207,6 +207,13 @@ def test_profile_deviations_per_region() -> None:
         profile_deviations(residual[:6], labels[:6])
 
 
+@pytest.mark.parametrize("factor", [1e3, 1e-3, 25.4, 0.1])
+def test_a_cloud_in_another_unit_is_refused_with_its_size(rotor37_curve: NominalCurve, factor: float) -> None:
+    cloud = simulate_section_scan(rotor37_curve, 400).xy * factor
+    with pytest.raises(InputError, match=r"span .* mm but the nominal section .* mm: a different length unit"):
+        evaluate_section(cloud, rotor37_curve)
+
+
 def test_careless_input_is_refused(stadium_curve: NominalCurve) -> None:
     points = stadium(5e-3, 50e-3, 40, 100)
     with pytest.raises(InputError, match="at least 20 points"):
