@@ -103,3 +103,35 @@ def test_errors_are_one_line(tmp_path: Path) -> None:
         read_point_cloud2(two)
     with pytest.raises(BagError, match=r"topic /other not found"):
         read_point_cloud2(two, "/other")
+
+
+@pytest.mark.parametrize("bigendian", [False, True])
+def test_a_scanner_layout_is_decoded_independently_of_the_encoder(tmp_path: Path, bigendian: bool) -> None:
+    # Bytes packed by hand (not by encode_point_cloud2): an organised 2x3 cloud with an
+    # intensity field, 4 bytes of point padding, 8 bytes of row padding, z stored as FLOAT64
+    # before x and y, normals absent.
+    store = ros_typestore()
+    field = store.types["sensor_msgs/msg/PointField"]
+    fields = [
+        field(name="z", offset=0, datatype=8, count=1),
+        field(name="x", offset=8, datatype=7, count=1),
+        field(name="y", offset=12, datatype=7, count=1),
+        field(name="intensity", offset=16, datatype=7, count=1),
+    ]
+    order = ">" if bigendian else "<"
+    expected = np.array(
+        [[0.5, -1.25, 2.0], [0.25, 3.0, -0.5], [1.0, 0.125, 4.0], [-2.0, 0.75, 1.5], [0.0, 1.0, 0.5], [6.5, -3.0, 0.25]]
+    )
+    point_step, row_step = 24, 3 * 24 + 8
+    data = bytearray(row_step * 2)
+    for k, (x, y, z) in enumerate(expected):
+        start = (k // 3) * row_step + (k % 3) * point_step
+        data[start : start + 20] = np.array([z], order + "f8").tobytes() + np.array([x, y, 7.0], order + "f4").tobytes()
+    message = store.deserialize_cdr(encode_point_cloud2(1, "part", np.zeros((1, 3))), POINT_CLOUD2)
+    message.height, message.width, message.fields = 2, 3, fields
+    message.is_bigendian, message.point_step, message.row_step = bigendian, point_step, row_step
+    message.data = np.frombuffer(bytes(data), dtype=np.uint8)
+    bag = write_point_cloud2_mcap(tmp_path / "scanner.mcap", [bytes(store.serialize_cdr(message, POINT_CLOUD2))])
+    cloud = read_point_cloud2(bag)
+    assert cloud.probe_vectors is None
+    assert np.array_equal(cloud.points, expected)
