@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CASCADE, ROTOR37
+from inspection_data import CASCADE, ROTOR37
 
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.inspection.point_cloud import (

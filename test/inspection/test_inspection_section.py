@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import CASCADE, ellipse, stadium
+from inspection_data import CASCADE, ellipse, stadium
 from scipy.spatial import Voronoi, cKDTree
 
 from robocal_uncertainty.errors import InputError
