@@ -52,7 +52,7 @@ from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, run_trials
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
 from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
-from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary, summarize
+from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary, coverage_window, summarize
 from robocal_uncertainty.montecarlo.validation import validate_gum
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy
 from robocal_uncertainty.uncertainty.reidentification import (
@@ -440,6 +440,11 @@ def _validate_inputs(
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials <= 0:
         msg = f"trials must be a positive integer or 'auto', got {trials!r}"
         raise ConfigError(msg)
+    try:
+        # Refuse before the work: the summary would refuse the same count after every trial ran.
+        coverage_window(int(trials), float(coverage))
+    except InputError as err:
+        raise ConfigError(f"trials: {err}") from None
     return q, int(trials)
 
 
@@ -881,7 +886,7 @@ def prepare_calibration_trials(
         As for :func:`evaluate_uncertainty`.
     """
     settings = settings or UncertaintySettings()
-    test_q, _ = _validate_inputs(model, test_joint_positions, 0.95, 1)
+    test_q, _ = _validate_inputs(model, test_joint_positions, 0.95, "auto")
     return _prepare(model, campaign, test_q, settings, calibration, lambda_, frame).trials
 
 

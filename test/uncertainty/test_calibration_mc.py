@@ -172,6 +172,7 @@ def test_positions_are_in_the_identified_base_frame_for_tracker_campaigns() -> N
     [
         ({"trials": 0}, "trials must be a positive integer"),
         ({"trials": -5}, "trials must be a positive integer"),
+        ({"trials": 10}, "trials: samples must have at least 11 trials for coverage 0.95"),
         ({"coverage": 1.0}, r"coverage probability must be in \(0, 1\)"),
         ({"coverage": 0.0}, r"coverage probability must be in \(0, 1\)"),
         ({"test_joint_positions": np.zeros(5)}, "test joints must have 6 values"),
