@@ -1001,6 +1001,154 @@ def _cmd_map(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_suggest(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.app import suggest_poses
+    from robocal_uncertainty.core import identify
+    from robocal_uncertainty.uncertainty import parse_sources
+
+    campaign, model = _campaign_and_robot(args)
+    campaign = campaign.reorder_joints(model.joint_names)
+    test_q = _test_joints(args, model)
+    candidates = None
+    if args.candidates_file:
+        candidates = _joint_configurations(
+            model, args.candidates_file, None, degrees=args.degrees, flag="--candidates-file", noun="candidate"
+        )
+        if args.count > len(candidates):
+            msg = (
+                f"--count {args.count} is more than the {_count(len(candidates), 'configuration')} "
+                f"in --candidates-file {args.candidates_file}"
+            )
+            raise ConfigError(msg)
+    settings = _uncertainty_settings(args, None, parse_sources(args.sources))
+    lambda_ = _lambda_arg(args.lambda_)
+    calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=args.accept_unconverged)
+    result = suggest_poses(
+        model,
+        campaign,
+        test_q,
+        settings=settings,
+        calibration=calibration,
+        lambda_=lambda_,
+        candidates=candidates,
+        n_candidates=args.candidates,
+        count=args.count,
+        monte_carlo_check=args.check,
+        trials=args.trials,
+        seed=args.seed,
+        frame=args.frame,
+    )
+    unit = "deg" if args.degrees else "rad"
+    source = (
+        f"the {_count(len(result.candidates), 'configuration')} of {args.candidates_file}"
+        if args.candidates_file
+        else f"{len(result.candidates)} candidates drawn inside the joint limits (seed {args.seed})"
+    )
+    print(f"Next-best poses for {model.name} ({campaign.n_poses} poses measured), ranked among {source}")
+    print(
+        f"u_pos = sqrt(trace of the tool-position covariance), RMS over the "
+        f"{_count(len(test_q), 'test configuration')}, frame {result.frame_id}; sources {', '.join(settings.sources)}"
+    )
+    print(_format_suggestions(result, unit))
+    if result.trials:
+        print(
+            f"Monte Carlo: {result.trials} trials, seed {result.seed}, with suggestions 1..rank added as simulated "
+            "measurements at the calibrated model's points"
+        )
+    if args.json:
+        text = json.dumps(_suggestions_dict(result, model, args, test_q, settings), indent=2, allow_nan=False)
+        Path(args.json).write_text(text + "\n", encoding="utf-8")
+        print(f"wrote {args.json}")
+    if args.csv_out:
+        Path(args.csv_out).write_text(_suggestions_csv(result, unit), encoding="utf-8")
+        print(f"wrote {args.csv_out}")
+    return 0
+
+
+def _suggestion_joints(q: NDArray[np.float64], unit: str) -> list[float]:
+    """Joint positions [rad] in `unit` ("rad" or "deg")."""
+    return [float(v) for v in (np.degrees(q) if unit == "deg" else q)]
+
+
+def _format_suggestions(result: Any, unit: str) -> str:
+    """The suggestion table: rank, joints in `unit`, predicted and Monte Carlo RMS u_pos in µm."""
+    digits = 4 if unit == "deg" else 6
+    header = [
+        "rank",
+        *(f"{name} / {unit}" for name in result.joint_names),
+        "predicted RMS u_pos / µm",
+        "Monte Carlo RMS u_pos / µm",
+    ]
+
+    def um(value: float | None) -> str:
+        return "-" if value is None else f"{value * 1e6:.3f}"
+
+    rows = [["now", *([""] * len(result.joint_names)), um(result.current_u_m), um(result.monte_carlo_current_u_m)]]
+    for rank, s in enumerate(result.suggestions, start=1):
+        joints = (f"{v:.{digits}f}" for v in _suggestion_joints(s.joint_positions, unit))
+        rows.append([str(rank), *joints, um(s.predicted_u_m), um(s.monte_carlo_u_m)])
+    widths = [max(len(row[c]) for row in [header, *rows]) for c in range(len(header))]
+    lines = ["  ".join(cell.rjust(w) for cell, w in zip(row, widths)) for row in [header, *rows]]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def _suggestions_dict(
+    result: Any, model: Any, args: argparse.Namespace, test_q: NDArray[np.float64], settings: Any
+) -> dict[str, Any]:
+    """The suggestions as a robot program reads them: SI units, named in every key."""
+    s = result.suggestions
+    return {
+        "command": "robocal-uncertainty suggest",
+        "robot": model.name,
+        "campaign": str(args.campaign),
+        "units": {
+            "_rad": "radian",
+            "_deg": "degree",
+            "_m": "metre (u_pos = sqrt(trace of the tool-position covariance), RMS over the test configurations)",
+            "_m2": "square metre",
+        },
+        "joint_names": list(result.joint_names),
+        "frame_id": result.frame_id,
+        "frame": args.frame,
+        "sources": list(settings.sources),
+        "tracker_noise": {"a_m": settings.tracker_noise.a, "b_m_per_m": settings.tracker_noise.b},
+        "encoder_noise_half_width_rad": settings.encoder_noise.half_width,
+        "test_joint_positions_rad": test_q.tolist(),
+        "candidates": {
+            "file": args.candidates_file,
+            "count": len(result.candidates),
+            "seed": None if args.candidates_file else result.seed,
+        },
+        "seed": result.seed,
+        "monte_carlo_trials": result.trials,
+        "current_rms_u_pos_m": result.current_u_m,
+        "monte_carlo_current_rms_u_pos_m": result.monte_carlo_current_u_m,
+        "suggestions": [
+            {
+                "rank": rank,
+                "joint_positions_rad": _suggestion_joints(p.joint_positions, "rad"),
+                "joint_positions_deg": _suggestion_joints(p.joint_positions, "deg"),
+                "reduction_m2": p.reduction_m2,
+                "predicted_rms_u_pos_m": p.predicted_u_m,
+                "monte_carlo_rms_u_pos_m": p.monte_carlo_u_m,
+            }
+            for rank, p in enumerate(s, start=1)
+        ],
+    }
+
+
+def _suggestions_csv(result: Any, unit: str) -> str:
+    """One row of joint positions per suggestion, best first, in `unit` (readable back as a
+    ``--joints-file``, ``--test-joints-file`` or ``--candidates-file``)."""
+    lines = [
+        f"# robocal-uncertainty suggest: next-best poses, best first; joint positions in {unit}",
+        ",".join(f"{name}_{unit}" for name in result.joint_names),
+    ]
+    lines += [",".join(repr(v) for v in _suggestion_joints(s.joint_positions, unit)) for s in result.suggestions]
+    return "\n".join(lines) + "\n"
+
+
 # ---------------------------------------------------------------------------------------------
 # Early checks: every option and output path is checked before any computation, with the
 # command line's own words (flags, units, 1-based counts).
@@ -1015,8 +1163,10 @@ _POSITIVE_INTS = (
     "poses",
     "block_size",
     "train_poses",
+    "count",
+    "candidates",
 )
-_NON_NEGATIVE_INTS = ("seed", "regions")
+_NON_NEGATIVE_INTS = ("seed", "regions", "check")
 _NON_NEGATIVE_FLOATS = (
     ("tracker_noise_um", "um"),
     ("tracker_noise_um_per_m", "um/m"),
@@ -1118,6 +1268,13 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ConfigError(msg)
     if getattr(args, "trials", None) == "auto" and args.command == "validate":
         raise ConfigError("validate needs a fixed number of --trials, not auto")
+    if args.command == "suggest":
+        if args.check > args.count:
+            msg = f"--check {args.check} is more than the --count {args.count} suggestions"
+            raise ConfigError(msg)
+        if not args.candidates_file and args.count > args.candidates:
+            msg = f"--count {args.count} is more than the --candidates {args.candidates} drawn"
+            raise ConfigError(msg)
     dask = getattr(args, "dask", None)
     if dask is not None and not _DASK_ADDRESS.match(dask.strip()):
         msg = f"--dask must be 'local' or a scheduler address such as tcp://host:8786, got {dask!r}"
@@ -1156,6 +1313,11 @@ def _check_outputs(args: argparse.Namespace) -> None:
             check_output_file(truth_path(args.out), force=force, option="truth file")
     elif args.command in ("demo", "evaluate", "replay", "validate", "map", "section"):
         check_report_directory(args.out, force=force, option="--out")
+    if getattr(args, "csv_out", None):
+        check_output_file(args.csv_out, force=force, option="--csv")
+        if args.json and Path(args.json).resolve() == Path(args.csv_out).resolve():
+            msg = f"--json and --csv name the same file {args.json}"
+            raise ConfigError(msg)
     if getattr(args, "json", None):
         check_output_file(args.json, force=force, option="--json")
     if getattr(args, "campaign_out", None):
@@ -1173,6 +1335,7 @@ _INPUTS = (
     ("joints_file", "the --joints-file"),
     ("test_joints_file", "the --test-joints-file"),
     ("from_file", "the --from-file"),
+    ("candidates_file", "the --candidates-file"),
     ("cloud", "the point cloud being read"),
     ("nominal", "the --nominal section"),
     ("instrument", "the --instrument config"),
@@ -1190,7 +1353,7 @@ def _check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
         outputs.append(("--out", str(args.out)))
         if args.command == "simulate":
             outputs.append(("truth file", str(truth_path(args.out))))
-    for dest, option in (("json", "--json"), ("campaign_out", "--campaign-out")):
+    for dest, option in (("json", "--json"), ("csv_out", "--csv"), ("campaign_out", "--campaign-out")):
         if getattr(args, dest, None):
             outputs.append((option, str(getattr(args, dest))))
     for option, out in outputs:
@@ -1464,6 +1627,59 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _add_frame_and_convergence_args(p)
     p.set_defaults(func=_cmd_map, lambda_range=None, min_poses=None, subset_size=None)
+
+    p = sub.add_parser(
+        "suggest",
+        help="next-best poses: the configurations whose measurement lowers the uncertainty at the test "
+        "configurations most (first-order ranking, optional Monte Carlo check)",
+    )
+    _add_campaign_args(p)
+    p.add_argument("--test-joints", nargs="+", help="joint values of the test configurations, n_joints each")
+    p.add_argument("--test-joints-file", help="CSV/whitespace file of test configurations, one per row")
+    p.add_argument(
+        "--degrees",
+        action="store_true",
+        help="joint values (--test-joints, --candidates-file, the printed table and --csv) are in degrees "
+        "(default radians)",
+    )
+    p.add_argument("--count", type=int, default=5, help="number of poses suggested, best first (default %(default)s)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--candidates",
+        type=int,
+        default=500,
+        help="rank this many configurations drawn uniformly inside the joint limits less 0.05 rad, with --seed "
+        "(default %(default)s)",
+    )
+    where.add_argument("--candidates-file", help="rank these configurations instead: CSV/whitespace file, one per row")
+    p.add_argument(
+        "--check",
+        type=int,
+        default=0,
+        help="Monte Carlo check of the first K suggestions: the campaign with suggestions 1..k added as simulated "
+        "measurements is evaluated (default %(default)s: none)",
+    )
+    p.add_argument("--trials", type=int, default=2000, help="Monte Carlo trials per check (default %(default)s)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the candidate draw and of every check (default %(default)s)"
+    )
+    p.add_argument(
+        "--sources",
+        default="tracker,encoder",
+        help="the ranking weighs the poses with the tracker and encoder noise (each only if listed); the checks use "
+        f"every listed source: {sources_help()} (default %(default)s)",
+    )
+    p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
+    _add_noise_args(p)
+    p.add_argument("--json", help="write the suggestions to this JSON file (SI units, also degrees)")
+    p.add_argument(
+        "--csv",
+        dest="csv_out",
+        help="write the suggested joint positions to this CSV file, best first, in rad (deg with --degrees)",
+    )
+    _add_force_arg(p, "the --json and --csv files")
+    _add_frame_and_convergence_args(p)
+    p.set_defaults(func=_cmd_suggest, lambda_range=None, min_poses=None, subset_size=None)
 
     p = sub.add_parser(
         "section",
