@@ -745,6 +745,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         joint_motion_threshold=args.joint_motion_threshold_rad,
         tracker_scatter_threshold=args.tracker_scatter_threshold_m,
         min_points=args.min_points,
+        orientation_scatter_threshold=args.orientation_scatter_threshold_rad,
     )
     if args.campaign_out and args.force:
         Path(args.campaign_out).unlink(missing_ok=True)  # --force: replay writes a new campaign
@@ -760,6 +761,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             options,
             joint_topic=args.joint_topic,
             point_topic=args.point_topic,
+            tracker_pose_topic=args.tracker_pose_topic,
             tracker_frame_id=args.tracker_frame,
             collector=settings,
             campaign_path=args.campaign_out,
@@ -1546,6 +1548,11 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--point-topic", default="/tracker/point", help="geometry_msgs/PointStamped topic (default %(default)s)"
     )
+    p.add_argument(
+        "--tracker-pose-topic",
+        help="6-DOF tracker: geometry_msgs/PoseStamped (or PoseWithCovarianceStamped) topic read instead of "
+        "--point-topic; the campaign then holds orientations (e.g. /tracker/pose)",
+    )
     p.add_argument("--tracker-frame", help="frame_id of valid tracker points (default: the most frequent)")
     p.add_argument(
         "--window-s",
@@ -1564,6 +1571,12 @@ def _build_parser() -> argparse.ArgumentParser:
         type=float,
         default=1e-4,
         help="max tracker scatter in a static window, m (default %(default)s)",
+    )
+    p.add_argument(
+        "--orientation-scatter-threshold-rad",
+        type=float,
+        default=2e-3,
+        help="6-DOF tracker: max range of any rotation-matrix entry in a static window, rad (default %(default)s)",
     )
     p.add_argument(
         "--min-points", type=int, default=10, help="min tracker points averaged per static pose (default %(default)s)"

@@ -38,6 +38,7 @@ def replay(
     *,
     joint_topic: str = JOINT_TOPIC,
     point_topic: str = POINT_TOPIC,
+    tracker_pose_topic: str | None = None,
     tracker_frame_id: str | None = None,
     collector: CollectorSettings | None = None,
     campaign_path: str | Path | None = None,
@@ -58,7 +59,7 @@ def replay(
         Nominal model.
     options : EvaluationOptions
         As for :func:`~robocal_uncertainty.app.evaluate`; must have ``test_joints``.
-    joint_topic, point_topic, tracker_frame_id, collector, campaign_path, log, auto_window
+    joint_topic, point_topic, tracker_pose_topic, tracker_frame_id, collector, campaign_path, log, auto_window
         See :func:`~robocal_uncertainty.pipeline.replay.replay_bag`.
     executor, workers, progress, phase_progress
         See :func:`~robocal_uncertainty.app.evaluate`.
@@ -76,6 +77,7 @@ def replay(
         model,
         joint_topic=joint_topic,
         point_topic=point_topic,
+        tracker_pose_topic=tracker_pose_topic,
         tracker_frame_id=tracker_frame_id,
         collector=collector,
         options=options,

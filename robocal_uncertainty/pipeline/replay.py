@@ -1,9 +1,12 @@
 """Offline replay of a raw recording through the collector and the calibration pipeline.
 
 The raw bag (one MCAP file or a rosbag2 directory) holds ``sensor_msgs/msg/JointState`` on
-the joint topic and ``geometry_msgs/msg/PointStamped`` on the tracker topic. Messages are
-fed in recorded (log-time) order to a :class:`~robocal_uncertainty.pipeline.collector.StaticPoseCollector`,
-exactly as the ROS nodes would receive them; its samples go to a
+the joint topic and ``geometry_msgs/msg/PointStamped`` on the tracker topic, or, for a 6-DOF
+tracker, ``geometry_msgs/msg/PoseStamped`` (or ``PoseWithCovarianceStamped``) on a tracker
+pose topic. Messages are fed in recorded (log-time) order to a
+:class:`~robocal_uncertainty.pipeline.collector.StaticPoseCollector` by
+:func:`feed_joint_state` and :func:`feed_tracker_message`, the functions the collector node
+feeds its messages with; its samples go to a
 :class:`~robocal_uncertainty.pipeline.calibration_pipeline.CalibrationPipeline`.
 
 A replay turns a bag into samples, a campaign and (optionally) a calibration. The
@@ -22,8 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from robocal_uncertainty.bagio.bag import open_bag
+from robocal_uncertainty.bagio.bag import Bag, open_bag
 from robocal_uncertainty.bagio.campaign_format import JOINT_TOPIC, POINT_TOPIC
+from robocal_uncertainty.bagio.pose_messages import POSE_STAMPED
 from robocal_uncertainty.bagio.ros_messages import JOINT_STATE, POINT_STAMPED
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
@@ -34,9 +38,22 @@ from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipelin
 from robocal_uncertainty.pipeline.collector import CollectorSettings, LogCallback, StaticPoseCollector
 from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
-__all__ = ["ReplayResult", "StillIntervals", "auto_collector_settings", "replay_bag", "still_intervals"]
+__all__ = [
+    "POSE_WITH_COVARIANCE_STAMPED",
+    "TRACKER_POSE_TYPES",
+    "ReplayResult",
+    "StillIntervals",
+    "auto_collector_settings",
+    "feed_joint_state",
+    "feed_tracker_message",
+    "replay_bag",
+    "still_intervals",
+]
 
 _NS_PER_S = 1_000_000_000
+POSE_WITH_COVARIANCE_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
+TRACKER_POSE_TYPES: tuple[str, ...] = (POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED)
+"""Message types accepted on a tracker pose topic (6-DOF tracker)."""
 
 
 @dataclass(frozen=True)
@@ -159,12 +176,77 @@ def _stamp(header: Any) -> int:
     return int(header.stamp.sec) * _NS_PER_S + int(header.stamp.nanosec)
 
 
+def feed_joint_state(collector: StaticPoseCollector, message: Any) -> CalibrationSample | None:
+    """Hand one ``sensor_msgs/JointState`` (a rosbags or an rclpy message) to `collector`.
+
+    Returns the sample of a dwell the message ended, if any (see
+    :meth:`StaticPoseCollector.add_joint_state`).
+    """
+    return collector.add_joint_state(
+        _stamp(message.header), [str(n) for n in message.name], np.asarray(message.position, dtype=np.float64)
+    )
+
+
+def feed_tracker_message(collector: StaticPoseCollector, message: Any) -> CalibrationSample | None:
+    """Hand one tracker message (a rosbags or an rclpy message) to `collector`.
+
+    ``geometry_msgs/PointStamped`` goes to :meth:`StaticPoseCollector.add_tracker_point`;
+    ``PoseStamped`` and ``PoseWithCovarianceStamped`` (6-DOF) go, position [m] and
+    orientation ``(x, y, z, w)``, to :meth:`StaticPoseCollector.add_tracker_pose`, which
+    drops a NaN (``nan``) or non-unit (``bad_quaternion``) orientation and counts it. The
+    covariance of a ``PoseWithCovarianceStamped`` is not used: a sample's covariances are
+    those of the mean over its dwell, from the scatter of the readings averaged.
+
+    Returns the sample of a dwell the message ended, if any.
+    """
+    stamp, frame_id = _stamp(message.header), str(message.header.frame_id)
+    if hasattr(message, "pose"):
+        pose = message.pose.pose if hasattr(message.pose, "covariance") else message.pose
+        p, o = pose.position, pose.orientation
+        return collector.add_tracker_pose(stamp, frame_id, (p.x, p.y, p.z), (o.x, o.y, o.z, o.w))
+    point = message.point
+    return collector.add_tracker_point(stamp, frame_id, (point.x, point.y, point.z))
+
+
+def _refuse_poses_as_points(bag: Bag, point_topic: str) -> None:
+    """A one-line BagError when the point topic is absent or carries poses and the bag has a
+    6-DOF tracker pose topic (to be replayed as the tracker pose topic)."""
+    schemas = {c.topic: c.schema_name for c in bag.contents.channels}
+    if schemas.get(point_topic, POINT_STAMPED) == POINT_STAMPED and point_topic in schemas:
+        return
+    poses = sorted(topic for topic, schema in schemas.items() if schema in TRACKER_POSE_TYPES)
+    if not poses:
+        return  # the usual missing-topic or wrong-type error follows
+    found = "carries poses" if point_topic in schemas else "not found"
+    msg = (
+        f"{bag.path}: tracker point topic {point_topic} {found}; {', '.join(poses)} carries 6-DOF tracker poses: "
+        "give it as the tracker pose topic (--tracker-pose-topic)"
+    )
+    raise BagError(msg)
+
+
+def _tracker_type(bag: Bag, topic: str) -> str:
+    """The pose type on `topic` (one of :data:`TRACKER_POSE_TYPES`), or a one-line BagError."""
+    schemas = {c.schema_name for c in bag.contents.channels if c.topic == topic}
+    found = [s for s in TRACKER_POSE_TYPES if s in schemas]
+    if len(schemas) != 1 or not found:
+        if not schemas:
+            known = sorted({c.topic for c in bag.contents.channels})
+            msg = f"{bag.path}: tracker pose topic {topic} not found (topics: {known})"
+        else:
+            expected = " or ".join(TRACKER_POSE_TYPES)
+            msg = f"{bag.path}: tracker pose topic {topic} has type {', '.join(sorted(schemas))}, expected {expected}"
+        raise BagError(msg)
+    return found[0]
+
+
 def replay_bag(
     path: str | Path,
     model: RobotModel,
     *,
     joint_topic: str = JOINT_TOPIC,
     point_topic: str = POINT_TOPIC,
+    tracker_pose_topic: str | None = None,
     tracker_frame_id: str | None = None,
     collector: CollectorSettings | None = None,
     options: EvaluationOptions | None = None,
@@ -184,9 +266,13 @@ def replay_bag(
         Nominal model; its joint names are collected.
     joint_topic, point_topic : str
         Topics of the joint states and tracker points.
+    tracker_pose_topic : str, optional
+        6-DOF tracker: topic of its ``geometry_msgs/msg/PoseStamped`` (or
+        ``PoseWithCovarianceStamped``), read instead of `point_topic`; the samples then carry
+        the mean orientation and its covariance, and the campaign is a 6-DOF one.
     tracker_frame_id : str, optional
-        Frame of valid tracker points; default: the most frequent ``frame_id`` on
-        `point_topic` (points in other frames are dropped as ``wrong_frame``).
+        Frame of valid tracker points; default: the most frequent ``frame_id`` on the
+        tracker topic (points in other frames are dropped as ``wrong_frame``).
     collector : CollectorSettings, optional
         Static detection settings.
     options, min_samples, campaign_path
@@ -217,18 +303,22 @@ def replay_bag(
     if campaign_path is not None and Path(campaign_path).exists():
         msg = f"campaign file {campaign_path} exists already; replay writes a new one"
         raise CampaignError(msg)
-    bag = open_bag(path, (joint_topic, point_topic))
+    tracker_topic = point_topic if tracker_pose_topic is None else tracker_pose_topic
+    bag = open_bag(path, (joint_topic, tracker_topic))
     bag.topic_messages(joint_topic, JOINT_STATE)
-    bag.topic_messages(point_topic, POINT_STAMPED)
+    if tracker_pose_topic is None:
+        _refuse_poses_as_points(bag, point_topic)
+    tracker_type = POINT_STAMPED if tracker_pose_topic is None else _tracker_type(bag, tracker_pose_topic)
+    bag.topic_messages(tracker_topic, tracker_type)
     order = sorted(
-        (m for m in bag.contents.messages if m.channel.topic in (joint_topic, point_topic)),
+        (m for m in bag.contents.messages if m.channel.topic in (joint_topic, tracker_topic)),
         key=lambda m: m.log_time_ns,
     )
     undecodable = 0
     events: list[tuple[bool, Any]] = []
     for message in order:
         is_joint = message.channel.topic == joint_topic
-        decoded = bag.try_decode(message, JOINT_STATE if is_joint else POINT_STAMPED)
+        decoded = bag.try_decode(message, JOINT_STATE if is_joint else tracker_type)
         if decoded is None:
             undecodable += 1
         else:
@@ -237,7 +327,7 @@ def replay_bag(
     if tracker_frame_id is None:
         frames = Counter(str(m.header.frame_id) for is_joint, m in events if not is_joint)
         if not frames:
-            msg = f"{path}: no decodable message on {point_topic}"
+            msg = f"{path}: no decodable message on {tracker_topic}"
             raise BagError(msg)
         tracker_frame_id = frames.most_common(1)[0][0]
     settings = collector or CollectorSettings()
@@ -250,14 +340,9 @@ def replay_bag(
         samples: list[CalibrationSample] = []
         for is_joint, message in events:
             if is_joint:
-                sample = pose_collector.add_joint_state(
-                    _stamp(message.header), message.name, np.asarray(message.position, dtype=np.float64)
-                )
+                sample = feed_joint_state(pose_collector, message)
             else:
-                point = message.point
-                sample = pose_collector.add_tracker_point(
-                    _stamp(message.header), str(message.header.frame_id), (point.x, point.y, point.z)
-                )
+                sample = feed_tracker_message(pose_collector, message)
             if sample is not None:
                 samples.append(sample)
                 pipeline.add_sample(sample)
