@@ -33,6 +33,9 @@ FIELDS_USED = {
         "point_covariance",
         "joint_state_count",
         "tracker_point_count",
+        "has_orientation",
+        "orientation",
+        "orientation_covariance",
     },
     "CalibrationResult": {
         "header",

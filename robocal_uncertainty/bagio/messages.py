@@ -126,8 +126,17 @@ def _f64(values: ArrayLike) -> NDArray[np.float64]:
 
 
 def sample_to_msg(sample: CalibrationSample) -> Msg:
-    """Convert a :class:`CalibrationSample` to a ``CalibrationSample`` message."""
-    return robocal_typestore().types[CALIBRATION_SAMPLE](
+    """Convert a :class:`CalibrationSample` to a ``CalibrationSample`` message.
+
+    A 6-DOF sample sets ``has_orientation``, its mean ``orientation`` (x, y, z, w) and
+    ``orientation_covariance`` (3x3 row-major [rad^2]); a point sample leaves them the
+    identity quaternion and zeros. Every float is copied exactly (float64 on the wire).
+    """
+    types = robocal_typestore().types
+    has_orientation = sample.orientation is not None and sample.orientation_covariance is not None
+    q = np.array([0.0, 0.0, 0.0, 1.0]) if sample.orientation is None else sample.orientation
+    rot_cov = np.zeros(9) if sample.orientation_covariance is None else _f64(sample.orientation_covariance)
+    return types[CALIBRATION_SAMPLE](
         header=_header(sample.stamp_ns, sample.frame_id),
         joint_names=list(sample.joint_names),
         joint_positions=_f64(sample.joint_positions),
@@ -136,19 +145,30 @@ def sample_to_msg(sample: CalibrationSample) -> Msg:
         point_covariance=_f64(sample.point_covariance),
         joint_state_count=int(sample.joint_state_count),
         tracker_point_count=int(sample.tracker_point_count),
+        has_orientation=has_orientation,
+        orientation=types["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+        orientation_covariance=rot_cov,
     )
 
 
 def msg_to_sample(message: Msg) -> CalibrationSample:
     """Convert a ``CalibrationSample`` message back to a :class:`CalibrationSample`.
 
+    With ``has_orientation`` the sample carries the orientation and its covariance (6-DOF);
+    without, both are None and the message's orientation fields are ignored.
+
     Raises
     ------
     InputError
-        Inconsistent lengths, NaN, or other invalid content.
+        Inconsistent lengths, NaN, a non-unit orientation quaternion, or other invalid content.
     """
     stamp = int(message.header.stamp.sec) * _NS_PER_S + int(message.header.stamp.nanosec)
     point = message.point
+    orientation = orientation_cov = None
+    if bool(message.has_orientation):
+        o = message.orientation
+        orientation = np.array([o.x, o.y, o.z, o.w], dtype=np.float64)
+        orientation_cov = _f64(message.orientation_covariance).reshape(3, 3)
     return CalibrationSample(
         stamp_ns=stamp,
         frame_id=str(message.header.frame_id),
@@ -159,6 +179,8 @@ def msg_to_sample(message: Msg) -> CalibrationSample:
         point_covariance=_f64(message.point_covariance).reshape(3, 3),
         joint_state_count=int(message.joint_state_count),
         tracker_point_count=int(message.tracker_point_count),
+        orientation=orientation,
+        orientation_covariance=orientation_cov,
     )
 
 
