@@ -265,11 +265,14 @@ def _print_adequacy(result: Any) -> None:
             f"(p = {ad.p_value:.3g}); no model error left for the residual source"
         )
     else:
-        u = ", ".join(f"{v * 1e6:.1f}" for v in ad.standard_uncertainty)
+        std = ad.standard_uncertainty
+        u = f"({', '.join(f'{v * 1e6:.1f}' for v in std[:3])}) um"
+        if len(std) > 3:  # 6-DOF residuals: the rotation part is in rad
+            u = f"position {u}, rotation ({', '.join(f'{v * 1e6:.1f}' for v in std[3:])}) urad"
         used = "included" if "residual" in result.settings.sources else "NOT included: add --sources ...,residual"
         print(
             f"Model adequacy: residuals exceed the stated noise (p = {ad.p_value:.3g}); model error "
-            f"u = ({u}) um per measurement-frame axis, {used}"
+            f"u = {u} per measurement-frame axis, {used}"
         )
 
 

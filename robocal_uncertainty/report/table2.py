@@ -15,10 +15,13 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.calibration_mc import (
+    ROTATION_AXES,
     CalibrationUncertainty,
+    OrientationUncertainty,
     PoseUncertainty,
 )
 
@@ -34,6 +37,8 @@ __all__ = [
     "format_significant",
     "format_table2",
     "gum_verdict",
+    "orientation_lines",
+    "orientation_rows",
     "pose_header",
     "round_to_uncertainty",
     "seed_difference_note",
@@ -192,7 +197,7 @@ def _grid(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     return out
 
 
-def format_table2(result: CalibrationUncertainty, *, unit: str = "mm") -> str:
+def format_table2(result: CalibrationUncertainty, *, unit: str = "mm", orientation: bool = True) -> str:
     """Seed Table 2 for every test configuration, as plain text.
 
     Parameters
@@ -200,6 +205,9 @@ def format_table2(result: CalibrationUncertainty, *, unit: str = "mm") -> str:
     result : CalibrationUncertainty
     unit : {"mm", "m", "µm", "um"}
         Display unit of lengths (the result is in metres).
+    orientation : bool
+        Also the orientation block (:func:`orientation_lines`, mrad) of every test
+        configuration whose result carries an orientation.
 
     Returns
     -------
@@ -207,7 +215,8 @@ def format_table2(result: CalibrationUncertainty, *, unit: str = "mm") -> str:
         One block per test configuration: a header (joints in degrees, trials, coverage
         probability, interval type, seed, sources, GUM verdict) and the rows output value,
         standard uncertainty, expanded uncertainty, coverage interval and relative
-        expanded uncertainty (%) in columns x, y, z.
+        expanded uncertainty (%) in columns x, y, z; then, with an orientation, standard and
+        expanded uncertainty and coverage interval in mrad in columns rx, ry, rz.
     """
     _scale(unit)
     blocks = []
@@ -216,8 +225,69 @@ def format_table2(result: CalibrationUncertainty, *, unit: str = "mm") -> str:
         rows = [[label, *cells] for label, cells in table2_rows(pose, unit)]
         lines.extend(_grid(["Quantity", "x", "y", "z"], rows))
         lines.append(RELATIVE_NOTE)
+        if orientation and pose.orientation is not None:
+            lines.extend(orientation_lines(pose.orientation, result.frame_id))
         blocks.append("\n".join(lines))
     return "\n\n".join(blocks) + "\n"
+
+
+UNDETERMINED = "undetermined"
+"""The cell of a rotation axis the campaign cannot determine (no uncertainty is stated)."""
+
+
+def orientation_rows(orientation: OrientationUncertainty) -> list[tuple[str, list[str]]]:
+    """Orientation rows of one test configuration in mrad: (label with unit, [rx, ry, rz] cells).
+
+    Standard uncertainty, expanded uncertainty (half-width of the coverage interval) and the
+    coverage interval of the rotation deviations from the mean orientation, rounded like
+    Table 2 (two significant digits of u); the cells of an undetermined axis read
+    ``undetermined``.
+    """
+    rows: list[tuple[str, list[str]]] = [
+        ("Standard uncertainty / mrad", []),
+        ("Expanded uncertainty / mrad", []),
+        ("Coverage interval / mrad", []),
+    ]
+    for axis, determined in zip(orientation.axes, orientation.determined):
+        if not determined:
+            for _, cells in rows:
+                cells.append(UNDETERMINED)
+            continue
+        u = axis.standard_uncertainty * 1e3
+        rows[0][1].append(round_to_uncertainty(u, u))
+        rows[1][1].append(round_to_uncertainty(axis.expanded_uncertainty * 1e3, u))
+        low = round_to_uncertainty(axis.interval.low * 1e3, u)
+        high = round_to_uncertainty(axis.interval.high * 1e3, u)
+        rows[2][1].append(f"({low}, {high})")
+    return rows
+
+
+def _tool_axis_name(orientation: OrientationUncertainty, direction: NDArray[np.float64]) -> str:
+    """``", the tool's z axis"`` when `direction` (output frame) is a tool axis, else ``""``."""
+    in_tool = orientation.mean_rotation.T @ direction
+    j = int(np.argmax(np.abs(in_tool)))
+    return f", the tool's {'xyz'[j]} axis" if abs(float(in_tool[j])) > 1.0 - 1e-6 else ""
+
+
+def orientation_lines(orientation: OrientationUncertainty, frame_id: str) -> list[str]:
+    """The orientation block of one test configuration: a units header, the rows of
+    :func:`orientation_rows` in columns rx, ry, rz, and one line per undetermined rotation."""
+    quat = ", ".join(f"{v:.6f}" for v in orientation.mean_quaternion)
+    lines = [
+        f"Tool orientation in frame {frame_id}: mean quaternion (x, y, z, w) = ({quat}); deviations from it "
+        "are rotations rx, ry, rz about the frame's fixed x, y, z axes, in mrad",
+    ]
+    rows = [[label, *cells] for label, cells in orientation_rows(orientation)]
+    lines.extend(_grid(["Quantity", *ROTATION_AXES], rows))
+    overlapping = ", ".join(name for name, ok in zip(ROTATION_AXES, orientation.determined) if not ok)
+    for direction in orientation.undetermined_directions:
+        d = ", ".join(f"{c:+.4f}" for c in direction)
+        lines.append(
+            f"undetermined: the rotation about ({d}) in frame {frame_id}{_tool_axis_name(orientation, direction)}: "
+            f"no parameter the measurements see moves it, so {overlapping} (overlapping it) carry no uncertainty "
+            "statement"
+        )
+    return lines
 
 
 def budget_rows(budget: Mapping[str, CalibrationUncertainty], pose: int = 0) -> list[list[str]]:
