@@ -13,11 +13,16 @@ One pose gives **6 equations**:
   the fixed x, y, z axes of the measurement frame (the convention of
   :mod:`robocal_uncertainty.core.rotation` and of ROS pose covariances).
 
-Weighting: every row is whitened by its standard uncertainty, ``1 / u_x, 1 / u_y, 1 / u_z``
-[1/m] for the position and ``1 / u_rx, 1 / u_ry, 1 / u_rz`` [1/rad] for the rotation, so the
-least squares minimises ``sum (r_i / u_i)^2``: a rotation residual of one standard uncertainty
-weighs as much as a position residual of one. The identification is then a weighted least
-squares in dimensionless units; the report states both uncertainties (``weights``).
+Weighting: every row is whitened by a standard deviation per component, ``1 / s_x, 1 / s_y,
+1 / s_z`` [1/m] for the position and ``1 / s_rx, 1 / s_ry, 1 / s_rz`` [1/rad] for the rotation,
+so the least squares minimises ``sum (r_i / s_i)^2``: a rotation residual of one standard
+deviation weighs as much as a position residual of one. ``s`` is the stated instrument
+uncertainty (``position_std``, ``rotation_std``) unless ``weight_std`` is set: the
+identification sets it from the residual scatter (variance components, see
+:func:`~robocal_uncertainty.core.identification.identify`), because on a real arm the
+unmodelled errors, not the tracker, dominate the residuals and the stated uncertainties alone
+would let one kind of equation drown the other. The instrument noise of the Monte Carlo always
+comes from the stated values; the report states both.
 
 The Jacobian comes from :func:`~robocal_uncertainty.core.kinematics.forward_poses_and_jacobian`:
 the angular rows are the world-frame angular velocity per unit parameter, which is the
@@ -39,7 +44,7 @@ from robocal_uncertainty.core.kinematics import forward_poses, forward_poses_and
 from robocal_uncertainty.core.measurement import POSITION_AXES, MeasurementType, positive_triple
 from robocal_uncertainty.core.robot_model import ParameterLayout
 from robocal_uncertainty.core.rotation import rotation_exp, rotation_log
-from robocal_uncertainty.errors import InputError
+from robocal_uncertainty.errors import ConfigError, InputError
 
 __all__ = ["ROTATION_AXES", "PoseMeasurement", "pose_values", "split_pose_values"]
 
@@ -81,14 +86,26 @@ class PoseMeasurement(MeasurementType):
     rotation_std : tuple of 3 float [rad]
         Standard uncertainty of the measured orientation about the measurement frame's x, y, z
         axes (components of the rotation residual).
+    weight_std : tuple of 6 float [m, m, m, rad, rad, rad] or None
+        Standard deviations that whiten the residual components in the least squares, when
+        they differ from the stated uncertainties (estimated variance components); None: the
+        stated ``position_std + rotation_std``.
     """
 
     position_std: tuple[float, float, float]
     rotation_std: tuple[float, float, float]
+    weight_std: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "position_std", positive_triple("position_std", self.position_std, "m"))
         object.__setattr__(self, "rotation_std", positive_triple("rotation_std", self.rotation_std, "rad"))
+        if self.weight_std is not None:
+            if len(self.weight_std) != 6:
+                msg = f"weight_std must hold six values [m, m, m, rad, rad, rad], got {self.weight_std!r}"
+                raise ConfigError(msg)
+            position = positive_triple("weight_std[:3]", self.weight_std[:3], "m")
+            rotation = positive_triple("weight_std[3:]", self.weight_std[3:], "rad")
+            object.__setattr__(self, "weight_std", position + rotation)
 
     @property
     def name(self) -> str:
@@ -127,8 +144,8 @@ class PoseMeasurement(MeasurementType):
 
     @property
     def weights(self) -> Array:
-        """``1 / std`` per component [1/m, 1/rad]."""
-        return 1.0 / self.std
+        """``1 / weight_std`` per component [1/m, 1/rad] (``1 / std`` when it is None)."""
+        return 1.0 / (self.std if self.weight_std is None else np.asarray(self.weight_std, dtype=np.float64))
 
     @property
     def measures_orientation(self) -> bool:

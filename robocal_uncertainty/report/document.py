@@ -43,6 +43,7 @@ from robocal_uncertainty.report.plots import (
     plot_lcurve,
     plot_parameter_distributions,
     plot_position_error,
+    plot_rotation_histograms,
     plot_uncertainty_vs,
     plot_uncertainty_vs_reach,
 )
@@ -419,6 +420,29 @@ def _param_display(kind: str) -> tuple[float, str, float, str]:
     return 1e3, "mm", 1e6, "µm"
 
 
+def _weighting_lines(cal: IdentificationResult) -> tuple[str, ...]:
+    """How the residual components were weighted (measurements mixing m and rad only)."""
+    m = cal.measurement
+    if m.weights is None:
+        return ()
+
+    def shown(values: Sequence[float]) -> str:
+        return ", ".join(
+            f"{name} {v * (1e6 if unit == 'm' else 1e3):.3g} {'µm' if unit == 'm' else 'mrad'}"
+            for name, unit, v in zip(m.component_names, m.component_units, values)
+        )
+
+    used = (1.0 / m.weights).tolist()
+    how = {
+        "stated": "the instrument's stated standard uncertainties",
+        "variance_components": (
+            f"standard deviations estimated from the residual scatter (variance components, "
+            f"{cal.weighting_iterations} fits; never below the stated values)"
+        ),
+    }.get(cal.weighting, cal.weighting)
+    return (f"residuals weighted by {how}: {shown(used)}", f"stated instrument uncertainties: {shown(m.std.tolist())}")
+
+
 def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> list[_Block]:
     kinds = dict(zip(cal.model.layout.names, cal.model.layout.kinds))
     mc = dict(zip(result.parameter_names, result.parameters))
@@ -438,6 +462,7 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
                 f"iterations: {cal.iterations}, converged: {'yes' if cal.converged else 'NO'} ({cal.message})",
                 f"poses: {cal.n_poses}; base initialised: {cal.base_initialised}",
                 f"estimated parameters: {int(cal.estimated.sum())} of {int(cal.candidates.sum())} candidates",
+                *_weighting_lines(cal),
             )
         ),
         _Para(
@@ -627,7 +652,7 @@ def write_report(
     ``report.md``, ``report.html`` (self-contained: figures embedded as data URIs unless
     `embed_images` is False), and the figures ``histograms_<i>.png`` and
     ``position_error_<i>.png`` per selected test configuration (1-based, see
-    `histograms`), ``configurations.png`` and ``uncertainty_vs_reach.png`` when there
+    `histograms`; with orientation also ``rotation_histograms_<i>.png``), ``configurations.png`` and ``uncertainty_vs_reach.png`` when there
     are two or more test configurations, ``lcurve.png``, ``parameters.png`` and
     ``sweep_<name>.png`` per sweep.
 
@@ -732,6 +757,16 @@ def write_report(
                 f"Position error |p − p̄|, test configuration {i + 1} (cf. seed Fig. 11)",
             )
         )
+        if result.poses[i].orientation is not None:
+            name = f"rotation_histograms_{i + 1}.png"
+            plot_rotation_histograms(result, out / name, pose=i)
+            figures.append(
+                _Image(
+                    name,
+                    f"Tool orientation per axis (rx, ry, rz about the fixed axes of {result.frame_id}, deviation "
+                    f"from the mean, mrad), test configuration {i + 1}, with coverage intervals and the GUM normal pdf",
+                )
+            )
     plot_lcurve(result.calibration, out / "lcurve.png")
     figures.append(_Image("lcurve.png", "L-curve and GCV with the chosen λ"))
     if result.parameter_names:

@@ -318,6 +318,15 @@ def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
     }
 
 
+_WEIGHTING_TEXT = {
+    "stated": "each residual component divided by the instrument's stated standard uncertainty (std, in its unit)",
+    "variance_components": (
+        "each residual component divided by its standard deviation estimated from the residual scatter "
+        "(variance components, std, in its unit; never below the stated uncertainty, stated_std)"
+    ),
+}
+
+
 def _measurement(calibration: IdentificationResult) -> dict[str, Any]:
     """What each pose measured and how its residual components were weighted."""
     m = calibration.measurement
@@ -328,8 +337,11 @@ def _measurement(calibration: IdentificationResult) -> dict[str, Any]:
         "units": list(m.component_units),
         "weighting": "unweighted (every component weight 1 in its unit)"
         if weights is None
-        else "each residual component divided by its standard uncertainty (std, in its unit)",
+        else _WEIGHTING_TEXT.get(calibration.weighting, calibration.weighting),
+        "weighting_method": calibration.weighting,
         "std": None if weights is None else (1.0 / weights).tolist(),
+        "stated_std": None if weights is None else m.std.tolist(),
+        "variance_component_fits": calibration.weighting_iterations,
     }
     if m.measures_orientation:
         out["rotation_rms_before_rad"] = calibration.rotation_rms_before

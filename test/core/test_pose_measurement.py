@@ -144,10 +144,49 @@ def test_calibration_file_of_a_6dof_calibration_applies_the_tool_rotation(tmp_pa
 
 def test_weights_that_contradict_the_scatter_are_reported() -> None:
     """An orientation std far below the encoder-driven rotation scatter (1e-9 rad against ~1e-4 rad)
-    makes rotations outweigh positions ~1e4x: identify must say so rather than stay silent;
-    a consistent std gives no such warning."""
+    makes rotations outweigh positions ~1e4x: with the stated weights identify must say so
+    rather than stay silent; a consistent std gives no such warning."""
     model = load_robot_model(PAPER)
     for ostd, expected in ((1e-9, True), (1e-4, False)):
         sim = simulate_campaign(model, SimulationSettings(n_poses=20, orientation_std=ostd), seed=3)
-        result = identify(model, sim.campaign)
+        result = identify(model, sim.campaign, weighting="stated")
         assert any("do not match the residual scatter" in w for w in result.warnings) is expected, result.warnings
+
+
+def test_variance_components_make_the_fit_immune_to_a_misstated_std() -> None:
+    """Variance components estimate each component's scatter from the residuals: the same data
+    with the orientation std stated 1e5 times too small give the same weights and estimates
+    as with the right one; the stated weighting gives estimates many uncertainties away."""
+    model = load_robot_model(PAPER)
+    sim = simulate_campaign(model, SimulationSettings(n_poses=20, orientation_std=1e-4), seed=3)
+    measurement = sim.campaign.measurement
+    assert isinstance(measurement, PoseMeasurement)
+    wrong = dataclasses.replace(sim.campaign, measurement=dataclasses.replace(measurement, rotation_std=(1e-9,) * 3))
+    right, low = identify(model, sim.campaign), identify(model, wrong)
+    assert low.weighting == right.weighting == "variance_components"
+    assert not low.warnings and not right.warnings
+    w_low, w_right = np.asarray(low.measurement.weight_std), np.asarray(right.measurement.weight_std)
+    # The rotation scatter (~0.12 mrad: encoder noise and the 0.1 mrad orientation noise).
+    assert np.all((w_right[3:] > 1e-4) & (w_right[3:] < 1.6e-4)), w_right
+    np.testing.assert_allclose(w_low, w_right, rtol=0.03)
+    est = right.estimated
+    z_low = np.abs(low.estimate - right.estimate)[est] / right.linearized_std[est]
+    assert z_low.max() < 0.05, z_low.max()
+    stated = identify(model, wrong, weighting="stated")
+    z_stated = np.abs(stated.estimate - right.estimate)[est] / right.linearized_std[est]
+    assert z_stated.max() > 1.0, z_stated.max()
+
+
+@pytest.mark.parametrize(
+    "weight_std", [(1e-4,) * 5, (1e-4, 1e-4, 1e-4, 0.0, 1e-4, 1e-4), (1e-4, 1e-4, float("nan"), 1e-4, 1e-4, 1e-4)]
+)
+def test_weight_std_must_be_six_positive_values(weight_std: tuple[float, ...]) -> None:
+    with pytest.raises(ConfigError, match="weight_std") as info:
+        PoseMeasurement((1e-5,) * 3, (1e-4,) * 3, weight_std=weight_std)  # type: ignore[arg-type]
+    assert "\n" not in str(info.value)
+
+
+def test_weight_std_sets_the_weights() -> None:
+    m = PoseMeasurement((1e-5,) * 3, (1e-4,) * 3, weight_std=(2e-4, 2e-4, 2e-4, 1e-3, 1e-3, 1e-3))
+    np.testing.assert_array_equal(m.weights, [5e3, 5e3, 5e3, 1e3, 1e3, 1e3])
+    np.testing.assert_array_equal(m.std, [1e-5, 1e-5, 1e-5, 1e-4, 1e-4, 1e-4])
