@@ -219,16 +219,25 @@ def _print_calibration(result: Any) -> None:
         f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm"
     )
     if result.measurement.measures_orientation:
-        std = result.measurement.std
+        stated, used = result.measurement.std, 1.0 / result.measurement.weights
         print(
-            f"  rotation residual RMS {result.rotation_rms_before * 1e3:.4f} mrad -> "
-            f"{result.rotation_rms_after * 1e3:.4f} mrad (position RMS above: the position part)"
+            f"  rotation residual RMS {result.rotation_rms_before * 1e3:.5g} mrad -> "
+            f"{result.rotation_rms_after * 1e3:.5g} mrad (position RMS above: the position part)"
         )
-        print(
-            "  weighting: each residual divided by its standard uncertainty, position "
-            f"({', '.join(f'{v * 1e6:.3g}' for v in std[:3])}) um, rotation "
-            f"({', '.join(f'{v * 1e6:.3g}' for v in std[3:])}) urad"
-        )
+
+        def triple(std: Any) -> str:
+            return (
+                f"position ({', '.join(f'{v * 1e6:.3g}' for v in std[:3])}) um, "
+                f"rotation ({', '.join(f'{v * 1e6:.3g}' for v in std[3:])}) urad"
+            )
+
+        if result.weighting == "variance_components":
+            print(
+                f"  weighting: each residual divided by its scatter (variance components, "
+                f"{result.weighting_iterations} fits): {triple(used)}; stated: {triple(stated)}"
+            )
+        else:
+            print(f"  weighting: each residual divided by its stated standard uncertainty, {triple(stated)}")
     from robocal_uncertainty.report.table2 import format_significant, round_to_uncertainty
 
     print("  parameter            nominal        estimate   1st-order std")
