@@ -103,6 +103,12 @@ def test_six_dof_campaign_prints_the_result_objects_orientation(
         u = [float(v) for v in rows["Standard uncertainty / mrad"]]
         np.testing.assert_allclose(u, [a.standard_uncertainty * 1e3 for a in o.axes], rtol=0.05)
         assert all(1e-3 < v < 10 for v in u)
+    # The report holds the orientation rows and a rotation histogram figure per configuration.
+    md = (tmp_path / "report" / "report.md").read_text(encoding="utf-8")
+    assert md.count("Tool orientation: mean (chordal L2) quaternion") == 2
+    for i in (1, 2):
+        assert (tmp_path / "report" / f"rotation_histograms_{i}.png").stat().st_size > 10_000
+        assert f"](rotation_histograms_{i}.png)" in md
     # The model-error line of a 6-DOF campaign states its rotation part in µrad, not µm.
     adequacy = next(line for line in out.splitlines() if line.startswith("Model adequacy"))
     if not result.model_adequacy.adequate:

@@ -32,6 +32,7 @@ REPORT_FILE_PATTERNS: tuple[str, ...] = (
     "uncertainty_vs_reach.png",
     "histograms_*.png",
     "position_error_*.png",
+    "rotation_histograms_*.png",
     "lcurve.png",
     "parameters.png",
     "sweep_*.png",

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
         plot_lcurve,
         plot_parameter_distributions,
         plot_position_error,
+        plot_rotation_histograms,
         plot_uncertainty_vs,
         plot_uncertainty_vs_reach,
     )
@@ -62,6 +63,7 @@ __all__ = [
     "plot_lcurve",
     "plot_parameter_distributions",
     "plot_position_error",
+    "plot_rotation_histograms",
     "plot_uncertainty_vs",
     "plot_uncertainty_vs_reach",
     "read_report_json",

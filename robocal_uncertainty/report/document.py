@@ -652,7 +652,8 @@ def write_report(
     ``report.md``, ``report.html`` (self-contained: figures embedded as data URIs unless
     `embed_images` is False), and the figures ``histograms_<i>.png`` and
     ``position_error_<i>.png`` per selected test configuration (1-based, see
-    `histograms`; with orientation also ``rotation_histograms_<i>.png``), ``configurations.png`` and ``uncertainty_vs_reach.png`` when there
+    `histograms`; with orientation also ``rotation_histograms_<i>.png``),
+    ``configurations.png`` and ``uncertainty_vs_reach.png`` when there
     are two or more test configurations, ``lcurve.png``, ``parameters.png`` and
     ``sweep_<name>.png`` per sweep.
 
@@ -688,8 +689,8 @@ def write_report(
         Test configurations that get per-configuration histogram figures. ``None``
         (default): all of them when there are at most 10, otherwise the first 6
         (:data:`~robocal_uncertainty.report.configurations.DEFAULT_HISTOGRAMS`) and the
-        worst. An int N: the first N (0 for none). ``"all"``: every one (one figure pair
-        per configuration: about 0.25 MB and 0.3 s each). A sequence: those 0-based
+        worst. An int N: the first N (0 for none). ``"all"``: every one (two figures per
+        configuration, three with orientation: about 0.25-0.4 MB and 0.3-0.5 s each). A sequence: those 0-based
         configuration indices.
 
     Returns

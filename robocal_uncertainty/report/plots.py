@@ -43,6 +43,7 @@ __all__ = [
     "plot_lcurve",
     "plot_parameter_distributions",
     "plot_position_error",
+    "plot_rotation_histograms",
     "plot_uncertainty_vs",
     "plot_uncertainty_vs_reach",
 ]
@@ -181,6 +182,87 @@ def plot_axis_histograms(
     pct = 100 * result.coverage_probability
     fig.suptitle(
         f"Tool position, test configuration {pose + 1}: {result.n_trials} trials, p = {pct:g} %",
+        fontsize=10,
+    )
+    _margins(fig, left=0.7, top=0.65, bottom=0.85, wspace=0.32)
+    return _save(fig, path)
+
+
+def plot_rotation_histograms(result: CalibrationUncertainty, path: str | Path, *, pose: int = 0) -> Path:
+    """Per-axis histograms of the tool orientation's deviations from its mean, in mrad.
+
+    Each panel (rx, ry, rz: rotations about the output frame's fixed axes) shows the Monte
+    Carlo histogram, the mean (0), the probabilistically symmetric and the shortest coverage
+    intervals and the GUM normal pdf, which is about the calibrated orientation (drawn at its
+    offset from the mean). An undetermined axis gets an empty panel that says so.
+
+    Parameters
+    ----------
+    result : CalibrationUncertainty
+        With orientation (:attr:`PoseUncertainty.orientation` not None).
+    path : str or Path
+        PNG file to write.
+    pose : int
+        Test configuration index.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ConfigError
+        `pose` out of range, or the result has no orientation.
+    """
+    from robocal_uncertainty.core.rotation import rotation_log
+    from robocal_uncertainty.uncertainty.calibration_mc import ROTATION_AXES
+
+    _check_pose(result, pose)
+    o = result.poses[pose].orientation
+    if o is None:
+        msg = f"test configuration {pose + 1} has no orientation (evaluated for positions only)"
+        raise ConfigError(msg)
+    s = 1e3  # rad -> mrad
+    calibrated_offset = rotation_log(o.calibrated_rotation @ o.mean_rotation.T)
+    fig = _figure(12.0, 4.2)
+    for j, name in enumerate(ROTATION_AXES):
+        ax = fig.add_subplot(1, 3, j + 1)
+        ax.set_xlabel(f"{name} / mrad")
+        if not o.determined[j]:
+            ax.text(0.5, 0.5, "undetermined", ha="center", va="center", transform=ax.transAxes)
+            ax.set_yticks([])
+            ax.set_title(f"{name}: no uncertainty statement")
+            continue
+        summary = o.axes[j]
+        hist = summary.histogram
+        edges = hist.edges * s
+        density = hist.counts / max(float(hist.counts.sum()) * float(np.diff(edges).mean()), np.finfo(float).tiny)
+        ax.stairs(density, edges, fill=True, color="0.75", ec="0.5", label="Monte Carlo")
+        ax.axvline(summary.estimate * s, color="k", lw=1.5, label="mean")
+        sym = summary.probabilistically_symmetric
+        ax.axvline(sym.low * s, color="tab:blue", ls="--", lw=1.2, label="prob. symmetric")
+        ax.axvline(sym.high * s, color="tab:blue", ls="--", lw=1.2)
+        sh = summary.shortest
+        ax.axvline(sh.low * s, color="tab:orange", ls=":", lw=1.5, label="shortest")
+        ax.axvline(sh.high * s, color="tab:orange", ls=":", lw=1.5)
+        u_gum = float(o.gum.standard_uncertainty[j]) * s
+        if u_gum > 0:
+            lo, hi = ax.get_xlim()
+            grid = np.linspace(lo, hi, 400)
+            centre = float(calibrated_offset[j]) * s
+            label = "GUM normal" if o.gum.applicable else "GUM normal (noise sources only)"
+            ax.plot(grid, stats.norm.pdf(grid, centre, u_gum), color="tab:red", lw=1.3, label=label)
+            ax.set_xlim(lo, hi)
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.set_ylabel("density / mrad⁻¹")
+        ax.set_title(f"{name}: u = {summary.standard_uncertainty * s:.3g} mrad")
+        if not fig.legends:
+            handles, labels = ax.get_legend_handles_labels()
+            fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=len(labels), frameon=False)
+    pct = 100 * result.coverage_probability
+    fig.suptitle(
+        f"Tool orientation (deviation from the mean, frame {result.frame_id}), test configuration {pose + 1}: "
+        f"{result.n_trials} trials, p = {pct:g} %",
         fontsize=10,
     )
     _margins(fig, left=0.7, top=0.65, bottom=0.85, wspace=0.32)

@@ -59,6 +59,7 @@ def test_write_report_creates_everything(setup, tmp_path):
         "lcurve.png",
         "parameters.png",
         "position_error_1.png",
+        "rotation_histograms_1.png",
         "sweep_equations.png",
         "sweep_lambda.png",
     ]

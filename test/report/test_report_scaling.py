@@ -41,7 +41,8 @@ def _evaluate(setup, n_test: int):
 
 
 def _per_config_pngs(indices) -> set[str]:
-    return {f"{kind}_{i + 1}.png" for i in indices for kind in ("histograms", "position_error")}
+    kinds = ("histograms", "position_error", "rotation_histograms")
+    return {f"{kind}_{i + 1}.png" for i in indices for kind in kinds}
 
 
 @pytest.fixture(scope="module")
