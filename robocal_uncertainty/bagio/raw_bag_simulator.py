@@ -9,7 +9,11 @@ finally returns home. Meanwhile:
   true joints plus the encoder noise of the simulation settings, fresh per reading;
 * ``/tracker/point`` (``geometry_msgs/msg/PointStamped``) at ``tracker_rate_hz``: true
   tool point in the campaign frame plus the tracker noise (uniform, per reading), except
-  during beam dropouts (a Poisson process of random gaps, in motion and in dwells).
+  during beam dropouts (a Poisson process of random gaps, in motion and in dwells);
+* for a 6-DOF campaign (simulated with ``orientation_std``), ``/tracker/pose``
+  (``geometry_msgs/msg/PoseStamped``) in place of the points: the same noisy position and
+  the true tool orientation turned by a normal rotation vector of ``orientation_std`` [rad]
+  per axis (fixed axes, per reading), with the same timing and dropouts.
 
 Header stamps are the sampling times (with a little jitter), log times add a random
 transport latency; messages are written in log-time order to one MCAP file (profile
@@ -31,8 +35,9 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 from numpy.typing import NDArray
 
-from robocal_uncertainty.bagio.campaign_format import JOINT_TOPIC, POINT_TOPIC
+from robocal_uncertainty.bagio.campaign_format import JOINT_TOPIC, POINT_TOPIC, POSE_TOPIC
 from robocal_uncertainty.bagio.mcap_stream import read_mcap_file
+from robocal_uncertainty.bagio.pose_messages import POSE_STAMPED, encode_pose_stamped
 from robocal_uncertainty.bagio.ros_messages import (
     JOINT_STATE,
     POINT_STAMPED,
@@ -40,7 +45,8 @@ from robocal_uncertainty.bagio.ros_messages import (
     encode_point_stamped,
     message_schema,
 )
-from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.kinematics import forward_points, forward_poses
+from robocal_uncertainty.core.rotation import quaternion_from_matrix, rotation_exp
 from robocal_uncertainty.core.simulation import SimulatedCampaign
 from robocal_uncertainty.errors import BagError, ConfigError
 
@@ -93,6 +99,8 @@ class RawBagSettings:
         End with a move back home (else the recording ends during the last dwell).
     joint_topic, point_topic : str
         Topic names.
+    pose_topic : str
+        Topic of the tracker poses of a 6-DOF campaign (written instead of `point_topic`).
     """
 
     joint_rate_hz: float = 125.0
@@ -108,6 +116,7 @@ class RawBagSettings:
     return_home: bool = True
     joint_topic: str = JOINT_TOPIC
     point_topic: str = POINT_TOPIC
+    pose_topic: str = POSE_TOPIC
 
     def __post_init__(self) -> None:
         for name in ("joint_rate_hz", "tracker_rate_hz", "dwell_s", "move_s"):
@@ -149,12 +158,16 @@ class StaticWindow:
         True joint positions.
     point : ndarray, shape (3,) [m]
         True tool point in the recording's frame.
+    orientation : ndarray, shape (4,), optional
+        6-DOF recordings: true tool orientation in the recording's frame, unit quaternion
+        ``(x, y, z, w)``; None for points.
     """
 
     start_ns: int
     end_ns: int
     joint_positions: Array
     point: Array
+    orientation: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -175,7 +188,12 @@ class RawBagTruth:
     settings : dict
         The :class:`RawBagSettings` as a dict.
     joint_count, point_count : int
-        Messages written per topic.
+        Messages written per topic (`point_count`: tracker points, or poses when 6-DOF).
+    orientation_std : float or None [rad]
+        6-DOF recordings: standard deviation of each rotation-vector component of the
+        orientation noise per reading; None for points.
+    tracker_topic : str
+        Topic of the tracker messages (points, or poses when 6-DOF).
     """
 
     frame: Literal["base", "tracker"]
@@ -186,6 +204,8 @@ class RawBagTruth:
     settings: dict[str, object]
     joint_count: int
     point_count: int
+    orientation_std: float | None = None
+    tracker_topic: str = POINT_TOPIC
 
     def to_json(self) -> str:
         """JSON text of the truth (floats round-trip exactly)."""
@@ -197,13 +217,22 @@ class RawBagTruth:
             "settings": self.settings,
             "joint_count": self.joint_count,
             "point_count": self.point_count,
-            "units": {"stamps": "ns", "joint_positions": "rad", "point": "m"},
+            "orientation_std": self.orientation_std,
+            "tracker_topic": self.tracker_topic,
+            "units": {
+                "stamps": "ns",
+                "joint_positions": "rad",
+                "point": "m",
+                "orientation": "quaternion x, y, z, w",
+                "orientation_std": "rad",
+            },
             "windows": [
                 {
                     "start_ns": w.start_ns,
                     "end_ns": w.end_ns,
                     "joint_positions": w.joint_positions.tolist(),
                     "point": w.point.tolist(),
+                    **({} if w.orientation is None else {"orientation": w.orientation.tolist()}),
                 }
                 for w in self.windows
             ],
@@ -302,8 +331,10 @@ def simulate_raw_recording(
     truth : RawBagTruth
     """
     settings = settings or RawBagSettings()
-    streams = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(6)]
-    rng_joint_t, rng_point_t, rng_encoder, rng_tracker, rng_dropout, rng_latency = streams
+    # A seventh stream for the orientation noise: the first six (and so a point recording)
+    # are those of earlier versions.
+    streams = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(7)]
+    rng_joint_t, rng_point_t, rng_encoder, rng_tracker, rng_dropout, rng_latency, rng_rotation = streams
     model = simulated.true_model
     sim = simulated.settings
     q_true = simulated.true_joint_positions
@@ -324,7 +355,8 @@ def simulate_raw_recording(
     params = model.parameter_vector()
     q_joint = _joints_at(jt, waypoints, settings)
     readings = q_joint + sim.encoder_noise.sample(rng_encoder, q_joint.shape)
-    points = forward_points(model.layout, params, _joints_at(pt, waypoints, settings))
+    q_point = _joints_at(pt, waypoints, settings)
+    points = forward_points(model.layout, params, q_point)
     if sim.frame == "tracker":
         distance = np.linalg.norm(points, axis=-1)
     else:
@@ -342,13 +374,23 @@ def simulate_raw_recording(
         RawRecord(settings.joint_topic, JOINT_STATE, int(log), encode_joint_state(int(s), names, q))
         for s, log, q in zip(joint_stamps, joint_log, readings)
     ]
-    records += [
-        RawRecord(settings.point_topic, POINT_STAMPED, int(log), encode_point_stamped(int(s), frame_id, x))
-        for s, log, x in zip(point_stamps, point_log, measured)
-    ]
+    six_dof = sim.orientation_std is not None
+    if six_dof:
+        _, rotations = forward_poses(model, params, q_point)
+        noise = rng_rotation.normal(0.0, float(sim.orientation_std or 0.0), size=(pt.size, 3))
+        quaternions = quaternion_from_matrix(rotation_exp(noise) @ rotations)
+        records += [
+            RawRecord(settings.pose_topic, POSE_STAMPED, int(log), encode_pose_stamped(int(s), frame_id, x, r))
+            for s, log, x, r in zip(point_stamps, point_log, measured, quaternions)
+        ]
+    else:
+        records += [
+            RawRecord(settings.point_topic, POINT_STAMPED, int(log), encode_point_stamped(int(s), frame_id, x))
+            for s, log, x in zip(point_stamps, point_log, measured)
+        ]
     records.sort(key=lambda r: r.log_time_ns)  # stable: ties keep joints first
 
-    true_points = forward_points(model.layout, params, q_true)
+    true_points, true_rotations = forward_poses(model, params, q_true)
     dwell_starts = starts[~moves]
     windows = tuple(
         StaticWindow(
@@ -356,6 +398,7 @@ def simulate_raw_recording(
             end_ns=start_ns + round(float(min(t0 + settings.dwell_s, duration)) * _NS_PER_S),
             joint_positions=q_true[i],
             point=true_points[i],
+            orientation=quaternion_from_matrix(true_rotations[i]) if six_dof else None,
         )
         for i, t0 in enumerate(dwell_starts)
     )
@@ -368,6 +411,8 @@ def simulate_raw_recording(
         settings=asdict(settings),
         joint_count=int(jt.size),
         point_count=int(pt.size),
+        orientation_std=sim.orientation_std,
+        tracker_topic=settings.pose_topic if six_dof else settings.point_topic,
     )
     return records, truth
 
@@ -470,9 +515,11 @@ def read_raw_truth(path: str | Path) -> RawBagTruth:
                 end_ns=int(w["end_ns"]),
                 joint_positions=np.array(w["joint_positions"], dtype=np.float64),
                 point=np.array(w["point"], dtype=np.float64),
+                orientation=np.array(w["orientation"], dtype=np.float64) if "orientation" in w else None,
             )
             for w in content["windows"]
         )
+        orientation_std = content.get("orientation_std")
         frame: Literal["base", "tracker"] = "base" if content["frame"] == "base" else "tracker"
         return RawBagTruth(
             frame=frame,
@@ -483,6 +530,8 @@ def read_raw_truth(path: str | Path) -> RawBagTruth:
             settings=dict(content["settings"]),
             joint_count=int(content["joint_count"]),
             point_count=int(content["point_count"]),
+            orientation_std=None if orientation_std is None else float(orientation_std),
+            tracker_topic=str(content.get("tracker_topic", content["settings"].get("point_topic", POINT_TOPIC))),
         )
     except (KeyError, TypeError, ValueError) as err:
         msg = f"{path} has no valid {RAW_TRUTH_METADATA!r} metadata record ({type(err).__name__}: {err})"
