@@ -3,10 +3,14 @@
 Subscribes ``/joint_states`` (``sensor_msgs/JointState``) and ``/tracker/point``
 (``geometry_msgs/PointStamped``), both with the sensor-data QoS (remap them in the launch
 file). With ``tracker_pose_topic`` set (a 6-DOF tracker), that topic
-(``geometry_msgs/PoseStamped``) is subscribed instead of ``/tracker/point``: the collector
+(``geometry_msgs/PoseStamped``, or ``PoseWithCovarianceStamped`` with
+``tracker_pose_with_covariance``) is subscribed instead of ``/tracker/point``: the collector
 checks the orientation scatter (``orientation_scatter_threshold_rad``) and averages the
-orientations (chordal mean) of each dwell. Messages are merged back into publication order
-(:mod:`.stream_merge`) and fed to a
+orientations (chordal mean) of each dwell, and the published samples carry the mean
+orientation and its covariance. Messages are merged back into publication order
+(:mod:`.stream_merge`) and fed, by the functions ``replay`` feeds a bag with
+(:func:`~robocal_uncertainty.pipeline.replay.feed_joint_state`,
+:func:`~robocal_uncertainty.pipeline.replay.feed_tracker_message`), to a
 :class:`~robocal_uncertainty.pipeline.collector.StaticPoseCollector`. Each sample is first
 appended to the campaign MCAP (flushed and fsynced per pose; a restart resumes from the
 file, so no sample taken before a crash is lost), then published on ``robocal/samples``.
@@ -45,9 +49,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PointStamped, PoseStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
@@ -64,7 +67,6 @@ from robocal_uncertainty.nodes.common import (
     diagnostic_array,
     load_model,
     run_node,
-    stamp_ns,
     to_ros,
 )
 from robocal_uncertainty.nodes.parameters import DIAGNOSTICS_PERIOD, ParamSpec, declare_parameters, non_empty, positive
@@ -72,6 +74,7 @@ from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_q
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import CollectorSettings, StaticPoseCollector
 from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus, DiagnosticThresholds, collector_status
+from robocal_uncertainty.pipeline.replay import feed_joint_state, feed_tracker_message
 from robocal_uncertainty.pipeline.stream_merge import StreamMerger
 
 __all__ = ["PARAMETERS", "CollectorNode", "main"]
@@ -100,6 +103,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "tracker_pose_topic",
         "",
         "6-DOF tracker: geometry_msgs/PoseStamped topic subscribed instead of /tracker/point; empty = points",
+        read_only=True,
+    ),
+    ParamSpec(
+        "tracker_pose_with_covariance",
+        False,
+        "6-DOF tracker: tracker_pose_topic carries geometry_msgs/PoseWithCovarianceStamped (its covariance is not "
+        "used: a sample's covariances come from the scatter over its dwell)",
         read_only=True,
     ),
     ParamSpec(
@@ -249,7 +259,8 @@ class CollectorNode(Node):
         self._status_pub = self.create_publisher(String, "robocal/collector_status", latched_qos())
         depth = p["input_queue_depth"]
         pose_topic = p["tracker_pose_topic"]
-        tracker_type: Any = PoseStamped if pose_topic else PointStamped
+        pose_type: Any = PoseWithCovarianceStamped if p["tracker_pose_with_covariance"] else PoseStamped
+        tracker_type: Any = pose_type if pose_topic else PointStamped
         tracker_topic = pose_topic or "/tracker/point"
         if _HAS_MESSAGE_INFO:
             self.create_subscription(JointState, "/joint_states", self._on_joint_state_info, sensor_qos(depth))
@@ -281,13 +292,13 @@ class CollectorNode(Node):
     def _on_joint_state_info(self, msg: JointState, info: dict[str, int]) -> None:
         self._push(_JOINTS, msg, info.get("source_timestamp", 0))
 
-    def _on_point_info(self, msg: PointStamped | PoseStamped, info: dict[str, int]) -> None:
+    def _on_point_info(self, msg: PointStamped | PoseStamped | PoseWithCovarianceStamped, info: dict[str, int]) -> None:
         self._push(_POINTS, msg, info.get("source_timestamp", 0))
 
     def _on_joint_state(self, msg: JointState) -> None:
         self._push(_JOINTS, msg, 0)
 
-    def _on_point(self, msg: PointStamped | PoseStamped) -> None:
+    def _on_point(self, msg: PointStamped | PoseStamped | PoseWithCovarianceStamped) -> None:
         self._push(_POINTS, msg, 0)
 
     def _push(self, stream: int, msg: Any, source_ns: int) -> None:
@@ -301,19 +312,9 @@ class CollectorNode(Node):
         """Hand one message (in publication order) to the collector."""
         try:
             if stream == _JOINTS:
-                sample = self.collector.add_joint_state(
-                    stamp_ns(msg.header), list(msg.name), np.asarray(msg.position, dtype=np.float64)
-                )
-            elif hasattr(msg, "pose"):  # PoseStamped from a 6-DOF tracker
-                p, o = msg.pose.position, msg.pose.orientation
-                sample = self.collector.add_tracker_pose(
-                    stamp_ns(msg.header), str(msg.header.frame_id), (p.x, p.y, p.z), (o.x, o.y, o.z, o.w)
-                )
-            else:
-                point = msg.point
-                sample = self.collector.add_tracker_point(
-                    stamp_ns(msg.header), str(msg.header.frame_id), (point.x, point.y, point.z)
-                )
+                sample = feed_joint_state(self.collector, msg)
+            else:  # a point, or a pose from a 6-DOF tracker
+                sample = feed_tracker_message(self.collector, msg)
         except CalibError as err:  # the collector drops bad input itself; this is a last resort
             self._causes.warning("internal", f"message dropped: {err}")
             return
@@ -332,8 +333,9 @@ class CollectorNode(Node):
         self.published += 1
         self._last_sample_ns = self.get_clock().now().nanoseconds
         point_mm = ", ".join(f"{v * 1e3:.3f}" for v in sample.point)
+        what = "points" if sample.orientation is None else "poses"
         self.get_logger().info(
-            f"sample {self.recorder.n_samples}: point ({point_mm}) mm from {sample.tracker_point_count} points, "
+            f"sample {self.recorder.n_samples}: point ({point_mm}) mm from {sample.tracker_point_count} {what}, "
             f"{sample.joint_state_count} joint states"
         )
         self._publish_status()
