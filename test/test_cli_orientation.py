@@ -4,6 +4,7 @@ object's values; "undetermined" cells and the undetermined rotation named for a 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -142,3 +143,42 @@ def test_point_campaign_names_the_undetermined_tool_axis(
     ]
     # Without orientation the table is the position table alone.
     assert "Tool orientation" not in format_table2(captured[-1].uncertainty, orientation=False)
+
+
+def test_validate_prints_the_held_out_orientation_statistics(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    campaign = tmp_path / "ur10_6dof.mcap"
+    argv = ["import-csv", str(UR10_CSV), "--orientation-convention", "intrinsic_xyz", "--out", str(campaign)]
+    assert main(argv) == 0
+    results: list[Any] = []
+    validate = app.validate
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        results.append(validate(*args, **kwargs))
+        return results[-1]
+
+    monkeypatch.setattr(app, "validate", spy)
+    capsys.readouterr()
+    out_dir = tmp_path / "validation"
+    argv = ["validate", str(campaign), "--robot", "ur10", "--train-poses", "53", "--trials", "200"]
+    assert main([*argv, "--out", str(out_dir), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    rotation = results[-1].orientation_axes
+    assert [a.axis for a in rotation] == ["rx", "ry", "rz"]
+    lines = out.splitlines()
+    start = lines.index(
+        next(line for line in lines if line.split()[:4] == ["axis", "RMS", "error", "/"] and "mrad" in line)
+    )
+    for line, a in zip(lines[start + 1 : start + 4], rotation):
+        assert line.split() == [
+            a.axis,
+            f"{a.rms_error * 1e3:.4f}",
+            f"{a.normalized_rms:.3f}",
+            f"{100 * a.inside_fraction:.1f}",
+        ]
+    assert "reliability: stated p / observed % (x, y, z, 3-D, rx, ry, rz)" in out
+
+    data = json.loads((out_dir / "validation.json").read_text())
+    assert [a["rms_error_rad"] for a in data["orientation_axes"]] == [a.rms_error for a in rotation]
+    assert data["reliability"]["observed"]["rz"] == rotation[2].reliability.tolist()

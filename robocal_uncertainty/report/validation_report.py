@@ -20,7 +20,7 @@ def validation_to_dict(validation: HoldoutValidation, *, extra: Mapping[str, Any
     v = validation
     return {
         "format": VALIDATION_FORMAT,
-        "units": {"length": "m"},
+        "units": {"length": "m", "angle": "rad"},
         "mode": v.mode,
         "frame_id": v.frame_id,
         "sources": list(v.sources),
@@ -41,10 +41,19 @@ def validation_to_dict(validation: HoldoutValidation, *, extra: Mapping[str, Any
             }
             for a in v.axes
         ],
+        "orientation_axes": [
+            {
+                "axis": a.axis,
+                "rms_error_rad": a.rms_error,
+                "normalized_error_rms": a.normalized_rms,
+                "inside_fraction": a.inside_fraction,
+            }
+            for a in v.orientation_axes
+        ],
         "region_inside_fraction": v.region_inside_fraction,
         "reliability": {
             "stated_coverage": v.levels.tolist(),
-            "observed": {a.axis: a.reliability.tolist() for a in v.axes},
+            "observed": {a.axis: a.reliability.tolist() for a in (*v.axes, *v.orientation_axes)},
             "observed_region": v.region_reliability.tolist(),
         },
         "folds": [
@@ -74,11 +83,19 @@ def format_validation(validation: HoldoutValidation) -> str:
     ]
     for a in v.axes:
         lines.append(f"{a.axis:<6}{a.rms_error * 1e6:>16.1f}{a.normalized_rms:>16.3f}{100 * a.inside_fraction:>20.1f}")
+    if v.orientation_axes:
+        lines.append(f"{'axis':<6}{'RMS error / mrad':>16}{'normalised RMS':>16}{f'inside {p:g} % / %':>20}")
+        for a in v.orientation_axes:
+            lines.append(
+                f"{a.axis:<6}{a.rms_error * 1e3:>16.4f}{a.normalized_rms:>16.3f}{100 * a.inside_fraction:>20.1f}"
+            )
     lines.append(f"3-D region (JCGM 102) at {p:g} %: {100 * v.region_inside_fraction:.1f} % inside")
-    lines.append("reliability: stated p / observed % (x, y, z, 3-D)")
+    rot_names = "".join(f", {a.axis}" for a in v.orientation_axes)
+    lines.append(f"reliability: stated p / observed % (x, y, z, 3-D{rot_names})")
     for i, level in enumerate(v.levels):
         obs = ", ".join(f"{100 * a.reliability[i]:.1f}" for a in v.axes)
-        lines.append(f"  {100 * level:5.1f} %: {obs}, {100 * v.region_reliability[i]:.1f}")
+        rot = "".join(f", {100 * a.reliability[i]:.1f}" for a in v.orientation_axes)
+        lines.append(f"  {100 * level:5.1f} %: {obs}, {100 * v.region_reliability[i]:.1f}{rot}")
     lines.append("An honest statement has normalised RMS near 1 and observed near stated coverage.")
     return "\n".join(lines)
 
