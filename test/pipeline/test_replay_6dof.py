@@ -218,6 +218,19 @@ def test_node_path_equals_replay_samples_calibration_and_uncertainty(
     assert nominal_error.max() > 2e-3
 
 
+def test_evaluate_of_the_recorded_6dof_campaign_equals_replay(replayed, paper_arm: RobotModel) -> None:
+    """The command line's ``evaluate`` of the campaign file the replay wrote: the same numbers."""
+    from robocal_uncertainty.app import EvaluationOptions
+
+    result, campaign_path = replayed
+    again = evaluate(paper_arm, read_campaign(campaign_path), EvaluationOptions(**OPTIONS_KW))
+    ours = result.evaluation
+    assert _bits(again.calibration.estimate) == _bits(ours.calibration.estimate)
+    assert _bits(again.uncertainty.samples) == _bits(ours.uncertainty.samples)
+    assert _bits(again.uncertainty.rotation_samples) == _bits(ours.uncertainty.rotation_samples)
+    assert again.warnings == ours.warnings
+
+
 def test_bad_quaternions_on_the_pose_topic_are_dropped_and_counted(
     paper_arm: RobotModel, simulated: SimulatedCampaign, tmp_path: Path
 ) -> None:
