@@ -25,6 +25,7 @@ __all__ = [
     "Distribution",
     "Empirical",
     "IndependentCopies",
+    "IndependentNormal",
     "IndependentRectangular",
     "Normal",
     "Rectangular",
@@ -544,6 +545,57 @@ class IndependentRectangular:
             self.centres + rng.uniform(-1.0, 1.0, size=(_check_n(n), self.size)) * self.half_widths,
             dtype=np.float64,
         )
+
+
+@dataclass(frozen=True, eq=False)
+class IndependentNormal:
+    """Independent normal components N(mean_i, std_i^2), as a vector.
+
+    A diagonal :class:`CorrelatedNormal` without its k x k factor: the orientation noise of
+    every pose of a 6-DOF campaign (thousands of components) would otherwise need a dense
+    Cholesky (or eigen) factor and a dense product per draw; the distribution is that of
+    ``CorrelatedNormal(mean, diag(std**2))``.
+
+    Parameters
+    ----------
+    std : array_like, shape (k,)
+        Standard deviations std_i >= 0, in the quantities' units (0 makes a component constant).
+    mean : array_like, shape (k,), optional
+        Expectations, default 0.
+    """
+
+    std: NDArray[np.float64]
+    mean: NDArray[np.float64]
+
+    def __init__(self, std: ArrayLike, mean: ArrayLike | None = None) -> None:
+        s = np.array(std, dtype=np.float64).reshape(-1)
+        m = np.zeros_like(s) if mean is None else np.array(mean, dtype=np.float64).reshape(-1)
+        if s.size < 1 or m.shape != s.shape:
+            msg = f"IndependentNormal needs k >= 1 standard deviations and as many means, got {s.size} and {m.size}"
+            raise ConfigError(msg)
+        if not (np.isfinite(s).all() and np.isfinite(m).all()) or (s < 0).any():
+            msg = "IndependentNormal standard deviations must be finite and >= 0, means finite"
+            raise ConfigError(msg)
+        object.__setattr__(self, "std", _readonly(s))
+        object.__setattr__(self, "mean", _readonly(m))
+
+    @property
+    def size(self) -> int:
+        return int(self.std.size)
+
+    def mean_vector(self) -> NDArray[np.float64]:
+        return self.mean.copy()
+
+    def variance_vector(self) -> NDArray[np.float64]:
+        """Variances std_i^2, shape (k,): the covariance is diagonal."""
+        return np.asarray(self.std**2, dtype=np.float64)
+
+    def covariance(self) -> NDArray[np.float64]:
+        return np.diag(self.variance_vector())
+
+    def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+        """Draw ``n`` vectors, shape (n, k)."""
+        return np.asarray(self.mean + rng.standard_normal((_check_n(n), self.size)) * self.std, dtype=np.float64)
 
 
 @dataclass(frozen=True, eq=False)

@@ -24,6 +24,7 @@ from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import (
     Distribution,
     IndependentCopies,
+    IndependentNormal,
     IndependentRectangular,
     StudentT,
 )
@@ -110,7 +111,7 @@ def _input_covariance(dist: Distribution) -> NDArray[np.float64]:
 
 def _variances(dist: Distribution) -> NDArray[np.float64]:
     """Diagonal of one input's covariance, without building it when the input is independent."""
-    if isinstance(dist, IndependentRectangular):
+    if isinstance(dist, (IndependentRectangular, IndependentNormal)):
         return dist.variance_vector()
     if isinstance(dist, IndependentCopies):
         return np.tile(np.diag(np.atleast_2d(dist.block_covariance())), dist.count)
@@ -119,7 +120,7 @@ def _variances(dist: Distribution) -> NDArray[np.float64]:
 
 def _propagated(jacobian: NDArray[np.float64], dist: Distribution) -> NDArray[np.float64]:
     """J_d Σ_d J_dᵀ of one input, exploiting diagonal and block-diagonal Σ_d."""
-    if isinstance(dist, IndependentRectangular):
+    if isinstance(dist, (IndependentRectangular, IndependentNormal)):
         return np.asarray((jacobian * dist.variance_vector()) @ jacobian.T, dtype=np.float64)
     if isinstance(dist, IndependentCopies):
         block = np.atleast_2d(dist.block_covariance())

@@ -28,10 +28,10 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import (
-    CorrelatedNormal,
     Distribution,
     Empirical,
     IndependentCopies,
+    IndependentNormal,
     IndependentRectangular,
     Rectangular,
 )
@@ -300,11 +300,9 @@ def _tracker_orientation(settings: UncertaintySettings, ctx: TrialContext) -> So
     if ctx.rotation_std is None:
         # Points carry no orientation: a source of zeros keeps "all" valid for every campaign.
         return AdditiveSource("tracker_orientation", IndependentRectangular(np.zeros(ctx.n_poses * d)), segments)
-    var = np.zeros((ctx.n_poses, d))
-    var[:, list(ctx.rotation_components)] = np.asarray(ctx.rotation_std, dtype=np.float64) ** 2
-    return AdditiveSource(
-        "tracker_orientation", CorrelatedNormal(np.zeros(var.size), np.diag(var.reshape(-1))), segments
-    )
+    std = np.zeros((ctx.n_poses, d))
+    std[:, list(ctx.rotation_components)] = np.asarray(ctx.rotation_std, dtype=np.float64)
+    return AdditiveSource("tracker_orientation", IndependentNormal(std.reshape(-1)), segments)
 
 
 def _encoder(settings: UncertaintySettings, ctx: TrialContext) -> Source:
