@@ -3,8 +3,9 @@
 Measured (53 training poses, split seed 0, 579 held out, 500 trials, sources tracker,
 tracker_orientation, encoder, residual; variance-component weighting): held-out RMS per
 rotation axis 0.59 (rx), 0.71 (ry), 0.62 (rz) mrad; 95 % intervals hold 96.0 % (rx), 92.2 %
-(ry), 93.3 % (rz) of the measured orientations and 96.4-97.1 % of the positions. Without the residual source (instrument noise only) the
-intervals hold under 25 %: the model's unmodelled errors dominate, as for points.
+(ry), 93.3 % (rz) of the measured orientations and 96.4-97.1 % of the positions. Without the
+residual source (instrument noise only) the intervals hold under 25 %: the model's unmodelled
+errors dominate, as for points.
 """
 
 from __future__ import annotations
