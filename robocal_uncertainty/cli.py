@@ -737,7 +737,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         model,
         campaign,
         test_q,
-        sources=parse_sources(args.sources),
+        sources=parse_sources(_default_sources(args.sources, campaign, "tracker,encoder")),
         args=args,
         out_dir=Path(args.out),
         label="evaluate",
@@ -799,6 +799,13 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _default_sources(given: str | None, campaign: Any, default: str) -> str:
+    """``--sources`` as given, else `default` plus the orientation noise of a 6-DOF campaign."""
+    if given is not None:
+        return given
+    return default + ",tracker_orientation" if campaign.measurement.measures_orientation else default
+
+
 def _sources_arg(text: str) -> tuple[str, ...]:
     from robocal_uncertainty.uncertainty import parse_sources
 
@@ -809,8 +816,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import validate
     from robocal_uncertainty.report.validation_report import format_validation, write_validation_report
 
-    options = _evaluation_options(args, _sources_arg(args.sources), None)
     campaign, model = _campaign_and_robot(args)
+    options = _evaluation_options(
+        args, _sources_arg(_default_sources(args.sources, campaign, "tracker,encoder,residual")), None
+    )
     validation_campaign = None
     if args.validation_campaign:
         validation_campaign = _read_campaign_checked(args, args.validation_campaign)
@@ -1537,8 +1546,8 @@ def _build_parser() -> argparse.ArgumentParser:
     _add_test_joint_args(p)
     p.add_argument(
         "--sources",
-        default="tracker,encoder",
-        help=f"comma list of {sources_help()} (default %(default)s)",
+        default=None,
+        help=f"comma list of {sources_help()} (default tracker,encoder; and tracker_orientation for a 6-DOF campaign)",
     )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     _add_force_arg(p, "an earlier report in --out")
@@ -1609,8 +1618,9 @@ def _build_parser() -> argparse.ArgumentParser:
     split.add_argument("--validation-campaign", help="a second campaign of the same tracker set-up, held out whole")
     p.add_argument(
         "--sources",
-        default="tracker,encoder,residual",
-        help=f"sources of the statement under test: {sources_help()} (default %(default)s)",
+        default=None,
+        help=f"sources of the statement under test: {sources_help()} (default tracker,encoder,residual; "
+        "and tracker_orientation for a 6-DOF campaign)",
     )
     p.add_argument("--out", default="robocal_validation", help="report directory (default %(default)s)")
     _add_force_arg(p, "an earlier report in --out")
