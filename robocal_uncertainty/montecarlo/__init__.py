@@ -41,7 +41,7 @@ if TYPE_CHECKING:
         reduce_trials,
         run_trials,
     )
-    from robocal_uncertainty.montecarlo.executor import open_executor
+    from robocal_uncertainty.montecarlo.executor import WorkerPool, open_executor
     from robocal_uncertainty.montecarlo.gum import GumOutput, GumResult, propagate_gum
     from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
     from robocal_uncertainty.montecarlo.streaming import Moments, Reduction
@@ -93,6 +93,7 @@ __all__ = [
     "TrialBlock",
     "TrialsResult",
     "Triangular",
+    "WorkerPool",
     "block_rng",
     "coverage_region",
     "monte_carlo",

@@ -359,11 +359,14 @@ def _iter_blocks(
     mp_context: str | None,
     executor: object | None = None,
     task: tuple[_ChunkTask, tuple[Any, ...]] = (_evaluate_chunk, ()),
+    *,
+    lookahead: int = 2,
 ) -> Generator[Any, None, None]:
     """Yield each block's result in block order, evaluating chunks lazily.
 
     ``task`` is the chunk function and its extra arguments after the chunk's sizes;
     chunks run in this process, on ``workers`` local processes or on ``executor``.
+    At most ``lookahead`` chunks per executor slot are submitted and not yet yielded.
     """
     function, extra = task
     chunks = (
@@ -378,7 +381,7 @@ def _iter_blocks(
             for start, chunk in chunks:
                 yield from function(trial_block, seed, start, chunk, *extra)
             return
-        window = 2 * executor_slots(runner)
+        window = lookahead * executor_slots(runner)
         pending: deque[FutureLike] = deque()
         try:
             # A bounded look-ahead keeps memory flat and lets an adaptive run stop early.
@@ -615,6 +618,11 @@ def _run_adaptive(
         msg = f"adaptive.max_trials must allow 2 sequences of {sequence_trials} trials, got {settings.max_trials}"
         raise ConfigError(msg)
     n_blocks = max_sequences * blocks_per_sequence
+    # One chunk in flight per slot, not two: chunks submitted past the sequence that
+    # converges are wasted, and they still run (a process pool cannot cancel a chunk once
+    # it is queued to a worker): a pool shut down after the run waits for them, a pool
+    # kept for the next run (WorkerPool) starts that run late. The driver's work between
+    # two chunks (one sequence's statistics) is short against a chunk.
     stream = _iter_blocks(
         trial_block,
         seed,
@@ -624,6 +632,7 @@ def _run_adaptive(
         workers,
         mp_context,
         executor,
+        lookahead=1,
     )
     sequences: list[NDArray[np.float64]] = []
     moments: list[NDArray[np.float64]] = []

@@ -17,6 +17,7 @@ import multiprocessing
 from collections.abc import Callable, Generator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from types import TracebackType
 from typing import Any, Protocol, runtime_checkable
 
 from robocal_uncertainty.errors import ConfigError
@@ -25,6 +26,7 @@ __all__ = [
     "LOCAL_DASK",
     "FutureLike",
     "SubmitExecutor",
+    "WorkerPool",
     "check_executor",
     "executor_slots",
     "open_executor",
@@ -239,3 +241,116 @@ def open_executor(
         yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _import_modules(modules: tuple[str, ...]) -> None:
+    """Worker initializer: import what the trial blocks need once, at the worker's start."""
+    for name in modules:
+        importlib.import_module(name)
+
+
+def _ready() -> bool:
+    return True
+
+
+class WorkerPool:
+    """Local worker processes kept across Monte Carlo runs (a long-running node's pool).
+
+    :func:`open_executor` starts ``workers`` processes for one run and stops them after it;
+    a node that evaluates every new calibration would pay the start (a fresh interpreter
+    importing numpy and scipy per worker) on every sample. A ``WorkerPool`` starts them
+    once and hands the same executor to every run (``run_trials(..., executor=pool.executor())``);
+    results are the same as in-process, bit for bit (see :mod:`.engine`).
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes; 1 means no pool: :meth:`executor` returns None (run in-process).
+    mp_context : str, optional
+        Start method. Default ``"forkserver"`` where the platform has it (else the platform
+        default): forking a process with other threads (a ROS node's middleware threads)
+        can deadlock the child, and the pool is started once, so the safer start costs once.
+    preload : sequence of str
+        Modules each worker imports when it starts (e.g. the trial block's module), so the
+        first run does not pay the imports.
+
+    Raises
+    ------
+    ConfigError
+        `workers` below 1 or a start method the platform lacks.
+
+    Notes
+    -----
+    The pool is started on the first :meth:`executor` call (or :meth:`start`) and restarted
+    if a worker died (a broken pool). Blocks of a run abandoned by an exception (e.g. a
+    superseded evaluation) that are already running finish in the background; queued ones
+    are cancelled (see the engine). Use as a context manager or call :meth:`close`.
+    """
+
+    def __init__(self, workers: int = 1, *, mp_context: str | None = None, preload: tuple[str, ...] = ()) -> None:
+        self.workers = _check_workers(workers)
+        methods = multiprocessing.get_all_start_methods()
+        if mp_context is None and "forkserver" in methods:
+            mp_context = "forkserver"
+        if mp_context is not None and mp_context not in methods:
+            msg = f"mp_context must be one of {methods}, got {mp_context!r}"
+            raise ConfigError(msg)
+        self.mp_context = mp_context
+        self.preload = tuple(preload)
+        self.started = 0
+        """How many times worker processes were started (1 after the first run, more after a crash)."""
+        self._pool: ProcessPoolExecutor | None = None
+        self._closed = False
+
+    def executor(self) -> ProcessPoolExecutor | None:
+        """The pool's executor (started if needed), or None when ``workers == 1``.
+
+        Raises
+        ------
+        ConfigError
+            The pool was closed.
+        """
+        if self._closed:
+            msg = "the worker pool is closed"
+            raise ConfigError(msg)
+        if self.workers == 1:
+            return None
+        # A worker that died leaves the executor broken for good: start a fresh one.
+        if self._pool is not None and getattr(self._pool, "_broken", False):
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+        if self._pool is None:
+            context = None if self.mp_context is None else multiprocessing.get_context(self.mp_context)
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=context,
+                initializer=_import_modules,
+                initargs=(self.preload,),
+            )
+            self.started += 1
+        return self._pool
+
+    def start(self) -> None:
+        """Start every worker now and wait until each has imported `preload` (no-op for 1)."""
+        pool = self.executor()
+        if pool is not None:
+            for future in [pool.submit(_ready) for _ in range(self.workers)]:
+                future.result()
+
+    def close(self) -> None:
+        """Stop the workers (waits for running blocks); :meth:`executor` refuses afterwards."""
+        self._closed = True
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self) -> WorkerPool:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -11,6 +11,9 @@ The evaluation (:func:`robocal_uncertainty.app.evaluate` on the pipeline's campa
 calibration, the call the command line's ``evaluate``/``replay`` make, so the same settings
 give the same numbers bit for bit; with ``budget``/``sweeps`` also the per-source budget and
 the sweeps, summarised in the status JSON) runs in a worker thread: callbacks never block.
+With ``workers`` > 1 the trial blocks run on worker processes started once, when the node
+starts, and kept for every evaluation (:class:`~robocal_uncertainty.montecarlo.executor.WorkerPool`):
+a new sample does not wait for fresh processes.
 A newer calibration, or a change of a Monte Carlo parameter, supersedes the running
 evaluation: it is cancelled at its next progress report (every ``block_size`` = 10 000
 trials) and its result, if any, discarded.
@@ -75,6 +78,7 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError, ConfigError
+from robocal_uncertainty.montecarlo.executor import WorkerPool
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.msg import PoseUncertainty as PoseUncertaintyMsg
@@ -248,7 +252,15 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("budget_trials", 2000, "Trials of each budget run", "trials", low=1, high=100_000_000),
     ParamSpec("sweeps", False, "Also compute u against lambda and against the number of equations"),
     ParamSpec("sweep_trials", 300, "Trials per sweep point", "trials", low=1, high=100_000_000),
-    ParamSpec("workers", 1, "Monte Carlo processes (never changes the result)", "processes", True, 1, 256),
+    ParamSpec(
+        "workers",
+        1,
+        "Monte Carlo worker processes, started once and kept (1: in the node's process; never changes the result)",
+        "processes",
+        True,
+        1,
+        256,
+    ),
     ParamSpec("progress_period_s", 2.0, "Interval of progress reports", "s", low=0.1, high=3600.0),
     ParamSpec(
         "orientation_variance_rad2",
@@ -339,6 +351,8 @@ class UncertaintyNode(Node):
         self._marker_pub = self.create_publisher(MarkerArray, "robocal/uncertainty_markers", latched_qos())
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self._health: dict[str, Any] = {"state": "idle"}
+        # Started by the worker thread; the trial block's module is imported once per process.
+        self._pool = WorkerPool(int(p["workers"]), preload=("robocal_uncertainty.uncertainty.calibration_mc",))
         self._evaluated: tuple[Campaign, IdentificationResult, EvaluationOptions] | None = None
         self.create_service(SuggestPoses, "~/suggest_poses", self._suggest_poses)
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
@@ -444,6 +458,10 @@ class UncertaintyNode(Node):
     # -- worker ----------------------------------------------------------------------------
 
     def _work(self) -> None:
+        try:
+            self._pool.start()
+        except Exception as err:  # the first evaluation retries; report, do not die
+            self.get_logger().error(f"cannot start the Monte Carlo worker processes: {type(err).__name__}: {err}")
         while True:
             with self._wake:
                 while self._pending is None and not self._stop:
@@ -482,7 +500,7 @@ class UncertaintyNode(Node):
                 pipeline.campaign,
                 job.options,
                 calibration=calibration,
-                workers=int(self.get_parameter("workers").value),
+                executor=self._pool.executor(),
                 progress=progress,
             )
         except _Superseded:
@@ -648,6 +666,7 @@ class UncertaintyNode(Node):
             self._stop = True
             self._wake.notify()
         self._worker.join(timeout=10.0)
+        self._pool.close()
         super().destroy_node()
 
 

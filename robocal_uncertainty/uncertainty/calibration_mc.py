@@ -84,6 +84,8 @@ __all__ = [
 
 Array = NDArray[np.float64]
 _SUB_BATCH = 256
+_TEST_ELEMENTS = 16_384
+"""Trials x test configurations evaluated at once after the re-identification (memory bound)."""
 # The outputs at the test configurations are tool positions (x, y, z), whatever is measured.
 _N_AXES = len(POSITION_AXES)
 OutputFrame = Literal["measurement", "base"]
@@ -354,7 +356,11 @@ class CalibrationTrials:
         measurement = self.problem.measurement
         dim = _N_AXES
         n_test = self.test_joints.shape[0]
+        k = self.x_hat.size
         out = np.empty((n, self.n_outputs))
+        params = np.empty((n, self.problem.start.size))
+        test_deviations: list[Array] = []
+        predictions: list[Array] = []
         # A fixed sub-batch: BLAS rounding may depend on the number of rows, so the split of
         # a block must never depend on a user setting.
         for lo_i in range(0, n, _SUB_BATCH):
@@ -392,27 +398,41 @@ class CalibrationTrials:
                     self.x_hat,
                     iterations=self.gauss_newton_iterations,
                 )
-            params = self.problem.parameters(x)
-            out[sl, dim * n_test : dim * n_test + self.x_hat.size] = params[:, self.problem.estimated]
-            if self.drop_base:
-                # Positions in the robot base frame: the identified base does not enter.
-                b0 = self.problem.layout.base_index
-                params[:, b0 : b0 + 6] = 0.0
-            qt = self.test_joints[None] + batch.test_joints if batch.test_joints is not None else self.test_joints
+            params[sl] = self.problem.parameters(x)
+            if batch.test_joints is not None:
+                test_deviations.append(batch.test_joints)
+            if batch.predictions is not None:
+                predictions.append(batch.predictions)
+        out[:, dim * n_test : dim * n_test + k] = params[:, self.problem.estimated]
+        if self.drop_base:
+            # Positions in the robot base frame: the identified base does not enter.
+            b0 = self.problem.layout.base_index
+            params[:, b0 : b0 + 6] = 0.0
+        # The test configurations of the whole block at once, in slices of a bounded size:
+        # every operation there is per trial (elementwise, or a 3x3 product per trial), so
+        # the values do not depend on the slices, and the per-call overhead is paid once per
+        # slice instead of once per sub-batch.
+        qt_dev = np.concatenate(test_deviations) if test_deviations else None
+        pred = np.concatenate(predictions) if predictions else None
+        step = max(_SUB_BATCH, _TEST_ELEMENTS // n_test)
+        for lo_i in range(0, n, step):
+            sl = slice(lo_i, min(n, lo_i + step))
+            t = sl.stop - sl.start
+            qt = self.test_joints[None] + qt_dev[sl] if qt_dev is not None else self.test_joints
             if self.reference_rotations is None:
-                pos = forward_points(self.problem.layout, params, qt)
+                pos = forward_points(self.problem.layout, params[sl], qt)
             else:
-                pos, rot = forward_poses(self.problem.layout, params, qt)
+                pos, rot = forward_poses(self.problem.layout, params[sl], qt)
                 # Deviation about the fixed axes of the output frame: exp([d]x) = R R_ref^T.
                 dev = rotation_log(rot @ np.swapaxes(self.reference_rotations, -1, -2))
-                if batch.predictions is not None and batch.predictions.shape[-1] == 2 * dim:
+                if pred is not None and pred.shape[-1] == 2 * dim:
                     # 6-DOF model errors: their rotation part (small) moves the orientation.
-                    dev = dev + batch.predictions[..., dim:] @ self.output_rotation.T
-                out[sl, dim * n_test + self.x_hat.size :] = dev.reshape(t, dim * n_test)
-            if batch.predictions is not None:
+                    dev = dev + pred[sl, :, dim:] @ self.output_rotation.T
+                out[sl, dim * n_test + k :] = dev.reshape(t, dim * n_test)
+            if pred is not None:
                 # Row-vector form of R_out e: model errors live in the measurement frame
                 # (their position part for 6-DOF measurements).
-                pos = pos + batch.predictions[..., :dim] @ self.output_rotation.T
+                pos = pos + pred[sl, :, :dim] @ self.output_rotation.T
             out[sl, : dim * n_test] = pos.reshape(t, dim * n_test)
         return out
 
