@@ -40,7 +40,7 @@ def test_section_report_equals_api(cloud_file: Path, tmp_path: Path, capsys: pyt
     assert main([*argv, "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "400 points" in text and "maximum thickness" in text and "profile, suction side" in text
-    assert "under-cover" in text
+    assert "interval (denoised MC)" in text and "Every stated interval is coverage-verified" in text
     assert sorted(p.name for p in out.iterdir()) == [
         "section.csv",
         "section.json",
@@ -60,6 +60,17 @@ def test_section_report_equals_api(cloud_file: Path, tmp_path: Path, capsys: pyt
     assert main(argv) == 1
     assert "exists and is not empty (give --force" in capsys.readouterr().err
     assert main([*argv, "--force", "--no-progress"]) == 0
+
+
+def test_seed_method_is_flagged(cloud_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "report"
+    argv = ["section", str(cloud_file), "--nominal", "rotor37", "--trials", "2000", "--out", str(out)]
+    assert main([*argv, "--method", "seed", "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "bias-corrected interval" in text and "note: NOT coverage-verified" in text
+    data = json.loads((out / "section.json").read_text())
+    assert data["method"] == "seed"
+    assert [row["coverage_verified"] for row in data["parameters"]] == [False] * 2 + [True] * 3 + [False] * 4
 
 
 def test_section_from_a_point_cloud2_bag(scan: PointCloud, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -3,7 +3,9 @@
 :func:`inspect_section` reads a measured section (a CMM text export, or the ``PointCloud2``
 messages of a bag), a nominal section (a file, or a shipped blade), an instrument YAML, and
 runs the batched Monte Carlo of the nine section parameters with the GUM comparison and the
-bias-corrected intervals of the max/min-defined parameters.
+bias-corrected intervals of the max/min-defined parameters. The default method ``denoised``
+samples the error around a denoised cloud (its 95 % intervals covered the truth in 92-94.5 % of
+200 simulated scans, for every parameter); ``seed`` perturbs the measured cloud as the seed does.
 :func:`section_demo` does the same on a simulated 1 836-point CMM scan of the shipped NASA
 Rotor 37 section at the seed's size, with a known truth.
 
@@ -176,6 +178,7 @@ def _run(
     workers: int,
     progress: ProgressCallback | None,
     truth: NDArray[np.float64] | None,
+    method: str,
 ) -> SectionInspection:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         msg = f"seed must be an integer >= 0, got {seed!r}"
@@ -192,6 +195,7 @@ def _run(
         chunk_blocks=1 if workers == 1 else 4,
         progress=progress,
         keep_samples=True,
+        method=method,
     )
     return SectionInspection(
         result=result,
@@ -219,6 +223,7 @@ def inspect_section(
     topic: str | None = None,
     message: int | None = None,
     progress: ProgressCallback | None = None,
+    method: str = "denoised",
 ) -> SectionInspection:
     """Measure a section's nine parameters and their uncertainty.
 
@@ -244,6 +249,8 @@ def inspect_section(
         PointCloud2 topic and message index of a bag (default: its only topic, all messages).
     progress : callable, optional
         ``progress(done, target)`` after each chunk of trial blocks.
+    method : str
+        ``denoised`` (default) or ``seed``; see :func:`~robocal_uncertainty.inspection.section_mc.section_uncertainty`.
 
     Returns
     -------
@@ -267,6 +274,7 @@ def inspect_section(
         workers=workers,
         progress=progress,
         truth=None,
+        method=method,
     )
 
 
@@ -278,6 +286,7 @@ def section_demo(
     workers: int = 1,
     instrument: str | None = None,
     progress: ProgressCallback | None = None,
+    method: str = "denoised",
 ) -> SectionInspection:
     """The demo: a simulated CMM scan of the shipped Rotor 37 section, measured with noise.
 
@@ -319,4 +328,5 @@ def section_demo(
         workers=workers,
         progress=progress,
         truth=clean.parameters.as_array(),
+        method=method,
     )

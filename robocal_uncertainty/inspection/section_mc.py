@@ -48,6 +48,7 @@ from robocal_uncertainty.inspection.cmm_model import (
     draw_bound,
     point_error_sources,
 )
+from robocal_uncertainty.inspection.denoise import DenoisedCloud, denoise_section
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud
 from robocal_uncertainty.inspection.section import (
@@ -71,16 +72,24 @@ from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
 from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
 
 __all__ = [
+    "METHODS",
     "FrozenSectionModel",
     "SectionTrials",
     "SectionUncertainty",
+    "TrialSetup",
     "build_frozen_model",
     "full_section_trials",
     "gum_source_budget",
+    "prepare_trials",
     "section_sources",
     "section_uncertainty",
     "source_generator",
 ]
+
+METHODS: tuple[str, ...] = ("seed", "denoised")
+"""Monte Carlo methods of :func:`section_uncertainty`: ``seed`` perturbs the measured cloud
+(the seed's method); ``denoised`` samples the error Δ around the denoised cloud
+(:mod:`.denoise`) and states the distribution of ``f(y) - Δ``."""
 
 _BOUND_MARGIN = 1.0 + 1e-6
 """Relative slack on the candidate windows, so round-off never drops a candidate."""
@@ -350,12 +359,18 @@ class SectionTrials:
     batch : int
         Trials evaluated per vectorised step (memory knob): the same draws whatever its value,
         the model values equal up to round-off of the regrouped matrix products (~1e-21 m).
+    reflect : ndarray, shape (9,) [m, rad], optional
+        None: a trial's value is the model value ``f(x + e')`` (the seed's method). Given
+        ``c = f(y) + f(x̂)``: ``c - f(x̂ + e') = f(y) - Δ`` with ``Δ = f(x̂ + e') - f(x̂)``, the
+        value the measurand would have if the measured ``f(y)`` carried the error Δ (method
+        ``denoised`` of :func:`section_uncertainty`, ``model`` built at the denoised cloud x̂).
     """
 
     model: FrozenSectionModel
     sources: tuple[ErrorSource, ...]
     source_indices: tuple[int, ...]
     batch: int = 1000
+    reflect: NDArray[np.float64] | None = None
 
     def __call__(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Parameters of ``n`` trials, shape (n, 9) [m, rad]."""
@@ -365,6 +380,8 @@ class SectionTrials:
             size = min(self.batch, n - start)
             draws = [s.draw(g, size) for s, g in zip(self.sources, generators)]
             out[start : start + size] = self.evaluate_draws(draws)
+        if self.reflect is not None:
+            np.subtract(self.reflect, out, out=out)
         return out
 
     def evaluate_draws(self, draws: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
@@ -418,6 +435,80 @@ def _select_sources(names: Sequence[str]) -> tuple[int, ...]:
     return tuple(SOURCE_NAMES.index(name) for name in chosen)
 
 
+@dataclass(frozen=True, eq=False)
+class TrialSetup:
+    """What a Monte Carlo of a measured section perturbs (:func:`prepare_trials`).
+
+    Attributes
+    ----------
+    measured : SectionEvaluation
+        Evaluation of the measured cloud y (its parameters are the estimates).
+    centre : SectionEvaluation
+        Evaluation of the cloud the trials perturb: y (``seed``) or the denoised x̂ (``denoised``).
+    sources : tuple of ErrorSource
+        Enabled sources at ``centre``'s points.
+    source_indices : tuple of int
+        Stream key of each source.
+    reflect : ndarray, shape (9,) or None
+        ``f(y) + f(x̂)`` for ``denoised`` (see :class:`SectionTrials`), None for ``seed``.
+    denoised : DenoisedCloud or None
+        The denoised cloud (``denoised`` only).
+    """
+
+    measured: SectionEvaluation
+    centre: SectionEvaluation
+    sources: tuple[ErrorSource, ...]
+    source_indices: tuple[int, ...]
+    reflect: NDArray[np.float64] | None
+    denoised: DenoisedCloud | None
+
+    def trials(self, batch: int = 1000) -> SectionTrials:
+        """The batched trial block (frozen model at ``centre``)."""
+        model = build_frozen_model(self.centre, self.sources)
+        return SectionTrials(model, self.sources, self.source_indices, batch, self.reflect)
+
+
+def prepare_trials(
+    cloud: PointCloud | ArrayLike,
+    curve: NominalCurve,
+    *,
+    instrument: CmmInstrument | None = None,
+    sources: Sequence[str] = SOURCE_NAMES,
+    options: SectionOptions | None = None,
+    reference: ArrayLike | None = None,
+    method: str = "seed",
+    denoise_half_width: float | None = None,
+) -> TrialSetup:
+    """Evaluate the measured cloud and, for ``denoised``, denoise and evaluate it again.
+
+    Parameters as for :func:`section_uncertainty`. The probe vectors of a PointCloud orient
+    the probing error at both clouds.
+
+    Returns
+    -------
+    TrialSetup
+    """
+    options = SectionOptions() if options is None else options
+    instrument = instrument or CmmInstrument()
+    indices = _select_sources(sources)
+    if method not in METHODS:
+        msg = f"method must be one of {list(METHODS)}, got {method!r}"
+        raise ConfigError(msg)
+    evaluation = evaluate_section(cloud, curve, options)
+    probe = cloud.probe_vectors if isinstance(cloud, PointCloud) else None
+    every = section_sources(evaluation, instrument, probe_vectors=probe, reference=reference)
+    if method == "seed":
+        return TrialSetup(evaluation, evaluation, tuple(every[k] for k in indices), indices, None, None)
+    # The noise variance of every per-point source weights the window choice, whichever
+    # sources the Monte Carlo enables: it is the noise in the measured points.
+    denoised = denoise_section(evaluation, every, curve.period, half_width=denoise_half_width)
+    centre = evaluate_section(denoised.points, curve, options)
+    ordered_probe = None if probe is None else np.asarray(probe, dtype=np.float64)[evaluation.order]
+    at_centre = section_sources(centre, instrument, probe_vectors=ordered_probe, reference=reference)
+    reflect = evaluation.parameters.as_array() + centre.parameters.as_array()
+    return TrialSetup(evaluation, centre, tuple(at_centre[k] for k in indices), indices, reflect, denoised)
+
+
 def full_section_trials(
     cloud: PointCloud | ArrayLike,
     curve: NominalCurve,
@@ -429,23 +520,34 @@ def full_section_trials(
     options: SectionOptions | None = None,
     reference: ArrayLike | None = None,
     block_size: int = DEFAULT_BLOCK_SIZE,
+    method: str = "seed",
+    denoise_half_width: float | None = None,
 ) -> NDArray[np.float64]:
     """Parameters of each trial by the full algorithm (re-registration, re-segmentation).
 
-    Same random draws as :func:`section_uncertainty` with the same ``seed``, ``block_size`` and
-    ``sources``; slow (about 0.1 s per trial for 1 836 points): for checking the batched model.
+    Same random draws as :func:`section_uncertainty` with the same ``seed``, ``block_size``,
+    ``sources`` and ``method``; slow (about 0.1 s per trial for 1 836 points): for checking the
+    batched model. With ``method="denoised"`` the full algorithm runs on the perturbed denoised
+    cloud and the values are ``f(y) - (f(x̂ + e') - f(x̂))`` as in :class:`SectionTrials`.
 
     Returns
     -------
     ndarray, shape (trials, 9) [m, rad]
     """
     opts = SectionOptions() if options is None else options
-    evaluation = evaluate_section(cloud, curve, opts)
-    indices = _select_sources(sources)
-    probe = cloud.probe_vectors if isinstance(cloud, PointCloud) else None
-    every = section_sources(evaluation, instrument or CmmInstrument(), probe_vectors=probe, reference=reference)
-    block = _FullTrials(evaluation.points, curve, opts, tuple(every[k] for k in indices), indices)
-    return np.array(run_trials(block, seed=seed, n_trials=trials, block_size=block_size).samples)
+    prepared = prepare_trials(
+        cloud,
+        curve,
+        instrument=instrument,
+        sources=sources,
+        options=opts,
+        reference=reference,
+        method=method,
+        denoise_half_width=denoise_half_width,
+    )
+    block = _FullTrials(prepared.centre.points, curve, opts, prepared.sources, prepared.source_indices)
+    values = np.array(run_trials(block, seed=seed, n_trials=trials, block_size=block_size).samples)
+    return values if prepared.reflect is None else prepared.reflect - values
 
 
 def gum_source_budget(trials: SectionTrials) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -513,6 +615,16 @@ class SectionUncertainty:
         Reference point of the MPE/thermal lengths.
     candidate_counts : tuple of int
         Thickness candidate points, suction segments per candidate, chord pairs.
+    method : str
+        ``seed``: ``monte_carlo`` describes ``f(y + e')``, the measured cloud y perturbed (the
+        seed's method; its mean exceeds the measured value by the noise bias of the max/min
+        parameters). ``denoised``: ``monte_carlo`` describes ``f(y) - Δ``,
+        ``Δ = f(x̂ + e') - f(x̂)`` the error sampled around the denoised cloud x̂: its mean is the
+        bias-corrected estimate, its intervals are the intervals for the measurand.
+    reference_parameters : ndarray, shape (9,) [m, rad]
+        Parameters of the cloud the trials perturb (y for ``seed``, x̂ for ``denoised``).
+    denoised : DenoisedCloud or None
+        The denoised cloud and its window choice (``denoised`` only).
     """
 
     parameters: SectionParameters
@@ -525,6 +637,9 @@ class SectionUncertainty:
     reference: NDArray[np.float64]
     candidate_counts: tuple[int, int, int]
     gum_with_repeatability: GumResult | None = None
+    method: str = "seed"
+    reference_parameters: NDArray[np.float64] | None = None
+    denoised: DenoisedCloud | None = None
 
 
 def section_uncertainty(
@@ -547,6 +662,8 @@ def section_uncertainty(
     keep_samples: bool = False,
     bins: int | str = 100,
     repeat_parameters: ArrayLike | None = None,
+    method: str = "seed",
+    denoise_half_width: float | None = None,
 ) -> SectionUncertainty:
     """Monte Carlo of the nine section parameters under the CMM model, with the GUM comparison.
 
@@ -583,6 +700,14 @@ def section_uncertainty(
     repeat_parameters : array_like, shape (k, 9) [m, rad], optional
         Parameters of k >= 2 repeated scans of the same section (``SectionParameters.as_array``
         of each); their standard deviations enter ``gum_with_repeatability`` (the seed's u3).
+    method : str
+        ``seed`` (default): Monte Carlo of the measured cloud perturbed, the seed's method; its
+        intervals of the max/min parameters (thickness, chord, profiles) do not cover the true
+        value at 95 % (the noise bias is counted twice). ``denoised``: Monte Carlo of the error
+        around the denoised cloud (:mod:`.denoise`), stated as the distribution of ``f(y) - Δ``
+        (see :class:`SectionUncertainty`); the estimate stays ``parameters`` = f(y).
+    denoise_half_width : float, optional
+        Smoothing window half-width of ``denoised`` [m]; None: chosen by Mallows' Cp.
 
     Returns
     -------
@@ -592,15 +717,21 @@ def section_uncertainty(
         msg = f"batch must be an integer >= 1, got {batch!r}"
         raise ConfigError(msg)
     repeats = None if repeat_parameters is None else _check_repeats(repeat_parameters)
-    opts = SectionOptions() if options is None else options
-    evaluation = evaluate_section(cloud, curve, opts)
-    indices = _select_sources(sources)
-    probe = cloud.probe_vectors if isinstance(cloud, PointCloud) else None
     inst = instrument or CmmInstrument()
-    every = section_sources(evaluation, inst, probe_vectors=probe, reference=reference)
-    chosen = tuple(every[k] for k in indices)
-    model = build_frozen_model(evaluation, chosen)
-    block = SectionTrials(model, chosen, indices, batch)
+    prepared = prepare_trials(
+        cloud,
+        curve,
+        instrument=inst,
+        sources=sources,
+        options=options,
+        reference=reference,
+        method=method,
+        denoise_half_width=denoise_half_width,
+    )
+    evaluation = prepared.measured
+    indices = prepared.source_indices
+    block = prepared.trials(batch)
+    model = block.model
     run = run_trials(
         block,
         seed=seed,
@@ -628,7 +759,7 @@ def section_uncertainty(
         adaptive=run.adaptive,
     )
     budget, covariance = gum_source_budget(block)
-    base = model.base
+    base = evaluation.parameters.as_array()
 
     def combined(z: NDArray[np.float64]) -> NDArray[np.float64]:
         return base + z @ budget.T
@@ -648,7 +779,7 @@ def section_uncertainty(
         inputs.update({f"repeatability[{name}]": StudentT(0.0, 1.0, dof) for name in PARAMETER_NAMES})
         with_repeats = propagate_gum(with_repeatability, inputs, coverage=p)
     reference_point = (
-        evaluation.points[evaluation.segmentation.leading_edge_point]
+        prepared.centre.points[prepared.centre.segmentation.leading_edge_point]
         if reference is None
         else np.asarray(reference, dtype=np.float64)
     )
@@ -667,6 +798,9 @@ def section_uncertainty(
             int(model.chord_pairs.shape[0]),
         ),
         gum_with_repeatability=with_repeats,
+        method=method,
+        reference_parameters=model.base.copy(),
+        denoised=prepared.denoised,
     )
 
 

@@ -1,4 +1,4 @@
-"""Section report: JSON in SI with units, Markdown/CSV/PNG, the measured coverage stated."""
+"""Section report: JSON in SI with units, Markdown/CSV/PNG, the measured coverage stated and flagged."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from robocal_uncertainty.report.section_report import (
     COVERAGE_STUDY,
     SECTION_REPORT_FORMAT,
     format_section_table,
+    section_report_dict,
     write_section_report,
 )
 
@@ -34,12 +35,15 @@ def test_demo_knows_its_truth_and_offsets_are_covered(demo: SectionInspection) -
     # Seed magnitudes: thickness u of order 1-2 um, chord GUM U of order 5 um.
     assert 1e-6 < outputs[0].standard_uncertainty < 2e-6
     assert 3e-6 < demo.result.gum.outputs[1].expanded_uncertainty < 6e-6
-    # Bias correction: the max/min parameters' bias is positive and the reflected interval lies below.
+    # Method denoised (the default): the Monte Carlo values are f(y) - Δ, so the stated interval
+    # is the Monte Carlo interval (clipped at 0 for the max/min lengths) and the bias of the
+    # max/min parameters is positive.
+    assert demo.result.method == "denoised"
     for fix, out in zip(demo.corrections, outputs):
         mc = out.probabilistically_symmetric
-        assert fix.interval.low == pytest.approx(2 * fix.measured - mc.high, abs=1e-15)
-        assert fix.interval.high == pytest.approx(2 * fix.measured - mc.low, abs=1e-15)
-        assert fix.estimate == pytest.approx(fix.measured - fix.bias, abs=1e-15)
+        low, high = (max(mc.low, 0.0), max(mc.high, 0.0)) if fix.recommended else (mc.low, mc.high)
+        assert (fix.interval.low, fix.interval.high) == (low, high)
+        assert fix.bias == pytest.approx(fix.measured - out.estimate, abs=1e-15)
         if fix.recommended:
             assert fix.bias > 0, fix.name
 
@@ -58,12 +62,16 @@ def test_report_files_and_content(demo: SectionInspection, tmp_path: Path) -> No
     assert set(thickness["budget"]) == {"mpe", "thermal", "probing", "algorithm"}
     budget = np.array(list(thickness["budget"].values()))
     assert np.sqrt((budget**2).sum()) == pytest.approx(thickness["gum_u"], rel=1e-9)
-    assert thickness["coverage_study_jcgm101"] == COVERAGE_STUDY["max_thickness"][0]
+    assert thickness["coverage_study_jcgm101"] == COVERAGE_STUDY["max_thickness"].jcgm101 == 0.72
+    assert thickness["coverage_measured"] == COVERAGE_STUDY["max_thickness"].denoised
+    assert data["method"] == "denoised" and data["denoise_half_width_m"] > 0
+    assert all(row["coverage_verified"] for row in data["parameters"])
+    assert data["coverage_note"].startswith("Every stated interval is coverage-verified")
     assert "under-cover" in data["coverage_note"] and "72.0%" in data["coverage_note"]
     markdown = files.markdown.read_text()
-    assert "## Known limitation: coverage of the max/min-defined parameters" in markdown
-    assert "| maximum thickness | 72.0% | 89.0% |" in markdown
-    assert "| profile, pressure side | 0.0% | 7.5% |" in markdown
+    assert "## Coverage of the intervals (measured over 200 simulated scans)" in markdown
+    assert "| maximum thickness | 72.0% | 89.0% | 94.5% | denoised 94.5% verified |" in markdown
+    assert "| profile, pressure side | 0.0% | 7.5% | 94.0% | denoised 94.0% verified |" in markdown
     assert "## GUM budget per source" in markdown
     with files.csv.open() as stream:
         rows = list(csv.DictReader(stream))
@@ -72,9 +80,24 @@ def test_report_files_and_content(demo: SectionInspection, tmp_path: Path) -> No
     assert files.histograms.stat().st_size > 10_000
 
 
+def test_seed_method_flags_the_intervals_known_to_under_cover() -> None:
+    run = section_demo(trials=2000, seed=3, method="seed")
+    data = section_report_dict(run.result, run.corrections)
+    assert data["method"] == "seed" and data["denoise_half_width_m"] is None
+    verified = {row["name"]: row["coverage_verified"] for row in data["parameters"]}
+    assert verified == {name: name in ("axial_offset", "circumferential_offset", "twist_angle") for name in verified}
+    kinds = [row["stated_interval_kind"] for row in data["parameters"]]
+    assert kinds == ["reflected", "reflected", "jcgm101", "jcgm101", "jcgm101", *["reflected"] * 4]
+    note = data["coverage_note"]
+    assert note.startswith("NOT coverage-verified (92%-98% over 200 simulated scans): maximum thickness")
+    table = format_section_table(run.result, run.corrections).splitlines()
+    assert "bias-corrected interval" in table[0]
+    assert table[2].endswith("89.0% NOT VERIFIED") and table[4].endswith("93.5%")
+
+
 def test_console_table_layout(demo: SectionInspection) -> None:
     table = format_section_table(demo.result, demo.corrections, truth=demo.truth).splitlines()
-    assert table[0].startswith("parameter") and "bias-corrected interval" in table[0]
+    assert table[0].startswith("parameter") and "interval (denoised MC)" in table[0] and "coverage" in table[0]
     assert sum("truth" in line for line in table) == 9
     thickness = table[2].split()
     assert thickness[:3] == ["maximum", "thickness", f"{demo.corrections[0].measured * 1e3:.4f}"]
