@@ -880,7 +880,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_section(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app.section_inspection import DEMO_SCENARIO, inspect_section, section_demo
     from robocal_uncertainty.montecarlo.engine import AdaptiveSettings
-    from robocal_uncertainty.report.section_report import format_section_table, write_section_report
+    from robocal_uncertainty.report.section_report import (
+        coverage_summary,
+        format_section_table,
+        write_section_report,
+    )
 
     if args.demo == (args.cloud is not None):
         raise ConfigError("section needs a CLOUD file or bag, or --demo (not both)")
@@ -909,6 +913,7 @@ def _cmd_section(args: argparse.Namespace) -> int:
                 workers=args.workers,
                 instrument=args.instrument,
                 progress=progress,
+                method=args.method,
             )
         else:
             run = inspect_section(
@@ -924,6 +929,7 @@ def _cmd_section(args: argparse.Namespace) -> int:
                 topic=args.topic,
                 message=args.message,
                 progress=progress,
+                method=args.method,
             )
     finally:
         finish()
@@ -936,10 +942,7 @@ def _cmd_section(args: argparse.Namespace) -> int:
     print()
     print(format_section_table(result, run.corrections, truth=run.truth))
     print()
-    print(
-        "note: the max/min parameters (thickness, chord, profiles) are biased upward by the noise; their "
-        "intervals under-cover (measured coverage in the report). Offsets and twist are well calibrated."
-    )
+    print(f"note: {coverage_summary(result.method)}")
     from robocal_uncertainty.app.output_paths import clear_earlier_report
 
     clear_earlier_report(args.out)
@@ -1737,6 +1740,13 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
     p.add_argument(
         "--workers", type=int, default=1, help="worker processes (never changes the result; default %(default)s)"
+    )
+    p.add_argument(
+        "--method",
+        choices=("denoised", "seed"),
+        default="denoised",
+        help="denoised: Monte Carlo of the error around the denoised cloud (intervals coverage-verified); "
+        "seed: perturb the measured cloud as the seed does (max/min intervals under-cover) (default %(default)s)",
     )
     p.add_argument("--out", default="section_report", help="report directory (default %(default)s)")
     _add_force_arg(p, "an earlier report in --out")
