@@ -280,6 +280,13 @@ def orientation_lines(orientation: OrientationUncertainty, frame_id: str) -> lis
     rows = [[label, *cells] for label, cells in orientation_rows(orientation)]
     lines.extend(_grid(["Quantity", *ROTATION_AXES], rows))
     overlapping = ", ".join(name for name, ok in zip(ROTATION_AXES, orientation.determined) if not ok)
+    if len(orientation.undetermined_directions) == 3:
+        lines.append(
+            "undetermined: every rotation of the tool; no parameter the measurements see fixes its orientation "
+            "(e.g. points on joint 6's axis see neither the rotation about it nor the flange tilt of the joint-6 "
+            "parameters held at nominal), so rx, ry, rz carry no uncertainty statement"
+        )
+        return lines
     for direction in orientation.undetermined_directions:
         d = ", ".join(f"{c:+.4f}" for c in direction)
         lines.append(

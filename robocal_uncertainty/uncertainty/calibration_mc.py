@@ -696,7 +696,13 @@ def undetermined_rotations(prep: _Prepared) -> list[Array]:
     rng = np.random.default_rng(20231101)  # the probe poses of structural_observability
     lo, hi = model.joint_limits[:, 0], model.joint_limits[:, 1]
     probe = rng.uniform(lo, hi, size=(200, model.n_joints))
-    _, jac = measurement.predict_and_jacobian(layout, calibration.estimate, probe)
+    # Linearised at the nominal parameters, where identify decided what to estimate: a
+    # parameter it held at nominal there (e.g. joint6.a for points on joint 6's axis) has an
+    # unseen error even though at the estimate its column is no longer exactly dependent. The
+    # rotation Jacobian below is taken at the same point, so that exact dependencies (joint6.theta
+    # and tool.rz) cancel there as they do in the measurements; the directions found are then
+    # carried with the tool (body-fixed, e.g. "about the tool axis") to the calibrated rotation.
+    _, jac = measurement.predict_and_jacobian(layout, calibration.nominal, probe)
     a_mat = stack_jacobian(measurement, jac)[:, cand]
     norms = np.linalg.norm(a_mat, axis=0)
     scale = np.where(norms > 1e-9 * norms.max(), norms, 1.0)
@@ -704,11 +710,15 @@ def undetermined_rotations(prep: _Prepared) -> list[Array]:
     _, sv, vt = np.linalg.svd(a_mat, full_matrices=True)
     rank = int(np.sum(sv > _NULL_RTOL * sv[0]))
     null = vt[rank:].T  # (n_cand, n_null), normalised parameter coordinates
-    p_out = calibration.estimate.copy()
+    p_out = calibration.nominal.copy()
+    p_cal = calibration.estimate.copy()
     b0 = layout.base_index
     if prep.trials.drop_base:
         p_out[b0 : b0 + 6] = 0.0
-    _, _, g6 = forward_poses_and_jacobian(layout, p_out, prep.test_joints)
+        p_cal[b0 : b0 + 6] = 0.0
+    _, r_nominal, g6 = forward_poses_and_jacobian(layout, p_out, prep.test_joints)
+    _, r_calibrated = forward_poses(layout, p_cal, prep.test_joints)
+    transport = r_calibrated @ np.swapaxes(r_nominal, -1, -2)
     j_w = g6[:, 3:, :]
     if prep.trials.drop_base:
         j_w[:, :, b0 : b0 + 6] = 0.0
@@ -721,7 +731,7 @@ def undetermined_rotations(prep: _Prepared) -> list[Array]:
         m_mat = j_w[i] @ null
         u, sm, _ = np.linalg.svd(m_mat, full_matrices=False)
         ref = max(float(np.linalg.norm(j_w[i], 2)), np.finfo(float).tiny)
-        out.append(u[:, sm > _ESTIMABLE_RTOL * ref].T.copy())
+        out.append(u[:, sm > _ESTIMABLE_RTOL * ref].T @ transport[i].T)
     return out
 
 

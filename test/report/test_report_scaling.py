@@ -89,7 +89,8 @@ def test_many_configurations_report_is_small_and_summarised(many, many_report):
         assert pose[key] is not None
     assert set(pose["axes"][0]["intervals"]) == {"probabilistically_symmetric", "shortest"}
     assert len(pose["region"]["semi_axes_m"]) == 3
-    assert (out / "report.json").stat().st_size < 1.5e6
+    # ~10 kB per configuration (positions, orientation incl. its undetermined directions, GUM, region).
+    assert (out / "report.json").stat().st_size < 1.7e6
 
     with (out / "configurations.csv").open(encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))

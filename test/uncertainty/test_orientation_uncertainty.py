@@ -50,26 +50,19 @@ def test_positions_and_parameters_are_bit_identical_without_orientation(on_axis)
         assert a.orientation is not None
 
 
-def test_point_campaign_on_tool_axis_names_the_rotation_about_the_tool_axis(on_axis) -> None:
+def test_point_campaign_on_tool_axis_leaves_every_rotation_undetermined(on_axis) -> None:
+    """Points on joint 6's axis see neither the rotation about it nor the flange tilt of the
+    joint6.a / joint6.alpha errors the calibration holds at nominal: nothing is stated."""
     _, _, result = on_axis
     for pose in result.poses:
         o = pose.orientation
-        assert o.undetermined_directions.shape == (1, 3)
-        tool_z = o.mean_rotation[:, 2]
-        # The undetermined direction is joint 6's axis, the tool z axis.
-        assert abs(abs(float(o.undetermined_directions[0] @ tool_z)) - 1.0) < 1e-6
-        # Fixed output axes overlap it here, so none has a number; published variance is huge
-        # along the tool axis only, the tilt perpendicular to it keeps the Monte Carlo value.
+        assert o.undetermined_directions.shape == (3, 3)
+        np.testing.assert_allclose(o.undetermined_directions @ o.undetermined_directions.T, np.eye(3), atol=1e-12)
         assert o.determined == (False, False, False)
         ros = o.ros_covariance(pose.covariance)
         assert ros.shape == (6, 6)
         np.testing.assert_allclose(ros, ros.T)
-        u = o.undetermined_directions[0]
-        assert float(u @ ros[3:, 3:] @ u) > 1e5
-        tilt = np.cross(u, [1.0, 0.0, 0.0])
-        tilt /= np.linalg.norm(tilt)
-        # (float64 keeps ~1e-10 rad^2 absolute beside a 1e6 rad^2 entry: 2 % of a 1e-8 variance.)
-        assert float(tilt @ ros[3:, 3:] @ tilt) == pytest.approx(float(tilt @ o.covariance @ tilt), rel=0.02)
+        assert np.all(np.linalg.eigvalsh(ros[3:, 3:]) > 1e5)
         np.testing.assert_array_equal(ros[:3, :3], pose.covariance)
 
 
