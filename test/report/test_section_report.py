@@ -89,7 +89,7 @@ def test_seed_method_flags_the_intervals_known_to_under_cover() -> None:
     kinds = [row["stated_interval_kind"] for row in data["parameters"]]
     assert kinds == ["reflected", "reflected", "jcgm101", "jcgm101", "jcgm101", *["reflected"] * 4]
     note = data["coverage_note"]
-    assert note.startswith("NOT coverage-verified (92%-98% over 200 simulated scans): maximum thickness")
+    assert note.startswith("NOT coverage-verified (92%-98% over 200 simulated scans of the demo section): maximum")
     table = format_section_table(run.result, run.corrections).splitlines()
     assert "bias-corrected interval" in table[0]
     assert table[2].endswith("89.0% NOT VERIFIED") and table[4].endswith("93.5%")
