@@ -2,7 +2,8 @@
 
 ``read_point_cloud`` / ``read_nominal_section`` (and the shipped blade readers) give SI data;
 ``evaluate_section`` computes the seed's nine section parameters; ``section_uncertainty`` runs
-the batched Monte Carlo under the CMM model (``load_instrument``) with the GUM comparison.
+the batched Monte Carlo under the CMM model (``load_instrument``) with the GUM comparison
+(method ``denoised``: the error sampled around ``denoise_section``'s cloud).
 """
 
 from typing import TYPE_CHECKING
@@ -20,6 +21,7 @@ if TYPE_CHECKING:
         point_error_sources,
         seed_instrument,
     )
+    from robocal_uncertainty.inspection.denoise import DenoisedCloud, denoise_section
     from robocal_uncertainty.inspection.nominal_curve import ClosestPoints, NominalCurve
     from robocal_uncertainty.inspection.point_cloud import (
         LENGTH_UNITS,
@@ -45,6 +47,7 @@ if TYPE_CHECKING:
     from robocal_uncertainty.inspection.section_mc import (
         SectionUncertainty,
         full_section_trials,
+        prepare_trials,
         section_uncertainty,
     )
     from robocal_uncertainty.inspection.segmentation import REGIONS, Segmentation, segment_section
@@ -60,6 +63,7 @@ __all__ = [
     "BiasCorrection",
     "ClosestPoints",
     "CmmInstrument",
+    "DenoisedCloud",
     "ErrorSource",
     "NominalCurve",
     "NominalSection",
@@ -72,12 +76,14 @@ __all__ = [
     "Segmentation",
     "bias_corrections",
     "chord_length",
+    "denoise_section",
     "evaluate_section",
     "full_section_trials",
     "load_instrument",
     "max_thickness",
     "point_displacements",
     "point_error_sources",
+    "prepare_trials",
     "profile_deviations",
     "read_cascade_profile",
     "read_nominal_section",
