@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Literal
@@ -393,7 +394,9 @@ def identify(
         weighting by the latter lets the rotations pull the positions away (measured on the
         UR10 series: held-out position RMS 0.437 mm stated vs 0.416 mm variance components,
         0.420 mm from the points alone). The estimated values are in
-        ``result.measurement.weight_std``.
+        ``result.measurement.weight_std``. With fewer than 10
+        residual degrees of freedom per component (a handful of poses), or when the
+        re-weighted fit does not converge, the stated weights are used and a warning says why.
 
     Returns
     -------
@@ -424,29 +427,74 @@ def identify(
     measurement = campaign.measurement
     if not isinstance(measurement, PoseMeasurement):
         return fit(campaign, accept_unconverged=accept_unconverged)
-    stated = measurement.std
     current = dataclasses.replace(measurement, weight_std=None)
+    stated_campaign = dataclasses.replace(campaign, measurement=current)
     if weighting == "stated":
-        result = fit(dataclasses.replace(campaign, measurement=current), accept_unconverged=accept_unconverged)
-        return dataclasses.replace(result, weighting="stated")
-    fits = 0
-    for fits in range(1, _VARIANCE_COMPONENT_FITS + 1):
-        # Intermediate fits only estimate the weights: an unconverged one is still a guide.
-        trial = fit(dataclasses.replace(campaign, measurement=current), accept_unconverged=True)
-        n_eq = trial.residuals.size
-        redundancy = max(1.0 - trial.effective_parameters / n_eq, 1.0 / n_eq)
-        scatter = np.sqrt(np.mean(trial.residuals**2, axis=0) / redundancy)
-        weight_std = np.maximum(scatter, stated)
-        previous = 1.0 / current.weights
-        current = dataclasses.replace(measurement, weight_std=tuple(float(v) for v in weight_std))
-        if np.max(np.abs(weight_std / previous - 1.0)) < _VARIANCE_COMPONENT_TOL:
-            break
-    result = fit(dataclasses.replace(campaign, measurement=current), accept_unconverged=accept_unconverged)
-    return dataclasses.replace(result, weighting="variance_components", weighting_iterations=fits)
+        return dataclasses.replace(fit(stated_campaign, accept_unconverged=accept_unconverged), weighting="stated")
+    return _variance_component_fit(fit, stated_campaign, accept_unconverged)
 
 
 _VARIANCE_COMPONENT_FITS = 10
 _VARIANCE_COMPONENT_TOL = 0.02
+_VARIANCE_COMPONENT_MIN_DOF = 10.0
+"""Residual degrees of freedom per component below which a variance is too noisy to weigh by."""
+
+
+def _variance_component_fit(
+    fit: Callable[..., IdentificationResult], campaign: Campaign, accept_unconverged: bool
+) -> IdentificationResult:
+    """:func:`identify` weighted by variance components (see its ``weighting``).
+
+    Falls back to the stated weights, with a warning that says why, when the campaign leaves
+    fewer than 10 residual degrees of freedom per component (a variance from a handful of
+    residuals would swing the weights by tens of percent) or when the fit with the estimated
+    weights does not converge where the stated one does.
+    """
+    measurement = campaign.measurement
+    assert isinstance(measurement, PoseMeasurement)
+    stated = measurement.std
+    current = measurement
+    first = fit(campaign, accept_unconverged=True)
+    n_poses, dim = first.residuals.shape
+    dof = n_poses * max(1.0 - first.effective_parameters / (n_poses * dim), 0.0)
+
+    def stated_fit(reason: str) -> IdentificationResult:
+        result = first if first.converged else fit(campaign, accept_unconverged=accept_unconverged)
+        warning = f"weighted by the stated uncertainties: {reason}"
+        return dataclasses.replace(result, weighting="stated", warnings=(*result.warnings, warning))
+
+    if dof < _VARIANCE_COMPONENT_MIN_DOF:
+        return stated_fit(
+            f"{n_poses} poses leave {dof:.3g} residual degrees of freedom per component, too few to "
+            f"estimate its variance (need {_VARIANCE_COMPONENT_MIN_DOF:g})"
+        )
+    trial, fits, change = first, 1, float("inf")
+    while True:
+        # Intermediate fits only estimate the weights: an unconverged one is still a guide.
+        n_eq = trial.residuals.size
+        redundancy = max(1.0 - trial.effective_parameters / n_eq, 1.0 / n_eq)
+        scatter = np.sqrt(np.mean(trial.residuals**2, axis=0) / redundancy)
+        weight_std = np.maximum(scatter, stated)
+        change = float(np.max(np.abs(weight_std * current.weights - 1.0)))
+        current = dataclasses.replace(measurement, weight_std=tuple(float(v) for v in weight_std))
+        if change < _VARIANCE_COMPONENT_TOL or fits >= _VARIANCE_COMPONENT_FITS:
+            break
+        trial = fit(dataclasses.replace(campaign, measurement=current), accept_unconverged=True)
+        fits += 1
+    result = fit(dataclasses.replace(campaign, measurement=current), accept_unconverged=True)
+    if not result.converged and first.converged:
+        return stated_fit("the fit with the estimated variance components did not converge")
+    if not result.converged and not accept_unconverged:
+        # The same refusal as a fixed-weight fit: let identify's own check raise it.
+        fit(dataclasses.replace(campaign, measurement=current), accept_unconverged=False)
+    warns = result.warnings
+    if change >= 0.1:
+        warns = (
+            *warns,
+            f"variance components not settled after {fits} fits (last change of a weight "
+            f"{100 * change:.3g} %): the weights are approximate",
+        )
+    return dataclasses.replace(result, weighting="variance_components", weighting_iterations=fits, warnings=warns)
 
 
 def _identify_weighted(

@@ -190,3 +190,21 @@ def test_weight_std_sets_the_weights() -> None:
     m = PoseMeasurement((1e-5,) * 3, (1e-4,) * 3, weight_std=(2e-4, 2e-4, 2e-4, 1e-3, 1e-3, 1e-3))
     np.testing.assert_array_equal(m.weights, [5e3, 5e3, 5e3, 1e3, 1e3, 1e3])
     np.testing.assert_array_equal(m.std, [1e-5, 1e-5, 1e-5, 1e-4, 1e-4, 1e-4])
+
+
+def test_too_few_poses_for_variance_components_fall_back_to_the_stated_weights() -> None:
+    """8 poses of the UR10 leave ~3 residual degrees of freedom per component: a variance from
+    them would swing the weights (and once broke the convergence); the stated ones are used, and
+    the warning says why. 20 poses are enough."""
+    model = load_robot_model(Path(__file__).resolve().parents[2] / "config" / "ur10.yaml")
+    small = simulate_campaign(model, SimulationSettings(n_poses=8, orientation_std=1e-4), seed=1)
+    result = identify(model, small.campaign)
+    assert result.converged
+    assert result.weighting == "stated"
+    assert result.measurement.weight_std is None
+    [warning] = [w for w in result.warnings if "weighted by the stated uncertainties" in w]
+    assert "8 poses leave" in warning and "need 10" in warning
+    stated = identify(model, small.campaign, weighting="stated")
+    np.testing.assert_array_equal(result.estimate, stated.estimate)
+    larger = simulate_campaign(model, SimulationSettings(n_poses=20, orientation_std=1e-4), seed=1)
+    assert identify(model, larger.campaign).weighting == "variance_components"
