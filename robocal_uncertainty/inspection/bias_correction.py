@@ -17,7 +17,7 @@ the bias) is stated as [0, ...] instead of an interval of negative deviations.
 
 The reflection takes the bias at the measured cloud, where the noise has already pushed the
 extreme points out, for the bias at the true cloud; over simulated scans it still under-covers
-(thickness 89 %, profiles 7-74 %). :func:`~.section_mc.section_uncertainty` with
+(thickness 89 %, profiles 7.5-73 %). :func:`~.section_mc.section_uncertainty` with
 ``method="denoised"`` samples the error around a denoised cloud instead; its Monte Carlo
 distribution is already that of the measurand, so for such a result this module only reads
 the bias (``f(y)`` minus the Monte Carlo mean), the estimate (the mean) and the interval (the

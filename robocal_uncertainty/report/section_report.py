@@ -62,7 +62,7 @@ COVERAGE_STUDY: dict[str, Coverage] = {
     "axial_offset": Coverage(0.935, 0.935, 0.935),
     "circumferential_offset": Coverage(0.945, 0.945, 0.945),
     "twist_angle": Coverage(0.945, 0.935, 0.935),
-    "profile_leading_edge": Coverage(0.0, 0.735, 0.925),
+    "profile_leading_edge": Coverage(0.0, 0.73, 0.925),
     "profile_trailing_edge": Coverage(0.0, 0.585, 0.925),
     "profile_pressure_side": Coverage(0.0, 0.075, 0.94),
     "profile_suction_side": Coverage(0.0, 0.13, 0.92),
