@@ -882,6 +882,7 @@ def _cmd_section(args: argparse.Namespace) -> int:
     from robocal_uncertainty.montecarlo.engine import AdaptiveSettings
     from robocal_uncertainty.report.section_report import (
         coverage_summary,
+        format_repeatability_budget,
         format_section_table,
         write_section_report,
     )
@@ -893,6 +894,12 @@ def _cmd_section(args: argparse.Namespace) -> int:
     if args.demo and (args.nominal or args.unit or args.topic or args.message is not None):
         raise ConfigError(
             "--demo uses the shipped Rotor 37 scenario: --nominal, --unit, --topic, --message do not apply"
+        )
+    if args.demo and args.repeat_scans is not None:
+        raise ConfigError("--repeat-scans needs measured scans of CLOUD's section; --demo simulates no repeats")
+    if args.repeat_scans is not None and len(args.repeat_scans) < 2:
+        raise ConfigError(
+            f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(args.repeat_scans)}"
         )
     trials = _trials(args.trials) if args.trials is not None else (100_000 if args.demo else 1_000_000)
     adaptive = AdaptiveSettings() if trials == "auto" else None
@@ -930,6 +937,7 @@ def _cmd_section(args: argparse.Namespace) -> int:
                 message=args.message,
                 progress=progress,
                 method=args.method,
+                repeat_scans=args.repeat_scans,
             )
     finally:
         finish()
@@ -942,6 +950,9 @@ def _cmd_section(args: argparse.Namespace) -> int:
     print()
     print(format_section_table(result, run.corrections, truth=run.truth))
     print()
+    if result.gum_with_repeatability is not None:
+        print(format_repeatability_budget(result))
+        print()
     print(f"note: {coverage_summary(result.method)}")
     from robocal_uncertainty.app.output_paths import clear_earlier_report
 
@@ -955,6 +966,7 @@ def _cmd_section(args: argparse.Namespace) -> int:
         "elapsed_s": run.elapsed_s,
         "workers": run.workers,
         "demo": bool(args.demo),
+        "repeat_scans": list(run.repeats),
     }
     files = write_section_report(result, run.corrections, args.out, truth=run.truth, extra=extra)
     print(f"section report written to {files.markdown.parent}")
@@ -1734,6 +1746,13 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--instrument", help="instrument YAML or shipped name (default: cmm_seed, the seed's CMM)")
     p.add_argument("--topic", help="PointCloud2 topic of a bag (default: its only PointCloud2 topic)")
     p.add_argument("--message", type=int, help="0-based message index in the topic (default: all messages joined)")
+    p.add_argument(
+        "--repeat-scans",
+        nargs="+",
+        metavar="CLOUD",
+        help="2 or more repeated scans of the same section (formats and --unit as CLOUD): their standard "
+        "deviation is the GUM budget's u3 (repeatability), shown for the chord as in the seed's table",
+    )
     p.add_argument(
         "--trials", help="Monte Carlo trials, or auto (JCGM 101 7.9) (default 1000000, the seed's; --demo 100000)"
     )

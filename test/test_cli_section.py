@@ -9,11 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from robocal_uncertainty.app.section_inspection import inspect_section, load_section_nominal
 from robocal_uncertainty.bagio.point_cloud2 import encode_point_cloud2, write_point_cloud2_mcap
 from robocal_uncertainty.cli import main
-from robocal_uncertainty.inspection.point_cloud import PointCloud
+from robocal_uncertainty.inspection.point_cloud import PointCloud, read_point_cloud
+from robocal_uncertainty.inspection.section import evaluate_section
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 
 TRIALS = "3000"
@@ -43,6 +45,7 @@ def test_section_report_equals_api(cloud_file: Path, tmp_path: Path, capsys: pyt
     assert "interval (denoised MC)" in text and "Every stated interval is coverage-verified" in text
     assert sorted(p.name for p in out.iterdir()) == [
         "section.csv",
+        "section.html",
         "section.json",
         "section.md",
         "section_histograms.png",
@@ -139,3 +142,92 @@ def test_other_section_than_the_nominal_is_refused(
     status = main(["section", str(path), "--nominal", "rotor37", "--trials", "10", "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err.strip()
     assert status == 1 and len(err.splitlines()) == 1, err
+
+
+def _write_scan(path: Path, cloud: PointCloud, noise: NDArray[np.float64] | None = None) -> Path:
+    points = cloud.points.copy()
+    if noise is not None:
+        points[:, :2] += noise
+    assert cloud.probe_vectors is not None
+    np.savetxt(path, np.column_stack([points * 1e3, cloud.probe_vectors]), fmt="%.9f", header="unit: mm\nx y z i j k")
+    return path
+
+
+@pytest.fixture(scope="module")
+def repeat_files(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """CLOUD and 3 repeated scans of the demo section (each with its own 1 um probing noise)."""
+    curve = load_section_nominal("rotor37")
+    folder = tmp_path_factory.mktemp("repeats")
+    rng = np.random.default_rng(7)
+    files = []
+    for k in range(4):
+        scan = simulate_section_scan(
+            curve, 400, offset=(-0.1e-3, 0.05e-3), twist=math.radians(0.05), form_amplitude=5e-6
+        )
+        files.append(_write_scan(folder / f"scan{k}.txt", scan, rng.normal(0.0, 1e-6, (scan.n_points, 2))))
+    return files
+
+
+def test_repeat_scans_give_the_seeds_chord_budget(
+    repeat_files: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "report"
+    cloud, *repeats = repeat_files
+    argv = ["section", str(cloud), "--nominal", "rotor37", "--trials", "2000", "--out", str(out), "--no-progress"]
+    assert main([*argv, "--repeat-scans", *map(str, repeats)]) == 0
+    text = capsys.readouterr().out
+    # u3 computed independently: the standard deviation (ddof 1) of the repeated scans' chords.
+    curve = load_section_nominal("rotor37")
+    chords = [evaluate_section(read_point_cloud(f), curve).parameters.chord_length for f in repeats]
+    u3 = float(np.std(chords, ddof=1))
+    assert u3 > 0
+    data = json.loads((out / "section.json").read_text())
+    assert data["repeat_scans"] == [str(f) for f in repeats]
+    budget = data["gum_with_repeatability"]
+    assert budget["n_scans"] == 3 and budget["repeatability_dof"] == 2
+    chord = budget["parameters"][1]
+    assert chord["name"] == "chord_length" and chord["unit"] == "m"
+    assert chord["contributions"]["repeatability"] == pytest.approx(u3, rel=1e-6)
+    terms = np.array(list(chord["contributions"].values()))
+    assert chord["U"] == pytest.approx(chord["k"] * math.sqrt(float((terms**2).sum())), rel=1e-9)
+    # The printed budget: u1 MPE, u2 thermal, u3 repeatability, the other sources, u_c, k, U95 (um).
+    block = text[text.index("GUM budget of the chord length with repeatability") :].splitlines()
+    assert "3 repeated scans" in block[0] and "in um" in block[0]
+    assert [line.split()[:2] for line in block[1:4]] == [["u1", "MPE"], ["u2", "thermal"], ["u3", "repeatability"]]
+    assert [line.split()[0] for line in block[4:9]] == ["probing", "algorithm", "u_c", "k", "U95"]
+    assert float(block[3].split()[2]) == pytest.approx(u3 * 1e6, abs=6e-5)
+    contributions = [float(line.split()[-2]) for line in block[1:6]]
+    assert all(line.split()[-1] == "um" for line in block[1:6])
+    u_c, k, u95 = float(block[6].split()[1]), float(block[7].split()[1]), float(block[8].split()[1])
+    assert block[8].split()[2] == "um"
+    assert u_c == pytest.approx(math.sqrt(sum(c * c for c in contributions)), abs=2e-4)
+    assert u95 == pytest.approx(k * math.sqrt(sum(c * c for c in contributions)), abs=1e-3)
+    markdown = (out / "section.md").read_text()
+    assert "## GUM budget with repeatability (seed's Table)" in markdown
+    assert f"| u3 repeatability | {u3 * 1e6:.4f} µm |" in markdown
+
+
+@pytest.mark.parametrize(
+    ("case", "match"),
+    [
+        ("one", "--repeat-scans needs at least 2 repeated scans"),
+        ("demo", "--demo simulates no repeats"),
+        ("other", "repeated scan .*other.txt: measured points do not match the nominal section"),
+    ],
+)
+def test_bad_repeat_scans_end_in_one_line(
+    repeat_files: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str, match: str
+) -> None:
+    cloud, first, second, _ = repeat_files
+    other = _write_scan(tmp_path / "other.txt", simulate_section_scan(load_section_nominal("rotor37:5"), 400))
+    argv = {
+        "one": ["section", str(cloud), "--nominal", "rotor37", "--repeat-scans", str(first)],
+        "demo": ["section", "--demo", "--repeat-scans", str(first), str(second)],
+        "other": ["section", str(cloud), "--nominal", "rotor37", "--repeat-scans", str(first), str(other)],
+    }[case]
+    status = main([*argv, "--trials", "10", "--out", str(tmp_path / "r"), "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert status == 1, err
+    assert len(err.splitlines()) == 1
+    assert err.startswith("robocal-uncertainty section: error:")
+    assert __import__("re").search(match, err), err

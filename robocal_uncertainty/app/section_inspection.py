@@ -7,7 +7,9 @@ bias-corrected intervals of the max/min-defined parameters. The default method `
 samples the error around a denoised cloud (its 95 % intervals covered the truth in 92-94.5 % of
 200 simulated scans, for every parameter); ``seed`` perturbs the measured cloud as the seed does.
 :func:`section_demo` does the same on a simulated 1 836-point CMM scan of the shipped NASA
-Rotor 37 section at the seed's size, with a known truth.
+Rotor 37 section at the seed's size, with a known truth. With ``repeat_scans``,
+:func:`inspect_section` also evaluates k >= 2 repeated scans of the same section with the same
+algorithm and adds their standard deviation to the GUM budget (the seed's u3, repeatability).
 
 Shipped nominals (``--nominal``): ``rotor37`` (surface 2 scaled by 7.14: maximum thickness
 30.37 mm, the seed's blade 30.365 mm), ``rotor37:K`` (surface K, same scale), ``cascade``
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -45,6 +48,7 @@ from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, ProgressCall
 
 __all__ = [
     "DEMO_SCENARIO",
+    "REPEAT_TOLERANCE",
     "ROTOR37_SCALE",
     "SectionInspection",
     "inspect_section",
@@ -92,6 +96,9 @@ class SectionInspection:
         Wall time of the Monte Carlo and GUM [s].
     workers : int
         Worker processes used (never changes the result).
+    repeats : tuple of str
+        Sources of the repeated scans whose spread is in ``result.gum_with_repeatability``
+        (empty when none were given).
     """
 
     result: SectionUncertainty
@@ -102,6 +109,7 @@ class SectionInspection:
     truth: NDArray[np.float64] | None
     elapsed_s: float
     workers: int
+    repeats: tuple[str, ...] = ()
 
 
 def _shipped(*parts: str) -> Path:
@@ -179,11 +187,13 @@ def _run(
     progress: ProgressCallback | None,
     truth: NDArray[np.float64] | None,
     method: str,
+    repeats: Sequence[PointCloud] = (),
 ) -> SectionInspection:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         msg = f"seed must be an integer >= 0, got {seed!r}"
         raise ConfigError(msg)
     start = time.perf_counter()
+    repeat_parameters = _repeat_parameters(cloud, curve, repeats) if repeats else None
     result = section_uncertainty(
         cloud,
         curve,
@@ -196,6 +206,7 @@ def _run(
         progress=progress,
         keep_samples=True,
         method=method,
+        repeat_parameters=repeat_parameters,
     )
     return SectionInspection(
         result=result,
@@ -206,7 +217,40 @@ def _run(
         truth=truth,
         elapsed_s=time.perf_counter() - start,
         workers=workers,
+        repeats=tuple(r.source for r in repeats),
     )
+
+
+REPEAT_TOLERANCE = 0.01
+"""Largest relative difference of a repeated scan's chord or maximum thickness from CLOUD's
+(both invariant to the part's placement): beyond it the file is not a repeat of this section."""
+
+
+def _repeat_parameters(cloud: PointCloud, curve: NominalCurve, repeats: Sequence[PointCloud]) -> NDArray[np.float64]:
+    """Parameters (k, 9) of the repeated scans, each evaluated as CLOUD is (same nominal, options)."""
+    if len(repeats) < 2:
+        msg = f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(repeats)}"
+        raise ConfigError(msg)
+    main = evaluate_section(cloud, curve).parameters
+    rows = []
+    for scan in repeats:
+        try:
+            found = evaluate_section(scan, curve).parameters
+        except InputError as exc:
+            msg = f"repeated scan {scan.source}: {exc}"
+            raise InputError(msg) from exc
+        for label, a, b in (
+            ("chord", found.chord_length, main.chord_length),
+            ("maximum thickness", found.max_thickness, main.max_thickness),
+        ):
+            if abs(a - b) > REPEAT_TOLERANCE * abs(b):
+                msg = (
+                    f"repeated scan {scan.source}: {label} {a * 1e3:.4f} mm differs from CLOUD's {b * 1e3:.4f} mm "
+                    f"by more than {REPEAT_TOLERANCE:.0%}: not a repeat of the same section"
+                )
+                raise InputError(msg)
+        rows.append(found.as_array())
+    return np.asarray(rows, dtype=np.float64)
 
 
 def inspect_section(
@@ -224,6 +268,7 @@ def inspect_section(
     message: int | None = None,
     progress: ProgressCallback | None = None,
     method: str = "denoised",
+    repeat_scans: Sequence[str | Path | PointCloud] | None = None,
 ) -> SectionInspection:
     """Measure a section's nine parameters and their uncertainty.
 
@@ -251,14 +296,34 @@ def inspect_section(
         ``progress(done, target)`` after each chunk of trial blocks.
     method : str
         ``denoised`` (default) or ``seed``; see :func:`~robocal_uncertainty.inspection.section_mc.section_uncertainty`.
+    repeat_scans : sequence of str, Path or PointCloud, optional
+        k >= 2 repeated scans of the same section (read as `cloud` is, same `unit`, `topic`,
+        `message`), evaluated with the same algorithm against the same nominal; their standard
+        deviations (ddof 1) enter ``result.gum_with_repeatability`` as the seed's u3.
 
     Returns
     -------
     SectionInspection
+
+    Raises
+    ------
+    ConfigError
+        Fewer than 2 repeated scans.
+    InputError
+        A repeated scan cannot be read or evaluated, or its chord or maximum thickness differs
+        from `cloud`'s by more than :data:`REPEAT_TOLERANCE` (not a repeat of this section).
     """
-    measured = (
-        cloud if isinstance(cloud, PointCloud) else load_section_cloud(cloud, unit=unit, topic=topic, message=message)
-    )
+
+    def load(spec: str | Path | PointCloud) -> PointCloud:
+        return (
+            spec if isinstance(spec, PointCloud) else load_section_cloud(spec, unit=unit, topic=topic, message=message)
+        )
+
+    measured = load(cloud)
+    if repeat_scans is not None and len(repeat_scans) < 2:
+        msg = f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(repeat_scans)}"
+        raise ConfigError(msg)
+    repeats = tuple(load(spec) for spec in repeat_scans or ())
     if isinstance(nominal, NominalCurve):
         curve, where = nominal, nominal.section.source
     else:
@@ -275,6 +340,7 @@ def inspect_section(
         progress=progress,
         truth=None,
         method=method,
+        repeats=repeats,
     )
 
 

@@ -1,4 +1,4 @@
-"""Report of a section inspection: JSON (SI), Markdown, CSV and one histogram figure.
+"""Report of a section inspection: JSON (SI), Markdown, HTML, CSV and one histogram figure.
 
 Values are SI inside and in the JSON (``units`` says which); the table, Markdown and CSV give
 lengths in mm (estimates) and µm (uncertainties, profiles), angles in degrees. Every report
@@ -6,13 +6,19 @@ states, per parameter, the measured coverage of the interval it recommends and w
 coverage was verified (within :data:`COVERAGE_TOLERANCE` of 95 % over 200 simulated scans with
 a known truth, :data:`COVERAGE_STUDY`, measured by the slow test
 ``test_coverage_over_200_simulated_scans``), instead of hiding an interval known to under-cover.
+With repeated scans (``gum_with_repeatability``) every report also gives the seed's GUM budget
+of the chord length (u1 MPE, u2 thermal, u3 repeatability, the other sources, u_c, k, U95).
+``section.html`` is ``section.md`` as a self-contained page (the histograms embedded).
 """
 
 from __future__ import annotations
 
+import base64
 import csv
+import html
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -32,7 +38,9 @@ __all__ = [
     "Coverage",
     "SectionReportFiles",
     "coverage_summary",
+    "format_repeatability_budget",
     "format_section_table",
+    "repeatability_budget",
     "section_report_dict",
     "stated_coverage",
     "write_section_report",
@@ -41,7 +49,7 @@ __all__ = [
 SECTION_REPORT_FORMAT = "robocal_uncertainty/section_report/1"
 """``format`` field of ``section.json``."""
 
-SECTION_REPORT_FILES = ("section.json", "section.md", "section.csv", "section_histograms.png")
+SECTION_REPORT_FILES = ("section.json", "section.md", "section.csv", "section_histograms.png", "section.html")
 """Files :func:`write_section_report` writes (always all of them, so ``--force`` leaves none stale)."""
 
 
@@ -122,6 +130,7 @@ class SectionReportFiles:
     markdown: Path
     csv: Path
     histograms: Path
+    html: Path
 
 
 def _display(name: str) -> tuple[str, float, str, float]:
@@ -222,8 +231,90 @@ def section_report_dict(
         "candidate_counts": list(result.candidate_counts),
         "parameters": rows,
         "coverage_note": coverage_summary(result.method),
+        "gum_with_repeatability": repeatability_budget(result),
         **(extra or {}),
     }
+
+
+_SOURCE_LABELS = {
+    "mpe": "u1 MPE",
+    "thermal": "u2 thermal",
+    "repeatability": "u3 repeatability",
+    "probing": "probing",
+    "algorithm": "algorithm",
+}
+
+
+def repeatability_budget(result: SectionUncertainty) -> dict[str, Any] | None:
+    """The GUM budget with repeatability per parameter (SI), or None without repeated scans.
+
+    ``contributions`` are the standard contributions [m, rad] of the instrument sources and of
+    ``repeatability`` (the seed's u3: the standard deviation, ddof 1, of the repeated scans'
+    values, a Type A input with ``n_scans - 1`` degrees of freedom); ``u_c`` their root sum of
+    squares, ``k`` the Student t factor at the Welch-Satterthwaite ``effective_dof``, ``U`` = k u_c.
+    """
+    gum = result.gum_with_repeatability
+    if gum is None:
+        return None
+    n_src = len(result.sources)
+    dof = float(getattr(gum.input_distributions[n_src], "dof", math.nan))
+    rows = []
+    for j, name in enumerate(PARAMETER_NAMES):
+        out = gum.outputs[j]
+        contributions = {src: abs(float(gum.sensitivities[j, i])) for i, src in enumerate(result.sources)}
+        contributions["repeatability"] = abs(float(gum.sensitivities[j, n_src + j]))
+        rows.append(
+            {
+                "name": name,
+                "unit": PARAMETER_UNITS[j],
+                "estimate": out.estimate,
+                "contributions": contributions,
+                "u_c": out.standard_uncertainty,
+                "effective_dof": out.effective_dof if math.isfinite(out.effective_dof) else None,
+                "k": out.coverage_factor,
+                "U": out.expanded_uncertainty,
+            }
+        )
+    return {
+        "n_scans": round(dof) + 1 if math.isfinite(dof) else None,
+        "repeatability_dof": dof if math.isfinite(dof) else None,
+        "coverage_probability": gum.coverage_probability,
+        "parameters": rows,
+    }
+
+
+def _budget_order(contributions: dict[str, float]) -> list[str]:
+    """The seed's order: u1 MPE, u2 thermal, u3 repeatability, then the other sources."""
+    first = [s for s in ("mpe", "thermal", "repeatability") if s in contributions]
+    return first + [s for s in contributions if s not in first]
+
+
+def format_repeatability_budget(result: SectionUncertainty, name: str = "chord_length") -> str:
+    """The seed's GUM budget table of one parameter (default the chord) with repeatability
+    (u1 MPE, u2 thermal, u3 repeatability, the other sources, u_c, k, U95); "" without repeats."""
+    budget = repeatability_budget(result)
+    if budget is None:
+        return ""
+    j = PARAMETER_NAMES.index(name)
+    row = budget["parameters"][j]
+    vu, vf, uu, uf = _display(name)
+    p = budget["coverage_probability"]
+    nu = row["effective_dof"]
+    lines = [
+        f"GUM budget of the {_LABELS[name]} with repeatability ({budget['n_scans']} repeated scans, "
+        f"u3 Type A with {budget['repeatability_dof']:.0f} degrees of freedom); standard contributions in {uu}:",
+    ]
+    for src in _budget_order(row["contributions"]):
+        lines.append(f"  {_SOURCE_LABELS.get(src, src):18s} {row['contributions'][src] * uf:10.4f} {uu}")
+    lines += [
+        f"  {'u_c':18s} {row['u_c'] * uf:10.4f} {uu} (root sum of squares)",
+        f"  {'k':18s} {row['k']:10.4f}    (Student t, {p:.0%}, "
+        + (f"nu_eff = {nu:.1f})" if nu is not None else "nu_eff infinite)"),
+        f"  {f'U{p * 100:.0f}':18s} {row['U'] * uf:10.4f} {uu} (k u_c)",
+        f"  {_LABELS[name]} = {row['estimate'] * vf:.4f} {vu} +- {row['U'] * uf:.2f} {uu} "
+        f"({p:.0%}, GUM with repeatability)",
+    ]
+    return "\n".join(lines)
 
 
 def coverage_summary(method: str) -> str:
@@ -398,8 +489,125 @@ def _markdown(data: dict[str, Any], table: str) -> str:
             f"| {_LABELS[row['name']]} | {study.jcgm101:.1%} | {study.reflected:.1%} | {study.denoised:.1%} "
             f"| {row['stated_interval_kind']} {row['coverage_measured']:.1%} {flag} |"
         )
-    out += ["", "Histograms of the Monte Carlo values: `section_histograms.png`.", ""]
+    repeat = data.get("gum_with_repeatability")
+    if repeat is not None:
+        out += _markdown_repeatability(repeat, data.get("repeat_scans"))
+    out += [
+        "",
+        "## Histograms",
+        "",
+        "![Monte Carlo values of the nine parameters about the measured value; dashed: 95 % interval]"
+        "(section_histograms.png)",
+        "",
+    ]
     return "\n".join(out)
+
+
+def _markdown_repeatability(repeat: dict[str, Any], files: list[str] | None) -> list[str]:
+    chord = repeat["parameters"][PARAMETER_NAMES.index("chord_length")]
+    p = repeat["coverage_probability"]
+    u_label = f"U{p * 100:.0f}"
+    out = [
+        "",
+        "## GUM budget with repeatability (seed's Table)",
+        "",
+        f"Chord length, {repeat['n_scans']} repeated scans"
+        + (f" ({', '.join(files)})" if files else "")
+        + f": u3 is the standard deviation (ddof 1) of their chord lengths, a Type A input with "
+        f"{repeat['repeatability_dof']:.0f} degrees of freedom; u_c the root sum of squares, k the Student t "
+        f"factor at ν_eff (Welch-Satterthwaite), {u_label} = k u_c.",
+        "",
+        "| source | standard contribution |",
+        "|---|---|",
+    ]
+    out += [
+        f"| {_SOURCE_LABELS.get(s, s)} | {chord['contributions'][s] * 1e6:.4f} µm |"
+        for s in _budget_order(chord["contributions"])
+    ]
+    nu = chord["effective_dof"]
+    out += [
+        f"| u_c | {chord['u_c'] * 1e6:.4f} µm |",
+        f"| k | {chord['k']:.4f} (ν_eff {'infinite' if nu is None else f'{nu:.1f}'}) |",
+        f"| {u_label} | {chord['U'] * 1e6:.4f} µm |",
+        "",
+        "Every parameter with repeatability:",
+        "",
+        f"| parameter | u3 repeatability | u_c | ν_eff | k | {u_label} |",
+        "|---|---|---|---|---|---|",
+    ]
+    for row in repeat["parameters"]:
+        _, _, uu, uf = _display(row["name"])
+        nu = row["effective_dof"]
+        out.append(
+            f"| {_LABELS[row['name']]} | {row['contributions']['repeatability'] * uf:.4f} {uu} "
+            f"| {row['u_c'] * uf:.4f} {uu} | {'inf' if nu is None else f'{nu:.1f}'} | {row['k']:.3f} "
+            f"| {row['U'] * uf:.4f} {uu} |"
+        )
+    return out
+
+
+_IMAGE = re.compile(r"^!\[(?P<alt>[^\]]*)\]\((?P<src>[^)]+)\)$")
+
+
+def _markdown_to_html(markdown: str, title: str, directory: Path) -> str:
+    """``section.md`` as a self-contained HTML page in the evaluate report's style: headings,
+    list items, paragraphs, pipe tables, fenced blocks as ``<pre>``, images embedded as base64."""
+    from robocal_uncertainty.report.document import _CSS, _html_cell
+
+    e = html.escape
+    out = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{e(title)}</title><style>{_CSS}pre{{background:#f6f6f6;padding:.5em;overflow-x:auto}}</style>"
+        "</head><body>",
+    ]
+    lines = markdown.splitlines()
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if not line.strip():
+            i += 1
+        elif line.startswith("```"):
+            end = i + 1
+            while end < len(lines) and not lines[end].startswith("```"):
+                end += 1
+            out.append("<pre>" + e("\n".join(lines[i + 1 : end])) + "</pre>")
+            i = end + 1
+        elif line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            out.append(f"<h{level}>{e(line[level:].strip())}</h{level}>")
+            i += 1
+        elif line.startswith("- "):
+            items = []
+            while i < len(lines) and lines[i].startswith("- "):
+                items.append(f"<li>{e(lines[i][2:])}</li>")
+                i += 1
+            out.append("<ul>" + "".join(items) + "</ul>")
+        elif line.startswith("|"):
+            rows = []
+            while i < len(lines) and lines[i].startswith("|"):
+                rows.append([c.strip() for c in lines[i].strip().strip("|").split("|")])
+                i += 1
+            head = "".join(f"<th>{e(h)}</th>" for h in rows[0])
+            body = "".join("<tr>" + "".join(_html_cell(c) for c in row) + "</tr>" for row in rows[2:])
+            out.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+        elif (image := _IMAGE.match(line)) is not None:
+            data = base64.b64encode((directory / image["src"]).read_bytes()).decode("ascii")
+            alt = image["alt"]
+            out.append(
+                f'<figure><img src="data:image/png;base64,{data}" alt="{e(alt)}">'
+                f"<figcaption>{e(alt)}</figcaption></figure>"
+            )
+            i += 1
+        else:
+            para = [line]
+            i += 1
+            while i < len(lines) and lines[i].strip() and not lines[i].startswith(("#", "- ", "|", "```", "![")):
+                para.append(lines[i])
+                i += 1
+            out.append(f"<p>{e(' '.join(para))}</p>")
+    out.append("</body></html>")
+    return "\n".join(out) + "\n"
 
 
 def _plot(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], path: Path) -> None:
@@ -440,7 +648,8 @@ def write_section_report(
     truth: NDArray[np.float64] | None = None,
     extra: dict[str, Any] | None = None,
 ) -> SectionReportFiles:
-    """Write ``section.json``, ``section.md``, ``section.csv``, ``section_histograms.png``."""
+    """Write ``section.json``, ``section.md``, ``section.csv``, ``section_histograms.png`` and
+    ``section.html`` (``section.md`` as a self-contained page, the histograms embedded)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     data = section_report_dict(result, corrections, truth=truth, extra=extra)
@@ -489,4 +698,8 @@ def write_section_report(
                 ]
             )
     _plot(result, corrections, files.histograms)
+    files.html.write_text(
+        _markdown_to_html(files.markdown.read_text(encoding="utf-8"), "Section inspection report", out),
+        encoding="utf-8",
+    )
     return files

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
+import html
 import json
+from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,9 @@ from robocal_uncertainty.app.section_inspection import SectionInspection, sectio
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES
 from robocal_uncertainty.report.section_report import (
     COVERAGE_STUDY,
+    SECTION_REPORT_FILES,
     SECTION_REPORT_FORMAT,
+    format_repeatability_budget,
     format_section_table,
     section_report_dict,
     write_section_report,
@@ -101,3 +105,60 @@ def test_console_table_layout(demo: SectionInspection) -> None:
     assert sum("truth" in line for line in table) == 9
     thickness = table[2].split()
     assert thickness[:3] == ["maximum", "thickness", f"{demo.corrections[0].measured * 1e3:.4f}"]
+
+
+class _StrictParser(HTMLParser):
+    """Tracks open elements: every non-void start tag must be closed in order."""
+
+    VOID = frozenset({"meta", "img", "br", "hr", "link", "input"})
+
+    def __init__(self) -> None:
+        super().__init__(convert_charrefs=True)
+        self.stack: list[str] = []
+        self.errors: list[str] = []
+        self.text: list[str] = []
+        self.images: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        if tag == "img":
+            self.images.append(dict(attrs).get("src") or "")
+        if tag not in self.VOID:
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag: str) -> None:
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"</{tag}> closes {self.stack[-1:] or 'nothing'}")
+        else:
+            self.stack.pop()
+
+    def handle_data(self, data: str) -> None:
+        self.text.append(data)
+
+
+def test_html_report_is_the_markdown_as_a_self_contained_page(demo: SectionInspection, tmp_path: Path) -> None:
+    files = write_section_report(demo.result, demo.corrections, tmp_path, truth=demo.truth)
+    assert "section.html" in SECTION_REPORT_FILES
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(SECTION_REPORT_FILES)
+    page = files.html.read_text(encoding="utf-8")
+    assert page.startswith("<!DOCTYPE html>")
+    parser = _StrictParser()
+    parser.feed(page)
+    parser.close()
+    assert parser.errors == [] and parser.stack == [] and parser.rawdata == ""
+    text = "".join(parser.text)
+    # The console table (a <pre>) and every table row of section.md, cell by cell.
+    for line in format_section_table(demo.result, demo.corrections, truth=demo.truth).splitlines():
+        assert html.escape(line, quote=False) in page, line
+    markdown = files.markdown.read_text(encoding="utf-8")
+    rows = [line for line in markdown.splitlines() if line.startswith("| ") and "---" not in line]
+    assert len(rows) >= 3 * (len(PARAMETER_NAMES) + 1)
+    for row in rows:
+        cells = [c.strip() for c in row.strip().strip("|").split("|")]
+        assert all(cell in text for cell in cells), row
+    for heading in (line.lstrip("#").strip() for line in markdown.splitlines() if line.startswith("#")):
+        assert heading in text
+    assert len(parser.images) == 1 and parser.images[0].startswith("data:image/png;base64,")
+    assert len(parser.images[0]) > 10_000
+    # Without repeated scans there is no repeatability budget.
+    assert format_repeatability_budget(demo.result) == ""
+    assert json.loads(files.json.read_text())["gum_with_repeatability"] is None
