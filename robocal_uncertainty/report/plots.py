@@ -31,6 +31,7 @@ from scipy import stats
 
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.montecarlo.summary import OutputSummary
 from robocal_uncertainty.report.configurations import ConfigurationSummary, summarize_configurations
 from robocal_uncertainty.report.table2 import LENGTH_UNITS
 from robocal_uncertainty.uncertainty.calibration_mc import (
@@ -51,6 +52,17 @@ __all__ = [
 Array = NDArray[np.float64]
 _DPI = 110
 _AXES = ("x", "y", "z")
+
+
+def _mark_summary(ax: Axes, summary: OutputSummary, scale: float) -> None:
+    """Vertical lines of a histogram: the mean, the probabilistically symmetric and the shortest interval."""
+    ax.axvline(summary.estimate * scale, color="k", lw=1.5, label="mean")
+    sym = summary.probabilistically_symmetric
+    ax.axvline(sym.low * scale, color="tab:blue", ls="--", lw=1.2, label="prob. symmetric")
+    ax.axvline(sym.high * scale, color="tab:blue", ls="--", lw=1.2)
+    sh = summary.shortest
+    ax.axvline(sh.low * scale, color="tab:orange", ls=":", lw=1.5, label="shortest")
+    ax.axvline(sh.high * scale, color="tab:orange", ls=":", lw=1.5)
 
 
 def _figure(width: float, height: float) -> Figure:
@@ -154,13 +166,7 @@ def plot_axis_histograms(
             label="Monte Carlo",
         )
         summary = p.axes[j]
-        ax.axvline(summary.estimate * s, color="k", lw=1.5, label="mean")
-        sym = summary.probabilistically_symmetric
-        ax.axvline(sym.low * s, color="tab:blue", ls="--", lw=1.2, label="prob. symmetric")
-        ax.axvline(sym.high * s, color="tab:blue", ls="--", lw=1.2)
-        sh = summary.shortest
-        ax.axvline(sh.low * s, color="tab:orange", ls=":", lw=1.5, label="shortest")
-        ax.axvline(sh.high * s, color="tab:orange", ls=":", lw=1.5)
+        _mark_summary(ax, summary, s)
         u_gum = float(p.gum.standard_uncertainty[j]) * s
         if u_gum > 0:
             lo, hi = ax.get_xlim()
@@ -238,13 +244,7 @@ def plot_rotation_histograms(result: CalibrationUncertainty, path: str | Path, *
         edges = hist.edges * s
         density = hist.counts / max(float(hist.counts.sum()) * float(np.diff(edges).mean()), np.finfo(float).tiny)
         ax.stairs(density, edges, fill=True, color="0.75", ec="0.5", label="Monte Carlo")
-        ax.axvline(summary.estimate * s, color="k", lw=1.5, label="mean")
-        sym = summary.probabilistically_symmetric
-        ax.axvline(sym.low * s, color="tab:blue", ls="--", lw=1.2, label="prob. symmetric")
-        ax.axvline(sym.high * s, color="tab:blue", ls="--", lw=1.2)
-        sh = summary.shortest
-        ax.axvline(sh.low * s, color="tab:orange", ls=":", lw=1.5, label="shortest")
-        ax.axvline(sh.high * s, color="tab:orange", ls=":", lw=1.5)
+        _mark_summary(ax, summary, s)
         u_gum = float(o.gum.standard_uncertainty[j]) * s
         if u_gum > 0:
             lo, hi = ax.get_xlim()
