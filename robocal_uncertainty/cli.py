@@ -750,7 +750,11 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     from robocal_uncertainty.pipeline import CollectorSettings
 
     model = _load_robot(args.robot, base_known=False if args.base_unknown else None)
-    options = _evaluation_options(args, _sources_arg(args.sources), _test_joints(args, model))
+    sources = args.sources
+    if sources is None:
+        # A tracker pose topic means a 6-DOF campaign: its orientation noise is an input too.
+        sources = "tracker,encoder,tracker_orientation" if args.tracker_pose_topic else "tracker,encoder"
+    options = _evaluation_options(args, _sources_arg(sources), _test_joints(args, model))
     window = _window_arg(args.window_s)
     settings = CollectorSettings(
         window_s=window if window is not None else CollectorSettings().window_s,
@@ -1577,7 +1581,12 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
     _add_base_unknown_arg(p)
     _add_test_joint_args(p)
-    p.add_argument("--sources", default="tracker,encoder", help=f"comma list of {sources_help()} (default %(default)s)")
+    p.add_argument(
+        "--sources",
+        default=None,
+        help=f"comma list of {sources_help()} (default tracker,encoder; and tracker_orientation with "
+        "--tracker-pose-topic)",
+    )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     _add_force_arg(p, "an earlier report in --out and the --campaign-out file")
     p.add_argument("--joint-topic", default="/joint_states", help="sensor_msgs/JointState topic (default %(default)s)")
