@@ -693,6 +693,12 @@ def undetermined_rotations(prep: _Prepared) -> list[Array]:
     layout = model.layout
     measurement = calibration.measurement
     cand = np.flatnonzero(calibration.candidates)
+    if prep.trials.drop_base:
+        # In the robot base frame the identified base is dropped: that frame is defined by the
+        # nominal joint-1 parameters the base absorbs (joint1.alpha = base.roll, ...), so those
+        # combinations are a choice of frame, not unseen errors of the tool's orientation.
+        b0 = layout.base_index
+        cand = cand[(cand < b0) | (cand >= b0 + 6)]
     rng = np.random.default_rng(20231101)  # the probe poses of structural_observability
     lo, hi = model.joint_limits[:, 0], model.joint_limits[:, 1]
     probe = rng.uniform(lo, hi, size=(200, model.n_joints))

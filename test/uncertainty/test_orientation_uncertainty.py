@@ -135,3 +135,26 @@ def test_rotation_covariance_agrees_with_an_independent_linearisation(off_axis) 
     for i, pose in enumerate(result.poses):
         want = g[i] @ cov_p @ g[i].T
         np.testing.assert_allclose(pose.orientation.covariance, want, rtol=0.02, atol=1e-3 * np.max(np.diag(want)))
+
+
+@pytest.mark.parametrize("frame", ["measurement", "base"])
+@pytest.mark.parametrize(("orientation_std", "tool_point", "expected"), [(1e-4, None, 0), (None, (0.08, 0.0, 0.05), 1)])
+def test_undetermined_rotations_do_not_depend_on_the_output_frame(
+    frame: str, orientation_std: float | None, tool_point: tuple[float, float, float] | None, expected: int
+) -> None:
+    """A tracker-frame campaign (base identified) stated in the tracker or the robot base frame:
+    6-DOF data determine every rotation, points with an off-axis tool all but the rotation about
+    joint 6's axis. In the base frame the joint-1 parameters the base absorbs (joint1.alpha =
+    base.roll, ...) define the frame; they once came out as two extra undetermined rotations."""
+    model = load_robot_model(ROOT / "config/ur10.yaml")
+    if tool_point is not None:
+        model = dataclasses.replace(model, tool_point=np.asarray(tool_point))
+    settings = SimulationSettings(frame="tracker", n_poses=30, orientation_std=orientation_std)
+    sim = simulate_campaign(model, settings, seed=0)
+    q = np.radians([[10.0, -60, 40, -30, 50, 20], [-40, -100, 70, 10, -30, 60]])
+    result = evaluate_uncertainty(model, sim.campaign, q, settings=NOISE, trials=200, seed=1, frame=frame)
+    for pose in result.poses:
+        assert pose.orientation.undetermined_directions.shape == (expected, 3)
+        if expected:
+            tool_z = pose.orientation.mean_rotation[:, 2]
+            assert abs(abs(float(pose.orientation.undetermined_directions[0] @ tool_z)) - 1.0) < 1e-5
