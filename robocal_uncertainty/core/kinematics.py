@@ -6,7 +6,8 @@ numpy broadcasting, with no Python loop over poses or trials (only over the 6 jo
 
 Internally vectors are stored component-first, shape (3, *batch), so that each of x, y, z is a
 contiguous array and the rotation algebra is a handful of fused multiply-adds.
-The Jacobian is analytic: each revolute-like parameter (alpha, beta, theta, base angles)
+A model read from a URDF starts the chain at its fixed mount and may have prismatic joints
+(the reading adds to ``d``). The Jacobian is analytic: each revolute-like parameter (alpha, beta, theta, base angles)
 moves the point by ``axis x (point - pivot)``, each prismatic-like one (a, d, tool, base xyz)
 by its axis, all expressed in the measurement frame.
 """
@@ -57,12 +58,9 @@ def _chain(
     When `keep_axes` is true, also return for each kinematic parameter its motion
     ``(kind, axis, pivot)`` with kind ``"rot"`` or ``"lin"``.
     """
+    mount = layout.mount_transform()
     ones = np.ones(shape)
-    zeros = np.zeros(shape)
-    cx = np.stack((ones, zeros, zeros))
-    cy = np.stack((zeros, ones, zeros))
-    cz = np.stack((zeros, zeros, ones))
-    origin = np.zeros((3, *shape))
+    cx, cy, cz, origin = (np.multiply.outer(mount[:3, c], ones) for c in range(4))
     motions: list[tuple[str, Array, Array]] = []
     for j, idx in enumerate(layout.joint_slices()):
         alpha = p[..., idx["alpha"]]
@@ -79,10 +77,11 @@ def _chain(
             if keep_axes:
                 motions.append(("rot", cy, origin))
             cx, cz = cb * cx - sb * cz, sb * cx + cb * cz
-        angle = q[..., j] + p[..., idx["theta"]]
+        prismatic = layout.is_prismatic(j)
+        angle = p[..., idx["theta"]] if prismatic else q[..., j] + p[..., idx["theta"]]
         ct, st = np.cos(angle), np.sin(angle)
         cx, cy = ct * cx + st * cy, ct * cy - st * cx
-        d = p[..., idx["d"]]
+        d = p[..., idx["d"]] + q[..., j] if prismatic else p[..., idx["d"]]
         if keep_axes:
             # Order must match layout.joint_slices(): alpha, a, theta, d, beta.
             beta_motion = motions.pop() if "beta" in idx else None
@@ -149,10 +148,11 @@ def _frame_in_base(layout: ParameterLayout, p: Array, q: Array) -> tuple[tuple[A
     # Start from the parameters' own shape (one entry per trial): until the first joint
     # angle enters, the chain is the same for every pose and needs no per-pose work.
     start = p.shape[:-1]
-    x0, x1, x2 = np.ones(start), np.zeros(start), np.zeros(start)
-    y0, y1, y2 = np.zeros(start), np.ones(start), np.zeros(start)
-    z0, z1, z2 = np.zeros(start), np.zeros(start), np.ones(start)
-    o0, o1, o2 = np.zeros(start), np.zeros(start), np.zeros(start)
+    m = layout.mount_transform()
+    x0, x1, x2 = (np.full(start, m[i, 0]) for i in range(3))
+    y0, y1, y2 = (np.full(start, m[i, 1]) for i in range(3))
+    z0, z1, z2 = (np.full(start, m[i, 2]) for i in range(3))
+    o0, o1, o2 = (np.full(start, m[i, 3]) for i in range(3))
     for j, idx in enumerate(layout.joint_slices()):
         alpha = p[..., idx["alpha"]]
         ca, sa = np.cos(alpha), np.sin(alpha)
@@ -167,12 +167,13 @@ def _frame_in_base(layout: ParameterLayout, p: Array, q: Array) -> tuple[tuple[A
             x0, z0 = cb * x0 - sb * z0, sb * x0 + cb * z0
             x1, z1 = cb * x1 - sb * z1, sb * x1 + cb * z1
             x2, z2 = cb * x2 - sb * z2, sb * x2 + cb * z2
-        angle = q[..., j] + p[..., idx["theta"]]
+        prismatic = layout.is_prismatic(j)
+        angle = p[..., idx["theta"]] if prismatic else q[..., j] + p[..., idx["theta"]]
         ct, st = np.cos(angle), np.sin(angle)
         x0, y0 = ct * x0 + st * y0, ct * y0 - st * x0
         x1, y1 = ct * x1 + st * y1, ct * y1 - st * x1
         x2, y2 = ct * x2 + st * y2, ct * y2 - st * x2
-        d = p[..., idx["d"]]
+        d = p[..., idx["d"]] + q[..., j] if prismatic else p[..., idx["d"]]
         o0, o1, o2 = o0 + d * z0, o1 + d * z1, o2 + d * z2
     return (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), (o0, o1, o2)
 

@@ -77,12 +77,13 @@ def positive_triple(name: str, value: object, unit: str) -> tuple[float, float, 
 
 
 def joint_columns(layout: ParameterLayout) -> list[int]:
-    """Indices of the joint offsets ``theta_j`` in the parameter vector, in joint order.
+    """Indices of the joint offsets (``theta_j``, ``d_j`` for a prismatic joint), in joint order.
 
-    In the modified DH chain a joint reading ``q_j`` enters only as ``q_j + theta_j``, so the
-    Jacobian of any measurement with respect to ``q_j`` is its column for ``theta_j``.
+    In the modified DH chain a joint reading ``q_j`` enters only as ``q_j + theta_j`` (a
+    prismatic one as ``q_j + d_j``), so the Jacobian of any measurement with respect to ``q_j``
+    is its column for that offset.
     """
-    return [idx["theta"] for idx in layout.joint_slices()]
+    return [idx["d" if layout.is_prismatic(j) else "theta"] for j, idx in enumerate(layout.joint_slices())]
 
 
 class MeasurementType(ABC):

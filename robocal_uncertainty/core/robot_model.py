@@ -10,7 +10,10 @@ Per joint ``i`` (Craig's row ``i``), the link transform is::
 
 ``beta`` is Hayati's extra rotation about y, used where consecutive axes are (nearly) parallel
 and the common normal, hence ``d``, is ill-defined. It is present only for joints that enable it.
-The measured point is ``world_T_base @ base_T_n @ tool_point``. When the model has a tool
+The measured point is ``world_T_base @ base_T_n @ tool_point``. A prismatic joint (models read
+from a URDF) adds its reading to ``d_i`` instead of ``theta_i``. A model read from a URDF may
+also carry a fixed ``mount`` (the URDF base link <- modified-DH frame 0), so that ``base_T_n``
+starts from the mount; it is part of the structure, not of the parameter vector. When the model has a tool
 rotation (``tool_rotation``; needed only by measurements of orientation), the measured frame is
 ``base_T_n`` rotated by ``Rz(rz) Ry(ry) Rx(rx)`` (fixed axes of the flange frame, the URDF rpy
 form) and moved to the tool point; the point itself does not depend on that rotation.
@@ -91,6 +94,23 @@ class ParameterLayout:
     n_joints: int
     has_beta: tuple[bool, ...]
     tool_rotation: bool = False
+    prismatic: tuple[bool, ...] = ()
+    mount: tuple[float, ...] = ()
+
+    def is_prismatic(self, joint: int) -> bool:
+        """Whether joint `joint` (0-based) is prismatic (its reading adds to ``d``, not ``theta``)."""
+        return bool(self.prismatic) and self.prismatic[joint]
+
+    def mount_transform(self) -> NDArray[np.float64]:
+        """Fixed transform base <- modified-DH frame 0, shape (4, 4) [m]; identity without a mount.
+
+        `mount` holds ``(x, y, z, roll, pitch, yaw)`` [m, rad] (URDF origin convention) or is empty.
+        """
+        out = np.eye(4)
+        if self.mount:
+            out[:3, :3] = rpy_to_matrix(np.asarray(self.mount[3:6], dtype=np.float64))
+            out[:3, 3] = self.mount[:3]
+        return out
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -199,6 +219,11 @@ class RobotModel:
     tool_rotation : bool
         Whether the parameter vector carries ``tool.rx, tool.ry, tool.rz`` (orientation
         measurements); False keeps the point-only layout.
+    prismatic : tuple of bool, length n_joints (or empty: all revolute)
+        Joints whose reading [m] adds to ``d`` instead of ``theta``; their ``joint_limits`` are in m.
+    mount_xyz, mount_rpy : ndarray, shape (3,) [m, rad]
+        Fixed transform robot base (URDF base link) <- modified-DH frame 0 (URDF origin
+        convention); zeros (identity) for models given in DH form. Not a parameter.
     """
 
     name: str
@@ -218,6 +243,9 @@ class RobotModel:
     measurement_frame_id: str = "laser_tracker"
     tool_rpy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     tool_rotation: bool = False
+    prismatic: tuple[bool, ...] = ()
+    mount_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    mount_rpy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -237,7 +265,12 @@ class RobotModel:
             msg = f"joint_limits must be {n} pairs [lower, upper] with lower < upper"
             raise ConfigError(msg)
         object.__setattr__(self, "joint_limits", limits)
-        for field_name in ("tool_point", "base_xyz", "base_rpy", "tool_rpy"):
+        prismatic = tuple(bool(b) for b in self.prismatic) or (False,) * n
+        if len(prismatic) != n:
+            msg = f"prismatic must have {n} entries, got {len(prismatic)}"
+            raise ConfigError(msg)
+        object.__setattr__(self, "prismatic", prismatic)
+        for field_name in ("tool_point", "base_xyz", "base_rpy", "tool_rpy", "mount_xyz", "mount_rpy"):
             value = np.asarray(getattr(self, field_name), dtype=np.float64)
             if value.shape != (3,) or not np.isfinite(value).all():
                 msg = f"{field_name} must be 3 finite numbers, got {value.tolist()}"
@@ -254,7 +287,10 @@ class RobotModel:
     @property
     def layout(self) -> ParameterLayout:
         """Layout of the flat parameter vector."""
-        return ParameterLayout(self.n_joints, self.has_beta, self.tool_rotation)
+        mounted = bool(np.any(self.mount_xyz != 0) or np.any(self.mount_rpy != 0))
+        mount = tuple(float(v) for v in (*self.mount_xyz, *self.mount_rpy)) if mounted else ()
+        prismatic = self.prismatic if any(self.prismatic) else ()
+        return ParameterLayout(self.n_joints, self.has_beta, self.tool_rotation, prismatic, mount)
 
     def parameter_vector(self) -> NDArray[np.float64]:
         """Flatten the model into its parameter vector, shape (n_params,) [m, rad]."""
