@@ -60,7 +60,14 @@ Array = NDArray[np.float64]
 EXPORT_FORMATS = ("urdf", "ur-kinematics", "yaml")
 SIDECAR_FORMAT = "robocal_uncertainty/export-uncertainty/1"
 UR_KINEMATICS_KEYS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
-_UR_JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")
+_UR_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
 
 
 @dataclass(frozen=True)
@@ -228,10 +235,15 @@ def _covariance(data: dict[str, Any], names: list[str]) -> tuple[list[list[float
         arr = np.zeros((0, 0))
     if arr.shape != (len(order), len(order)):
         return None, f"the calibration's covariance has shape {arr.shape}, not ({len(order)}, {len(order)}): left out"
-    return arr.tolist(), f"from the calibration file, over {len(order)} parameters (order: sidecar 'covariance_parameters')"
+    return (
+        arr.tolist(),
+        f"from the calibration file, over {len(order)} parameters (order: sidecar 'covariance_parameters')",
+    )
 
 
-def _sidecar(data: dict[str, Any], calibrated: RobotModel, point_in_tip: Array | None, tip: str | None) -> dict[str, Any]:
+def _sidecar(
+    data: dict[str, Any], calibrated: RobotModel, point_in_tip: Array | None, tip: str | None
+) -> dict[str, Any]:
     params = [p for p in data.get("parameters", []) if isinstance(p, dict)]
     names = [str(p.get("name")) for p in params]
     covariance, note = _covariance(data, names)
@@ -275,6 +287,11 @@ def _fmt(value: float) -> str:
     return repr(float(value)) if value != 0.0 else "0"
 
 
+def _clean(value: float) -> float:
+    """``value`` as a float, with -0.0 written as 0.0."""
+    return float(value) + 0.0
+
+
 def _corrected_urdf_text(text: str, origins: dict[str, tuple[Array, Array]], comment: str, where: str) -> str:
     try:
         root = ET.fromstring(text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
@@ -291,7 +308,9 @@ def _corrected_urdf_text(text: str, origins: dict[str, tuple[Array, Array]], com
             origin = ET.SubElement(joint, "origin")
         origin.set("xyz", " ".join(_fmt(v) for v in xyz))
         origin.set("rpy", " ".join(_fmt(v) for v in rpy))
-    root.insert(0, ET.Comment(" " + comment.replace("--", "- -").replace("\n", "\n     ") + " "))
+    note = ET.Comment(" " + comment.replace("--", "- -").replace("\n", "\n     ") + " ")
+    note.tail = "\n  "
+    root.insert(0, note)
     return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
@@ -307,7 +326,8 @@ def _generated_urdf(model: RobotModel, comment: str) -> tuple[str, Array, str]:
         kind = "prismatic" if model.prismatic[j] else "revolute"
         lo, hi = model.joint_limits[j]
         body.append(
-            f"  <joint name={_q(name)} type={_q(kind)}>\n    <parent link={_q(links[j])}/><child link={_q(links[j + 1])}/>\n"
+            f"  <joint name={_q(name)} type={_q(kind)}>\n"
+            f"    <parent link={_q(links[j])}/><child link={_q(links[j + 1])}/>\n"
             f"    <origin xyz={_q(' '.join(_fmt(v) for v in origin[:3, 3]))} "
             f"rpy={_q(' '.join(_fmt(v) for v in urdf_rpy(origin[:3, :3])))}/>\n"
             f'    <axis xyz="0 0 1"/>\n    <limit lower={_q(_fmt(lo))} upper={_q(_fmt(hi))} effort="0" velocity="0"/>\n'
@@ -321,7 +341,8 @@ def _generated_urdf(model: RobotModel, comment: str) -> tuple[str, Array, str]:
         f"rpy={_q(' '.join(_fmt(v) for v in urdf_rpy(flange[:3, :3])))}/>\n  </joint>"
     )
     body.append(
-        '  <joint name="measured_point_joint" type="fixed">\n    <parent link="flange"/><child link="measured_point"/>\n'
+        '  <joint name="measured_point_joint" type="fixed">\n'
+        '    <parent link="flange"/><child link="measured_point"/>\n'
         f"    <origin xyz={_q(' '.join(_fmt(v) for v in model.tool_point))} "
         f"rpy={_q(' '.join(_fmt(v) for v in model.tool_rpy))}/>\n  </joint>"
     )
@@ -416,12 +437,12 @@ def _ur_kinematics(chain: UrdfChain, origins: dict[str, tuple[Array, Array]], co
     for key, joint in zip(UR_KINEMATICS_KEYS, movable):
         xyz, rpy = origins[joint.name]
         kin[key] = {
-            "x": float(xyz[0]),
-            "y": float(xyz[1]),
-            "z": float(xyz[2]),
-            "roll": float(rpy[0]),
-            "pitch": float(rpy[1]),
-            "yaw": float(rpy[2]),
+            "x": _clean(xyz[0]),
+            "y": _clean(xyz[1]),
+            "z": _clean(xyz[2]),
+            "roll": _clean(rpy[0]),
+            "pitch": _clean(rpy[1]),
+            "yaw": _clean(rpy[2]),
         }
     digest = hashlib.sha256(repr(sorted((k, sorted(v.items())) for k, v in kin.items())).encode()).hexdigest()
     kin["hash"] = "calib_robocal_" + digest[:16]

@@ -23,9 +23,20 @@ its joint reading is paired with it (tracker latency of a real recording is a fe
 seconds apart)."""
 
 
-def load_robot(name: str, *, base_known: bool | None = None) -> Any:
+def load_robot(
+    name: str, *, base_known: bool | None = None, base_link: str | None = None, tip_link: str | None = None
+) -> Any:
+    """``--robot``: a robot YAML, a shipped model name, or a URDF (``.urdf``) with its chain ends."""
     from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
 
+    if Path(name).suffix.lower() == ".urdf":
+        from robocal_uncertainty.core.urdf_model import load_urdf, robot_model_from_urdf
+
+        model = robot_model_from_urdf(load_urdf(name), base_link, tip_link)
+        return replace(model, base_known=base_known) if base_known is not None else model
+    if base_link is not None or tip_link is not None:
+        msg = f"--base-link and --tip-link choose a URDF chain; --robot {name} is not a .urdf file"
+        raise ConfigError(msg)
     path = resolve_robot_config(name)
     try:
         model = load_robot_model(path)
@@ -234,7 +245,12 @@ def campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
     refuse campaign joint readings outside the robot's joint limits."""
     campaign = read_campaign_checked(args, args.campaign)
     check_campaign_counts(args, campaign.n_poses)
-    model = load_robot(args.robot, base_known=False if args.base_unknown else None)
+    model = load_robot(
+        args.robot,
+        base_known=False if args.base_unknown else None,
+        base_link=getattr(args, "base_link", None),
+        tip_link=getattr(args, "tip_link", None),
+    )
     check_campaign_joints(model, campaign, args.campaign)
     return campaign, model
 

@@ -26,6 +26,7 @@ VERB_MODULES = (
     "map",
     "suggest",
     "section",
+    "export",
 )
 """The commands, in the order ``--help`` lists them: one module of this package each, with
 ``register(subparsers)`` (its options) and ``run(args) -> int`` (its work and printing). A new

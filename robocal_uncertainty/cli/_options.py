@@ -22,7 +22,10 @@ def add_base_unknown_arg(p: argparse.ArgumentParser) -> None:
 def add_campaign_args(p: argparse.ArgumentParser) -> None:
     """The campaign positional, --robot, --base-unknown and --pairing-tolerance-ms."""
     p.add_argument("campaign", help="campaign: .mcap file or rosbag2 directory")
-    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    p.add_argument(
+        "--robot", required=True, help="robot YAML file, shipped model name (paper_arm, ur10) or URDF file (.urdf)"
+    )
+    add_urdf_chain_args(p)
     add_base_unknown_arg(p)
     p.add_argument(
         "--pairing-tolerance-ms",
@@ -163,4 +166,14 @@ def add_dask_arg(p: argparse.ArgumentParser) -> None:
         metavar="ADDRESS",
         help="run the trial blocks on a Dask cluster: scheduler address, or 'local' for a LocalCluster of "
         "--workers processes (needs the [dask] extra; never changes the result)",
+    )
+
+
+def add_urdf_chain_args(p: argparse.ArgumentParser) -> None:
+    """--base-link and --tip-link: the chain of a ``--robot X.urdf``."""
+    p.add_argument("--base-link", help="--robot X.urdf: the chain's base link (default: the URDF's root link)")
+    p.add_argument(
+        "--tip-link",
+        help="--robot X.urdf: the chain's tip link, where the measured point is (default: the end of the first "
+        "serial chain)",
     )

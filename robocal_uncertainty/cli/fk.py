@@ -8,13 +8,16 @@ from pathlib import Path
 from typing import Any
 
 from robocal_uncertainty.cli._common import joint_configurations, load_robot
-from robocal_uncertainty.cli._options import add_force_arg
+from robocal_uncertainty.cli._options import add_force_arg, add_urdf_chain_args
 
 
 def register(sub: Any) -> None:
     """Add the ``fk`` command and its options to the subparsers `sub`."""
     p = sub.add_parser("fk", help="tool positions of the nominal or calibrated model")
-    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    p.add_argument(
+        "--robot", required=True, help="robot YAML file, shipped model name (paper_arm, ur10) or URDF file (.urdf)"
+    )
+    add_urdf_chain_args(p)
     p.add_argument("--calibration", help="calibration JSON from 'calibrate --json' (default: the nominal model)")
     p.add_argument("--joints", nargs="+", help="joint values, n_joints per configuration")
     p.add_argument("--joints-file", help="CSV/whitespace file, one configuration per row")
@@ -34,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import tool_points
     from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration
 
-    model = load_robot(args.robot)
+    model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link)
     if args.calibration:
         model = apply_calibration(model, read_calibration(args.calibration), where=f"calibration {args.calibration}")
     q = joint_configurations(

@@ -21,6 +21,7 @@ from robocal_uncertainty.cli._options import (
     add_force_arg,
     add_test_joint_args,
     add_uncertainty_args,
+    add_urdf_chain_args,
 )
 from robocal_uncertainty.uncertainty.sources import sources_help
 
@@ -31,7 +32,10 @@ def register(sub: Any) -> None:
         "replay", help="replay a raw bag: detect static poses, calibrate, evaluate (same report as evaluate)"
     )
     p.add_argument("bag", help="raw recording: .mcap file or rosbag2 directory")
-    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    p.add_argument(
+        "--robot", required=True, help="robot YAML file, shipped model name (paper_arm, ur10) or URDF file (.urdf)"
+    )
+    add_urdf_chain_args(p)
     add_base_unknown_arg(p)
     add_test_joint_args(p)
     p.add_argument(
@@ -88,7 +92,12 @@ def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import replay
     from robocal_uncertainty.pipeline import CollectorSettings
 
-    model = load_robot(args.robot, base_known=False if args.base_unknown else None)
+    model = load_robot(
+        args.robot,
+        base_known=False if args.base_unknown else None,
+        base_link=args.base_link,
+        tip_link=args.tip_link,
+    )
     sources = args.sources
     if sources is None:
         # A tracker pose topic means a 6-DOF campaign: its orientation noise is an input too.

@@ -561,10 +561,7 @@ def robot_model_from_urdf(
         if row.has_beta:
             frame = frame @ _rot(1, row.beta)
     limits = np.array(
-        [
-            [j.lower, j.upper] if j.type != "continuous" else [-2.0 * math.pi, 2.0 * math.pi]
-            for j in movable
-        ],
+        [[j.lower, j.upper] if j.type != "continuous" else [-2.0 * math.pi, 2.0 * math.pi] for j in movable],
         dtype=np.float64,
     )
     model = RobotModel(
