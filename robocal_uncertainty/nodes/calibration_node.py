@@ -9,6 +9,9 @@ subscriber gets the latest) and written to ``calibration_file`` (YAML, SI units 
 default ``<campaign>.calibration.yaml`` next to the campaign), replacing it atomically.
 Its health (samples, condition number, residual RMS, lambda, convergence, time since the last
 calibration; OK/WARN/ERROR) goes to ``/diagnostics`` every ``diagnostics_period_s``.
+After each calibration the calibrated URDF goes to ``~/robot_description`` (``std_msgs/String``,
+reliable, transient local, depth 1). A URDF in the ``robot_description`` parameter (with
+``base_link``/``tip_link``, default the first serial chain) replaces ``robot_config``.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +32,14 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from robocal_uncertainty.app.export import (
+    calibrated_robot_description,
+    load_robot_source,
+    robot_source_from_description,
+)
 from robocal_uncertainty.bagio.messages import calibration_to_msg, msg_to_sample
 from robocal_uncertainty.core.calibration_file import calibration_to_dict
 from robocal_uncertainty.core.identification import IdentificationResult
@@ -131,6 +141,14 @@ class CalibrationNode(Node):
         p = declare_parameters(self, PARAMETERS, on_change=self._note_change)
         self.robot_config = p["robot_config"]
         self.model = load_model(self.robot_config, base_unknown=p["base_unknown"])
+        # A URDF in `robot_description` (as robot_state_publisher takes it) replaces robot_config.
+        self._description = str(self.declare_parameter("robot_description", "").value)
+        chain = {k: str(self.declare_parameter(k, "").value) or None for k in ("base_link", "tip_link")}
+        self._source = None
+        if self._description.strip():
+            self._source = robot_source_from_description(self._description, **chain)
+            self.model = replace(self._source.model, base_known=not p["base_unknown"] and self._source.model.base_known)
+            self.robot_config = "robot_description"
         self.store = SampleStore(self.model)
         self.campaign_path = campaign_file(p["campaign_path"])
         self.calibration_path = (
@@ -151,6 +169,7 @@ class CalibrationNode(Node):
                     self.get_logger().warning(f"campaign {self.campaign_path}: {note}")
                 self.get_logger().info(f"read {added} samples from {self.campaign_path}")
         self._result_pub = self.create_publisher(CalibrationResultMsg, "robocal/calibration", latched_qos())
+        self._description_pub = self.create_publisher(String, "~/robot_description", latched_qos())
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
         self.create_service(Trigger, "~/calibrate", self._calibrate_service)
         self.create_timer(0.5, self._after_parameter_change)
@@ -231,6 +250,7 @@ class CalibrationNode(Node):
             f"calibrated from {n} samples: residual RMS {result.rms_before * 1e3:.4f} -> "
             f"{result.rms_after * 1e3:.4f} mm, lambda {result.lambda_:.4g} ({result.lambda_method})"
         )
+        self._publish_description(result)
         try:
             self._write(result)
         except OSError as err:
@@ -257,6 +277,17 @@ class CalibrationNode(Node):
 
     def _publish_diagnostics(self) -> None:
         self._diagnostics_pub.publish(diagnostic_array(self, [self.diagnostic_status()]))
+
+    def _publish_description(self, result: IdentificationResult) -> None:
+        """The calibrated URDF on the latched ``~/robot_description`` (robot_state_publisher can follow it)."""
+        try:
+            source = self._source or load_robot_source(self.robot_config)
+            data = calibration_to_dict(result, robot=self.robot_config)
+            text = calibrated_robot_description(data, source, urdf_text=self._description or None)
+        except CalibError as err:
+            self._causes.warning("no_robot_description", f"no calibrated robot_description: {err}")
+            return
+        self._description_pub.publish(String(data=text))
 
     def _write(self, result: IdentificationResult) -> None:
         data = calibration_to_dict(result, robot=self.robot_config)
