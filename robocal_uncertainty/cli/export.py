@@ -22,7 +22,14 @@ def register(sub: Any) -> None:
         help="write a calibration as a corrected URDF, UR kinematics YAML or robot YAML (uncertainty beside it)",
     )
     p.add_argument("calibration", help="calibration JSON from 'calibrate --json'")
-    p.add_argument("--format", required=True, choices=("urdf", "ur-kinematics", "yaml"), dest="export_format")
+    p.add_argument(
+        "--format",
+        required=True,
+        choices=("urdf", "ur-kinematics", "yaml"),
+        dest="export_format",
+        help="urdf: the robot's URDF with corrected joint origins; ur-kinematics: ur_description's "
+        "kinematics_params_file; yaml: the package's robot YAML",
+    )
     p.add_argument("--out", required=True, help="file to write")
     p.add_argument(
         "--robot",
