@@ -266,7 +266,7 @@ def _sidecar(
         ],
         "not_identifiable": list(data.get("not_identifiable", [])),
         "covariance": covariance,
-        "covariance_parameters": list(order) if covariance is not None else None,
+        "covariance_parameters": list(order or names) if covariance is not None else None,
         "covariance_note": note,
         "measurement_frame": {
             "note": (
@@ -381,9 +381,9 @@ def _frame0(source: RobotSource, chain: UrdfChain) -> Array | None:
 
 
 def _robot_yaml(model: RobotModel, comment: str) -> str:
-    if any(model.prismatic) or np.any(model.mount_xyz != 0) or np.any(model.mount_rpy != 0):
+    if any(model.prismatic) or model.mounted:
         msg = (
-            f"robot model {model.name!r} comes from a URDF (fixed mount or prismatic joints), which the robot "
+            f"robot model {model.name!r} comes from a URDF (a mount, prismatic joints), which the robot "
             "YAML cannot hold: use --format urdf"
         )
         raise ConfigError(msg)

@@ -58,9 +58,18 @@ def _chain(
     When `keep_axes` is true, also return for each kinematic parameter its motion
     ``(kind, axis, pivot)`` with kind ``"rot"`` or ``"lin"``.
     """
-    mount = layout.mount_transform()
     ones = np.ones(shape)
-    cx, cy, cz, origin = (np.multiply.outer(mount[:3, c], ones) for c in range(4))
+    m0 = layout.mount_index
+    if m0 is None:
+        zeros = np.zeros(shape)
+        cx = np.stack((ones, zeros, zeros))
+        cy = np.stack((zeros, ones, zeros))
+        cz = np.stack((zeros, zeros, ones))
+        origin = np.zeros((3, *shape))
+    else:
+        mount_cols, mount_origin, _ = _pose(p, m0)
+        cx, cy, cz = (mount_cols[c] * ones for c in range(3))
+        origin = mount_origin * ones
     motions: list[tuple[str, Array, Array]] = []
     for j, idx in enumerate(layout.joint_slices()):
         alpha = p[..., idx["alpha"]]
@@ -98,7 +107,11 @@ def _chain(
 
 def _base(p: Array, layout: ParameterLayout) -> tuple[Array, Array, Array]:
     """Base rotation columns (3 cols, 3 comps, ...), translation (3, ...), and roll/pitch axes."""
-    b0 = layout.base_index
+    return _pose(p, layout.base_index)
+
+
+def _pose(p: Array, b0: int) -> tuple[Array, Array, Array]:
+    """Rotation columns, translation and roll/pitch axes of the ``x y z roll pitch yaw`` at `b0`."""
     roll, pitch, yaw = p[..., b0 + 3], p[..., b0 + 4], p[..., b0 + 5]
     cr, sr = np.cos(roll), np.sin(roll)
     cp, sp = np.cos(pitch), np.sin(pitch)
@@ -113,6 +126,29 @@ def _base(p: Array, layout: ParameterLayout) -> tuple[Array, Array, Array]:
     roll_axis = col0
     pitch_axis = np.stack((-syw, cyw, zero))
     return np.stack((col0, col1, col2)), translation, np.stack((roll_axis, pitch_axis))
+
+
+def _mount_motions(
+    layout: ParameterLayout, p: Array, point: Array, shape: tuple[int, ...]
+) -> list[tuple[int, tuple[Array, Array]]]:
+    """For each mount parameter: its index and the (linear, angular) motion of the point in the
+    robot base frame per unit change (component-first, shape (3, *shape)); empty without a mount."""
+    m0 = layout.mount_index
+    if m0 is None:
+        return []
+    _, origin, axes = _pose(p, m0)
+    zero = np.zeros((3, *shape))
+    out = []
+    for i in range(3):
+        unit = np.zeros((3, *shape))
+        unit[i] = 1.0
+        out.append((m0 + i, (unit, zero)))
+    ez = np.zeros((3, *shape))
+    ez[2] = 1.0
+    for i, axis in enumerate((axes[0], axes[1], ez)):
+        axis_b = np.broadcast_to(axis, (3, *shape))
+        out.append((m0 + 3 + i, (_cross(axis_b, point - origin), axis_b)))
+    return out
 
 
 def _tool_rotation(layout: ParameterLayout, p: Array) -> tuple[Array, Array] | None:
@@ -148,11 +184,15 @@ def _frame_in_base(layout: ParameterLayout, p: Array, q: Array) -> tuple[tuple[A
     # Start from the parameters' own shape (one entry per trial): until the first joint
     # angle enters, the chain is the same for every pose and needs no per-pose work.
     start = p.shape[:-1]
-    m = layout.mount_transform()
-    x0, x1, x2 = (np.full(start, m[i, 0]) for i in range(3))
-    y0, y1, y2 = (np.full(start, m[i, 1]) for i in range(3))
-    z0, z1, z2 = (np.full(start, m[i, 2]) for i in range(3))
-    o0, o1, o2 = (np.full(start, m[i, 3]) for i in range(3))
+    m0 = layout.mount_index
+    if m0 is None:
+        x0, x1, x2 = np.ones(start), np.zeros(start), np.zeros(start)
+        y0, y1, y2 = np.zeros(start), np.ones(start), np.zeros(start)
+        z0, z1, z2 = np.zeros(start), np.zeros(start), np.ones(start)
+        o0, o1, o2 = np.zeros(start), np.zeros(start), np.zeros(start)
+    else:
+        (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = _pose(p, m0)[0]
+        o0, o1, o2 = p[..., m0], p[..., m0 + 1], p[..., m0 + 2]
     for j, idx in enumerate(layout.joint_slices()):
         alpha = p[..., idx["alpha"]]
         ca, sa = np.cos(alpha), np.sin(alpha)
@@ -266,6 +306,8 @@ def forward_points_and_jacobian(
     r0 = layout.tool_rotation_index
     if r0 is not None:
         jac[r0 : r0 + 3] = 0.0  # the tool rotation does not move the point
+    for k, (linear, angular) in _mount_motions(layout, p, point, shape):
+        jac[k] = _rotate(base_cols, linear)
     b0 = layout.base_index
     for i in range(3):
         jac[b0 + i] = 0.0
@@ -349,6 +391,9 @@ def forward_poses_and_jacobian(
     t0 = layout.tool_index
     for i in range(3):
         jac[t0 + i, :3] = _rotate(base_cols, last_cols[i])
+    for k, (linear, angular) in _mount_motions(layout, p, point, shape):
+        jac[k, :3] = _rotate(base_cols, linear)
+        jac[k, 3:] = _rotate(base_cols, angular)
     b0 = layout.base_index
     for i in range(3):
         jac[b0 + i, i] = 1.0

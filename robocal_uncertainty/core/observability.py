@@ -5,7 +5,8 @@ combinations move the measured point identically for every pose (joint-1 offset 
 d1 and base z, joint-6 offset and the tool point, the d of parallel axes). They are
 structurally not identifiable: fixing one of each dependent group at its nominal value loses
 nothing. They are found once per model on a rich random pose set, by a
-greedy rank test in a fixed order of preference (base, tool, then joints in order), so the
+greedy rank test in a fixed order of preference (base, tool, joints in order, then the mount of a
+URDF model), so the
 choice is deterministic and matches common practice (keep the base yaw, drop theta1).
 """
 
@@ -104,6 +105,7 @@ def structural_observability(
     order = [k for k in range(layout.size) if names[k].startswith("base.")]
     order += [k for k in range(layout.size) if names[k].startswith("tool.")]
     order += [k for k in range(layout.size) if names[k].startswith("joint")]
+    order += [k for k in range(layout.size) if names[k].startswith("mount.")]
     kept: list[int] = []
     dropped: list[int] = []
     basis = np.zeros((jac.shape[0], 0))

@@ -12,8 +12,8 @@ Per joint ``i`` (Craig's row ``i``), the link transform is::
 and the common normal, hence ``d``, is ill-defined. It is present only for joints that enable it.
 The measured point is ``world_T_base @ base_T_n @ tool_point``. A prismatic joint (models read
 from a URDF) adds its reading to ``d_i`` instead of ``theta_i``. A model read from a URDF may
-also carry a fixed ``mount`` (the URDF base link <- modified-DH frame 0), so that ``base_T_n``
-starts from the mount; it is part of the structure, not of the parameter vector. When the model has a tool
+also carry a ``mount`` (the URDF base link <- modified-DH frame 0, parameters ``mount.*``), so
+that ``base_T_n`` starts from the mount. When the model has a tool
 rotation (``tool_rotation``; needed only by measurements of orientation), the measured frame is
 ``base_T_n`` rotated by ``Rz(rz) Ry(ry) Rx(rx)`` (fixed axes of the flange frame, the URDF rpy
 form) and moved to the tool point; the point itself does not depend on that rotation.
@@ -84,8 +84,9 @@ class ParameterLayout:
     The vector holds, in this order: for each joint its ``alpha, a, theta, d`` and, where
     enabled, ``beta``; then ``tool.x, tool.y, tool.z``; when `tool_rotation` is true,
     ``tool.rx, tool.ry, tool.rz`` (the tool frame's rotation in the flange frame,
-    ``Rz(rz) Ry(ry) Rx(rx)`` [rad]); then
-    ``base.x, base.y, base.z, base.roll, base.pitch, base.yaw``.
+    ``Rz(rz) Ry(ry) Rx(rx)`` [rad]); when `has_mount` is true (models read from a URDF),
+    ``mount.x, mount.y, mount.z, mount.roll, mount.pitch, mount.yaw`` (robot base <- frame 0);
+    then ``base.x, base.y, base.z, base.roll, base.pitch, base.yaw``.
 
     Without `tool_rotation` (the default) the layout is exactly the point-only layout: the
     tool rotation does not move a measured point, so it exists only for orientation data.
@@ -95,22 +96,11 @@ class ParameterLayout:
     has_beta: tuple[bool, ...]
     tool_rotation: bool = False
     prismatic: tuple[bool, ...] = ()
-    mount: tuple[float, ...] = ()
+    has_mount: bool = False
 
     def is_prismatic(self, joint: int) -> bool:
         """Whether joint `joint` (0-based) is prismatic (its reading adds to ``d``, not ``theta``)."""
         return bool(self.prismatic) and self.prismatic[joint]
-
-    def mount_transform(self) -> NDArray[np.float64]:
-        """Fixed transform base <- modified-DH frame 0, shape (4, 4) [m]; identity without a mount.
-
-        `mount` holds ``(x, y, z, roll, pitch, yaw)`` [m, rad] (URDF origin convention) or is empty.
-        """
-        out = np.eye(4)
-        if self.mount:
-            out[:3, :3] = rpy_to_matrix(np.asarray(self.mount[3:6], dtype=np.float64))
-            out[:3, 3] = self.mount[:3]
-        return out
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -122,6 +112,8 @@ class ParameterLayout:
         out.extend(("tool.x", "tool.y", "tool.z"))
         if self.tool_rotation:
             out.extend(("tool.rx", "tool.ry", "tool.rz"))
+        if self.has_mount:
+            out.extend(("mount.x", "mount.y", "mount.z", "mount.roll", "mount.pitch", "mount.yaw"))
         out.extend(("base.x", "base.y", "base.z", "base.roll", "base.pitch", "base.yaw"))
         return tuple(out)
 
@@ -142,7 +134,7 @@ class ParameterLayout:
     @property
     def size(self) -> int:
         """Length of the parameter vector."""
-        return 4 * self.n_joints + sum(self.has_beta) + 9 + (3 if self.tool_rotation else 0)
+        return 4 * self.n_joints + sum(self.has_beta) + 9 + (3 if self.tool_rotation else 0) + 6 * self.has_mount
 
     def joint_slices(self) -> tuple[dict[str, int], ...]:
         """Per joint, the index of each of its fields in the vector."""
@@ -165,9 +157,14 @@ class ParameterLayout:
         return self.tool_index + 3 if self.tool_rotation else None
 
     @property
+    def mount_index(self) -> int | None:
+        """Index of ``mount.x`` (then y, z, roll, pitch, yaw), or None without a mount."""
+        return self.tool_index + (6 if self.tool_rotation else 3) if self.has_mount else None
+
+    @property
     def base_index(self) -> int:
         """Index of ``base.x``; then y, z, roll, pitch, yaw."""
-        return self.tool_index + (6 if self.tool_rotation else 3)
+        return self.tool_index + (6 if self.tool_rotation else 3) + 6 * self.has_mount
 
     def index(self, name: str) -> int:
         """Index of the parameter called `name`."""
@@ -222,8 +219,12 @@ class RobotModel:
     prismatic : tuple of bool, length n_joints (or empty: all revolute)
         Joints whose reading [m] adds to ``d`` instead of ``theta``; their ``joint_limits`` are in m.
     mount_xyz, mount_rpy : ndarray, shape (3,) [m, rad]
-        Fixed transform robot base (URDF base link) <- modified-DH frame 0 (URDF origin
-        convention); zeros (identity) for models given in DH form. Not a parameter.
+        Transform robot base (URDF base link) <- modified-DH frame 0 (URDF origin convention);
+        zeros (identity) for models given in DH form.
+    mounted : bool
+        Whether the mount is part of the parameter vector (``mount.*``); set for models read
+        from a URDF and whenever the mount is not the identity. With measurements in the base
+        frame it carries the first axis's place, which the first row alone cannot.
     """
 
     name: str
@@ -246,6 +247,7 @@ class RobotModel:
     prismatic: tuple[bool, ...] = ()
     mount_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     mount_rpy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    mounted: bool = False
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -276,6 +278,8 @@ class RobotModel:
                 msg = f"{field_name} must be 3 finite numbers, got {value.tolist()}"
                 raise ConfigError(msg)
             object.__setattr__(self, field_name, value)
+        if np.any(self.mount_xyz != 0) or np.any(self.mount_rpy != 0):
+            object.__setattr__(self, "mounted", True)
         object.__setattr__(self, "has_beta", tuple(bool(b) for b in self.has_beta))
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
 
@@ -287,10 +291,8 @@ class RobotModel:
     @property
     def layout(self) -> ParameterLayout:
         """Layout of the flat parameter vector."""
-        mounted = bool(np.any(self.mount_xyz != 0) or np.any(self.mount_rpy != 0))
-        mount = tuple(float(v) for v in (*self.mount_xyz, *self.mount_rpy)) if mounted else ()
         prismatic = self.prismatic if any(self.prismatic) else ()
-        return ParameterLayout(self.n_joints, self.has_beta, self.tool_rotation, prismatic, mount)
+        return ParameterLayout(self.n_joints, self.has_beta, self.tool_rotation, prismatic, self.mounted)
 
     def parameter_vector(self) -> NDArray[np.float64]:
         """Flatten the model into its parameter vector, shape (n_params,) [m, rad]."""
@@ -303,6 +305,10 @@ class RobotModel:
         r0 = layout.tool_rotation_index
         if r0 is not None:
             p[r0 : r0 + 3] = self.tool_rpy
+        m0 = layout.mount_index
+        if m0 is not None:
+            p[m0 : m0 + 3] = self.mount_xyz
+            p[m0 + 3 : m0 + 6] = self.mount_rpy
         p[layout.base_index : layout.base_index + 3] = self.base_xyz
         p[layout.base_index + 3 : layout.base_index + 6] = self.base_rpy
         return p
@@ -320,6 +326,10 @@ class RobotModel:
                 fields[field_name][j] = p[k]
         r0 = layout.tool_rotation_index
         tool_rpy = self.tool_rpy.copy() if r0 is None else p[r0 : r0 + 3].copy()
+        m0 = layout.mount_index
+        if m0 is not None:
+            fields["mount_xyz"] = p[m0 : m0 + 3].copy()
+            fields["mount_rpy"] = p[m0 + 3 : m0 + 6].copy()
         return replace(
             self,
             tool_point=p[layout.tool_index : layout.tool_index + 3].copy(),

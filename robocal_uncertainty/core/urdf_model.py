@@ -6,10 +6,10 @@ frame. :func:`robot_model_from_urdf` takes the chain from a base link to a tip l
 the root and the end of the first serial chain), folds the fixed joints into their neighbours
 and converts the chain exactly to the package's modified-DH model:
 
-- frame 0 of the modified-DH chain is placed on the first joint axis; the fixed transform base
-  link <- frame 0 is the model's ``mount`` (not a parameter: with a tracker frame it is the same
-  motion as the base transform; with measurements in the base link the first row's ``alpha, a``
-  and, where enabled, ``beta`` move the first axis);
+- frame 0 of the modified-DH chain is placed on the first joint axis; the transform base link
+  <- frame 0 is the model's ``mount`` (parameters ``mount.*``: with measurements in the base link
+  they carry the first axis's place and direction, which the first row alone cannot; with a
+  tracker frame the base transform duplicates them and the observability report drops them);
 - each further axis is placed relative to the previous one by the common normal (``alpha, a``
   on the row, ``theta, d`` on the previous row); where the axes are parallel within
   :data:`HAYATI_ANGLE` the row uses Hayati's ``beta`` instead of the ill-defined common normal;
@@ -300,13 +300,13 @@ def parse_urdf(text: str, *, where: str = "URDF") -> UrdfRobot:
     robot = UrdfRobot(name=root.get("name") or "robot", links=tuple(links), joints=tuple(joints), where=where)
     for link in links:
         seen = {link}
-        joint = robot.parent_joint(link)
-        while joint is not None:
-            if joint.parent in seen:
-                msg = f"{where}: joint {joint.name!r} closes a kinematic loop through link {joint.parent!r}"
+        up = robot.parent_joint(link)
+        while up is not None:
+            if up.parent in seen:
+                msg = f"{where}: joint {up.name!r} closes a kinematic loop through link {up.parent!r}"
                 raise ConfigError(msg)
-            seen.add(joint.parent)
-            joint = robot.parent_joint(joint.parent)
+            seen.add(up.parent)
+            up = robot.parent_joint(up.parent)
     roots = [link for link in links if robot.parent_joint(link) is None]
     if len(roots) > 1:
         msg = f"{where}: links {', '.join(repr(r) for r in roots)} have no parent: the URDF is not one tree"
@@ -583,6 +583,7 @@ def robot_model_from_urdf(
         prismatic=tuple(j.type == "prismatic" for j in movable),
         mount_xyz=mount_xyz,
         mount_rpy=mount_rpy,
+        mounted=True,
     )
     # The tool: tip link in the last modified-DH frame, then the measured point in the tip link.
     frames, _ = model_frames(model)
