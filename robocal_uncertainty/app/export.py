@@ -199,7 +199,7 @@ def _identity(data: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _comment(data: dict[str, Any], where: str, what: str) -> str:
+def _comment(data: dict[str, Any], where: str, what: str, uncertainty: str = "the sidecar JSON") -> str:
     ident = _identity(data)
     lines = [
         f"{what} written by robocal-uncertainty export from {where}.",
@@ -211,7 +211,7 @@ def _comment(data: dict[str, Any], where: str, what: str) -> str:
     rms_b, rms_a = ident.get("residual_rms_before_m"), ident.get("residual_rms_after_m")
     if isinstance(rms_b, (int, float)) and isinstance(rms_a, (int, float)):
         lines.append(f"residual RMS {1e3 * rms_b:.4g} mm before, {1e3 * rms_a:.4g} mm after calibration")
-    lines.append("The parameters' uncertainty and which of them the data determine: see the sidecar JSON.")
+    lines.append(f"The parameters' uncertainty and which of them the data determine: see {uncertainty}.")
     return "\n".join(lines)
 
 
@@ -456,6 +456,8 @@ def export_calibration(
     fmt: str,
     *,
     where: str = "calibration",
+    urdf_text: str | None = None,
+    uncertainty: str = "the sidecar JSON",
 ) -> Export:
     """Export a calibration (what :func:`read_calibration` returns) in format `fmt`.
 
@@ -468,6 +470,10 @@ def export_calibration(
     fmt : {"urdf", "ur-kinematics", "yaml"}
     where : str
         Names the calibration in messages and in the exported file's comment.
+    urdf_text : str, optional
+        The text of ``source.urdf`` when it is not a file (a ``robot_description`` parameter).
+    uncertainty : str
+        Where the comment says the uncertainty is stated.
 
     Raises
     ------
@@ -484,7 +490,9 @@ def export_calibration(
         text = _robot_yaml(calibrated, _comment(data, where, "Calibrated robot model"))
         return Export(fmt, text, _sidecar(data, calibrated, None, None), np.zeros(3), "")
     if fmt == "urdf" and source.urdf is None:
-        text, point, tip = _generated_urdf(calibrated, _comment(data, where, "Calibrated URDF (generated)"))
+        text, point, tip = _generated_urdf(
+            calibrated, _comment(data, where, "Calibrated URDF (generated)", uncertainty)
+        )
         return Export(fmt, text, _sidecar(data, calibrated, point, tip), point, tip)
     if fmt == "ur-kinematics" and source.urdf is None:
         msg = (
@@ -496,11 +504,15 @@ def export_calibration(
     origins, point = calibrated_joint_origins(chain, nominal, calibrated, frame0=_frame0(source, chain))
     assert source.urdf is not None
     if fmt == "urdf":
-        raw = Path(source.urdf.where).read_text(encoding="utf-8") if Path(source.urdf.where).is_file() else None
+        raw = urdf_text
+        if raw is None and Path(source.urdf.where).is_file():
+            raw = Path(source.urdf.where).read_text(encoding="utf-8")
         if raw is None:
             msg = f"cannot read the URDF text of {source.urdf.where}"
             raise ConfigError(msg)
-        text = _corrected_urdf_text(raw, origins, _comment(data, where, "Calibrated URDF"), source.urdf.where)
+        text = _corrected_urdf_text(
+            raw, origins, _comment(data, where, "Calibrated URDF", uncertainty), source.urdf.where
+        )
     else:
         text = _ur_kinematics(chain, origins, _comment(data, where, "UR kinematics_params_file"))
     return Export(fmt, text, _sidecar(data, calibrated, point, chain.tip_link), point, chain.tip_link)
@@ -519,11 +531,7 @@ def calibrated_robot_description(data: dict[str, Any], source: RobotSource, *, u
         The URDF text the model was read from (a ``robot_description`` parameter); without it
         the URDF file of `source`, or one generated from the model.
     """
-    if urdf_text is None or source.urdf is None:
-        return export_calibration(data, source, "urdf", where="calibration_node").text
-    calibrated = apply_calibration(source.model, data, where="calibration_node")
-    nominal = source.model.with_tool_rotation() if calibrated.tool_rotation else source.model
-    chain = source.chain()
-    origins, _ = calibrated_joint_origins(chain, nominal, calibrated, frame0=_frame0(source, chain))
-    comment = _comment(data, "calibration_node", "Calibrated URDF")
-    return _corrected_urdf_text(urdf_text, origins, comment, source.urdf.where)
+    note = "the node's calibration_file"
+    return export_calibration(
+        data, source, "urdf", where="calibration_node", urdf_text=urdf_text, uncertainty=note
+    ).text
