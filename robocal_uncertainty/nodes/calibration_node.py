@@ -279,7 +279,7 @@ class CalibrationNode(Node):
         self._diagnostics_pub.publish(diagnostic_array(self, [self.diagnostic_status()]))
 
     def _publish_description(self, result: IdentificationResult) -> None:
-        """The calibrated URDF on the latched ``~/robot_description`` (robot_state_publisher can follow it)."""
+        """The calibrated URDF on the latched ``~/robot_description`` (for robot_description topic readers)."""
         try:
             source = self._source or load_robot_source(self.robot_config)
             data = calibration_to_dict(result, robot=self.robot_config)
