@@ -39,7 +39,7 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, fit_rigid_base
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.measurement import joint_columns
-from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError, IdentifiabilityError, InputError
@@ -47,17 +47,21 @@ from robocal_uncertainty.errors import ConfigError, IdentifiabilityError, InputE
 __all__ = [
     "BASE_NAMES",
     "DEFAULT_SIGNIFICANCE",
+    "LENGTH_SCALE",
     "MIN_CHECK_DOF",
     "TOOL_NAMES",
     "SessionState",
     "TrackerMove",
     "Verification",
+    "effect_jacobian",
     "parameter_covariance",
     "tracker_move",
     "verify_session",
 ]
 
 Array = NDArray[np.float64]
+LENGTH_SCALE = "length_scale"
+"""Session effect: every joint length parameter (a, d) scaled by ``1 + s`` (temperature)."""
 BASE_NAMES: tuple[str, ...] = ("base.x", "base.y", "base.z", "base.roll", "base.pitch", "base.yaw")
 TOOL_NAMES: tuple[str, ...] = ("tool.x", "tool.y", "tool.z")
 DEFAULT_SIGNIFICANCE = 0.05
@@ -99,10 +103,27 @@ class SessionState:
         Its covariance (zeros where not estimated).
     sources : tuple of str
         Uncertainty sources the statement was made with.
-    between_session_covariance : ndarray, shape (n_joints, n_joints) [rad^2] or None
-        Between-session covariance of the joint offsets when several sessions were pooled.
+    between_session_covariance : ndarray, shape (k_b, k_b) or None
+        Between-session covariance of the session effects named by `between_session_names`
+        (joint offsets [rad^2], ``length_scale`` [1]) when several sessions were pooled.
     scope : str
         ``"session"`` (statement for the calibration session only) or ``"future sessions"``.
+    extra : dict
+        Provenance written to and read from the calibration file (campaign, settings, tool
+        point, model-adequacy test).
+    model_error_draws : ndarray, shape (n, 3) [m] or None
+        The calibration's residuals whitened to `model_error_covariance`, robot base frame:
+        the model error is resampled from them (its real, heavy-tailed shape), as the
+        Monte Carlo's ``residual`` source does. None: normal with that covariance.
+    model_error_dof : float or None
+        Effective degrees of freedom of the model-error estimate (``2 n / var(m_i)`` with
+        ``m_i`` the per-pose Mahalanobis size of the draws over 3): the null distribution of a
+        check scales the model error by ``sqrt(nu / chi2_nu)`` per trial, so an estimate from
+        few poses widens it as a Student-t does. None: the estimate is taken as exact.
+    between_session_names : tuple of str
+        Session effects of `between_session_covariance` (see :data:`SESSION_EFFECTS`).
+    between_session_dof : float or None
+        Degrees of freedom of that estimate (the null scales it as the model error's).
     """
 
     frame: Literal["base", "tracker"]
@@ -119,6 +140,10 @@ class SessionState:
     between_session_covariance: Array | None = None
     scope: str = "session"
     extra: dict[str, object] = field(default_factory=dict)
+    model_error_draws: Array | None = None
+    model_error_dof: float | None = None
+    between_session_names: tuple[str, ...] = ()
+    between_session_dof: float | None = None
 
     def covariance_of(self, names: tuple[str, ...] | list[str]) -> Array:
         """Sub-block of the parameter covariance for `names` (zero rows for names not estimated)."""
@@ -205,6 +230,10 @@ class Verification:
     model_error_std : ndarray, shape (3,) [m]
         Model-error standard uncertainty per axis the check assumed (base frame).
     warnings : tuple of str
+    effect_names : tuple of str
+    effects : ndarray, shape (k,) or None
+        Session effects estimated on the check (what changed since the calibration).
+    effects_covariance : ndarray, shape (k, k) or None
     """
 
     consistent: bool
@@ -231,6 +260,35 @@ class Verification:
     rms_error: float
     model_error_std: Array
     warnings: tuple[str, ...] = ()
+    effect_names: tuple[str, ...] = ()
+    effects: Array | None = None
+    effects_covariance: Array | None = None
+
+
+def effect_jacobian(layout: ParameterLayout, params: Array, joint_positions: Array, names: tuple[str, ...]) -> Array:
+    """Derivative of the tool points with respect to session effects, shape (n, 3, k).
+
+    Parameters
+    ----------
+    layout : ParameterLayout
+    params : ndarray, shape (n_params,) [m, rad]
+    joint_positions : ndarray, shape (n, n_joints) [rad]
+    names : tuple of str
+        Joint offsets (``jointN.theta``: a change of the offset) and :data:`LENGTH_SCALE`
+        (every joint ``a`` and ``d`` scaled by ``1 + s``).
+    """
+    _, jac = forward_points_and_jacobian(layout, params, joint_positions)
+    out = np.zeros((*jac.shape[:2], len(names)))
+    lengths = [idx[k] for idx in layout.joint_slices() for k in ("a", "d")]
+    for c, name in enumerate(names):
+        if name == LENGTH_SCALE:
+            out[:, :, c] = jac[:, :, lengths] @ params[lengths]
+        elif name in layout.names:
+            out[:, :, c] = jac[:, :, layout.names.index(name)]
+        else:
+            msg = f"unknown session effect {name!r} (joint offsets jointN.theta or {LENGTH_SCALE})"
+            raise ConfigError(msg)
+    return out
 
 
 def _tracker_pose(registration: Array) -> tuple[Array, Array]:
@@ -273,7 +331,7 @@ def tracker_move(new: Array, new_cov: Array, old: Array, old_cov: Array) -> Trac
         if n == 0.0:
             return 0.0, float(np.sqrt(np.trace(block)))
         g = vec / n
-        return n, float(np.sqrt(max(g @ block @ g, 0.0)))
+        return n, float(np.sqrt(max(float(g @ block @ g), 0.0)))
 
     distance, distance_std = norm_std(v[:3], cov[:3, :3])
     angle, angle_std = norm_std(v[3:], cov[3:, 3:])
@@ -322,6 +380,15 @@ def _pose_noise(
     return cov
 
 
+def _sqrt_psd(matrix: Array) -> Array:
+    evals, evecs = np.linalg.eigh(matrix)
+    return np.asarray(evecs * np.sqrt(np.clip(evals, 0.0, None)), dtype=np.float64)
+
+
+def _chol(matrix: Array) -> Array:
+    return np.asarray(np.linalg.cholesky(matrix), dtype=np.float64)
+
+
 def _gls_chi2(r: Array, chol: Array, a_mat: Array) -> float:
     """``r^T C^-1 r`` minus the part the re-registration columns explain (C = chol chol^T)."""
     rw = linalg.solve_triangular(chol, r, lower=True)
@@ -345,6 +412,10 @@ def _null_statistics(
     model_error: Array,
     kin_jacobian: Array,
     kin_covariance: Array,
+    model_error_draws: Array | None = None,
+    model_error_dof: float | None = None,
+    between_factor: Array | None = None,
+    between_dof: float | None = None,
 ) -> Array:
     """The check statistic for `trials` draws of the errors "nothing changed" allows, shape (trials,).
 
@@ -374,9 +445,21 @@ def _null_statistics(
         e = tracker.sample(rng, np.broadcast_to(distances, (m, n)))
         dq = encoder.sample(rng, (m, n, n_joints))
         e = e + np.einsum("pij,tpj->tpi", joint_jacobian, dq)
-        if me_sqrt is not None:
-            e = e + rng.standard_normal((m, n, 3)) @ me_sqrt.T
+        me = None
+        if model_error_draws is not None and model_error_draws.shape[0]:
+            me = model_error_draws[rng.integers(0, model_error_draws.shape[0], size=(m, n))]
+        elif me_sqrt is not None:
+            me = rng.standard_normal((m, n, 3)) @ me_sqrt.T
+        if me is not None:
+            if model_error_dof is not None and np.isfinite(model_error_dof):
+                me = me * np.sqrt(model_error_dof / rng.chisquare(model_error_dof, size=m))[:, None, None]
+            e = e + me
         flat = e.reshape(m, 3 * n)
+        if between_factor is not None:
+            shift = rng.standard_normal((m, between_factor.shape[1])) @ between_factor.T
+            if between_dof is not None and np.isfinite(between_dof):
+                shift = shift * np.sqrt(between_dof / rng.chisquare(between_dof, size=m))[:, None]
+            flat = flat + shift
         if k_sqrt is not None:
             flat = flat + rng.standard_normal((m, k_sqrt.shape[1])) @ k_sqrt.T
         w = linalg.solve_triangular(chol, flat.T, lower=True)
@@ -396,6 +479,7 @@ def verify_session(
     encoder_noise: EncoderNoise | None = None,
     null_trials: int = DEFAULT_NULL_TRIALS,
     seed: int = 0,
+    effects: tuple[str, ...] = (),
 ) -> Verification:
     """Re-register a new session on a check campaign and test the calibration against it.
 
@@ -457,6 +541,7 @@ def verify_session(
     theta_cols = joint_columns(layout)
     distances = np.linalg.norm(y, axis=1) if campaign.frame == "tracker" else np.full(n, 2.0)
     scale = np.ones(free.size)
+    between = state.between_session_covariance if state.between_session_names else None
 
     def covariance(jac: Array, params: Array) -> Array:
         r_wb = rpy_to_matrix(params[b0 + 3 : b0 + 6])
@@ -466,6 +551,9 @@ def verify_session(
         if kin.size:
             jk = jac[:, :, kin].reshape(3 * n, kin.size)
             cov = cov + jk @ sigma_k @ jk.T
+        if between is not None:
+            g = effect_jacobian(layout, params, q, state.between_session_names).reshape(3 * n, -1)
+            cov = cov + g @ between @ g.T
         return np.asarray(cov, dtype=np.float64)
 
     pred, jac = forward_points_and_jacobian(layout, p, q)
@@ -481,7 +569,7 @@ def verify_session(
                 "(the tool points must span the workspace and the wrist must turn between poses)"
             )
             raise IdentifiabilityError(msg)
-    chol = np.linalg.cholesky(covariance(jac, p))
+    chol = _chol(covariance(jac, p))
     for _ in range(_MAX_ITERATIONS):
         r = (y - pred).reshape(3 * n)
         if not free.size:
@@ -492,7 +580,7 @@ def verify_session(
         p[free] += step
         pred, jac = forward_points_and_jacobian(layout, p, q)
         a_mat = jac[:, :, free].reshape(3 * n, free.size)
-        chol = np.linalg.cholesky(covariance(jac, p))
+        chol = np.asarray(np.linalg.cholesky(covariance(jac, p)), dtype=np.float64)
         if np.max(np.abs(step * scale)) < 1e-12 + 1e-10 * np.max(np.abs(p[free] * scale)):
             break
     r = (y - pred).reshape(3 * n)
@@ -508,6 +596,7 @@ def verify_session(
     dof = 3 * n - rank
     chi2 = _gls_chi2(r, chol, a_mat)
     p_chi2 = float(stats.chi2.sf(chi2, dof))
+    r_new = rpy_to_matrix(p[b0 + 3 : b0 + 6])
     null = _null_statistics(
         null_trials,
         seed,
@@ -517,9 +606,15 @@ def verify_session(
         tracker,
         encoder,
         jac[:, :, theta_cols],
-        rpy_to_matrix(p[b0 + 3 : b0 + 6]) @ state.model_error_covariance @ rpy_to_matrix(p[b0 + 3 : b0 + 6]).T,
+        r_new @ state.model_error_covariance @ r_new.T,
         jac[:, :, kin].reshape(3 * n, kin.size) if kin.size else np.zeros((3 * n, 0)),
         sigma_k,
+        None if state.model_error_draws is None else state.model_error_draws @ r_new.T,
+        state.model_error_dof,
+        None
+        if between is None
+        else effect_jacobian(layout, p, q, state.between_session_names).reshape(3 * n, -1) @ _sqrt_psd(between),
+        state.between_session_dof,
     )
     p_value = float((1 + np.count_nonzero(null >= chi2)) / (1 + null.size))
     res_cov = c_mat - a_mat @ reg_cov @ a_mat.T
@@ -533,11 +628,11 @@ def verify_session(
     excess = 0.0
     if chi2 > dof:
         lo, hi = 0.0, float(np.sqrt(np.mean(residuals**2))) + 1e-9
-        while _gls_chi2(r, np.linalg.cholesky(c_mat + hi**2 * np.eye(3 * n)), a_mat) > dof:
+        while _gls_chi2(r, _chol(c_mat + hi**2 * np.eye(3 * n)), a_mat) > dof:
             hi *= 2.0
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            if _gls_chi2(r, np.linalg.cholesky(c_mat + mid**2 * np.eye(3 * n)), a_mat) > dof:
+            if _gls_chi2(r, _chol(c_mat + mid**2 * np.eye(3 * n)), a_mat) > dof:
                 lo = mid
             else:
                 hi = mid
@@ -566,6 +661,17 @@ def verify_session(
             f"p = {p_value:.3g} < {significance:g}); re-calibrate"
         )
     warns: list[str] = []
+    effect_values = effect_cov = None
+    if effects:
+        g = effect_jacobian(layout, p, q, effects).reshape(3 * n, len(effects))
+        full = np.concatenate((a_mat, g), axis=1)
+        col = np.linalg.norm(full, axis=0)
+        col[col == 0] = 1.0
+        fw = linalg.solve_triangular(chol, full / col, lower=True)
+        inv = np.linalg.pinv(fw.T @ fw) / np.outer(col, col)
+        step = inv @ (full.T @ linalg.cho_solve((chol, True), r))
+        effect_values = step[free.size :]
+        effect_cov = inv[free.size :, free.size :]
     return Verification(
         consistent=consistent,
         verdict=verdict,
@@ -591,10 +697,15 @@ def verify_session(
         rms_error=rms,
         model_error_std=np.sqrt(np.clip(np.diag(state.model_error_covariance), 0.0, None)),
         warnings=tuple(warns),
+        effect_names=tuple(effects),
+        effects=effect_values,
+        effects_covariance=effect_cov,
     )
 
 
-def parameter_covariance(calibration: IdentificationResult, joint_positions: Array, pose_covariances: Array) -> Array:
+def parameter_covariance(
+    calibration: IdentificationResult, joint_positions: Array, pose_covariances: Array, *, include_bias: bool = True
+) -> Array:
     """Linearised covariance of the estimated parameters of a point calibration.
 
     The regularised Gauss-Newton solution is, to first order, ``x = G b`` with
@@ -628,5 +739,11 @@ def parameter_covariance(calibration: IdentificationResult, joint_positions: Arr
     gain = np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T)
     c_mat = linalg.block_diag(*pose_covariances)
     cov_x = gain @ c_mat @ gain.T
+    if include_bias and calibration.lambda_ > 0.0:
+        # First-order Tikhonov shrinkage -(A^T A + P)^-1 P x, evaluated at x_hat: a systematic
+        # error of the estimate the sandwich does not hold (see calibration_mc._regularisation_bias).
+        x_hat = (calibration.estimate - calibration.nominal)[est] * scale
+        bias = -np.linalg.solve(a_mat.T @ a_mat + penalty, penalty @ x_hat)
+        cov_x = cov_x + np.outer(bias, bias)
     cov = cov_x / np.outer(scale, scale)
     return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)
