@@ -13,6 +13,7 @@ whether the robot still agrees with its calibration within the stated uncertaint
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -23,9 +24,10 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, verify_session
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
-from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.errors import CalibError, ConfigError
+from robocal_uncertainty.uncertainty.between_sessions import estimate_between_sessions, with_between_sessions
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
-from robocal_uncertainty.uncertainty.sessions import session_state
+from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state
 
 __all__ = ["SessionCalibration", "VerificationRun", "calibrate_session", "load_session_calibration", "verify"]
 
@@ -50,6 +52,9 @@ def calibrate_session(
     accept_unconverged: bool = False,
     sources: tuple[str, ...] = ("tracker", "encoder", "residual"),
     campaign_name: str | None = None,
+    cross_validation_folds: int = 5,
+    later_sessions: Sequence[Campaign] = (),
+    retool: bool = True,
 ) -> SessionCalibration:
     """Identify `campaign` and record the session for verification and later sessions.
 
@@ -66,6 +71,16 @@ def calibrate_session(
         Sources of the statement; ``residual`` carries the model error.
     campaign_name : str, optional
         Recorded in the file.
+    cross_validation_folds : int
+        When the model is inadequate, take the model error from this many folds of held-out
+        poses (:func:`~robocal_uncertainty.uncertainty.sessions.cross_validated_model_error`);
+        0 keeps the one from the calibration's own residuals.
+    later_sessions : sequence of Campaign
+        Campaigns of the same robot from other sessions (their own tracker set-ups): the
+        between-session component is estimated from them and the statement then holds for a
+        future session (:mod:`~robocal_uncertainty.uncertainty.between_sessions`).
+    retool : bool
+        The probe was remounted between sessions (re-register the tool point on each).
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     if result.measurement.dimension != 3 or result.measurement.weights is not None:
@@ -74,16 +89,39 @@ def calibrate_session(
             "(this one used orientation data)"
         )
         return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
+    warnings: list[str] = []
+    settings: dict[str, object] = {
+        "lambda": str(lambda_),
+        "lambda_method": result.lambda_method,
+        "cross_validation_folds": cross_validation_folds,
+        "retool": retool,
+    }
     state, adequacy = session_state(
-        result,
-        campaign,
-        tracker_noise,
-        encoder_noise,
-        sources=sources,
-        campaign_name=campaign_name,
-        settings={"lambda": str(lambda_), "lambda_method": result.lambda_method},
+        result, campaign, tracker_noise, encoder_noise, sources=sources, campaign_name=campaign_name, settings=settings
     )
-    return SessionCalibration(result=result, state=state, adequacy=adequacy, warnings=())
+    if cross_validation_folds and not adequacy.adequate and "residual" in sources:
+        try:
+            cv = cross_validated_model_error(
+                model, campaign, tracker_noise, encoder_noise, folds=cross_validation_folds, lambda_=lambda_
+            )
+        except CalibError as err:
+            warnings.append(f"model error from the calibration's own residuals: {cross_validation_folds}-fold {err}")
+        else:
+            state, adequacy = session_state(
+                result,
+                campaign,
+                tracker_noise,
+                encoder_noise,
+                sources=sources,
+                adequacy=adequacy,
+                campaign_name=campaign_name,
+                settings=settings,
+                cross_validated=cv,
+            )
+    if later_sessions:
+        between = estimate_between_sessions(result.model, state, list(later_sessions), retool=retool)
+        state = with_between_sessions(state, between)
+    return SessionCalibration(result=result, state=state, adequacy=adequacy, warnings=tuple(warnings))
 
 
 def load_session_calibration(model: RobotModel, path: str | Path) -> tuple[RobotModel, SessionState, dict[str, Any]]:
