@@ -234,6 +234,9 @@ class Verification:
     effects : ndarray, shape (k,) or None
         Session effects estimated on the check (what changed since the calibration).
     effects_covariance : ndarray, shape (k, k) or None
+    effective_dof : ndarray, shape (n, 3) or None
+        Welch-Satterthwaite degrees of freedom of each residual component's standard
+        deviation (inf where every part is taken as exact); see :meth:`coverage_factors`.
     """
 
     consistent: bool
@@ -263,6 +266,20 @@ class Verification:
     effect_names: tuple[str, ...] = ()
     effects: Array | None = None
     effects_covariance: Array | None = None
+    effective_dof: Array | None = None
+
+    def coverage_factors(self, coverage: float = 0.95) -> Array:
+        """Per component: the t-quantile for `coverage` with its Welch-Satterthwaite dof, shape (n, 3).
+
+        The components estimated from few observations (the between-session effects, the
+        model error) carry their degrees of freedom; the others are taken as exact.
+        """
+        dof = np.full(self.normalised.shape, np.inf) if self.effective_dof is None else self.effective_dof
+        return np.asarray(stats.t.ppf(0.5 + coverage / 2.0, dof), dtype=np.float64)
+
+    def inside(self, coverage: float = 0.95) -> NDArray[np.bool_]:
+        """Which residual components lie inside their `coverage` interval, shape (n, 3)."""
+        return np.asarray(np.abs(self.normalised) <= self.coverage_factors(coverage))
 
 
 def effect_jacobian(layout: ParameterLayout, params: Array, joint_positions: Array, names: tuple[str, ...]) -> Array:
@@ -378,6 +395,45 @@ def _pose_noise(
     cov: Array = (encoder.half_width**2 / 3.0) * np.einsum("pij,pkj->pik", jq, jq)
     cov += np.eye(3) * (tracker.std(distances) ** 2)[:, None, None]
     return cov
+
+
+def _effective_dof(
+    res_std: Array,
+    jac: Array,
+    params: Array,
+    q: Array,
+    layout: ParameterLayout,
+    state: SessionState,
+    rotation: Array,
+    between_names: tuple[str, ...] | None,
+) -> Array:
+    """Welch-Satterthwaite dof of each residual component's variance, shape (n, 3).
+
+    Parts with finite dof: the model error (``state.model_error_dof``) and each group of
+    between-session effects (joint offsets, length scale; ``state.between_session_dof`` for the
+    smaller group, the group sizes' ratio for the other). The rest of the variance is exact.
+    """
+    n = res_std.shape[0]
+    total = res_std**2
+    parts: list[tuple[Array, float]] = []
+    if state.model_error_dof is not None and np.isfinite(state.model_error_dof):
+        me = np.diag(rotation @ state.model_error_covariance @ rotation.T)
+        parts.append((np.broadcast_to(me, (n, 3)), float(state.model_error_dof)))
+    if between_names and state.between_session_covariance is not None and state.between_session_dof is not None:
+        g = effect_jacobian(layout, params, q, between_names)
+        groups = {nm == LENGTH_SCALE for nm in between_names}
+        sizes = {key: sum(1 for nm in between_names if (nm == LENGTH_SCALE) == key) for key in groups}
+        per_effect = float(state.between_session_dof) / min(sizes.values())
+        for key in groups:
+            cols = [c for c, nm in enumerate(between_names) if (nm == LENGTH_SCALE) == key]
+            sub = state.between_session_covariance[np.ix_(cols, cols)]
+            var = np.einsum("pik,kl,pil->pi", g[:, :, cols], sub, g[:, :, cols])
+            parts.append((var, per_effect * sizes[key]))
+    if not parts:
+        return np.full((n, 3), np.inf)
+    denominator = sum(np.minimum(var, total) ** 2 / dof for var, dof in parts)
+    with np.errstate(divide="ignore"):
+        return np.asarray(np.where(denominator > 0, total**2 / denominator, np.inf), dtype=np.float64)
 
 
 def _sqrt_psd(matrix: Array) -> Array:
@@ -661,6 +717,9 @@ def verify_session(
             f"p = {p_value:.3g} < {significance:g}); re-calibrate"
         )
     warns: list[str] = []
+    effective_dof = _effective_dof(
+        res_std, jac, p, q, layout, state, r_new, None if between is None else state.between_session_names
+    )
     effect_values = effect_cov = None
     if effects:
         g = effect_jacobian(layout, p, q, effects).reshape(3 * n, len(effects))
@@ -700,6 +759,7 @@ def verify_session(
         effect_names=tuple(effects),
         effects=effect_values,
         effects_covariance=effect_cov,
+        effective_dof=effective_dof,
     )
 
 

@@ -51,6 +51,38 @@ def model_error_dof(draws: Array, covariance: Array) -> float:
     return float(2.0 * m.size / var) if var > 0 else float("inf")
 
 
+def _parameter_factor(folds: list[tuple[Array, Array, Array, Array, Array]], model_error_base: Array) -> float:
+    """The factor of :attr:`CrossValidatedModelError.parameter_factor` (bisection in log space)."""
+    from scipy import linalg
+
+    dof = sum(r.size - a.shape[1] for r, _, _, _, a in folds)
+
+    def pooled(kappa: float) -> float:
+        total = 0.0
+        for r, noise, r_wb, param, a_mat in folds:
+            me = r_wb @ model_error_base @ r_wb.T
+            c_mat = linalg.block_diag(*(noise + me)) + kappa * param
+            chol = np.linalg.cholesky(c_mat)
+            rw = linalg.solve_triangular(chol, r, lower=True)
+            qm, _ = np.linalg.qr(linalg.solve_triangular(chol, a_mat, lower=True))
+            rw = rw - qm @ (qm.T @ rw)
+            total += float(rw @ rw)
+        return total
+
+    if pooled(1.0) <= dof:
+        return 1.0
+    lo, hi = 0.0, np.log(1e3)
+    if pooled(float(np.exp(hi))) > dof:
+        return float(np.exp(hi))
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if pooled(float(np.exp(mid))) > dof:
+            lo = mid
+        else:
+            hi = mid
+    return float(np.exp(hi))
+
+
 def session_state(
     calibration: IdentificationResult,
     campaign: Campaign,
@@ -101,6 +133,8 @@ def session_state(
         model_error = r_wb @ cross_validated.covariance @ r_wb.T
         draws = cross_validated.draws
     cov = parameter_covariance(calibration, q, noise + model_error)
+    if use_residual and cross_validated is not None:
+        cov = cov * cross_validated.parameter_factor
     names = tuple(n for n, e in zip(calibration.parameter_names, calibration.estimated) if e)
     model_error_cov_base = r_wb.T @ model_error @ r_wb
     state = SessionState(
@@ -149,17 +183,24 @@ class CrossValidatedModelError:
     fitted_covariance : ndarray, shape (3, 3) [m^2]
         The first-order estimate from the calibration's own residuals, for comparison.
     folds : int
+    parameter_factor : float
+        Factor (>= 1) on the calibration's parameter covariance with which the held-out folds,
+        tested as a check is (tracker pose re-registered), give a statistic equal to its degrees
+        of freedom: the first-order covariance treats the model error as independent from pose
+        to pose, a smooth real one moves the parameters more.
     """
 
     covariance: Array
     draws: Array
     fitted_covariance: Array
     folds: int
+    parameter_factor: float = 1.0
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready (the draws are written with the session's model error)."""
         return {
             "folds": self.folds,
+            "parameter_factor": self.parameter_factor,
             "covariance_base_m2": self.covariance.tolist(),
             "fitted_covariance_base_m2": self.fitted_covariance.tolist(),
         }
@@ -196,6 +237,7 @@ def cross_validated_model_error(
     held: list[Array] = []
     known: list[Array] = []
     fitted: list[Array] = []
+    folds_data: list[tuple[Array, Array, Array, Array, Array]] = []
     for part in np.array_split(order, folds):
         train = np.setdiff1d(order, part)
         cal = identify(model, campaign.subset(train), lambda_=lambda_, accept_unconverged=True)
@@ -213,6 +255,18 @@ def cross_validated_model_error(
         b0 = layout.base_index
         r_wb = rpy_to_matrix(cal.estimate[b0 + 3 : b0 + 6])
         held.append((y - pred) @ r_wb)
+        kin = [i for i, nm in enumerate(state.covariance_names) if not nm.startswith("base.")]
+        jk_flat = jk[:, :, kin].reshape(-1, len(kin))
+        base = jac[:, :, b0 : b0 + 6].reshape(-1, 6)
+        folds_data.append(
+            (
+                (y - pred).reshape(-1),
+                noise,
+                r_wb,
+                jk_flat @ state.parameter_covariance[np.ix_(kin, kin)] @ jk_flat.T,
+                base / np.linalg.norm(base, axis=0),
+            )
+        )
         known.append(np.einsum("ki,pkl,lj->pij", r_wb, noise + param, r_wb))
         fitted.append(r_wb.T @ adequacy.inadequacy_covariance @ r_wb)
     residuals = np.concatenate(held)
@@ -224,7 +278,9 @@ def cross_validated_model_error(
     s_inv_sqrt = (s_evecs / np.sqrt(np.maximum(s_evals, np.finfo(float).tiny))) @ s_evecs.T
     m_evals, m_evecs = np.linalg.eigh(cov)
     m_sqrt = (m_evecs * np.sqrt(np.clip(m_evals, 0.0, None))) @ m_evecs.T
+    factor = _parameter_factor(folds_data, cov)
     return CrossValidatedModelError(
+        parameter_factor=factor,
         covariance=cov,
         draws=centred @ (m_sqrt @ s_inv_sqrt).T,
         fitted_covariance=np.mean(fitted, axis=0),
