@@ -79,3 +79,18 @@ def test_verify_refuses_small_checks_and_files_without_a_session(
     assert "has no session record" in capsys.readouterr().err
     assert main(["verify", str(sessions / "cal.json"), str(small), "--robot", "ur10", "--significance", "5"]) == 1
     assert "--significance is a probability" in capsys.readouterr().err
+
+
+def test_evaluate_adds_the_between_session_component(sessions: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cal = sessions / "cal_future.json"
+    args = ["calibrate", str(sessions / "ur10.session1.mcap"), "--robot", "ur10", "--json", str(cal)]
+    assert main([*args, "--sessions", str(sessions / "ur10.session2.mcap")]) == 0
+    assert "statement scope: future sessions (between-session component from 2 sessions" in capsys.readouterr().out
+    joints = ["--test-joints", "0.9", "-1.8", "1.5", "0.3", "0.9", "-1.6"]
+    base = ["evaluate", str(sessions / "ur10.session1.mcap"), "--robot", "ur10", *joints, "--trials", "2000"]
+    assert main([*base, "--between-session", str(cal), "--out", str(sessions / "ev"), "--force"]) == 0
+    out = capsys.readouterr().out
+    assert "between_session" in out.split("Uncertainty budget")[1]
+    # A file of one session has no component to add: one-line refusal.
+    assert main([*base, "--between-session", str(sessions / "cal.json"), "--out", str(sessions / "ev2")]) == 1
+    assert "has no between-session component: calibrate it with --sessions" in capsys.readouterr().err

@@ -29,10 +29,12 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal_uncertainty.core.calibration_file import read_calibration, read_session_state
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
@@ -48,7 +50,13 @@ from robocal_uncertainty.uncertainty.sources import (
     register_source,
 )
 
-__all__ = ["BetweenSessions", "estimate_between_sessions", "identifiable_effects", "with_between_sessions"]
+__all__ = [
+    "BetweenSessions",
+    "between_sessions_from_file",
+    "estimate_between_sessions",
+    "identifiable_effects",
+    "with_between_sessions",
+]
 
 Array = NDArray[np.float64]
 _RCOND = 1e-6
@@ -215,6 +223,34 @@ def estimate_between_sessions(
         n_sessions=len(sessions) + 1,
         session_effects=e,
         session_effects_std=np.asarray(stds),
+    )
+
+
+def between_sessions_from_file(path: str | Path) -> BetweenSessions:
+    """The between-session component of a calibration file (``calibrate --sessions``).
+
+    Raises
+    ------
+    ConfigError
+        Not a calibration, or one without a between-session component.
+    """
+    where = f"calibration {path}"
+    state = read_session_state(read_calibration(path), where=where)
+    if state is None or state.between_session_covariance is None or not state.between_session_names:
+        msg = f"{where} has no between-session component: calibrate it with --sessions (campaigns of other sessions)"
+        raise ConfigError(msg)
+    summary = state.extra.get("between_session", {})
+    assert isinstance(summary, dict)
+    k = len(state.between_session_names)
+    return BetweenSessions(
+        names=state.between_session_names,
+        covariance=state.between_session_covariance,
+        group_std={str(a): float(b) for a, b in dict(summary.get("group_std", {})).items()},
+        group_dof={str(a): float(b) for a, b in dict(summary.get("group_dof", {})).items()},
+        dof=float(state.between_session_dof if state.between_session_dof is not None else np.inf),
+        n_sessions=int(summary.get("n_sessions", 0)),
+        session_effects=np.asarray(summary.get("session_effects", np.zeros((0, k))), dtype=np.float64),
+        session_effects_std=np.asarray(summary.get("session_effects_std", np.zeros((0, k))), dtype=np.float64),
     )
 
 
