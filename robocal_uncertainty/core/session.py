@@ -554,6 +554,18 @@ def verify_session(
         Test level (false-alarm rate), default 5 %.
     tracker_noise, encoder_noise : optional
         The new session's instruments; the calibration session's by default.
+    null_trials : int
+        Monte Carlo draws of the statistic under "nothing changed" from the stated
+        distributions (uniform tracker and encoder errors, the model error resampled from its
+        draws or normal, normal parameter and between-session errors; the estimated parts
+        scaled by ``sqrt(nu / chi2_nu)`` per draw); they give the p-value. With uniform errors
+        the statistic has lighter tails than a chi-square, whose p-value would be too large.
+    seed : int
+        Seed of those draws (``SeedSequence(seed)`` spawned per block of 4096 draws).
+    effects : tuple of str
+        Session effects to estimate after the re-registration (joint offsets, length scale;
+        :func:`effect_jacobian`) in one linear GLS step with it: what changed since the
+        calibration, with its covariance (``Verification.effects``); they do not enter the test.
 
     Raises
     ------
