@@ -16,9 +16,26 @@ from typing import Any
 from robocal_uncertainty.app.output_paths import check_output_file
 from robocal_uncertainty.bagio.campaign_mcap import write_campaign
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.simulation import SimulatedCampaign, SimulationSettings, simulate_campaign
+from robocal_uncertainty.core.simulation import (
+    SessionSimulationSettings,
+    SimulatedCampaign,
+    SimulatedSessions,
+    SimulationSettings,
+    simulate_campaign,
+    simulate_sessions,
+)
 
-__all__ = ["TRUTH_FORMAT", "SimulationFiles", "simulate", "simulation_truth", "truth_path"]
+__all__ = [
+    "SESSION_TRUTH_FORMAT",
+    "TRUTH_FORMAT",
+    "SessionFiles",
+    "SimulationFiles",
+    "session_path",
+    "simulate",
+    "simulate_sessions_files",
+    "simulation_truth",
+    "truth_path",
+]
 
 TRUTH_FORMAT = "robocal_uncertainty/simulation_truth/1"
 """``format`` field of the truth JSON."""
@@ -91,3 +108,59 @@ def simulate(
     write_campaign(campaign_path, sim.campaign, overwrite=overwrite)
     truth.write_text(json.dumps(simulation_truth(sim, model, seed=seed), indent=1) + "\n", encoding="utf-8")
     return SimulationFiles(campaign_path=campaign_path, truth_path=truth, simulation=sim)
+
+
+SESSION_TRUTH_FORMAT = "robocal_uncertainty/session_truth/1"
+"""``format`` field of a session's truth JSON."""
+
+
+@dataclass(frozen=True, eq=False)
+class SessionFiles:
+    """What :func:`simulate_sessions_files` wrote: one campaign and truth per session."""
+
+    campaign_paths: tuple[Path, ...]
+    truth_paths: tuple[Path, ...]
+    simulation: SimulatedSessions
+
+
+def session_path(out: str | Path, index: int) -> Path:
+    """Campaign path of session `index` (1-based): ``run.mcap`` -> ``run.session2.mcap``."""
+    path = Path(out)
+    return path.with_name(f"{path.stem}.session{index}{path.suffix or '.mcap'}")
+
+
+def simulate_sessions_files(
+    model: RobotModel,
+    settings: SessionSimulationSettings,
+    out: str | Path,
+    *,
+    seed: int | None,
+    overwrite: bool = False,
+) -> SessionFiles:
+    """Simulate several sessions of one robot; write each campaign and its truth.
+
+    Session ``k`` goes to :func:`session_path` ``(out, k)`` with its truth beside it
+    (:func:`truth_path`): the robot (shared), the session's true parameters (its tracker frame
+    as the base), its tracker placement, probe remount, joint-offset drift and temperature
+    (format :data:`SESSION_TRUTH_FORMAT`, SI units). Every output path is checked before
+    anything is drawn or written.
+    """
+    paths = [session_path(out, k + 1) for k in range(settings.n_sessions)]
+    campaigns = [check_output_file(p, force=overwrite, option="--out") for p in paths]
+    truths = [check_output_file(truth_path(p), force=overwrite, option="truth file") for p in campaigns]
+    sim = simulate_sessions(model, settings, seed=seed)
+    for k, (campaign_path, truth, session, change) in enumerate(zip(campaigns, truths, sim.sessions, sim.changes)):
+        write_campaign(campaign_path, session.campaign, overwrite=overwrite)
+        data = simulation_truth(session, model, seed=seed)
+        data.update(
+            {
+                "format": SESSION_TRUTH_FORMAT,
+                "session": k + 1,
+                "n_sessions": settings.n_sessions,
+                "robot_parameters": sim.robot_parameters.tolist(),
+                "change": change.to_dict(),
+                "expansion_per_K": settings.expansion,
+            }
+        )
+        truth.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    return SessionFiles(campaign_paths=tuple(campaigns), truth_paths=tuple(truths), simulation=sim)

@@ -129,7 +129,10 @@ def check_outputs(args: argparse.Namespace) -> None:
     from robocal_uncertainty.app.simulation import truth_path
 
     force = bool(getattr(args, "force", False))
-    if args.command in ("simulate", "import-csv"):
+    sessions = args.command == "simulate" and (
+        getattr(args, "sessions", None) is not None or getattr(args, "session_poses", None) is not None
+    )
+    if args.command in ("simulate", "import-csv") and not sessions:
         check_output_file(args.out, force=force, option="--out")
         if args.command == "simulate":
             check_output_file(truth_path(args.out), force=force, option="truth file")

@@ -99,7 +99,13 @@ def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Seque
     from robocal_uncertainty.core import EncoderNoise, TrackerNoise
     from robocal_uncertainty.uncertainty import UncertaintySettings
 
+    between = None
+    if getattr(args, "between_session", None):
+        from robocal_uncertainty.uncertainty.between_sessions import between_sessions_from_file
+
+        between = between_sessions_from_file(args.between_session)
     return UncertaintySettings(
+        between_session=between,
         sources=tuple(sources),
         tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
         encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),

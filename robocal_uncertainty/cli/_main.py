@@ -23,6 +23,7 @@ VERB_MODULES = (
     "evaluate",
     "replay",
     "validate",
+    "verify",
     "map",
     "suggest",
     "section",

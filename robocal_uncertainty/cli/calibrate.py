@@ -7,7 +7,7 @@ from typing import Any
 
 from robocal_uncertainty.cli._common import campaign_and_robot, parse_lambda
 from robocal_uncertainty.cli._evaluation import print_calibration
-from robocal_uncertainty.cli._options import add_campaign_args, add_force_arg
+from robocal_uncertainty.cli._options import add_campaign_args, add_force_arg, add_noise_args
 
 
 def register(sub: Any) -> None:
@@ -27,17 +27,98 @@ def register(sub: Any) -> None:
         action="store_true",
         help="report an identification that did not converge instead of stopping with an error",
     )
+    add_noise_args(p)
+    p.add_argument(
+        "--sessions",
+        nargs="+",
+        metavar="CAMPAIGN",
+        help="campaigns of the same robot from other sessions (own tracker set-ups): estimate the between-session "
+        "component, so that the statement holds for a future session",
+    )
+    p.add_argument(
+        "--same-tool",
+        action="store_true",
+        help="the probe was not remounted between the sessions (default: re-register the tool point on each)",
+    )
+    p.add_argument(
+        "--cross-validation-folds",
+        type=int,
+        default=5,
+        help="model error from this many folds of held-out poses when the model is inadequate; 0: from the "
+        "calibration's own residuals (default %(default)s)",
+    )
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from robocal_uncertainty.core import identify
-    from robocal_uncertainty.core.calibration_file import write_calibration
+def session_lines(state: Any) -> list[str]:
+    """What ``calibrate`` prints about the session record it writes."""
+    import numpy as np
 
+    me = np.sqrt(np.clip(np.diag(state.model_error_covariance), 0.0, None)) * 1e6
+    adequacy = state.extra.get("model_adequacy", {})
+    origin = "held-out poses" if adequacy.get("cross_validated") else "calibration residuals"
+    lines = [
+        f"session record: {state.n_poses} poses in the {state.frame} frame ({state.frame_id}), "
+        f"{len(state.covariance_names)} parameters with covariance, model error u = "
+        f"({me[0]:.1f}, {me[1]:.1f}, {me[2]:.1f}) um per axis (base frame, from {origin})"
+    ]
+    if state.scope == "session":
+        lines.append(
+            "statement scope: this session only (one session: a later tracker set-up, probe mounting or drift is "
+            "not covered; give --sessions to cover future sessions, or run verify on a check campaign)"
+        )
+    else:
+        between = state.extra.get("between_session", {})
+        groups = between.get("group_std", {})
+        parts = []
+        if "joint_offsets" in groups:
+            parts.append(f"joint offsets {np.degrees(groups['joint_offsets']) * 1e3:.2f} mdeg")
+        if "length_scale" in groups:
+            parts.append(f"length scale {groups['length_scale'] * 1e6:.1f} ppm")
+        lines.append(
+            f"statement scope: future sessions (between-session component from {between.get('n_sessions')} sessions, "
+            f"{between.get('dof', state.between_session_dof):.0f}+ degrees of freedom: {', '.join(parts)} per session)"
+        )
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from robocal_uncertainty.app.verification import calibrate_session
+    from robocal_uncertainty.cli._common import check_campaign_joints, read_campaign_checked
+    from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+    from robocal_uncertainty.core.calibration_file import write_calibration
+    from robocal_uncertainty.errors import ConfigError
+
+    if args.cross_validation_folds < 0 or args.cross_validation_folds == 1:
+        msg = f"--cross-validation-folds must be 0 or at least 2, got {args.cross_validation_folds}"
+        raise ConfigError(msg)
     campaign, model = campaign_and_robot(args)
-    result = identify(model, campaign, lambda_=parse_lambda(args.lambda_), accept_unconverged=args.accept_unconverged)
-    print_calibration(result)
+    later = []
+    for path in args.sessions or ():
+        session = read_campaign_checked(args, path)
+        check_campaign_joints(model, session, path)
+        later.append(session)
+    calibration = calibrate_session(
+        model,
+        campaign,
+        tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
+        encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
+        lambda_=parse_lambda(args.lambda_),
+        accept_unconverged=args.accept_unconverged,
+        campaign_name=str(args.campaign),
+        cross_validation_folds=args.cross_validation_folds,
+        later_sessions=later,
+        retool=not args.same_tool,
+    )
+    print_calibration(calibration.result)
+    for warning in calibration.warnings:
+        print(f"warning: {warning}")
+    if calibration.state is not None:
+        for line in session_lines(calibration.state):
+            print(line)
     if args.json:
-        write_calibration(args.json, result, robot=str(args.robot))
+        write_calibration(args.json, calibration.result, robot=str(args.robot), session=calibration.state)
         print(f"wrote {args.json}")
     return 0

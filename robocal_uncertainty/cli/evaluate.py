@@ -28,6 +28,12 @@ def register(sub: Any) -> None:
         default=None,
         help=f"comma list of {sources_help()} (default tracker,encoder; and tracker_orientation for a 6-DOF campaign)",
     )
+    p.add_argument(
+        "--between-session",
+        metavar="CAL.json",
+        help="a calibration written by calibrate --sessions: add its between-session component (source "
+        "between_session) so the statement holds for a future session",
+    )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
     add_uncertainty_args(p, trials_default="auto")
@@ -40,11 +46,14 @@ def run(args: argparse.Namespace) -> int:
     test_q = read_test_joints(args, model)
     from robocal_uncertainty.uncertainty import parse_sources
 
+    sources = parse_sources(default_sources(args.sources, campaign, "tracker,encoder"))
+    if args.between_session and "between_session" not in sources:
+        sources = (*sources, "between_session")
     run_evaluation(
         model,
         campaign,
         test_q,
-        sources=parse_sources(default_sources(args.sources, campaign, "tracker,encoder")),
+        sources=sources,
         args=args,
         out_dir=Path(args.out),
         label="evaluate",

@@ -25,6 +25,29 @@ def register(sub: Any) -> None:
     )
     add_noise_args(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated robot, poses and noise (default 0)")
+    g = p.add_argument_group(
+        "sessions",
+        "several measurement sessions of one robot: OUT.session1.mcap, OUT.session2.mcap, ... (tracker frame), each "
+        "with its truth; every session places the tracker anew, later ones also remount the probe, drift the joint "
+        "offsets and change the temperature",
+    )
+    g.add_argument("--sessions", type=int, default=None, help="number of sessions (default: one campaign)")
+    g.add_argument("--session-poses", type=int, nargs="+", help="poses of each session (default --poses for all)")
+    g.add_argument(
+        "--tool-remount-um", type=float, default=50.0, help="probe remount std per axis, um (default %(default)s)"
+    )
+    g.add_argument(
+        "--joint-drift-deg",
+        type=float,
+        default=0.002,
+        help="joint-offset drift std per joint and session, deg (default %(default)s)",
+    )
+    g.add_argument(
+        "--temperature-k",
+        type=float,
+        default=2.0,
+        help="temperature std between sessions, K; links scale by 23e-6/K (default %(default)s)",
+    )
     add_force_arg(p, "the campaign and truth files")
     p.set_defaults(func=run)
 
@@ -40,10 +63,52 @@ def run(args: argparse.Namespace) -> int:
         tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
         encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
     )
+    if args.sessions is not None or args.session_poses is not None:
+        return _run_sessions(args, model, settings)
     files = simulate(model, settings, args.out, seed=args.seed, overwrite=args.force)
     print(
         f"wrote {files.campaign_path} ({count(files.simulation.campaign.n_poses, 'pose')}, "
         f"points in the {args.frame} frame) "
         f"and truth {files.truth_path}"
     )
+    return 0
+
+
+def _run_sessions(args: argparse.Namespace, model: Any, settings: Any) -> int:
+    from robocal_uncertainty.app.simulation import simulate_sessions_files
+    from robocal_uncertainty.core.simulation import SessionSimulationSettings
+    from robocal_uncertainty.errors import ConfigError
+
+    n = args.sessions if args.sessions is not None else len(args.session_poses)
+    poses = tuple(args.session_poses) if args.session_poses else args.poses
+    if args.session_poses and len(args.session_poses) != n:
+        msg = f"--session-poses gives {len(args.session_poses)} counts for {n} sessions"
+        raise ConfigError(msg)
+    for option, value in (
+        ("--tool-remount-um", args.tool_remount_um),
+        ("--joint-drift-deg", args.joint_drift_deg),
+        ("--temperature-k", args.temperature_k),
+    ):
+        if not (np.isfinite(value) and value >= 0):
+            msg = f"{option} must be a finite number >= 0, got {value:g}"
+            raise ConfigError(msg)
+    session_settings = SessionSimulationSettings(
+        n_sessions=n,
+        n_poses=poses,
+        base=settings,
+        tool_remount_std=args.tool_remount_um * 1e-6,
+        joint_offset_std=float(np.radians(args.joint_drift_deg)),
+        temperature_std=args.temperature_k,
+    )
+    files = simulate_sessions_files(model, session_settings, args.out, seed=args.seed, overwrite=args.force)
+    for k, (path, truth, change) in enumerate(
+        zip(files.campaign_paths, files.truth_paths, files.simulation.changes), start=1
+    ):
+        campaign = files.simulation.sessions[k - 1].campaign
+        xyz = np.asarray(change.tracker_xyz) * 1e3
+        print(
+            f"wrote session {k}: {path} ({count(campaign.n_poses, 'pose')}, tracker at "
+            f"({xyz[0]:.0f}, {xyz[1]:.0f}, {xyz[2]:.0f}) mm, temperature {change.temperature_delta:+.2f} K) "
+            f"and truth {truth}"
+        )
     return 0

@@ -1,4 +1,55 @@
-"""A calibration result as JSON: what ``calibrate --json`` writes and ``fk --calibration`` reads."""
+"""A calibration result as JSON: what ``calibrate --json`` writes, ``fk --calibration`` and ``verify`` read.
+
+Format ``robocal_uncertainty/calibration/2`` (SI units: m, rad; written since sessions
+existed), a JSON object with
+
+``format``, ``units``, ``robot``, ``model_name``, ``joint_names``
+    What the file is and which robot it belongs to.
+``parameters``
+    One entry per parameter: ``name``, ``unit``, ``nominal``, ``estimate``, ``estimated``
+    (whether the data determined it; the others keep their nominal value) and
+    ``linearized_std``.
+``not_identifiable``, ``lambda``, ``lambda_method``, ``condition_number``, residual statistics,
+``n_poses``, ``iterations``, ``converged``, ``message``, ``base_initialised``, ``warnings``
+    The identification (as in version 1).
+``determined``
+    Names of the estimated parameters (order of the covariance matrix).
+``effective_parameters``
+    Trace of the regularised fit's influence matrix.
+``parameter_covariance``
+    ``{"names": [...], "matrix": [[...]]}``: linearised covariance of the estimates from the
+    stated noise plus the model error (products of m and rad); absent when the calibration
+    carries no session record (orientation data).
+``session``
+    The session the calibration was measured in: ``frame`` (``tracker`` or ``base``),
+    ``frame_id``, ``n_poses``, ``registration`` (``names`` base.x .. base.yaw, ``world_T_base``:
+    the robot base pose in the measurement frame, and its ``covariance``), ``tool``
+    (``point_m`` and its ``covariance``), ``campaign`` (the file it came from, when known).
+``noise``
+    The stated instruments: ``tracker_noise_a_m``, ``tracker_noise_b_m_per_m``,
+    ``encoder_noise_half_width_rad``.
+``model_error``
+    ``covariance_base_m2``: per-pose covariance of what the kinematic model cannot represent,
+    robot base frame; ``draws_base_m``: the residuals it is resampled from (whitened to it,
+    base frame) and ``dof_estimate`` (its effective degrees of freedom); ``adequate``,
+    ``chi2``, ``dof``, ``p_value`` of the adequacy test, ``included`` (whether the statement
+    carries it) and ``cross_validated`` (when the model error came from held-out poses).
+``sources``
+    Uncertainty sources of the statement.
+``between_session``
+    ``null`` for one session, or the between-session component estimated from several (see
+    :mod:`robocal_uncertainty.uncertainty.between_sessions`): ``effects`` (``jointN.theta``
+    [rad], ``length_scale`` [1]), their ``covariance`` for a future session, ``dof``, and a
+    summary (group standard deviations, per-session effects).
+``scope``
+    ``"session"``: statements hold for the calibration session (its tracker set-up and
+    probe mounting) only; ``"future sessions"``: a between-session component is included.
+``settings``
+    Free-form settings that produced the file (seed, weighting, ...).
+
+Version 1 files (``robocal_uncertainty/calibration/1``: the identification only) are still
+read; :func:`read_session_state` returns None for them.
+"""
 
 from __future__ import annotations
 
@@ -12,21 +63,100 @@ from numpy.typing import NDArray
 
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, SessionState
+from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 
-__all__ = ["CALIBRATION_FORMAT", "apply_calibration", "calibration_to_dict", "read_calibration", "write_calibration"]
+__all__ = [
+    "CALIBRATION_FORMAT",
+    "CALIBRATION_FORMATS",
+    "apply_calibration",
+    "calibration_to_dict",
+    "read_calibration",
+    "read_session_state",
+    "session_state_to_dict",
+    "write_calibration",
+]
 
-CALIBRATION_FORMAT = "robocal_uncertainty/calibration/1"
+CALIBRATION_FORMAT = "robocal_uncertainty/calibration/2"
+"""The format written."""
+CALIBRATION_FORMATS: tuple[str, ...] = ("robocal_uncertainty/calibration/1", CALIBRATION_FORMAT)
+"""Formats read."""
 
 
 def _finite_or_none(values: NDArray[np.float64]) -> list[float | None]:
     return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=np.float64)]
 
 
-def calibration_to_dict(result: IdentificationResult, *, robot: str) -> dict[str, Any]:
-    """JSON-ready description of a calibration, SI units stated."""
-    kinds = result.model.layout.kinds
+def _matrix(values: NDArray[np.float64]) -> list[list[float]]:
+    return [[float(v) for v in row] for row in np.asarray(values, dtype=np.float64)]
+
+
+def session_state_to_dict(state: SessionState) -> dict[str, Any]:
+    """The parts of a calibration file that :class:`SessionState` holds (see the module docstring)."""
+    between = None
+    if state.between_session_covariance is not None:
+        between = dict(state.extra.get("between_session", {}))  # type: ignore[call-overload]
+        between["effects"] = list(state.between_session_names)
+        between["covariance"] = _matrix(state.between_session_covariance)
+        between["dof"] = state.between_session_dof
+    t0 = [state.covariance_names.index(n) for n in TOOL_NAMES if n in state.covariance_names]
+    tool = state.extra.get("tool_point_m")
     return {
+        "parameter_covariance": {
+            "names": list(state.covariance_names),
+            "matrix": _matrix(state.parameter_covariance),
+        },
+        "session": {
+            "frame": state.frame,
+            "frame_id": state.frame_id,
+            "n_poses": state.n_poses,
+            "registration": {
+                "names": list(BASE_NAMES),
+                "world_T_base": [float(v) for v in state.registration],
+                "covariance": _matrix(state.registration_covariance),
+            },
+            "tool": {
+                "names": list(TOOL_NAMES),
+                "point_m": None if tool is None else list(tool),  # type: ignore[call-overload]
+                "covariance": _matrix(state.covariance_of(TOOL_NAMES)) if t0 else None,
+            },
+            "campaign": state.extra.get("campaign"),
+        },
+        "noise": {
+            "tracker_noise_a_m": state.tracker_noise.a,
+            "tracker_noise_b_m_per_m": state.tracker_noise.b,
+            "encoder_noise_half_width_rad": state.encoder_noise.half_width,
+        },
+        "model_error": {
+            "covariance_base_m2": _matrix(state.model_error_covariance),
+            "draws_base_m": None if state.model_error_draws is None else _matrix(state.model_error_draws),
+            "dof_estimate": state.model_error_dof,
+            **dict(state.extra.get("model_adequacy", {})),  # type: ignore[call-overload]
+        },
+        "sources": list(state.sources),
+        "between_session": between,
+        "scope": state.scope,
+        "settings": dict(state.extra.get("settings", {})),  # type: ignore[call-overload]
+    }
+
+
+def calibration_to_dict(
+    result: IdentificationResult, *, robot: str, session: SessionState | None = None
+) -> dict[str, Any]:
+    """JSON-ready description of a calibration, SI units stated.
+
+    Parameters
+    ----------
+    result : IdentificationResult
+    robot : str
+        The robot configuration it was identified with.
+    session : SessionState, optional
+        The session record (covariances, registration, noise, model error); without it the
+        file says ``scope: session`` and carries no ``parameter_covariance``.
+    """
+    kinds = result.model.layout.kinds
+    out = {
         "format": CALIBRATION_FORMAT,
         "units": {"length": "m", "angle": "rad"},
         "robot": robot,
@@ -57,12 +187,22 @@ def calibration_to_dict(result: IdentificationResult, *, robot: str) -> dict[str
         "message": result.message,
         "base_initialised": result.base_initialised,
         "warnings": list(result.warnings),
+        "determined": [n for n, e in zip(result.parameter_names, result.estimated) if e],
+        "effective_parameters": result.effective_parameters,
     }
+    if session is not None:
+        out.update(session_state_to_dict(session))
+    else:
+        out.update({"session": None, "scope": "session", "between_session": None})
+    return out
 
 
-def write_calibration(path: str | Path, result: IdentificationResult, *, robot: str) -> None:
+def write_calibration(
+    path: str | Path, result: IdentificationResult, *, robot: str, session: SessionState | None = None
+) -> None:
     """Write :func:`calibration_to_dict` to `path`."""
-    Path(path).write_text(json.dumps(calibration_to_dict(result, robot=robot), indent=2) + "\n", encoding="utf-8")
+    data = calibration_to_dict(result, robot=robot, session=session)
+    Path(path).write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
 
 
 def read_calibration(path: str | Path) -> dict[str, Any]:
@@ -85,10 +225,101 @@ def read_calibration(path: str | Path) -> dict[str, Any]:
     except json.JSONDecodeError as err:
         msg = f"calibration {file} is not valid JSON: {err.msg} (line {err.lineno})"
         raise ConfigError(msg) from err
-    if not isinstance(data, dict) or data.get("format") != CALIBRATION_FORMAT:
-        msg = f"{file} is not a robocal_uncertainty calibration (format {CALIBRATION_FORMAT})"
+    if not isinstance(data, dict) or data.get("format") not in CALIBRATION_FORMATS:
+        msg = f"{file} is not a robocal_uncertainty calibration (format {' or '.join(CALIBRATION_FORMATS)})"
         raise ConfigError(msg)
     return data
+
+
+def _square(where: str, name: str, value: object, size: int) -> NDArray[np.float64]:
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        msg = f"{where}: {name} is not a numeric matrix"
+        raise ConfigError(msg) from err
+    if array.shape != (size, size) or not np.isfinite(array).all():
+        msg = f"{where}: {name} must be a finite {size}x{size} matrix, got shape {array.shape}"
+        raise ConfigError(msg)
+    return array
+
+
+def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> SessionState | None:
+    """The session record of a calibration file, or None when it has none (version 1, orientation data).
+
+    Raises
+    ------
+    ConfigError
+        A session record that is incomplete or malformed (one line naming the field).
+    """
+    session = data.get("session")
+    if data.get("format") != CALIBRATION_FORMAT or session is None:
+        return None
+    try:
+        cov = data["parameter_covariance"]
+        names = tuple(str(n) for n in cov["names"])
+        registration = session["registration"]
+        noise = data["noise"]
+        model_error = data["model_error"]
+        tracker = TrackerNoise(a=float(noise["tracker_noise_a_m"]), b=float(noise["tracker_noise_b_m_per_m"]))
+        encoder = EncoderNoise(half_width=float(noise["encoder_noise_half_width_rad"]))
+        frame = session["frame"]
+        reg = np.asarray(registration["world_T_base"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError) as err:
+        msg = f"{where}: incomplete session record ({err.__class__.__name__}: {err})"
+        raise ConfigError(msg) from err
+    if frame not in ("base", "tracker") or reg.shape != (6,) or not np.isfinite(reg).all():
+        msg = f"{where}: session frame must be base or tracker with a 6-value registration"
+        raise ConfigError(msg)
+    between = data.get("between_session")
+    between_cov = None
+    between_names: tuple[str, ...] = ()
+    between_dof = None
+    extra: dict[str, object] = {
+        "campaign": session.get("campaign"),
+        "settings": data.get("settings") or {},
+        "tool_point_m": (session.get("tool") or {}).get("point_m"),
+        "model_adequacy": {
+            k: v for k, v in model_error.items() if k not in ("covariance_base_m2", "draws_base_m", "dof_estimate")
+        },
+    }
+    if between is not None:
+        try:
+            between_names = tuple(str(n) for n in between["effects"])
+            between_dof = None if between.get("dof") is None else float(between["dof"])
+        except (KeyError, TypeError, ValueError) as err:
+            msg = f"{where}: incomplete between_session record ({err.__class__.__name__}: {err})"
+            raise ConfigError(msg) from err
+        between_cov = _square(where, "between_session.covariance", between.get("covariance"), len(between_names))
+        extra["between_session"] = {k: v for k, v in between.items() if k not in ("effects", "covariance", "dof")}
+    draws = model_error.get("draws_base_m")
+    draws_array = None
+    if draws is not None:
+        draws_array = np.asarray(draws, dtype=np.float64)
+        if draws_array.ndim != 2 or draws_array.shape[1] != 3 or not np.isfinite(draws_array).all():
+            msg = f"{where}: model_error.draws_base_m must be n rows of 3 finite values [m]"
+            raise ConfigError(msg)
+    return SessionState(
+        frame=frame,
+        frame_id=str(session.get("frame_id", "")),
+        n_poses=int(session.get("n_poses", 0)),
+        covariance_names=names,
+        parameter_covariance=_square(where, "parameter_covariance.matrix", cov.get("matrix"), len(names)),
+        model_error_covariance=_square(
+            where, "model_error.covariance_base_m2", model_error.get("covariance_base_m2"), 3
+        ),
+        tracker_noise=tracker,
+        encoder_noise=encoder,
+        registration=reg,
+        registration_covariance=_square(where, "session.registration.covariance", registration.get("covariance"), 6),
+        sources=tuple(str(s) for s in data.get("sources") or ()),
+        between_session_covariance=between_cov,
+        between_session_names=between_names,
+        between_session_dof=between_dof,
+        model_error_draws=draws_array,
+        model_error_dof=None if model_error.get("dof_estimate") is None else float(model_error["dof_estimate"]),
+        scope=str(data.get("scope", "session")),
+        extra=extra,
+    )
 
 
 def _check_identity(model: RobotModel, data: dict[str, Any], where: str) -> None:

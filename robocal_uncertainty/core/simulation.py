@@ -25,14 +25,21 @@ from robocal_uncertainty.errors import ConfigError
 __all__ = [
     "EncoderNoise",
     "ParameterErrorRanges",
+    "SessionChange",
+    "SessionSimulationSettings",
     "SimulatedCampaign",
+    "SimulatedSessions",
     "SimulationSettings",
     "TrackerNoise",
     "UnmodelledErrors",
     "draw_joint_positions",
+    "draw_session_change",
     "draw_true_parameters",
+    "session_parameters",
     "simulate_campaign",
     "simulate_measurements",
+    "simulate_session",
+    "simulate_sessions",
 ]
 
 Array = NDArray[np.float64]
@@ -363,6 +370,311 @@ def simulate_campaign(
         true_model=true_model,
         true_joint_positions=q_true,
         true_points=forward_points(model.layout, true_params, q_true + settings.unmodelled.deflection(q_true)),
+        settings=settings,
+        seed=seed,
+    )
+
+
+@dataclass(frozen=True)
+class SessionChange:
+    """What one measurement session changes on a robot (the truth of a simulated session).
+
+    Parameters
+    ----------
+    tracker_xyz : tuple of 3 float [m]
+        Tracker position in the robot base frame.
+    tracker_rpy : tuple of 3 float [rad]
+        Tracker frame orientation in the robot base frame.
+    tool_offset : tuple of 3 float [m]
+        Probe (tool point) remount: added to the robot's tool point, flange frame.
+    joint_offset_drift : tuple of float [rad], length n_joints
+        Added to every joint offset ``theta_j`` (encoder zero drift, re-homing).
+    temperature_delta : float [K]
+        Temperature difference from the reference session: every joint length parameter
+        (``a``, ``d``) is scaled by ``1 + expansion * temperature_delta``.
+    """
+
+    tracker_xyz: tuple[float, float, float]
+    tracker_rpy: tuple[float, float, float]
+    tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    joint_offset_drift: tuple[float, ...] = ()
+    temperature_delta: float = 0.0
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready description, SI units in the names."""
+        return {
+            "tracker_xyz_m": list(self.tracker_xyz),
+            "tracker_rpy_rad": list(self.tracker_rpy),
+            "tool_offset_m": list(self.tool_offset),
+            "joint_offset_drift_rad": list(self.joint_offset_drift),
+            "temperature_delta_K": self.temperature_delta,
+        }
+
+
+@dataclass(frozen=True)
+class SessionSimulationSettings:
+    """Several measurement sessions of one simulated robot.
+
+    Parameters
+    ----------
+    n_sessions : int
+        Number of sessions (>= 1).
+    n_poses : int or tuple of int
+        Poses per session (one count for all, or one per session).
+    base : SimulationSettings
+        Noise models, parameter errors and unmodelled errors shared by all sessions (its
+        ``n_poses``, ``frame`` and tracker placement are replaced per session; the frame is
+        always ``tracker``).
+    tracker_distance : (float, float) [m]
+        Range of the horizontal tracker-to-robot distance; the azimuth is uniform over the
+        full circle, the tracker looks at the robot (yaw) within ``tracker_yaw_spread``.
+    tracker_height : float [m]
+        Half-width of the uniform tracker height about the base.
+    tracker_level : float [rad]
+        Half-width of the uniform roll and pitch (a levelled tripod: small).
+    tracker_yaw_spread : float [rad]
+        Half-width of the yaw about "looking at the robot".
+    tool_remount_std : float [m]
+        Standard deviation per axis of the probe remount (0 for the first session).
+    joint_offset_std : float [rad]
+        Standard deviation of the per-session joint offset drift, every joint (0 for the
+        first session: it defines the robot's reference).
+    temperature_std : float [K]
+        Standard deviation of the temperature difference from the first session.
+    expansion : float [1/K]
+        Linear expansion coefficient of the links (aluminium 23e-6).
+    """
+
+    n_sessions: int = 3
+    n_poses: int | tuple[int, ...] = 53
+    base: SimulationSettings = field(default_factory=SimulationSettings)
+    tracker_distance: tuple[float, float] = (2.0, 3.0)
+    tracker_height: float = 0.3
+    tracker_level: float = float(np.radians(1.0))
+    tracker_yaw_spread: float = float(np.radians(20.0))
+    tool_remount_std: float = 50e-6
+    joint_offset_std: float = float(np.radians(0.002))
+    temperature_std: float = 2.0
+    expansion: float = 23e-6
+
+    def __post_init__(self) -> None:
+        if isinstance(self.n_sessions, bool) or not isinstance(self.n_sessions, int) or self.n_sessions < 1:
+            msg = f"n_sessions must be a positive integer, got {self.n_sessions!r}"
+            raise ConfigError(msg)
+        counts = self.poses_per_session()
+        if len(counts) != self.n_sessions or any(
+            isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in counts
+        ):
+            msg = f"n_poses must be a positive integer or one per session ({self.n_sessions}), got {self.n_poses!r}"
+            raise ConfigError(msg)
+        for name in (
+            "tracker_height",
+            "tracker_level",
+            "tracker_yaw_spread",
+            "tool_remount_std",
+            "joint_offset_std",
+            "temperature_std",
+            "expansion",
+        ):
+            value = getattr(self, name)
+            if not _real(value) or not np.isfinite(value) or value < 0:
+                msg = f"{name} must be finite and >= 0, got {value!r}"
+                raise ConfigError(msg)
+        lo, hi = self.tracker_distance
+        if not (_real(lo) and _real(hi) and 0 < lo <= hi and np.isfinite(hi)):
+            msg = f"tracker_distance must be (low, high) with 0 < low <= high [m], got {self.tracker_distance!r}"
+            raise ConfigError(msg)
+
+    def poses_per_session(self) -> tuple[int, ...]:
+        """Pose count of every session."""
+        if isinstance(self.n_poses, tuple):
+            return self.n_poses
+        return (self.n_poses,) * self.n_sessions
+
+
+@dataclass(frozen=True)
+class SimulatedSessions:
+    """Sessions of one simulated robot with their truth.
+
+    Attributes
+    ----------
+    robot_parameters : ndarray, shape (n_params,) [m, rad]
+        The robot as it is in the reference (first) session, base part zero (robot base frame).
+    changes : tuple of SessionChange
+        What each session changed (the first one only places the tracker).
+    sessions : tuple of SimulatedCampaign
+        Each session's campaign (points in that session's tracker frame) and its true model
+        (tracker placement, tool, drift and temperature applied).
+    settings : SessionSimulationSettings
+    seed : int or None
+    """
+
+    robot_parameters: Array
+    changes: tuple[SessionChange, ...]
+    sessions: tuple[SimulatedCampaign, ...]
+    settings: SessionSimulationSettings
+    seed: int | None
+
+
+def draw_session_change(
+    model: RobotModel, settings: SessionSimulationSettings, *, rng: np.random.Generator, reference: bool
+) -> SessionChange:
+    """Draw a tracker placement and (unless `reference`) a remount, drift and temperature."""
+    azimuth = rng.uniform(0.0, 2.0 * np.pi)
+    distance = rng.uniform(*settings.tracker_distance)
+    height = rng.uniform(-settings.tracker_height, settings.tracker_height)
+    xyz = (distance * np.cos(azimuth), distance * np.sin(azimuth), height)
+    level = rng.uniform(-settings.tracker_level, settings.tracker_level, size=2)
+    yaw = azimuth + np.pi + rng.uniform(-settings.tracker_yaw_spread, settings.tracker_yaw_spread)
+    yaw = float(np.arctan2(np.sin(yaw), np.cos(yaw)))
+    tool = rng.normal(0.0, settings.tool_remount_std, size=3)
+    drift = rng.normal(0.0, settings.joint_offset_std, size=model.n_joints)
+    temperature = float(rng.normal(0.0, settings.temperature_std))
+    if reference:
+        tool, drift, temperature = np.zeros(3), np.zeros(model.n_joints), 0.0
+    return SessionChange(
+        tracker_xyz=(float(xyz[0]), float(xyz[1]), float(xyz[2])),
+        tracker_rpy=(float(level[0]), float(level[1]), yaw),
+        tool_offset=(float(tool[0]), float(tool[1]), float(tool[2])),
+        joint_offset_drift=tuple(float(v) for v in drift),
+        temperature_delta=temperature,
+    )
+
+
+def session_parameters(model: RobotModel, robot_parameters: Array, change: SessionChange, *, expansion: float) -> Array:
+    """True parameter vector of a session: the robot changed by `change`, base = tracker placement.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model (its layout).
+    robot_parameters : ndarray, shape (n_params,) [m, rad]
+        The robot in the reference session.
+    change : SessionChange
+    expansion : float [1/K]
+
+    Returns
+    -------
+    ndarray, shape (n_params,): base part = world_T_base of the session's tracker frame.
+    """
+    layout = model.layout
+    p = np.array(robot_parameters, dtype=np.float64)
+    scale = 1.0 + expansion * change.temperature_delta
+    drift = np.zeros(model.n_joints) if not change.joint_offset_drift else np.asarray(change.joint_offset_drift)
+    if drift.shape != (model.n_joints,):
+        msg = f"joint_offset_drift must have {model.n_joints} values, got {drift.shape[0]}"
+        raise ConfigError(msg)
+    for j, idx in enumerate(layout.joint_slices()):
+        p[idx["theta"]] += drift[j]
+        for name in ("a", "d"):
+            p[idx[name]] *= scale
+    t0 = layout.tool_index
+    p[t0 : t0 + 3] += np.asarray(change.tool_offset)
+    r_bt = rpy_to_matrix(np.asarray(change.tracker_rpy))
+    r_tb = r_bt.T
+    b0 = layout.base_index
+    p[b0 : b0 + 3] = -r_tb @ np.asarray(change.tracker_xyz)
+    p[b0 + 3 : b0 + 6] = rpy_from_matrix(r_tb)
+    return p
+
+
+def simulate_session(
+    model: RobotModel,
+    robot_parameters: Array,
+    change: SessionChange,
+    settings: SimulationSettings,
+    *,
+    expansion: float = 23e-6,
+    rng: np.random.Generator,
+    seed: int | None = None,
+) -> SimulatedCampaign:
+    """One session of a known robot: poses and noisy points in the session's tracker frame.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    robot_parameters : ndarray, shape (n_params,) [m, rad]
+        The robot in the reference session (see :func:`session_parameters`).
+    change : SessionChange
+        This session's tracker placement, remount, drift and temperature.
+    settings : SimulationSettings
+        Noise models, unmodelled errors and ``n_poses`` (its tracker placement and frame are
+        taken from `change`, frame ``tracker``).
+    rng : numpy.random.Generator
+    """
+    settings = replace(settings, frame="tracker", tracker_xyz=change.tracker_xyz, tracker_rpy=change.tracker_rpy)
+    true_params = session_parameters(model, robot_parameters, change, expansion=expansion)
+    q_true = draw_joint_positions(model, settings.n_poses, rng=rng, margin=settings.joint_margin)
+    readings, points, std = simulate_measurements(true_params, model, q_true, settings, rng=rng)
+    campaign = Campaign(
+        joint_names=model.joint_names,
+        joint_positions=readings,
+        points=points,
+        frame="tracker",
+        frame_id=model.measurement_frame_id,
+        point_std=std,
+        stamps_ns=np.arange(settings.n_poses, dtype=np.int64) * 10_000_000_000,
+        metadata={
+            "source": "simulation",
+            "robot": model.name,
+            "seed": seed,
+            "n_poses": settings.n_poses,
+            "tracker_noise_a_m": settings.tracker_noise.a,
+            "tracker_noise_b_m_per_m": settings.tracker_noise.b,
+            "encoder_noise_half_width_rad": settings.encoder_noise.half_width,
+            "session": change.to_dict(),
+        },
+    )
+    deflected = q_true + settings.unmodelled.deflection(q_true)
+    return SimulatedCampaign(
+        campaign=campaign,
+        true_model=model.with_parameters(true_params),
+        true_joint_positions=q_true,
+        true_points=forward_points(model.layout, true_params, deflected),
+        settings=settings,
+        seed=seed,
+    )
+
+
+def simulate_sessions(
+    model: RobotModel,
+    settings: SessionSimulationSettings | None = None,
+    *,
+    seed: int | None = None,
+    rng: np.random.Generator | None = None,
+) -> SimulatedSessions:
+    """Draw one true robot and several measurement sessions of it.
+
+    The robot (nominal + uniform errors, ``settings.base.errors``) is drawn once. Every
+    session places the tracker anew; sessions after the first also remount the probe, drift
+    the joint offsets and change the temperature (normal draws with the settings' spreads).
+
+    Parameters
+    ----------
+    model : RobotModel
+    settings : SessionSimulationSettings, optional
+    seed : int, optional
+        Seed of the generator (ignored when `rng` is given; recorded).
+    rng : numpy.random.Generator, optional
+    """
+    settings = settings or SessionSimulationSettings()
+    if rng is None:
+        rng = np.random.default_rng(seed)
+    robot = draw_true_parameters(model, settings.base.errors, rng=rng)
+    b0 = model.layout.base_index
+    robot[b0 : b0 + 6] = 0.0
+    changes: list[SessionChange] = []
+    sessions: list[SimulatedCampaign] = []
+    for k, n_poses in enumerate(settings.poses_per_session()):
+        change = draw_session_change(model, settings, rng=rng, reference=k == 0)
+        base = replace(settings.base, n_poses=n_poses)
+        sessions.append(simulate_session(model, robot, change, base, expansion=settings.expansion, rng=rng, seed=seed))
+        changes.append(change)
+    return SimulatedSessions(
+        robot_parameters=robot,
+        changes=tuple(changes),
+        sessions=tuple(sessions),
         settings=settings,
         seed=seed,
     )

@@ -48,6 +48,7 @@ from robocal_uncertainty.core.measurement import POSITION_AXES, joint_columns, r
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import chordal_mean, quaternion_from_matrix, rotation_exp, rotation_log
+from robocal_uncertainty.core.session import effect_jacobian
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, run_trials
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
@@ -790,6 +791,20 @@ def _orientation_uncertainty(
     return out
 
 
+def test_effect_jacobian(
+    calibration: IdentificationResult, test_q: Array, settings: UncertaintySettings
+) -> Array | None:
+    """Derivative of the tool point at the test configurations w.r.t. the session effects.
+
+    Shape (n_test, 3, k), in the measurement frame as every ``predictions`` offset (the output
+    rotation takes them into the base frame); None without a between-session component.
+    """
+    between = settings.between_session
+    if between is None:
+        return None
+    return effect_jacobian(calibration.model.layout, calibration.estimate, test_q, tuple(between.names))
+
+
 def _prepare(
     model: RobotModel,
     campaign: Campaign,
@@ -867,6 +882,7 @@ def _prepare(
         min_poses=min_poses,
         subset_size=subset_size,
         rotation_std=np.asarray(measurement.rotation_std) if isinstance(measurement, PoseMeasurement) else None,
+        test_effect_jacobian=test_effect_jacobian(calibration, test_q, settings),
     )
     trials = CalibrationTrials(
         problem=problem,

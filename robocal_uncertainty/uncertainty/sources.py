@@ -20,12 +20,15 @@ import math
 import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.uncertainty.between_sessions import BetweenSessions
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import (
     Distribution,
@@ -82,6 +85,9 @@ class TrialContext:
     rotation_std : ndarray, shape (3,) [rad] or None
         Standard uncertainty of a measured orientation about the measurement frame's x, y, z
         axes (the rotation components 3-5 of a 6-DOF measurement); None for points.
+    test_effect_jacobian : ndarray, shape (n_test, 3, k) or None
+        Derivative of the predicted tool point w.r.t. the between-session effects (the
+        ``between_session`` source); None without a between-session component.
     """
 
     n_poses: int
@@ -95,6 +101,7 @@ class TrialContext:
     min_poses: int
     subset_size: int
     rotation_std: Array | None = None
+    test_effect_jacobian: Array | None = None
 
     @property
     def rotation_components(self) -> tuple[int, ...]:
@@ -512,6 +519,9 @@ class UncertaintySettings:
         is in the base frame.
     gauss_newton_iterations : int
         Maximum re-identification iterations per trial (warm-started at the calibration).
+    between_session : BetweenSessions or None
+        Between-session component for the ``between_session`` source
+        (:mod:`robocal_uncertainty.uncertainty.between_sessions`).
     jacobian : {"frozen", "exact"}
         ``frozen``: chord iterations with the calibration's Jacobian (fast, default);
         ``exact``: Gauss-Newton with each trial's own Jacobian (reference).
@@ -526,6 +536,7 @@ class UncertaintySettings:
     tracker_xyz: tuple[float, float, float] = (2.0, 0.5, 0.3)
     gauss_newton_iterations: int = 4
     jacobian: Literal["frozen", "exact"] = "frozen"
+    between_session: BetweenSessions | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sources", parse_sources(self.sources))
@@ -550,3 +561,7 @@ class UncertaintySettings:
         if xyz is None or xyz.shape != (3,) or not np.isfinite(xyz).all():
             msg = f"tracker_xyz must be 3 finite coordinates [m], got {self.tracker_xyz!r}"
             raise ConfigError(msg)
+
+
+# Sources in their own modules register themselves on import.
+from robocal_uncertainty.uncertainty import between_sessions as _between_sessions  # noqa: F401

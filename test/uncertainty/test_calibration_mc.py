@@ -224,6 +224,7 @@ def test_unknown_source_names_are_refused() -> None:
         "pose_choice",
         "residual",
         "tracker_orientation",
+        "between_session",
     )
 
 

@@ -1,0 +1,210 @@
+"""The session services: calibrate with a session record, and verify a calibration in a new session.
+
+:func:`calibrate_session` identifies the parameters of a campaign (as ``calibrate``) and adds
+what a later session needs: the parameter covariance, the model error, the noise models and
+the session's registration (:class:`~robocal_uncertainty.core.session.SessionState`), written
+by :func:`~robocal_uncertainty.core.calibration_file.write_calibration`.
+
+:func:`verify` reads such a calibration file and a short check campaign measured in a new
+session, re-registers the new measurement frame (and the tool point when asked), and tests
+whether the robot still agrees with its calibration within the stated uncertainty
+(:func:`~robocal_uncertainty.core.session.verify_session`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration, read_session_state
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, verify_session
+from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+from robocal_uncertainty.errors import CalibError, ConfigError
+from robocal_uncertainty.uncertainty.between_sessions import estimate_between_sessions, with_between_sessions
+from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
+from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state
+
+__all__ = ["SessionCalibration", "VerificationRun", "calibrate_session", "load_session_calibration", "verify"]
+
+
+@dataclass(frozen=True, eq=False)
+class SessionCalibration:
+    """A calibration and its session record (None for orientation data, with a warning)."""
+
+    result: IdentificationResult
+    state: SessionState | None
+    adequacy: ModelAdequacy | None
+    warnings: tuple[str, ...]
+
+
+def calibrate_session(
+    model: RobotModel,
+    campaign: Campaign,
+    *,
+    tracker_noise: TrackerNoise,
+    encoder_noise: EncoderNoise,
+    lambda_: str | float = "auto",
+    accept_unconverged: bool = False,
+    sources: tuple[str, ...] = ("tracker", "encoder", "residual"),
+    campaign_name: str | None = None,
+    cross_validation_folds: int = 5,
+    later_sessions: Sequence[Campaign] = (),
+    retool: bool = True,
+) -> SessionCalibration:
+    """Identify `campaign` and record the session for verification and later sessions.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+    tracker_noise, encoder_noise
+        The session's stated instruments (the model error is what they do not explain).
+    lambda_, accept_unconverged
+        As :func:`~robocal_uncertainty.core.identification.identify`.
+    sources : tuple of str
+        Sources of the statement; ``residual`` carries the model error.
+    campaign_name : str, optional
+        Recorded in the file.
+    cross_validation_folds : int
+        When the model is inadequate, take the model error from this many folds of held-out
+        poses (:func:`~robocal_uncertainty.uncertainty.sessions.cross_validated_model_error`);
+        0 keeps the one from the calibration's own residuals.
+    later_sessions : sequence of Campaign
+        Campaigns of the same robot from other sessions (their own tracker set-ups): the
+        between-session component is estimated from them and the statement then holds for a
+        future session (:mod:`~robocal_uncertainty.uncertainty.between_sessions`).
+    retool : bool
+        The probe was remounted between sessions (re-register the tool point on each).
+    """
+    result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
+    if result.measurement.dimension != 3 or result.measurement.weights is not None:
+        warning = (
+            "no session record: verify and between-session statements need a point calibration "
+            "(this one used orientation data)"
+        )
+        return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
+    warnings: list[str] = []
+    settings: dict[str, object] = {
+        "lambda": str(lambda_),
+        "lambda_method": result.lambda_method,
+        "cross_validation_folds": cross_validation_folds,
+        "retool": retool,
+    }
+    state, adequacy = session_state(
+        result, campaign, tracker_noise, encoder_noise, sources=sources, campaign_name=campaign_name, settings=settings
+    )
+    if cross_validation_folds and not adequacy.adequate and "residual" in sources:
+        try:
+            cv = cross_validated_model_error(
+                model, campaign, tracker_noise, encoder_noise, folds=cross_validation_folds, lambda_=lambda_
+            )
+        except CalibError as err:
+            warnings.append(f"model error from the calibration's own residuals: {cross_validation_folds}-fold {err}")
+        else:
+            state, adequacy = session_state(
+                result,
+                campaign,
+                tracker_noise,
+                encoder_noise,
+                sources=sources,
+                adequacy=adequacy,
+                campaign_name=campaign_name,
+                settings=settings,
+                cross_validated=cv,
+            )
+    if later_sessions:
+        between = estimate_between_sessions(result.model, state, list(later_sessions), retool=retool)
+        state = with_between_sessions(state, between)
+    return SessionCalibration(result=result, state=state, adequacy=adequacy, warnings=tuple(warnings))
+
+
+def load_session_calibration(model: RobotModel, path: str | Path) -> tuple[RobotModel, SessionState, dict[str, Any]]:
+    """The calibrated model, its session record and the raw file of a calibration.
+
+    Raises
+    ------
+    ConfigError
+        Not a calibration of this robot, or one without a session record (version 1 files,
+        orientation calibrations): the message says to re-run ``calibrate --json``.
+    """
+    where = f"calibration {path}"
+    data = read_calibration(path)
+    calibrated = apply_calibration(model, data, where=where)
+    state = read_session_state(data, where=where)
+    if state is None:
+        msg = (
+            f"{where} has no session record (parameter covariance, model error, registration): "
+            "written by an older version or from orientation data; re-run calibrate --json on its campaign"
+        )
+        raise ConfigError(msg)
+    return calibrated, state, data
+
+
+@dataclass(frozen=True, eq=False)
+class VerificationRun:
+    """What :func:`verify` did: the check's result and what it was run with."""
+
+    verification: Any  # robocal_uncertainty.core.session.Verification
+    calibration_path: Path
+    check_campaign: str
+    state: SessionState
+    robot: str
+    scope: Literal["session", "future sessions"] | str
+
+
+def verify(
+    model: RobotModel,
+    calibration_path: str | Path,
+    check: Campaign,
+    *,
+    check_name: str = "",
+    retool: bool = False,
+    significance: float = DEFAULT_SIGNIFICANCE,
+    tracker_noise: TrackerNoise | None = None,
+    encoder_noise: EncoderNoise | None = None,
+    null_trials: int = DEFAULT_NULL_TRIALS,
+    seed: int = 0,
+) -> VerificationRun:
+    """Verify a calibration on a check campaign of a new session.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model of the robot (the calibration is applied to it).
+    calibration_path : str or Path
+        A calibration file with a session record.
+    check : Campaign
+        The check campaign (5-20 poses spread over the workspace).
+    check_name : str
+        Names the check campaign in the result.
+    retool : bool
+        Re-register the tool point (probe remounted).
+    significance, tracker_noise, encoder_noise, null_trials, seed
+        See :func:`~robocal_uncertainty.core.session.verify_session`.
+    """
+    calibrated, state, _ = load_session_calibration(model, calibration_path)
+    result = verify_session(
+        calibrated,
+        state,
+        check,
+        retool=retool,
+        significance=significance,
+        tracker_noise=tracker_noise,
+        encoder_noise=encoder_noise,
+        null_trials=null_trials,
+        seed=seed,
+    )
+    return VerificationRun(
+        verification=result,
+        calibration_path=Path(calibration_path),
+        check_campaign=check_name,
+        state=state,
+        robot=model.name,
+        scope=state.scope,
+    )

@@ -1,0 +1,821 @@
+"""Sessions: what one measurement session adds to a robot's calibration, and the check of a new one.
+
+A calibration is made in one *session*: the tracker stands somewhere (the measurement frame,
+``world_T_base``), a probe is mounted (the tool point). The robot's kinematic parameters are
+meant to outlive the session; the registration and the tool may not. :class:`SessionState`
+holds what a later session needs (parameter covariance, model error, noise models, the
+session's registration with its uncertainty); :func:`verify_session` takes a short check
+campaign from a new session, re-registers the new measurement frame (and optionally the tool
+point) by generalised least squares, and tests whether the robot still agrees with its
+calibration within the stated uncertainty.
+
+The test. With ``y`` the check points (n x 3, new tracker frame), ``f(theta)`` the calibrated
+model's prediction with the re-registered nuisance ``theta`` (6 tracker-pose parameters, plus
+3 tool-point coordinates when the probe was remounted) and ``C`` the covariance of ``y - f``
+under "nothing changed":
+
+``C = J_k Sigma_k J_k^T + blockdiag_i(Sigma_tracker,i + J_q,i Sigma_q J_q,i^T + R Sigma_m R^T)``
+
+(calibration parameter uncertainty, correlated across poses; tracker and encoder noise;
+the calibration's model error ``Sigma_m``, stated in the robot base frame and turned into the
+new tracker frame by the re-registered rotation ``R``), the GLS estimate ``theta_hat``
+minimises ``r^T C^-1 r`` and the statistic ``chi2 = r^T C^-1 r`` at the minimum follows a
+chi-square with ``3 n - k`` degrees of freedom (``k`` = rank of the re-registration
+Jacobian: the degrees of freedom the re-registration used are taken off). The check is
+*consistent* when its p-value is at least the significance level (the false-alarm rate).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, stats
+
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult, fit_rigid_base
+from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.measurement import joint_columns
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
+from robocal_uncertainty.core.rotation import rotation_log
+from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+from robocal_uncertainty.errors import ConfigError, IdentifiabilityError, InputError
+
+__all__ = [
+    "BASE_NAMES",
+    "DEFAULT_SIGNIFICANCE",
+    "LENGTH_SCALE",
+    "MIN_CHECK_DOF",
+    "TOOL_NAMES",
+    "SessionState",
+    "TrackerMove",
+    "Verification",
+    "effect_jacobian",
+    "parameter_covariance",
+    "tracker_move",
+    "verify_session",
+]
+
+Array = NDArray[np.float64]
+LENGTH_SCALE = "length_scale"
+"""Session effect: every joint length parameter (a, d) scaled by ``1 + s`` (temperature)."""
+BASE_NAMES: tuple[str, ...] = ("base.x", "base.y", "base.z", "base.roll", "base.pitch", "base.yaw")
+TOOL_NAMES: tuple[str, ...] = ("tool.x", "tool.y", "tool.z")
+DEFAULT_SIGNIFICANCE = 0.05
+"""Level of the check's chi-square test: its false-alarm rate when nothing changed."""
+MIN_CHECK_DOF = 6
+"""Fewest equations a check must leave after the re-registration (3 n - k)."""
+_DEGENERATE_RCOND = 1e-7
+DEFAULT_NULL_TRIALS = 20000
+"""Monte Carlo draws of the check statistic under the null hypothesis."""
+_NULL_BLOCK = 4096
+_MAX_ITERATIONS = 30
+
+
+@dataclass(frozen=True, eq=False)
+class SessionState:
+    """What a calibration session leaves for verification and for the next session (SI units).
+
+    Attributes
+    ----------
+    frame : {"base", "tracker"}
+        Frame of the session's measurements.
+    frame_id : str
+        Name of that frame.
+    n_poses : int
+        Poses of the calibration campaign.
+    covariance_names : tuple of str, length k
+        The estimated parameters (those the data determine), order of `parameter_covariance`.
+    parameter_covariance : ndarray, shape (k, k) [m^2, m rad, rad^2]
+        Covariance of the estimates (linearised, from the stated noise and the model error).
+    model_error_covariance : ndarray, shape (3, 3) [m^2]
+        Covariance per pose of the error the kinematic model cannot represent, in the robot
+        base frame (zeros when the residuals are consistent with the stated noise).
+    tracker_noise, encoder_noise
+        Noise models stated for the session.
+    registration : ndarray, shape (6,) [m, rad]
+        ``world_T_base`` of the session (``base.x .. base.yaw``: the robot base in the tracker
+        frame); zeros for a base-frame campaign.
+    registration_covariance : ndarray, shape (6, 6)
+        Its covariance (zeros where not estimated).
+    sources : tuple of str
+        Uncertainty sources the statement was made with.
+    between_session_covariance : ndarray, shape (k_b, k_b) or None
+        Between-session covariance of the session effects named by `between_session_names`
+        (joint offsets [rad^2], ``length_scale`` [1]) when several sessions were pooled.
+    scope : str
+        ``"session"`` (statement for the calibration session only) or ``"future sessions"``.
+    extra : dict
+        Provenance written to and read from the calibration file (campaign, settings, tool
+        point, model-adequacy test).
+    model_error_draws : ndarray, shape (n, 3) [m] or None
+        The calibration's residuals whitened to `model_error_covariance`, robot base frame:
+        the model error is resampled from them (its real, heavy-tailed shape), as the
+        Monte Carlo's ``residual`` source does. None: normal with that covariance.
+    model_error_dof : float or None
+        Effective degrees of freedom of the model-error estimate (``2 n / var(m_i)`` with
+        ``m_i`` the per-pose Mahalanobis size of the draws over 3): the null distribution of a
+        check scales the model error by ``sqrt(nu / chi2_nu)`` per trial, so an estimate from
+        few poses widens it as a Student-t does. None: the estimate is taken as exact.
+    between_session_names : tuple of str
+        Session effects of `between_session_covariance` (see :data:`SESSION_EFFECTS`).
+    between_session_dof : float or None
+        Degrees of freedom of that estimate (the null scales it as the model error's).
+    """
+
+    frame: Literal["base", "tracker"]
+    frame_id: str
+    n_poses: int
+    covariance_names: tuple[str, ...]
+    parameter_covariance: Array
+    model_error_covariance: Array
+    tracker_noise: TrackerNoise
+    encoder_noise: EncoderNoise
+    registration: Array
+    registration_covariance: Array
+    sources: tuple[str, ...] = ("tracker", "encoder", "residual")
+    between_session_covariance: Array | None = None
+    scope: str = "session"
+    extra: dict[str, object] = field(default_factory=dict)
+    model_error_draws: Array | None = None
+    model_error_dof: float | None = None
+    between_session_names: tuple[str, ...] = ()
+    between_session_dof: float | None = None
+
+    def covariance_of(self, names: tuple[str, ...] | list[str]) -> Array:
+        """Sub-block of the parameter covariance for `names` (zero rows for names not estimated)."""
+        index = {n: i for i, n in enumerate(self.covariance_names)}
+        out = np.zeros((len(names), len(names)))
+        have = [(a, index[n]) for a, n in enumerate(names) if n in index]
+        for a, i in have:
+            for b, j in have:
+                out[a, b] = self.parameter_covariance[i, j]
+        return out
+
+
+@dataclass(frozen=True)
+class TrackerMove:
+    """How far the tracker moved between two registrations, in the robot base frame.
+
+    Attributes
+    ----------
+    translation : ndarray, shape (3,) [m]
+        New tracker position minus old, robot base frame.
+    translation_std : ndarray, shape (3,) [m]
+    distance, distance_std : float [m]
+        Norm of `translation` and its first-order standard uncertainty.
+    rotation : ndarray, shape (3,) [rad]
+        Rotation vector of ``R_new R_old^T`` (tracker orientation in the base frame).
+    rotation_std : ndarray, shape (3,) [rad]
+    angle, angle_std : float [rad]
+    covariance : ndarray, shape (6, 6)
+        Of (translation, rotation).
+    """
+
+    translation: Array
+    translation_std: Array
+    distance: float
+    distance_std: float
+    rotation: Array
+    rotation_std: Array
+    angle: float
+    angle_std: float
+    covariance: Array
+
+
+@dataclass(frozen=True)
+class Verification:
+    """Outcome of :func:`verify_session`.
+
+    Attributes
+    ----------
+    consistent : bool
+        True when ``p_value >= significance``.
+    verdict : str
+        One line: consistent, or drifted with its magnitude.
+    chi2, dof, p_value, significance : float
+        The test (``dof = 3 n - k``); `p_value` from the Monte Carlo null distribution.
+    p_value_chi2 : float
+        The chi-square approximation's p-value (normal errors), for comparison.
+    null_trials, seed : int
+        Draws and seed of the null distribution.
+    n_poses : int
+    reregistered : tuple of str
+        Parameters re-registered on the check (tracker pose, tool point).
+    registration : ndarray, shape (k,) [m, rad]
+        Their estimates.
+    registration_covariance : ndarray, shape (k, k)
+    move : TrackerMove or None
+        Tracker move from the calibration session (None for a base-frame check).
+    tool_change : ndarray, shape (3,) [m] or None
+        Re-registered tool point minus the calibrated one.
+    tool_change_std : ndarray, shape (3,) [m] or None
+    residuals : ndarray, shape (n, 3) [m]
+        Measured minus predicted after the re-registration.
+    normalised : ndarray, shape (n, 3)
+        Residuals over their standard deviation under "nothing changed".
+    pose_chi2 : ndarray, shape (n,)
+        ``z_i^T z_i`` per pose with the pose's whitened residual block (about chi2 with
+        3 (n - k/3)/n degrees of freedom each).
+    stated_std : ndarray, shape (n, 3) [m]
+        Standard deviation of each residual component under "nothing changed".
+    excess_std : float [m]
+        Smallest extra per-axis standard deviation that makes the statistic equal its degrees
+        of freedom (0 when chi2 <= dof): the size of the drift beyond the stated uncertainty.
+    rms_error : float [m]
+        RMS over the poses of the residual norm.
+    model_error_std : ndarray, shape (3,) [m]
+        Model-error standard uncertainty per axis the check assumed (base frame).
+    warnings : tuple of str
+    effect_names : tuple of str
+    effects : ndarray, shape (k,) or None
+        Session effects estimated on the check (what changed since the calibration).
+    effects_covariance : ndarray, shape (k, k) or None
+    effective_dof : ndarray, shape (n, 3) or None
+        Welch-Satterthwaite degrees of freedom of each residual component's standard
+        deviation (inf where every part is taken as exact); see :meth:`coverage_factors`.
+    """
+
+    consistent: bool
+    verdict: str
+    chi2: float
+    dof: int
+    p_value: float
+    p_value_chi2: float
+    null_trials: int
+    seed: int
+    significance: float
+    n_poses: int
+    reregistered: tuple[str, ...]
+    registration: Array
+    registration_covariance: Array
+    move: TrackerMove | None
+    tool_change: Array | None
+    tool_change_std: Array | None
+    residuals: Array
+    normalised: Array
+    pose_chi2: Array
+    stated_std: Array
+    excess_std: float
+    rms_error: float
+    model_error_std: Array
+    warnings: tuple[str, ...] = ()
+    effect_names: tuple[str, ...] = ()
+    effects: Array | None = None
+    effects_covariance: Array | None = None
+    effective_dof: Array | None = None
+
+    def coverage_factors(self, coverage: float = 0.95) -> Array:
+        """Per component: the t-quantile for `coverage` with its Welch-Satterthwaite dof, shape (n, 3).
+
+        The components estimated from few observations (the between-session effects, the
+        model error) carry their degrees of freedom; the others are taken as exact.
+        """
+        dof = np.full(self.normalised.shape, np.inf) if self.effective_dof is None else self.effective_dof
+        return np.asarray(stats.t.ppf(0.5 + coverage / 2.0, dof), dtype=np.float64)
+
+    def inside(self, coverage: float = 0.95) -> NDArray[np.bool_]:
+        """Which residual components lie inside their `coverage` interval, shape (n, 3)."""
+        return np.asarray(np.abs(self.normalised) <= self.coverage_factors(coverage))
+
+
+def effect_jacobian(layout: ParameterLayout, params: Array, joint_positions: Array, names: tuple[str, ...]) -> Array:
+    """Derivative of the tool points with respect to session effects, shape (n, 3, k).
+
+    Parameters
+    ----------
+    layout : ParameterLayout
+    params : ndarray, shape (n_params,) [m, rad]
+    joint_positions : ndarray, shape (n, n_joints) [rad]
+    names : tuple of str
+        Joint offsets (``jointN.theta``: a change of the offset) and :data:`LENGTH_SCALE`
+        (every joint ``a`` and ``d`` scaled by ``1 + s``).
+    """
+    _, jac = forward_points_and_jacobian(layout, params, joint_positions)
+    out = np.zeros((*jac.shape[:2], len(names)))
+    lengths = [idx[k] for idx in layout.joint_slices() for k in ("a", "d")]
+    for c, name in enumerate(names):
+        if name == LENGTH_SCALE:
+            out[:, :, c] = jac[:, :, lengths] @ params[lengths]
+        elif name in layout.names:
+            out[:, :, c] = jac[:, :, layout.names.index(name)]
+        else:
+            msg = f"unknown session effect {name!r} (joint offsets jointN.theta or {LENGTH_SCALE})"
+            raise ConfigError(msg)
+    return out
+
+
+def _tracker_pose(registration: Array) -> tuple[Array, Array]:
+    """Tracker position [m] and orientation matrix in the robot base frame from world_T_base."""
+    r_wb = rpy_to_matrix(registration[3:6])
+    r_bw = r_wb.T
+    return -r_bw @ registration[:3], r_bw
+
+
+def _move_vector(new: Array, old: Array) -> Array:
+    t_new, r_new = _tracker_pose(new)
+    t_old, r_old = _tracker_pose(old)
+    return np.concatenate((t_new - t_old, rotation_log(r_new @ r_old.T)))
+
+
+def tracker_move(new: Array, new_cov: Array, old: Array, old_cov: Array) -> TrackerMove:
+    """The tracker move between two registrations with its first-order uncertainty.
+
+    Parameters
+    ----------
+    new, old : ndarray, shape (6,) [m, rad]
+        ``world_T_base`` (x, y, z, roll, pitch, yaw) of the two sessions.
+    new_cov, old_cov : ndarray, shape (6, 6)
+        Their covariances (independent of each other).
+    """
+    v = _move_vector(new, old)
+    jac_new = np.empty((6, 6))
+    jac_old = np.empty((6, 6))
+    for k in range(6):
+        h = 1e-7
+        e = np.zeros(6)
+        e[k] = h
+        jac_new[:, k] = (_move_vector(new + e, old) - _move_vector(new - e, old)) / (2 * h)
+        jac_old[:, k] = (_move_vector(new, old + e) - _move_vector(new, old - e)) / (2 * h)
+    cov = jac_new @ new_cov @ jac_new.T + jac_old @ old_cov @ jac_old.T
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
+    def norm_std(vec: Array, block: Array) -> tuple[float, float]:
+        n = float(np.linalg.norm(vec))
+        if n == 0.0:
+            return 0.0, float(np.sqrt(np.trace(block)))
+        g = vec / n
+        return n, float(np.sqrt(max(float(g @ block @ g), 0.0)))
+
+    distance, distance_std = norm_std(v[:3], cov[:3, :3])
+    angle, angle_std = norm_std(v[3:], cov[3:, 3:])
+    return TrackerMove(
+        translation=v[:3],
+        translation_std=std[:3],
+        distance=distance,
+        distance_std=distance_std,
+        rotation=v[3:],
+        rotation_std=std[3:],
+        angle=angle,
+        angle_std=angle_std,
+        covariance=cov,
+    )
+
+
+def _check_campaign(model: RobotModel, campaign: Campaign, retool: bool) -> tuple[Campaign, Array, int]:
+    if not isinstance(campaign, Campaign):
+        msg = f"check campaign must be a Campaign, got {type(campaign).__name__}"
+        raise InputError(msg)
+    campaign = campaign.reorder_joints(model.joint_names)
+    positions = campaign.measurement.positions(campaign.points)
+    if positions is None:
+        msg = f"check campaign holds no 3-D positions ({campaign.measurement.quantity}): cannot verify"
+        raise InputError(msg)
+    k = (6 if campaign.frame == "tracker" else 0) + (3 if retool else 0)
+    need = int(np.ceil((k + MIN_CHECK_DOF) / 3))
+    if campaign.n_poses < need:
+        what = "the tracker pose" + (" and the tool point" if retool else "") if k else "nothing"
+        msg = (
+            f"check campaign too small: {campaign.n_poses} poses give {3 * campaign.n_poses} equations; "
+            f"re-registering {what} takes {k}, and the test needs at least {MIN_CHECK_DOF} more "
+            f"(measure at least {need} poses, 5-20 spread over the workspace)"
+        )
+        raise IdentifiabilityError(msg)
+    return campaign, np.asarray(positions, dtype=np.float64), k
+
+
+def _pose_noise(
+    jac: Array, theta_cols: list[int], distances: Array, tracker: TrackerNoise, encoder: EncoderNoise
+) -> Array:
+    """Per-pose covariance of tracker and encoder noise, shape (n, 3, 3) [m^2]."""
+    jq = jac[:, :, theta_cols]
+    cov: Array = (encoder.half_width**2 / 3.0) * np.einsum("pij,pkj->pik", jq, jq)
+    cov += np.eye(3) * (tracker.std(distances) ** 2)[:, None, None]
+    return cov
+
+
+def _effective_dof(
+    res_std: Array,
+    jac: Array,
+    params: Array,
+    q: Array,
+    layout: ParameterLayout,
+    state: SessionState,
+    rotation: Array,
+    between_names: tuple[str, ...] | None,
+) -> Array:
+    """Welch-Satterthwaite dof of each residual component's variance, shape (n, 3).
+
+    Parts with finite dof: the model error (``state.model_error_dof``) and each group of
+    between-session effects (joint offsets, length scale; ``state.between_session_dof`` for the
+    smaller group, the group sizes' ratio for the other). The rest of the variance is exact.
+    """
+    n = res_std.shape[0]
+    total = res_std**2
+    parts: list[tuple[Array, float]] = []
+    if state.model_error_dof is not None and np.isfinite(state.model_error_dof):
+        me = np.diag(rotation @ state.model_error_covariance @ rotation.T)
+        parts.append((np.broadcast_to(me, (n, 3)), float(state.model_error_dof)))
+    if between_names and state.between_session_covariance is not None and state.between_session_dof is not None:
+        g = effect_jacobian(layout, params, q, between_names)
+        groups = {nm == LENGTH_SCALE for nm in between_names}
+        sizes = {key: sum(1 for nm in between_names if (nm == LENGTH_SCALE) == key) for key in groups}
+        per_effect = float(state.between_session_dof) / min(sizes.values())
+        for key in groups:
+            cols = [c for c, nm in enumerate(between_names) if (nm == LENGTH_SCALE) == key]
+            sub = state.between_session_covariance[np.ix_(cols, cols)]
+            var = np.einsum("pik,kl,pil->pi", g[:, :, cols], sub, g[:, :, cols])
+            parts.append((var, per_effect * sizes[key]))
+    if not parts:
+        return np.full((n, 3), np.inf)
+    denominator = sum(np.minimum(var, total) ** 2 / dof for var, dof in parts)
+    with np.errstate(divide="ignore"):
+        return np.asarray(np.where(denominator > 0, total**2 / denominator, np.inf), dtype=np.float64)
+
+
+def _sqrt_psd(matrix: Array) -> Array:
+    evals, evecs = np.linalg.eigh(matrix)
+    return np.asarray(evecs * np.sqrt(np.clip(evals, 0.0, None)), dtype=np.float64)
+
+
+def _chol(matrix: Array) -> Array:
+    return np.asarray(np.linalg.cholesky(matrix), dtype=np.float64)
+
+
+def _gls_chi2(r: Array, chol: Array, a_mat: Array) -> float:
+    """``r^T C^-1 r`` minus the part the re-registration columns explain (C = chol chol^T)."""
+    rw = linalg.solve_triangular(chol, r, lower=True)
+    if a_mat.shape[1] == 0:
+        return float(rw @ rw)
+    aw = linalg.solve_triangular(chol, a_mat, lower=True)
+    q, _ = np.linalg.qr(aw)
+    rw = rw - q @ (q.T @ rw)
+    return float(rw @ rw)
+
+
+def _null_statistics(
+    trials: int,
+    seed: int,
+    chol: Array,
+    a_mat: Array,
+    distances: Array,
+    tracker: TrackerNoise,
+    encoder: EncoderNoise,
+    joint_jacobian: Array,
+    model_error: Array,
+    kin_jacobian: Array,
+    kin_covariance: Array,
+    model_error_draws: Array | None = None,
+    model_error_dof: float | None = None,
+    between_factor: Array | None = None,
+    between_dof: float | None = None,
+) -> Array:
+    """The check statistic for `trials` draws of the errors "nothing changed" allows, shape (trials,).
+
+    Blocks of :data:`_NULL_BLOCK` draws, each from its own ``SeedSequence(seed).spawn`` child:
+    the draws do not depend on anything but the seed and the count.
+    """
+    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 100:
+        msg = f"null_trials must be an integer >= 100, got {trials!r}"
+        raise ConfigError(msg)
+    n = distances.size
+    n_joints = joint_jacobian.shape[-1]
+    if a_mat.shape[1]:
+        aw = linalg.solve_triangular(chol, a_mat, lower=True)
+        q_mat, _ = np.linalg.qr(aw)
+    else:
+        q_mat = np.zeros((3 * n, 0))
+    me_sqrt = np.linalg.cholesky(model_error + 1e-30 * np.eye(3)) if np.any(model_error) else None
+    k_sqrt = None
+    if kin_jacobian.shape[1]:
+        evals, evecs = np.linalg.eigh(kin_covariance)
+        k_sqrt = kin_jacobian @ (evecs * np.sqrt(np.clip(evals, 0.0, None)))
+    n_blocks = -(-trials // _NULL_BLOCK)
+    out = np.empty(trials)
+    for b, child in enumerate(np.random.SeedSequence(seed).spawn(n_blocks)):
+        rng = np.random.default_rng(child)
+        m = min(_NULL_BLOCK, trials - b * _NULL_BLOCK)
+        e = tracker.sample(rng, np.broadcast_to(distances, (m, n)))
+        dq = encoder.sample(rng, (m, n, n_joints))
+        e = e + np.einsum("pij,tpj->tpi", joint_jacobian, dq)
+        me = None
+        if model_error_draws is not None and model_error_draws.shape[0]:
+            me = model_error_draws[rng.integers(0, model_error_draws.shape[0], size=(m, n))]
+        elif me_sqrt is not None:
+            me = rng.standard_normal((m, n, 3)) @ me_sqrt.T
+        if me is not None:
+            if model_error_dof is not None and np.isfinite(model_error_dof):
+                me = me * np.sqrt(model_error_dof / rng.chisquare(model_error_dof, size=m))[:, None, None]
+            e = e + me
+        flat = e.reshape(m, 3 * n)
+        if between_factor is not None:
+            shift = rng.standard_normal((m, between_factor.shape[1])) @ between_factor.T
+            if between_dof is not None and np.isfinite(between_dof):
+                shift = shift * np.sqrt(between_dof / rng.chisquare(between_dof, size=m))[:, None]
+            flat = flat + shift
+        if k_sqrt is not None:
+            flat = flat + rng.standard_normal((m, k_sqrt.shape[1])) @ k_sqrt.T
+        w = linalg.solve_triangular(chol, flat.T, lower=True)
+        w = w - q_mat @ (q_mat.T @ w)
+        out[b * _NULL_BLOCK : b * _NULL_BLOCK + m] = np.sum(w * w, axis=0)
+    return out
+
+
+def verify_session(
+    model: RobotModel,
+    state: SessionState,
+    campaign: Campaign,
+    *,
+    retool: bool = False,
+    significance: float = DEFAULT_SIGNIFICANCE,
+    tracker_noise: TrackerNoise | None = None,
+    encoder_noise: EncoderNoise | None = None,
+    null_trials: int = DEFAULT_NULL_TRIALS,
+    seed: int = 0,
+    effects: tuple[str, ...] = (),
+) -> Verification:
+    """Re-register a new session on a check campaign and test the calibration against it.
+
+    Parameters
+    ----------
+    model : RobotModel
+        The calibrated model (the calibration file applied; its layout without a tool rotation).
+    state : SessionState
+        What the calibration session left (covariances, model error, registration).
+    campaign : Campaign
+        Check measurements of the new session: points in its tracker frame (the tracker pose
+        is re-registered) or in the robot base frame (nothing is, but the tool when `retool`).
+    retool : bool
+        Re-register the tool point too (the probe was remounted).
+    significance : float
+        Test level (false-alarm rate), default 5 %.
+    tracker_noise, encoder_noise : optional
+        The new session's instruments; the calibration session's by default.
+    null_trials : int
+        Monte Carlo draws of the statistic under "nothing changed" from the stated
+        distributions (uniform tracker and encoder errors, the model error resampled from its
+        draws or normal, normal parameter and between-session errors; the estimated parts
+        scaled by ``sqrt(nu / chi2_nu)`` per draw); they give the p-value. With uniform errors
+        the statistic has lighter tails than a chi-square, whose p-value would be too large.
+    seed : int
+        Seed of those draws (``SeedSequence(seed)`` spawned per block of 4096 draws).
+    effects : tuple of str
+        Session effects to estimate after the re-registration (joint offsets, length scale;
+        :func:`effect_jacobian`) in one linear GLS step with it: what changed since the
+        calibration, with its covariance (``Verification.effects``); they do not enter the test.
+
+    Raises
+    ------
+    IdentifiabilityError
+        Too few poses, or poses that cannot re-register (degenerate).
+    InputError
+        Wrong joints, no positions.
+    ConfigError
+        A significance level outside (0, 1).
+    """
+    if not (0.0 < float(significance) < 1.0):
+        msg = f"significance must be in (0, 1), got {significance!r}"
+        raise ConfigError(msg)
+    if model.tool_rotation:
+        model = dataclasses.replace(model, tool_rotation=False)
+    campaign, y, _ = _check_campaign(model, campaign, retool)
+    tracker = tracker_noise or state.tracker_noise
+    encoder = encoder_noise or state.encoder_noise
+    layout = model.layout
+    names = layout.names
+    q = campaign.joint_positions
+    n = campaign.n_poses
+    p = model.parameter_vector()
+    b0 = layout.base_index
+    free_names: list[str] = []
+    if campaign.frame == "tracker":
+        free_names += list(BASE_NAMES)
+        p_kin = p.copy()
+        p_kin[b0 : b0 + 6] = 0.0
+        xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), y)
+        p[b0 : b0 + 3] = xyz
+        p[b0 + 3 : b0 + 6] = rpy
+    else:
+        p[b0 : b0 + 6] = 0.0
+    if retool:
+        free_names += list(TOOL_NAMES)
+    free = np.array([names.index(nm) for nm in free_names], dtype=np.intp)
+    kin_names = tuple(nm for nm in state.covariance_names if nm not in free_names and not nm.startswith("base."))
+    kin = np.array([names.index(nm) for nm in kin_names if nm in names], dtype=np.intp)
+    sigma_k = state.covariance_of(tuple(nm for nm in kin_names if nm in names))
+    theta_cols = joint_columns(layout)
+    distances = np.linalg.norm(y, axis=1) if campaign.frame == "tracker" else np.full(n, 2.0)
+    scale = np.ones(free.size)
+    between = state.between_session_covariance if state.between_session_names else None
+
+    def covariance(jac: Array, params: Array) -> Array:
+        r_wb = rpy_to_matrix(params[b0 + 3 : b0 + 6])
+        blocks = _pose_noise(jac, theta_cols, distances, tracker, encoder)
+        blocks = blocks + r_wb @ state.model_error_covariance @ r_wb.T
+        cov = linalg.block_diag(*blocks)
+        if kin.size:
+            jk = jac[:, :, kin].reshape(3 * n, kin.size)
+            cov = cov + jk @ sigma_k @ jk.T
+        if between is not None:
+            g = effect_jacobian(layout, params, q, state.between_session_names).reshape(3 * n, -1)
+            cov = cov + g @ between @ g.T
+        return np.asarray(cov, dtype=np.float64)
+
+    pred, jac = forward_points_and_jacobian(layout, p, q)
+    a_mat = jac[:, :, free].reshape(3 * n, free.size)
+    if free.size:
+        scale = np.linalg.norm(a_mat, axis=0)
+        s = np.linalg.svd(a_mat / scale, compute_uv=False)
+        if s[-1] <= _DEGENERATE_RCOND * s[0]:
+            msg = (
+                f"degenerate check campaign: its {n} poses cannot re-register "
+                f"{'the tracker pose' if campaign.frame == 'tracker' else ''}"
+                f"{' and ' if campaign.frame == 'tracker' and retool else ''}{'the tool point' if retool else ''} "
+                "(the tool points must span the workspace and the wrist must turn between poses)"
+            )
+            raise IdentifiabilityError(msg)
+    chol = _chol(covariance(jac, p))
+    for _ in range(_MAX_ITERATIONS):
+        r = (y - pred).reshape(3 * n)
+        if not free.size:
+            break
+        aw = linalg.solve_triangular(chol, a_mat / scale, lower=True)
+        rw = linalg.solve_triangular(chol, r, lower=True)
+        step = np.linalg.lstsq(aw, rw, rcond=None)[0] / scale
+        p[free] += step
+        pred, jac = forward_points_and_jacobian(layout, p, q)
+        a_mat = jac[:, :, free].reshape(3 * n, free.size)
+        chol = np.asarray(np.linalg.cholesky(covariance(jac, p)), dtype=np.float64)
+        if np.max(np.abs(step * scale)) < 1e-12 + 1e-10 * np.max(np.abs(p[free] * scale)):
+            break
+    r = (y - pred).reshape(3 * n)
+    c_mat = chol @ chol.T
+    if free.size:
+        aw = linalg.solve_triangular(chol, a_mat / scale, lower=True)
+        rank = int(np.linalg.matrix_rank(aw))
+        cov_scaled = np.linalg.pinv(aw.T @ aw)
+        reg_cov = cov_scaled / np.outer(scale, scale)
+    else:
+        rank = 0
+        reg_cov = np.zeros((0, 0))
+    dof = 3 * n - rank
+    chi2 = _gls_chi2(r, chol, a_mat)
+    p_chi2 = float(stats.chi2.sf(chi2, dof))
+    r_new = rpy_to_matrix(p[b0 + 3 : b0 + 6])
+    null = _null_statistics(
+        null_trials,
+        seed,
+        chol,
+        a_mat,
+        distances,
+        tracker,
+        encoder,
+        jac[:, :, theta_cols],
+        r_new @ state.model_error_covariance @ r_new.T,
+        jac[:, :, kin].reshape(3 * n, kin.size) if kin.size else np.zeros((3 * n, 0)),
+        sigma_k,
+        None if state.model_error_draws is None else state.model_error_draws @ r_new.T,
+        state.model_error_dof,
+        None
+        if between is None
+        else effect_jacobian(layout, p, q, state.between_session_names).reshape(3 * n, -1) @ _sqrt_psd(between),
+        state.between_session_dof,
+    )
+    p_value = float((1 + np.count_nonzero(null >= chi2)) / (1 + null.size))
+    res_cov = c_mat - a_mat @ reg_cov @ a_mat.T
+    res_std = np.sqrt(np.clip(np.diag(res_cov), 1e-30, None)).reshape(n, 3)
+    residuals = r.reshape(n, 3)
+    normalised = residuals / res_std
+    pose_chi2 = np.empty(n)
+    for i in range(n):
+        block = res_cov[3 * i : 3 * i + 3, 3 * i : 3 * i + 3]
+        pose_chi2[i] = float(residuals[i] @ np.linalg.pinv(block, rcond=1e-10) @ residuals[i])
+    excess = 0.0
+    if chi2 > dof:
+        lo, hi = 0.0, float(np.sqrt(np.mean(residuals**2))) + 1e-9
+        while _gls_chi2(r, _chol(c_mat + hi**2 * np.eye(3 * n)), a_mat) > dof:
+            hi *= 2.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if _gls_chi2(r, _chol(c_mat + mid**2 * np.eye(3 * n)), a_mat) > dof:
+                lo = mid
+            else:
+                hi = mid
+        excess = hi
+    rms = float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
+    move = None
+    if campaign.frame == "tracker" and state.frame == "tracker":
+        move = tracker_move(p[b0 : b0 + 6], reg_cov[:6, :6], state.registration, state.registration_covariance)
+    tool_change = tool_std = None
+    if retool:
+        t0 = layout.tool_index
+        k0 = free_names.index("tool.x")
+        tool_change = p[t0 : t0 + 3] - model.tool_point
+        tool_cov = reg_cov[k0 : k0 + 3, k0 : k0 + 3] + state.covariance_of(TOOL_NAMES)
+        tool_std = np.sqrt(np.clip(np.diag(tool_cov), 0.0, None))
+    consistent = p_value >= significance
+    if consistent:
+        verdict = (
+            f"consistent: the robot agrees with its calibration within the stated uncertainty "
+            f"(chi2 = {chi2:.3g} on {dof} degrees of freedom, p = {p_value:.3g} >= {significance:g})"
+        )
+    else:
+        verdict = (
+            f"drifted: the robot deviates from its calibration by about {excess * 1e3:.3g} mm per axis "
+            f"beyond the stated uncertainty (chi2 = {chi2:.3g} on {dof} degrees of freedom, "
+            f"p = {p_value:.3g} < {significance:g}); re-calibrate"
+        )
+    warns: list[str] = []
+    effective_dof = _effective_dof(
+        res_std, jac, p, q, layout, state, r_new, None if between is None else state.between_session_names
+    )
+    effect_values = effect_cov = None
+    if effects:
+        g = effect_jacobian(layout, p, q, effects).reshape(3 * n, len(effects))
+        full = np.concatenate((a_mat, g), axis=1)
+        col = np.linalg.norm(full, axis=0)
+        col[col == 0] = 1.0
+        fw = linalg.solve_triangular(chol, full / col, lower=True)
+        inv = np.linalg.pinv(fw.T @ fw) / np.outer(col, col)
+        step = inv @ (full.T @ linalg.cho_solve((chol, True), r))
+        effect_values = step[free.size :]
+        effect_cov = inv[free.size :, free.size :]
+    return Verification(
+        consistent=consistent,
+        verdict=verdict,
+        chi2=chi2,
+        dof=dof,
+        p_value=p_value,
+        p_value_chi2=p_chi2,
+        null_trials=null_trials,
+        seed=seed,
+        significance=float(significance),
+        n_poses=n,
+        reregistered=tuple(free_names),
+        registration=p[free].copy(),
+        registration_covariance=reg_cov,
+        move=move,
+        tool_change=tool_change,
+        tool_change_std=tool_std,
+        residuals=residuals,
+        normalised=normalised,
+        pose_chi2=pose_chi2,
+        stated_std=res_std,
+        excess_std=float(excess),
+        rms_error=rms,
+        model_error_std=np.sqrt(np.clip(np.diag(state.model_error_covariance), 0.0, None)),
+        warnings=tuple(warns),
+        effect_names=tuple(effects),
+        effects=effect_values,
+        effects_covariance=effect_cov,
+        effective_dof=effective_dof,
+    )
+
+
+def parameter_covariance(
+    calibration: IdentificationResult, joint_positions: Array, pose_covariances: Array, *, include_bias: bool = True
+) -> Array:
+    """Linearised covariance of the estimated parameters of a point calibration.
+
+    The regularised Gauss-Newton solution is, to first order, ``x = G b`` with
+    ``G = (A^T A + lambda^2 P)^-1 A^T`` (column-scaled Jacobian ``A`` at the estimate), so
+    ``Cov(x) = G C G^T`` with ``C`` the block-diagonal covariance of the measured points
+    (stated noise plus model error): the sandwich, valid whatever the weighting.
+
+    Parameters
+    ----------
+    calibration : IdentificationResult
+        A point calibration (unweighted, 3 equations per pose).
+    joint_positions : ndarray, shape (n_poses, n_joints) [rad]
+    pose_covariances : ndarray, shape (n_poses, 3, 3) [m^2]
+        Covariance of each measured point in the measurement frame.
+
+    Returns
+    -------
+    ndarray, shape (k, k): over the estimated parameters, in ``parameter_names`` order.
+    """
+    measurement = calibration.measurement
+    if measurement.dimension != 3 or measurement.weights is not None:
+        msg = "a parameter covariance for a later session needs a point calibration (3 unweighted equations per pose)"
+        raise ConfigError(msg)
+    layout = calibration.model.layout
+    est = np.flatnonzero(calibration.estimated)
+    n = joint_positions.shape[0]
+    _, jac = forward_points_and_jacobian(layout, calibration.estimate, joint_positions)
+    scale = calibration.column_scale[est]
+    a_mat = jac.reshape(3 * n, layout.size)[:, est] / scale
+    penalty = calibration.lambda_**2 * np.diag(calibration.penalized[est].astype(np.float64))
+    gain = np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T)
+    c_mat = linalg.block_diag(*pose_covariances)
+    cov_x = gain @ c_mat @ gain.T
+    if include_bias and calibration.lambda_ > 0.0:
+        # First-order Tikhonov shrinkage -(A^T A + P)^-1 P x, evaluated at x_hat: a systematic
+        # error of the estimate the sandwich does not hold (see calibration_mc._regularisation_bias).
+        x_hat = (calibration.estimate - calibration.nominal)[est] * scale
+        bias = -np.linalg.solve(a_mat.T @ a_mat + penalty, penalty @ x_hat)
+        cov_x = cov_x + np.outer(bias, bias)
+    cov = cov_x / np.outer(scale, scale)
+    return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)

@@ -1,0 +1,103 @@
+"""The between-session component: its estimate from sessions and its Monte Carlo source."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal_uncertainty.core import identify, load_robot_model
+from robocal_uncertainty.core.calibration_file import read_calibration, read_session_state, write_calibration
+from robocal_uncertainty.core.session import LENGTH_SCALE, effect_jacobian
+from robocal_uncertainty.core.simulation import SessionSimulationSettings, simulate_sessions
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.between_sessions import (
+    estimate_between_sessions,
+    identifiable_effects,
+    with_between_sessions,
+)
+from robocal_uncertainty.uncertainty.sessions import session_state
+from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY
+
+DATA = Path(__file__).resolve().parents[2] / "robocal_uncertainty" / "data"
+
+
+@pytest.fixture(scope="module")
+def sessions():
+    model = dataclasses.replace(load_robot_model(DATA / "ur10.yaml"), base_known=False)
+    sim = simulate_sessions(model, SessionSimulationSettings(n_sessions=4, n_poses=53), seed=2)
+    first = sim.sessions[0]
+    cal = identify(model, first.campaign)
+    state, _ = session_state(cal, first.campaign, first.settings.tracker_noise, first.settings.encoder_noise)
+    return model, sim, cal, state
+
+
+def test_effects_left_out_are_those_the_re_registration_absorbs(sessions) -> None:
+    _, sim, cal, _ = sessions
+    names = identifiable_effects(cal.model, sim.sessions[1].campaign)
+    # Joint 1's offset is the tracker's yaw; joint 6's turns the tool point (0.45 mm off its axis
+    # here) as a remounted tool would.
+    assert names == ("joint2.theta", "joint3.theta", "joint4.theta", "joint5.theta", LENGTH_SCALE)
+    assert "joint1.theta" not in identifiable_effects(cal.model, sim.sessions[1].campaign, retool=False)
+
+
+def test_session_effects_match_the_truth(sessions) -> None:
+    _, sim, cal, state = sessions
+    between = estimate_between_sessions(cal.model, state, [s.campaign for s in sim.sessions[1:]])
+    assert between.n_sessions == 4 and between.group_dof == {"joint_offsets": 12.0, "length_scale": 3.0}
+    for k, change in enumerate(sim.changes[1:]):
+        truth = np.array([*change.joint_offset_drift[1:5], 23e-6 * change.temperature_delta])
+        z = (between.session_effects[k] - truth) / between.session_effects_std[k]
+        assert np.all(np.abs(z) < 4.0), z
+    # A future session relative to the reference: twice the per-session variance.
+    np.testing.assert_allclose(np.diag(between.covariance)[:4], 2 * between.group_std["joint_offsets"] ** 2)
+    future = with_between_sessions(state, between)
+    assert future.scope == "future sessions" and future.between_session_names == between.names
+    with pytest.raises(ConfigError):
+        estimate_between_sessions(cal.model, state, [])
+
+
+def test_file_round_trip_with_between_sessions(sessions, tmp_path: Path) -> None:
+    _, sim, cal, state = sessions
+    between = estimate_between_sessions(cal.model, state, [sim.sessions[1].campaign])
+    future = with_between_sessions(state, between)
+    path = tmp_path / "cal.json"
+    write_calibration(path, cal, robot="ur10", session=future)
+    data = read_calibration(path)
+    assert data["scope"] == "future sessions"
+    back = read_session_state(data)
+    assert back is not None and back.between_session_names == between.names
+    np.testing.assert_allclose(back.between_session_covariance, between.covariance)
+    assert back.between_session_dof == between.dof
+
+
+def test_between_session_source_adds_the_effect_covariance(sessions) -> None:
+    model, sim, cal, state = sessions
+    assert "between_session" in SOURCE_REGISTRY
+    between = estimate_between_sessions(cal.model, state, [s.campaign for s in sim.sessions[1:]])
+    test_q = sim.sessions[0].campaign.joint_positions[:3]
+    settings = UncertaintySettings(sources=("between_session",), between_session=between)
+    result = evaluate_uncertainty(
+        model, sim.sessions[0].campaign, test_q, settings=settings, calibration=cal, trials=20000, frame="base"
+    )
+    params = cal.estimate.copy()
+    b0 = cal.model.layout.base_index
+    params[b0 : b0 + 6] = 0.0
+    g = effect_jacobian(cal.model.layout, params, test_q, between.names)
+    for k, pose in enumerate(result.poses):
+        expected = g[k] @ between.covariance @ g[k].T
+        np.testing.assert_allclose(np.sqrt(np.diag(pose.covariance)), np.sqrt(np.diag(expected)), rtol=0.03)
+    # Without a component the source adds nothing (so "all" stays valid).
+    plain = evaluate_uncertainty(
+        model,
+        sim.sessions[0].campaign,
+        test_q,
+        settings=UncertaintySettings(sources=("between_session",)),
+        calibration=cal,
+        trials=1000,
+        frame="base",
+    )
+    assert np.all(np.abs(plain.poses[0].covariance) < 1e-24)
