@@ -178,7 +178,14 @@ def test_ur_kinematics_of_the_shipped_series(tmp_path: Path, capsys: pytest.Capt
     names = {p["name"] for p in sidecar["parameters"]}
     assert {"joint2.a", "tool.z", "base.yaw"} <= names
     assert any(not p["determined_by_data"] for p in sidecar["parameters"])
-    assert sidecar["covariance"] is None and "standard uncertainties only" in sidecar["covariance_note"]
+    # The covariance travels too (format 2 calibration files): over the estimated parameters,
+    # symmetric positive semi-definite, its order named.
+    cov = np.array(sidecar["covariance"])
+    order = sidecar["covariance_parameters"]
+    assert cov.shape == (len(order), len(order)) and set(order) <= names
+    assert set(order) == {p["name"] for p in sidecar["parameters"] if p["determined_by_data"]}
+    assert np.allclose(cov, cov.T, rtol=0, atol=1e-12 * np.abs(cov).max())
+    assert np.linalg.eigvalsh(cov).min() > -1e-9 * np.abs(cov).max()
 
 
 def test_robot_description_string_from_a_description_parameter() -> None:
@@ -212,3 +219,13 @@ def test_export_errors_are_one_line(
     err = capsys.readouterr().err
     assert err.startswith("robocal-uncertainty export: error: ") and match in err
     assert err.count("\n") == 1
+
+
+def test_a_calibration_without_covariance_says_so_in_the_sidecar() -> None:
+    """Format 1 files state standard uncertainties only: the sidecar says there is no covariance."""
+    from robocal_uncertainty.app.export import _covariance
+
+    assert _covariance({"parameters": []}, ["a", "b"])[0] is None
+    assert "standard uncertainties only" in _covariance({}, ["a"])[1]
+    wrong = {"parameter_covariance": {"names": ["a", "b"], "matrix": [[1.0]]}}
+    assert _covariance(wrong, ["a", "b"])[0] is None and "shape (1, 1)" in _covariance(wrong, ["a", "b"])[1]

@@ -215,9 +215,16 @@ def _comment(data: dict[str, Any], where: str, what: str, uncertainty: str = "th
     return "\n".join(lines)
 
 
+def _covariance_entry(data: dict[str, Any]) -> Any:
+    return data.get("parameter_covariance") or data.get("covariance")
+
+
 def _covariance(data: dict[str, Any], names: list[str]) -> tuple[list[list[float]] | None, str]:
-    """The calibration's covariance over `names` if it holds one, else None and why."""
-    cov = data.get("covariance")
+    """The calibration's covariance over `names` if it holds one, else None and why.
+
+    Format 2 calibration files hold it as ``parameter_covariance: {names, matrix}`` (the
+    estimated parameters' linearised covariance); an older ``covariance`` key is read too."""
+    cov = _covariance_entry(data)
     matrix, order = None, names
     if isinstance(cov, dict):
         matrix = cov.get("matrix")
@@ -247,7 +254,7 @@ def _sidecar(
     params = [p for p in data.get("parameters", []) if isinstance(p, dict)]
     names = [str(p.get("name")) for p in params]
     covariance, note = _covariance(data, names)
-    cov = data.get("covariance")
+    cov = _covariance_entry(data)
     order = (cov.get("parameters") or cov.get("names")) if isinstance(cov, dict) else names
     return {
         "format": SIDECAR_FORMAT,
