@@ -264,6 +264,18 @@ def _horner(coefficients: tuple[float, ...], b2: Array) -> Array | float:
     return acc
 
 
+def _turn(
+    v: tuple[Array, Array, Array], c: Array, s: Array, beta: tuple[Array, Array] | None, ca: Array, sa: Array
+) -> tuple[Array, Array, Array]:
+    """``Rx(alpha) Ry(beta) Rz(theta) v`` from the cosines and sines (no beta: None)."""
+    x, y, z = v
+    x, y = c * x - s * y, s * x + c * y
+    if beta is not None:
+        cb, sb = beta
+        x, z = cb * x + sb * z, cb * z - sb * x
+    return x, ca * y - sa * z, sa * y + ca * z
+
+
 @dataclass(frozen=True, eq=False)
 class NearbyPoints:
     """Measured points at parameters and joint readings close to a reference, cheaply.
@@ -274,9 +286,10 @@ class NearbyPoints:
     with ``cos b`` and ``sin b`` from their Taylor series, cut where the next term is below
     half an ulp of 1 (two or three terms for micro-radians): a few multiply-adds instead of
     two transcendental calls per joint and pose. The chain is walked from the tool back to the
-    base on the point alone (no rotation matrices). When some ``|b|`` exceeds 0.25 rad the
-    angles are evaluated directly. The points agree with :func:`forward_points` to a few ulps
-    (the order of the floating-point operations differs), not bit for bit.
+    base on the point alone (no rotation matrices; :meth:`poses` walks the tool's x and z axes
+    too). When some ``|b|`` exceeds 0.25 rad the angles are evaluated directly. The points
+    agree with :func:`forward_points` (the poses with :func:`forward_poses`) to a few ulps (the
+    order of the floating-point operations differs), not bit for bit.
 
     Attributes
     ----------
@@ -309,6 +322,32 @@ class NearbyPoints:
 
         `joint_positions` must have the reference's poses: shape (..., n_poses, n_joints).
         """
+        p, shape, (vx, vy, vz), _ = self._walk(params, joint_positions, rotation=False)
+        base_cols, translation, _ = _base(p, self.layout)
+        out = np.empty((*shape, 3))
+        for i in range(3):
+            out[..., i] = base_cols[0][i] * vx + base_cols[1][i] * vy + base_cols[2][i] * vz + translation[i]
+        return out
+
+    def poses(self, params: Array, joint_positions: Array) -> Array:
+        """Tool poses as stored 6-DOF values (..., n_poses, 12): the point [m], then
+        ``world_R_tool`` row by row, as ``pose_values(*forward_poses(...))`` gives them (to a
+        few ulps). The x and z axes of the tool are walked with the point, y is ``z x x``."""
+        p, shape, (vx, vy, vz), axes = self._walk(params, joint_positions, rotation=True)
+        (x0, x1, x2), (z0, z1, z2) = axes
+        cols = ((x0, x1, x2), (z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0), (z0, z1, z2))
+        base_cols, translation, _ = _base(p, self.layout)
+        out = np.empty((*shape, 12))
+        for i in range(3):
+            out[..., i] = base_cols[0][i] * vx + base_cols[1][i] * vy + base_cols[2][i] * vz + translation[i]
+            for c, col in enumerate(cols):
+                out[..., 3 + 3 * i + c] = base_cols[0][i] * col[0] + base_cols[1][i] * col[1] + base_cols[2][i] * col[2]
+        return out
+
+    def _walk(
+        self, params: Array, joint_positions: Array, *, rotation: bool
+    ) -> tuple[Array, tuple[int, ...], tuple[Array, Array, Array], list[tuple[Array, Array, Array]]]:
+        """The tool point and (with `rotation`) the tool's x and z axes in the base frame."""
         layout = self.layout
         p, q, shape = _prepare(layout, params, joint_positions)
         if q.shape[-2:] != self.joints.shape:
@@ -324,6 +363,16 @@ class NearbyPoints:
         sin_series = () if direct else _series(largest, odd=True)
         t0 = layout.tool_index
         vx, vy, vz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
+        # The tool's x and z axes in the flange frame (the tool rotation's columns, if any).
+        axes: list[tuple[Array, Array, Array]] = []
+        if rotation:
+            tool = _tool_rotation(layout, p)
+            if tool is None:
+                one, zero = np.ones(p.shape[:-1]), np.zeros(p.shape[:-1])
+                axes = [(one, zero, zero), (zero, zero, one)]
+            else:
+                r = tool[0]
+                axes = [(r[..., 0, 0], r[..., 1, 0], r[..., 2, 0]), (r[..., 0, 2], r[..., 1, 2], r[..., 2, 2])]
         for j in range(layout.n_joints - 1, -1, -1):
             idx = slices[j]
             vz = vz + p[..., idx["d"]]
@@ -337,20 +386,17 @@ class NearbyPoints:
                 sb = b * _horner(sin_series, b2)
                 c = self.cos_ref[j] * cb - self.sin_ref[j] * sb
                 s = self.sin_ref[j] * cb + self.cos_ref[j] * sb
-            vx, vy = c * vx - s * vy, s * vx + c * vy
+            beta = None
             if "beta" in idx:
                 beta = p[..., idx["beta"]]
                 cbeta, sbeta = np.cos(beta), np.sin(beta)
-                vx, vz = cbeta * vx + sbeta * vz, cbeta * vz - sbeta * vx
             alpha = p[..., idx["alpha"]]
             ca, sa = np.cos(alpha), np.sin(alpha)
-            vy, vz = ca * vy - sa * vz, sa * vy + ca * vz
+            turn = (c, s, None if beta is None else (cbeta, sbeta), ca, sa)
+            vx, vy, vz = _turn((vx, vy, vz), *turn)
+            axes = [_turn(axis, *turn) for axis in axes]
             vx = vx + p[..., idx["a"]]
-        base_cols, translation, _ = _base(p, layout)
-        out = np.empty((*shape, 3))
-        for i in range(3):
-            out[..., i] = base_cols[0][i] * vx + base_cols[1][i] * vy + base_cols[2][i] * vz + translation[i]
-        return out
+        return p, shape, (vx, vy, vz), axes
 
 
 def forward_points_and_jacobian(

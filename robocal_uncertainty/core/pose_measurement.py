@@ -35,12 +35,13 @@ measured frame is the flange frame.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.kinematics import forward_poses, forward_poses_and_jacobian
+from robocal_uncertainty.core.kinematics import NearbyPoints, forward_poses, forward_poses_and_jacobian
 from robocal_uncertainty.core.measurement import POSITION_AXES, MeasurementType, positive_triple
 from robocal_uncertainty.core.robot_model import ParameterLayout
 from robocal_uncertainty.core.rotation import rotation_exp, rotation_log
@@ -163,6 +164,12 @@ class PoseMeasurement(MeasurementType):
         """Tool poses (..., n_poses, 12) and the (..., n_poses, 6, n_params) Jacobian."""
         points, rotations, jac = forward_poses_and_jacobian(layout, params, joint_positions)
         return pose_values(points, rotations), jac
+
+    def nearby_predictor(
+        self, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> Callable[[Array, Array], Array]:
+        """Tool poses near the reference by :meth:`~robocal_uncertainty.core.kinematics.NearbyPoints.poses`."""
+        return NearbyPoints.at(layout, params, joint_positions).poses
 
     def residual(self, measured: Array, predicted: Array) -> Array:
         """``(p_m - p_p, log(R_m R_p^T))``, shape (..., n_poses, 6) [m, rad]."""

@@ -16,6 +16,7 @@ from robocal_uncertainty.core.kinematics import (
     NearbyPoints,
     forward_points,
     forward_points_and_jacobian,
+    forward_poses,
 )
 from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.core.robot_model import RobotModel
@@ -158,6 +159,31 @@ def test_nearby_points_match_plain_matrix_product(spread: float) -> None:
         np.testing.assert_allclose(got, forward_points(ref.layout, params, q), rtol=0, atol=5e-15)
         # Shared readings (no leading axis) broadcast like forward_points.
         np.testing.assert_allclose(near(params, q_ref), forward_points(ref.layout, params, q_ref), rtol=0, atol=5e-15)
+
+
+@pytest.mark.parametrize("spread", [1e-5, 0.1, 1.0], ids=["urad", "0.1rad", "direct"])
+@pytest.mark.parametrize("tool_rotation", [False, True], ids=["flange", "tool_rotation"])
+def test_nearby_poses_match_forward_poses(spread: float, tool_rotation: bool) -> None:
+    # forward_poses is checked against independent references in test_orientation_kinematics.
+    rng = np.random.default_rng(13)
+    ref = perturbed(load_robot_model(PAPER_YAML), rng, beta=True)
+    if tool_rotation:
+        ref = ref.with_tool_rotation()
+    layout = ref.layout
+    p0 = ref.parameter_vector()
+    if layout.tool_rotation_index is not None:
+        p0[layout.tool_rotation_index : layout.tool_rotation_index + 3] = rng.uniform(-0.5, 0.5, 3)
+    q_ref = rng.uniform(-np.pi, np.pi, (9, ref.n_joints))
+    near = NearbyPoints.at(layout, p0, q_ref)
+    params = p0 + rng.uniform(-spread, spread, (3, layout.size)) * 0.1
+    q = q_ref + rng.uniform(-spread, spread, (3, *q_ref.shape))
+    got = near.poses(params, q)
+    points, rotations = forward_poses(layout, params, q)
+    assert got.shape == (3, 9, 12)
+    np.testing.assert_allclose(got[..., :3], points, rtol=0, atol=5e-15)
+    np.testing.assert_allclose(got[..., 3:].reshape(3, 9, 3, 3), rotations, rtol=0, atol=5e-15)
+    # The point part is the point walk's, bit for bit.
+    assert np.array_equal(got[..., :3], near(params, q))
 
 
 # --- pinocchio ---------------------------------------------------------------------------
