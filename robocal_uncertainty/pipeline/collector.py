@@ -38,7 +38,8 @@ moves by less than the thresholds. Too few data in the averaged span (fewer than
 joint states or `min_points` tracker points, e.g. the beam was blocked) rejects the dwell.
 
 The window statistics are incremental (:class:`_StillTracker`): a message costs O(1)
-amortised numpy work whatever the window length, and the decisions are exactly those of
+amortised work whatever the window length (plain Python on its few values; numpy only when a
+window is reduced, about once per window length), and the decisions are exactly those of
 recomputing the peak-to-peak ranges over every window.
 
 Time is message time (header stamps, int ns), never the wall clock, so a replay behaves
@@ -228,6 +229,15 @@ class _Series:
     def stamp(self, i: int) -> int:
         """Stamp of row `i` (relative to the current first row) [ns]."""
         return self._ts[self._lo + i]
+
+    def covers(self, stamp: int) -> bool:
+        """Whether the first row is stamped at or before `stamp` (False when empty)."""
+        return self._lo < len(self._ts) and self._ts[self._lo] <= stamp
+
+    def window(self, stamp: int) -> tuple[int, int]:
+        """(position of the first row stamped at or after `stamp`, rows from there on)."""
+        i = bisect_left(self._ts, stamp, self._lo)
+        return i - self._lo, len(self._ts) - i
 
     def drop_front(self, count: int) -> None:
         self._lo += count
@@ -628,17 +638,17 @@ class StaticPoseCollector:
     def _window_static(self, now: int) -> bool:
         lo = now - self._window_ns
         joints, points = self._joints, self._points
-        if not len(joints) or joints.stamp(0) > lo:
+        if not joints.covers(lo):
             return False  # the window is not covered by joint states yet
-        i0 = joints.index(lo)
-        if len(joints) - i0 < 2 or not self._joint_still.still(joints, i0, now):
+        i0, n = joints.window(lo)
+        if n < 2 or not self._joint_still.still(joints, i0, now):
             return False
-        k0 = points.index(lo)
-        if len(points) - k0 >= 2 and not self._point_still.still(points, k0, now):
+        k0, n = points.window(lo)
+        if n >= 2 and not self._point_still.still(points, k0, now):
             return False
         rotations = self._rotations
-        r0 = rotations.index(lo)
-        return len(rotations) - r0 < 2 or self._rotation_still.still(rotations, r0, now)
+        r0, n = rotations.window(lo)
+        return n < 2 or self._rotation_still.still(rotations, r0, now)
 
     def _prune(self, now: int) -> None:
         """Drop data no window can need: keep one joint state at or before the window start."""
@@ -657,6 +667,8 @@ class StaticPoseCollector:
             keep_until = self._dwell_start + self._guard_ns + self._average_ns
         keep_from = now - self._window_ns - self._guard_ns
         for series in (self._joints, self._points, self._rotations):
+            if len(series) < 256:
+                continue  # the middle cannot reach 256 rows (the condition below)
             i0, i1 = series.index(keep_until, "right"), series.index(keep_from)
             # Amortised: only compact once the unneeded middle is as large as the rest.
             if i1 - i0 >= max(256, len(series) // 2):

@@ -359,8 +359,9 @@ def replay_bag(
             raise BagError(msg)
         tracker_frame_id = frames.most_common(1)[0][0]
     settings = collector or CollectorSettings()
-    still = _still_of(events, model.joint_names, settings.joint_motion_threshold)
-    if auto_window:
+    # The still intervals of the joints serve the auto window and the diagnosis only.
+    still = _still_of(events, model.joint_names, settings.joint_motion_threshold) if auto_window else None
+    if still is not None:
         settings = auto_collector_settings(settings, still)
     pose_collector = StaticPoseCollector.from_settings(model.joint_names, tracker_frame_id, settings, log=log)
     pipeline = CalibrationPipeline(model, options=options, min_samples=min_samples, campaign_path=campaign_path)
@@ -392,7 +393,17 @@ def replay_bag(
         tracker_frame_id=tracker_frame_id,
         truncated=bag.truncated,
         collector=settings,
-        diagnosis="" if samples else _diagnose(bag, events, model, tracker_frame_id, settings, still, pose_collector),
+        diagnosis=""
+        if samples
+        else _diagnose(
+            bag,
+            events,
+            model,
+            tracker_frame_id,
+            settings,
+            still if still is not None else _still_of(events, model.joint_names, settings.joint_motion_threshold),
+            pose_collector,
+        ),
     )
 
 
