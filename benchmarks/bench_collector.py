@@ -2,8 +2,9 @@
 
 Feeds a simulated campaign (6 joints; 2 s dwells, 3 s moves, encoder and tracker noise) for
 `--minutes` of message time, as the live node would, and prints messages per second (CPU of
-this process) and the traced peak memory. Compare messages per second with the 2 000/s the
-live rate needs; the peak must not grow with the duration (run 1 and 10 minutes).
+this process), the traced peak memory of the collector's allocations and the peak resident
+memory of the process. Compare messages per second with the 2 000/s the live rate needs; the
+peaks must not grow with the duration (run 1 and 10 minutes).
 
 Usage: ``python benchmarks/bench_collector.py --minutes 10``
 """
@@ -11,6 +12,8 @@ Usage: ``python benchmarks/bench_collector.py --minutes 10``
 from __future__ import annotations
 
 import argparse
+import resource
+import sys
 import time
 import tracemalloc
 
@@ -68,6 +71,8 @@ def main() -> None:
         f"{2 * args.rate_hz:,.0f}/s); {samples} samples; traced peak {peak / 1e6:.2f} MB (second pass under "
         "tracemalloc)"
     )
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    print(f"peak resident memory of the process: {rss / 1024.0 if sys.platform != 'darwin' else rss / 2**20:.0f} MiB")
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ from robocal_uncertainty.core.measurement import joint_columns
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.simulation import draw_joint_positions
 from robocal_uncertainty.errors import InputError
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration_mc import EvaluationSettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
@@ -438,7 +438,10 @@ def suggest_poses(
 
         def mc_u(c: Campaign) -> float:
             result = evaluate_uncertainty(
-                model, c, q_test, settings=settings, lambda_=lambda_, trials=trials, seed=seed, frame=frame
+                model,
+                c,
+                q_test,
+                EvaluationSettings(uncertainty=settings, lambda_=lambda_, trials=trials, seed=seed, frame=frame),
             )
             return _rms_u(np.array([pose.covariance for pose in result.poses]))
 

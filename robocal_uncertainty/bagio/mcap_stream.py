@@ -2,22 +2,29 @@
 
 A writer killed before ``finish`` leaves a file without summary, footer and closing magic,
 possibly with a half-written last record. :func:`read_mcap_file` first walks the top-level
-record framing (opcode, length) to find where the last complete record ends, then feeds
-exactly those bytes to mcap's non-seeking :class:`~mcap.stream_reader.StreamReader`. All
-complete records are returned and ``truncated`` tells whether the end was missing.
+record framing (opcode, length) to find where the last complete record ends, then reads
+exactly those bytes, record by record, up to the footer. All complete records are returned
+and ``truncated`` tells whether the end was missing.
+
+Messages (in chunks, where a recorder puts them, or at top level) are unpacked here, one
+``struct`` call each on the (decompressed) bytes; schemas, channels, metadata and chunk
+headers are read by mcap's record classes; indexes and statistics are not parsed (a replay
+reads every message in file order). The chunk and data-section CRCs are checked, as mcap's
+``StreamReader(validate_crcs=True)`` checks them.
 """
 
 from __future__ import annotations
 
 import io
 import struct
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
-from mcap.exceptions import EndOfFile
-from mcap.records import Channel, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Metadata, Schema
 
 from robocal_uncertainty.errors import BagError
 
@@ -26,6 +33,8 @@ __all__ = ["MCAP_MAGIC", "ChannelInfo", "McapContents", "RawMessage", "is_mcap",
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_OPCODE = 0x02
 _RECORD_PREFIX = struct.Struct("<BQ")
+_MESSAGE_HEADER = struct.Struct("<HIQQ")
+"""Message record: channel id, sequence, log time [ns], publish time [ns]; the data follow."""
 
 
 @dataclass(frozen=True)
@@ -68,27 +77,6 @@ class McapContents:
     metadata: dict[str, dict[str, str]]
     channels: tuple[ChannelInfo, ...]
     truncated: bool
-
-
-class _Bounded(io.RawIOBase):
-    """Raw reader exposing only the first `limit` bytes of `stream`."""
-
-    def __init__(self, stream: BinaryIO, limit: int) -> None:
-        super().__init__()
-        self._stream = stream
-        self._left = limit
-
-    def readable(self) -> bool:
-        return True
-
-    def readinto(self, buffer: memoryview) -> int:  # type: ignore[override]
-        size = min(len(buffer), self._left)
-        if size <= 0:
-            return 0
-        data = self._stream.read(size)
-        buffer[: len(data)] = data
-        self._left -= len(data)
-        return len(data)
 
 
 def is_mcap(path: Path) -> bool:
@@ -134,14 +122,105 @@ class _Collector:
                 "" if schema is None else schema.encoding,
                 record.message_encoding,
             )
-        elif isinstance(record, Message):
-            channel = self.channels.get(record.channel_id)
-            if channel is None:
-                msg = f"MCAP file {self.path}: message on undeclared channel {record.channel_id}"
-                raise BagError(msg)
-            self.messages.append(RawMessage(channel, record.log_time, bytes(record.data)))
         elif isinstance(record, Metadata):
             self.metadata[record.name] = dict(record.metadata)
+        elif isinstance(record, Chunk):
+            self.add_chunk(record)
+
+    def add_message(self, channel_id: int, log_time: int, data: bytes) -> None:
+        channel = self.channels.get(channel_id)
+        if channel is None:
+            msg = f"MCAP file {self.path}: message on undeclared channel {channel_id}"
+            raise BagError(msg)
+        self.messages.append(RawMessage(channel, log_time, data))
+
+    def add_chunk(self, chunk: Chunk) -> None:
+        """The records of one chunk, in order (messages without mcap's record objects)."""
+        data = _chunk_bytes(chunk)
+        size = len(data)
+        offset = 0
+        prefix, header = _RECORD_PREFIX, _MESSAGE_HEADER
+        append, channels = self.messages.append, self.channels
+        while offset < size:
+            opcode, length = prefix.unpack_from(data, offset)
+            body = offset + prefix.size
+            offset = body + length
+            if offset > size:
+                msg = f"record of {length} bytes past the end of its chunk ({size} bytes)"
+                raise ValueError(msg)
+            if opcode == Opcode.MESSAGE:
+                channel_id, _, log_time, _ = header.unpack_from(data, body)
+                channel = channels.get(channel_id)
+                if channel is None:
+                    msg = f"MCAP file {self.path}: message on undeclared channel {channel_id}"
+                    raise BagError(msg)
+                append(RawMessage(channel, log_time, data[body + header.size : offset]))
+            elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+                stream = ReadDataStream(io.BytesIO(data[body:offset]))
+                self.add(Schema.read(stream) if opcode == Opcode.SCHEMA else Channel.read(stream))
+
+
+def _chunk_bytes(chunk: Chunk) -> bytes:
+    """Decompressed records of `chunk`, its CRC checked (as mcap's ``validate_crcs`` does)."""
+    # The decompressors mcap uses, imported when needed (as mcap does, an error without them).
+    if chunk.compression == "zstd":
+        try:
+            import zstandard
+        except ImportError:  # pragma: no cover - installed with mcap's ros2 support
+            raise BagError("MCAP chunk compressed with zstd, but the zstandard module is not installed") from None
+        data: bytes = zstandard.decompress(chunk.data, chunk.uncompressed_size)
+    elif chunk.compression == "lz4":
+        try:
+            import lz4.frame
+        except ImportError:  # pragma: no cover
+            raise BagError("MCAP chunk compressed with lz4, but the lz4 module is not installed") from None
+        data = lz4.frame.decompress(chunk.data)
+    elif chunk.compression == "":
+        data = bytes(chunk.data)
+    else:
+        msg = f"MCAP chunk with unknown compression {chunk.compression!r}"
+        raise BagError(msg)
+    if chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc:
+        msg = f"chunk CRC {zlib.crc32(data)} does not match the recorded {chunk.uncompressed_crc}"
+        raise ValueError(msg)
+    return data
+
+
+_RECORD_TYPES: dict[int, type[Schema] | type[Channel] | type[Metadata] | type[Chunk]] = {
+    Opcode.SCHEMA: Schema,
+    Opcode.CHANNEL: Channel,
+    Opcode.METADATA: Metadata,
+    Opcode.CHUNK: Chunk,
+}
+
+
+def _read_records(collector: _Collector, data: bytes, limit: int) -> None:
+    """Walk the top-level records in ``data[8:limit]`` (all complete) up to the footer.
+
+    Messages are unpacked in place; schemas, channels, metadata and chunks are read by mcap's
+    record classes; the data section's CRC (in the DataEnd record) is checked, as mcap's
+    ``StreamReader(validate_crcs=True)`` does.
+    """
+    offset = len(MCAP_MAGIC)
+    prefix, header = _RECORD_PREFIX, _MESSAGE_HEADER
+    while offset + prefix.size <= limit:
+        opcode, length = prefix.unpack_from(data, offset)
+        body = offset + prefix.size
+        end = body + length
+        if opcode == Opcode.FOOTER:
+            return
+        if opcode == Opcode.MESSAGE:
+            channel_id, _, log_time, _ = header.unpack_from(data, body)
+            collector.add_message(channel_id, log_time, data[body + header.size : end])
+        elif opcode == Opcode.DATA_END:
+            (recorded,) = struct.unpack_from("<I", data, body)
+            if recorded != 0 and zlib.crc32(data[:offset]) != recorded:
+                msg = f"data section CRC {zlib.crc32(data[:offset])} does not match the recorded {recorded}"
+                raise ValueError(msg)
+        elif opcode in _RECORD_TYPES:
+            collector.add(_RECORD_TYPES[opcode].read(ReadDataStream(io.BytesIO(data[body:end]))))
+        # Other records (header, indexes, statistics, attachments, unknown opcodes) are skipped.
+        offset = end
 
 
 def read_mcap_file(path: Path) -> McapContents:
@@ -160,21 +239,14 @@ def read_mcap_file(path: Path) -> McapContents:
             raise BagError(msg)
         limit, complete = _complete_length(stream, size)
         stream.seek(0)
-        reader = StreamReader(_Bounded(stream, limit), validate_crcs=True)
-        try:
-            for record in reader.records:
-                if isinstance(record, Footer):
-                    break
-                collector.add(record)
-        except EndOfFile:
-            if complete:
-                msg = f"MCAP file {path} ends inside its closing magic bytes"
-                raise BagError(msg) from None
-        except BagError:
-            raise
-        except Exception as err:  # mcap, struct and the decompressors raise many types
-            msg = f"corrupt MCAP file {path}: {type(err).__name__}: {err}"
-            raise BagError(msg) from err
+        data = stream.read(limit)
+    try:
+        _read_records(collector, data, limit)
+    except BagError:
+        raise
+    except Exception as err:  # struct, mcap's record readers and the decompressors raise many types
+        msg = f"corrupt MCAP file {path}: {type(err).__name__}: {err}"
+        raise BagError(msg) from err
     return McapContents(
         tuple(collector.messages),
         collector.metadata,

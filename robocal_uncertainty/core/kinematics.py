@@ -14,12 +14,21 @@ by its axis, all expressed in the measurement frame.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
 
-__all__ = ["forward_points", "forward_points_and_jacobian", "forward_poses", "forward_poses_and_jacobian"]
+__all__ = [
+    "NearbyPoints",
+    "forward_points",
+    "forward_points_and_jacobian",
+    "forward_poses",
+    "forward_poses_and_jacobian",
+]
 
 Array = NDArray[np.float64]
 
@@ -263,6 +272,172 @@ def forward_points(model_or_layout: RobotModel | ParameterLayout, params: Array,
     for i in range(3):
         out[..., i] = base_cols[0][i] * px + base_cols[1][i] * py + base_cols[2][i] * pz + translation[i]
     return out
+
+
+_TAYLOR_LIMIT = 0.25
+"""Largest angle change [rad] from the reference that :class:`NearbyPoints` expands in series."""
+_TAYLOR_TOLERANCE = 2.0**-57
+"""Truncation error allowed in the series of ``cos`` and ``sin`` (below half an ulp of 1)."""
+
+
+def _series(largest: float, odd: bool) -> tuple[float, ...]:
+    """Taylor coefficients, in powers of ``b^2``, of ``cos b`` (even) or ``sin(b) / b`` (odd).
+
+    As many as needed for ``|b| <= largest``: the first term left out is below the tolerance.
+    """
+    coefficients: list[float] = []
+    k = 0
+    while True:
+        order = 2 * k + odd
+        if k and largest**order / math.factorial(order) <= _TAYLOR_TOLERANCE:
+            return tuple(coefficients)
+        coefficients.append((-1) ** k / math.factorial(order))
+        k += 1
+
+
+def _horner(coefficients: tuple[float, ...], b2: Array) -> Array | float:
+    """``sum_k coefficients[k] * b2**k``."""
+    if len(coefficients) == 1:
+        return coefficients[0]
+    acc = b2 * coefficients[-1] + coefficients[-2]
+    for c in coefficients[-3::-1]:
+        acc = acc * b2 + c
+    return acc
+
+
+def _turn(
+    v: tuple[Array, Array, Array], c: Array, s: Array, beta: tuple[Array, Array] | None, ca: Array, sa: Array
+) -> tuple[Array, Array, Array]:
+    """``Rx(alpha) Ry(beta) Rz(theta) v`` from the cosines and sines (no beta: None)."""
+    x, y, z = v
+    x, y = c * x - s * y, s * x + c * y
+    if beta is not None:
+        cb, sb = beta
+        x, z = cb * x + sb * z, cb * z - sb * x
+    return x, ca * y - sa * z, sa * y + ca * z
+
+
+@dataclass(frozen=True, eq=False)
+class NearbyPoints:
+    """Measured points at parameters and joint readings close to a reference, cheaply.
+
+    The Monte Carlo evaluates the chain many times at parameters and readings that differ
+    from the calibration by micro-radians. The joint angle ``q + theta`` then is the
+    reference angle ``a0`` plus a small ``b``, and ``cos(a0 + b) = cos a0 cos b - sin a0 sin b``
+    with ``cos b`` and ``sin b`` from their Taylor series, cut where the next term is below
+    half an ulp of 1 (two or three terms for micro-radians): a few multiply-adds instead of
+    two transcendental calls per joint and pose. The chain is walked from the tool back to the
+    base on the point alone (no rotation matrices; :meth:`poses` walks the tool's x and z axes
+    too). When some ``|b|`` exceeds 0.25 rad the angles are evaluated directly. The points
+    agree with :func:`forward_points` (the poses with :func:`forward_poses`) to a few ulps (the
+    order of the floating-point operations differs), not bit for bit.
+
+    Attributes
+    ----------
+    layout : ParameterLayout
+    theta : ndarray, shape (n_joints,) [rad]
+        Reference joint offsets.
+    joints : ndarray, shape (n_poses, n_joints) [rad]
+        Reference joint readings.
+    cos_ref, sin_ref : ndarray, shape (n_joints, n_poses)
+        Cosine and sine of the reference angles ``joints + theta``.
+    """
+
+    layout: ParameterLayout
+    theta: Array
+    joints: Array
+    cos_ref: Array
+    sin_ref: Array
+
+    @classmethod
+    def at(cls, layout: ParameterLayout, params: Array, joint_positions: Array) -> NearbyPoints:
+        """Reference at `params` (n_params,) and readings `joint_positions` (n_poses, n_joints)."""
+        params = np.asarray(params, dtype=np.float64)
+        joints = np.array(joint_positions, dtype=np.float64)
+        theta = params[[idx["theta"] for idx in layout.joint_slices()]]
+        angles = (joints + theta).T
+        return cls(layout, theta, joints, np.cos(angles), np.sin(angles))
+
+    def __call__(self, params: Array, joint_positions: Array) -> Array:
+        """Points (..., n_poses, 3) [m], as :func:`forward_points` (same shapes and frame).
+
+        `joint_positions` must have the reference's poses: shape (..., n_poses, n_joints).
+        """
+        p, shape, (vx, vy, vz), _ = self._walk(params, joint_positions, rotation=False)
+        base_cols, translation, _ = _base(p, self.layout)
+        out = np.empty((*shape, 3))
+        for i in range(3):
+            out[..., i] = base_cols[0][i] * vx + base_cols[1][i] * vy + base_cols[2][i] * vz + translation[i]
+        return out
+
+    def poses(self, params: Array, joint_positions: Array) -> Array:
+        """Tool poses as stored 6-DOF values (..., n_poses, 12): the point [m], then
+        ``world_R_tool`` row by row, as ``pose_values(*forward_poses(...))`` gives them (to a
+        few ulps). The x and z axes of the tool are walked with the point, y is ``z x x``."""
+        p, shape, (vx, vy, vz), axes = self._walk(params, joint_positions, rotation=True)
+        (x0, x1, x2), (z0, z1, z2) = axes
+        cols = ((x0, x1, x2), (z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0), (z0, z1, z2))
+        base_cols, translation, _ = _base(p, self.layout)
+        out = np.empty((*shape, 12))
+        for i in range(3):
+            out[..., i] = base_cols[0][i] * vx + base_cols[1][i] * vy + base_cols[2][i] * vz + translation[i]
+            for c, col in enumerate(cols):
+                out[..., 3 + 3 * i + c] = base_cols[0][i] * col[0] + base_cols[1][i] * col[1] + base_cols[2][i] * col[2]
+        return out
+
+    def _walk(
+        self, params: Array, joint_positions: Array, *, rotation: bool
+    ) -> tuple[Array, tuple[int, ...], tuple[Array, Array, Array], list[tuple[Array, Array, Array]]]:
+        """The tool point and (with `rotation`) the tool's x and z axes in the base frame."""
+        layout = self.layout
+        p, q, shape = _prepare(layout, params, joint_positions)
+        if q.shape[-2:] != self.joints.shape:
+            msg = f"joint_positions must have shape (..., {self.joints.shape[0]}, {layout.n_joints}), got {q.shape}"
+            raise ValueError(msg)
+        slices = layout.joint_slices()
+        theta_idx = [idx["theta"] for idx in slices]
+        dq = q - self.joints
+        dtheta = p[..., theta_idx] - self.theta  # (..., 1, n_joints)
+        largest = float(np.max(np.abs(dq), initial=0.0)) + float(np.max(np.abs(dtheta), initial=0.0))
+        direct = not largest <= _TAYLOR_LIMIT  # also for NaN
+        cos_series = () if direct else _series(largest, odd=False)
+        sin_series = () if direct else _series(largest, odd=True)
+        t0 = layout.tool_index
+        vx, vy, vz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
+        # The tool's x and z axes in the flange frame (the tool rotation's columns, if any).
+        axes: list[tuple[Array, Array, Array]] = []
+        if rotation:
+            tool = _tool_rotation(layout, p)
+            if tool is None:
+                one, zero = np.ones(p.shape[:-1]), np.zeros(p.shape[:-1])
+                axes = [(one, zero, zero), (zero, zero, one)]
+            else:
+                r = tool[0]
+                axes = [(r[..., 0, 0], r[..., 1, 0], r[..., 2, 0]), (r[..., 0, 2], r[..., 1, 2], r[..., 2, 2])]
+        for j in range(layout.n_joints - 1, -1, -1):
+            idx = slices[j]
+            vz = vz + p[..., idx["d"]]
+            if direct:
+                angle = q[..., j] + p[..., idx["theta"]]
+                c, s = np.cos(angle), np.sin(angle)
+            else:
+                b = dq[..., j] + dtheta[..., j]
+                b2 = b * b
+                cb = _horner(cos_series, b2)
+                sb = b * _horner(sin_series, b2)
+                c = self.cos_ref[j] * cb - self.sin_ref[j] * sb
+                s = self.sin_ref[j] * cb + self.cos_ref[j] * sb
+            beta = None
+            if "beta" in idx:
+                beta = p[..., idx["beta"]]
+                cbeta, sbeta = np.cos(beta), np.sin(beta)
+            alpha = p[..., idx["alpha"]]
+            ca, sa = np.cos(alpha), np.sin(alpha)
+            turn = (c, s, None if beta is None else (cbeta, sbeta), ca, sa)
+            vx, vy, vz = _turn((vx, vy, vz), *turn)
+            axes = [_turn(axis, *turn) for axis in axes]
+            vx = vx + p[..., idx["a"]]
+        return p, shape, (vx, vy, vz), axes
 
 
 def forward_points_and_jacobian(

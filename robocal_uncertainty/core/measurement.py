@@ -38,12 +38,13 @@ this module give bit-identical numbers to the point-only code they replace.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.kinematics import NearbyPoints, forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import ParameterLayout
 from robocal_uncertainty.errors import ConfigError
 
@@ -169,6 +170,20 @@ class MeasurementType(ABC):
             In the residual's coordinates: ``residual(m, predict(p + dp)) ~
             residual(m, predict(p)) - jacobian @ dp``.
         """
+
+    def nearby_predictor(
+        self, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> Callable[[Array, Array], Array] | None:
+        """A faster :meth:`predict` for parameters and readings close to a reference, or None.
+
+        Re-identification in a Monte Carlo evaluates the chain at micro-perturbations of the
+        calibration (`params`, shape (n_params,)) and its readings (`joint_positions`, shape
+        (n_poses, n_joints)); a type may return a callable ``f(params, joint_positions)`` with
+        the shapes and values of :meth:`predict` (to a few ulps) that exploits this. None (the
+        default): use :meth:`predict`.
+        """
+        _ = layout, params, joint_positions
+        return None
 
     def residual(self, measured: Array, predicted: Array) -> Array:
         """Measured minus predicted, shape (..., n_poses, dimension).
@@ -368,6 +383,10 @@ class PointMeasurement(MeasurementType):
         (..., n_poses, 3, n_params).
         """
         return forward_points_and_jacobian(layout, params, joint_positions)
+
+    def nearby_predictor(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> NearbyPoints:
+        """Tool points near the reference by :class:`~robocal_uncertainty.core.kinematics.NearbyPoints`."""
+        return NearbyPoints.at(layout, params, joint_positions)
 
     def positions(self, values: Array) -> Array:
         """The points themselves [m]."""

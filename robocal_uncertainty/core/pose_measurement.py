@@ -35,15 +35,16 @@ measured frame is the flange frame.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.kinematics import forward_poses, forward_poses_and_jacobian
+from robocal_uncertainty.core.kinematics import NearbyPoints, forward_poses, forward_poses_and_jacobian
 from robocal_uncertainty.core.measurement import POSITION_AXES, MeasurementType, positive_triple
 from robocal_uncertainty.core.robot_model import ParameterLayout
-from robocal_uncertainty.core.rotation import rotation_exp, rotation_log
+from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.errors import ConfigError, InputError
 
 __all__ = ["ROTATION_AXES", "PoseMeasurement", "pose_values", "split_pose_values"]
@@ -164,17 +165,73 @@ class PoseMeasurement(MeasurementType):
         points, rotations, jac = forward_poses_and_jacobian(layout, params, joint_positions)
         return pose_values(points, rotations), jac
 
+    def nearby_predictor(
+        self, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> Callable[[Array, Array], Array]:
+        """Tool poses near the reference by :meth:`~robocal_uncertainty.core.kinematics.NearbyPoints.poses`."""
+        return NearbyPoints.at(layout, params, joint_positions).poses
+
     def residual(self, measured: Array, predicted: Array) -> Array:
-        """``(p_m - p_p, log(R_m R_p^T))``, shape (..., n_poses, 6) [m, rad]."""
-        pm, rm = split_pose_values(measured)
-        pp, rp = split_pose_values(predicted)
-        return np.concatenate((pm - pp, rotation_log(rm @ np.swapaxes(rp, -1, -2))), axis=-1)
+        """``(p_m - p_p, log(R_m R_p^T))``, shape (..., n_poses, 6) [m, rad].
+
+        Entry by entry on the stored values (no stacked 3x3 products, the Monte Carlo's hot
+        path); :func:`~robocal_uncertainty.core.rotation.rotation_log`'s formulas, and that
+        function itself when a residual rotation is within ~0.14 rad of pi.
+        """
+        m = np.asarray(measured, dtype=np.float64)
+        p = np.asarray(predicted, dtype=np.float64)
+        out = np.empty((*np.broadcast_shapes(m.shape, p.shape)[:-1], 6))
+        out[..., :3] = m[..., :3] - p[..., :3]
+        rm = [m[..., 3 + i] for i in range(9)]
+        rp = [p[..., 3 + i] for i in range(9)]
+
+        def entry(i: int, j: int) -> Array:  # (R_m R_p^T)_ij
+            return rm[3 * i] * rp[3 * j] + rm[3 * i + 1] * rp[3 * j + 1] + rm[3 * i + 2] * rp[3 * j + 2]
+
+        w = (entry(2, 1) - entry(1, 2), entry(0, 2) - entry(2, 0), entry(1, 0) - entry(0, 1))
+        c = 0.5 * (entry(0, 0) + entry(1, 1) + entry(2, 2) - 1.0)  # cos(theta)
+        if np.any(c < -0.99):
+            _, r_m = split_pose_values(m)
+            _, r_p = split_pose_values(p)
+            out[..., 3:] = rotation_log(r_m @ np.swapaxes(r_p, -1, -2))
+            return out
+        s = 0.5 * np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])  # sin(theta)
+        theta = np.arctan2(s, c)
+        small = s < 1e-8
+        half = 0.5 * np.where(small, 1.0 + theta**2 / 6.0, theta / np.where(small, 1.0, 2.0 * s) * 2.0)
+        for i in range(3):
+            out[..., 3 + i] = half * w[i]
+        return out
 
     def perturb(self, values: Array, errors: Array) -> Array:
-        """``(p + e_p, exp([e_r]x) R)``: the inverse of :meth:`residual`."""
-        p, r = split_pose_values(values)
+        """``(p + e_p, exp([e_r]x) R)``: the inverse of :meth:`residual`.
+
+        Rodrigues' formula entry by entry, ``exp([e]x) = I + a [e]x + b (e e^T - |e|^2 I)``
+        with :func:`~robocal_uncertainty.core.rotation.rotation_exp`'s ``a`` and ``b``.
+        """
+        v = np.asarray(values, dtype=np.float64)
         e = np.asarray(errors, dtype=np.float64)
-        return pose_values(p + e[..., :3], rotation_exp(e[..., 3:]) @ r)
+        out = np.empty((*np.broadcast_shapes(v.shape[:-1], e.shape[:-1]), 12))
+        out[..., :3] = v[..., :3] + e[..., :3]
+        e0, e1, e2 = e[..., 3], e[..., 4], e[..., 5]
+        theta2 = e0 * e0 + e1 * e1 + e2 * e2
+        small = theta2 < 1e-8
+        safe = np.where(small, 1.0, np.sqrt(theta2))
+        a = np.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, np.sin(safe) / safe)
+        b = np.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - np.cos(safe)) / safe**2)
+        diagonal = 1.0 - b * theta2
+        be0, be1, be2 = b * e0, b * e1, b * e2
+        ae0, ae1, ae2 = a * e0, a * e1, a * e2
+        rows = (
+            (diagonal + be0 * e0, be0 * e1 - ae2, be0 * e2 + ae1),
+            (be1 * e0 + ae2, diagonal + be1 * e1, be1 * e2 - ae0),
+            (be2 * e0 - ae1, be2 * e1 + ae0, diagonal + be2 * e2),
+        )
+        r = [v[..., 3 + k] for k in range(9)]
+        for i, (x, y, z) in enumerate(rows):
+            for j in range(3):
+                out[..., 3 + 3 * i + j] = x * r[j] + y * r[3 + j] + z * r[6 + j]
+        return out
 
     def instrument_covariance(self, position_std: Array) -> Array:
         """Covariance from the instrument's **position** noise only, shape (n_poses, 6, 6).

@@ -38,7 +38,8 @@ moves by less than the thresholds. Too few data in the averaged span (fewer than
 joint states or `min_points` tracker points, e.g. the beam was blocked) rejects the dwell.
 
 The window statistics are incremental (:class:`_StillTracker`): a message costs O(1)
-amortised numpy work whatever the window length, and the decisions are exactly those of
+amortised work whatever the window length (plain Python on its few values; numpy only when a
+window is reduced, about once per window length), and the decisions are exactly those of
 recomputing the peak-to-peak ranges over every window.
 
 Time is message time (header stamps, int ns), never the wall clock, so a replay behaves
@@ -48,6 +49,8 @@ exactly like the live run. Bad messages are dropped and counted per cause (see
 
 from __future__ import annotations
 
+import math
+from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -95,6 +98,15 @@ previous accepted one of the same stream; a tracker orientation that is not a un
 quaternion (tolerance 1e-6)."""
 
 _NS_PER_S = 1_000_000_000
+
+
+def _floats(values: ArrayLike) -> list[float]:
+    """`values` flattened to Python floats, as ``np.asarray(values, float64).reshape(-1)`` gives them."""
+    if isinstance(values, np.ndarray) and values.dtype == np.float64:
+        return values.reshape(-1).tolist()  # type: ignore[no-any-return]
+    if isinstance(values, (tuple, list)) and all(type(v) is float for v in values):
+        return list(values)
+    return np.asarray(values, dtype=np.float64).reshape(-1).tolist()  # type: ignore[no-any-return]
 
 
 def _seconds_to_ns(name: str, value: float, *, positive: bool) -> int:
@@ -165,59 +177,81 @@ class CollectorSettings:
             raise ConfigError(msg)
 
 
+Row = list[float]
+
+
 class _Series:
-    """Growing time series: increasing int stamps [ns] and rows of values, array backed."""
+    """Growing time series: increasing int stamps [ns] and rows of values.
+
+    Kept in Python lists: the collector appends one short row (3, 6 or 9 values) per message
+    and asks several positions by bisection, which costs a fraction of the equivalent numpy
+    calls on such small pieces; arrays are built only for the rows a window reduction or an
+    average needs (:meth:`rows`), with the same values and layout as before.
+    """
 
     def __init__(self, width: int) -> None:
-        self._t = np.empty(256, dtype=np.int64)
-        self._v = np.empty((256, width), dtype=np.float64)
+        self.width = width
+        self._ts: list[int] = []
+        self._rows: list[Row] = []
         self._lo = 0
-        self._hi = 0
 
     def __len__(self) -> int:
-        return self._hi - self._lo
+        return len(self._ts) - self._lo
 
     @property
     def stamps(self) -> NDArray[np.int64]:
-        """Stamps, shape (n,) [ns] (a view)."""
-        return self._t[self._lo : self._hi]
+        """Stamps, shape (n,) [ns] (a copy)."""
+        return np.array(self._ts[self._lo :], dtype=np.int64)
 
     @property
     def values(self) -> NDArray[np.float64]:
-        """Values, shape (n, width) (a view)."""
-        return self._v[self._lo : self._hi]
+        """Values, shape (n, width) (a copy)."""
+        return self.rows(0, len(self))
 
-    def append(self, stamp: int, value: NDArray[np.float64]) -> None:
-        if self._hi == self._t.size:
-            n = len(self)
-            if n * 2 > self._t.size:
-                self._t = np.concatenate([self._t, np.empty_like(self._t)])
-                self._v = np.concatenate([self._v, np.empty_like(self._v)])
-            self._t[:n] = self._t[self._lo : self._hi]
-            self._v[:n] = self._v[self._lo : self._hi]
-            self._lo, self._hi = 0, n
-        self._t[self._hi] = stamp
-        self._v[self._hi] = value
-        self._hi += 1
+    def rows(self, start: int, stop: int) -> NDArray[np.float64]:
+        """Rows start..stop-1 (relative to the current first row) as a C-contiguous array."""
+        rows = self._rows[self._lo + start : self._lo + stop]
+        return np.array(rows, dtype=np.float64).reshape(len(rows), self.width)
+
+    def append(self, stamp: int, value: Row) -> None:
+        if self._lo > 256 and self._lo * 2 > len(self._ts):
+            del self._ts[: self._lo]
+            del self._rows[: self._lo]
+            self._lo = 0
+        self._ts.append(stamp)
+        self._rows.append(value)
 
     def index(self, stamp: int, side: Literal["left", "right"] = "left") -> int:
         """Position of `stamp` in the stamps (numpy ``searchsorted`` semantics)."""
-        return int(np.searchsorted(self.stamps, stamp, side=side))
+        search = bisect_left if side == "left" else bisect_right
+        return search(self._ts, stamp, self._lo) - self._lo
+
+    def stamp(self, i: int) -> int:
+        """Stamp of row `i` (relative to the current first row) [ns]."""
+        return self._ts[self._lo + i]
+
+    def covers(self, stamp: int) -> bool:
+        """Whether the first row is stamped at or before `stamp` (False when empty)."""
+        return self._lo < len(self._ts) and self._ts[self._lo] <= stamp
+
+    def window(self, stamp: int) -> tuple[int, int]:
+        """(position of the first row stamped at or after `stamp`, rows from there on)."""
+        i = bisect_left(self._ts, stamp, self._lo)
+        return i - self._lo, len(self._ts) - i
 
     def drop_front(self, count: int) -> None:
         self._lo += count
 
     def delete(self, start: int, stop: int) -> None:
         """Remove rows start..stop-1 (relative to the current first row)."""
-        n = len(self)
-        keep = n - stop
         a, b = self._lo + start, self._lo + stop
-        self._t[a : a + keep] = self._t[b : self._hi].copy()
-        self._v[a : a + keep] = self._v[b : self._hi].copy()
-        self._hi = a + keep
+        del self._ts[a:b]
+        del self._rows[a:b]
 
     def clear(self) -> None:
-        self._lo = self._hi = 0
+        self._lo = 0
+        self._ts.clear()
+        self._rows.clear()
 
 
 class _StillTracker:
@@ -233,7 +267,9 @@ class _StillTracker:
       ``a..b`` too and cannot be still. `a` is the latest such row.
 
     Only when neither applies are the window's rows reduced (then the run or the block
-    is renewed from them), so a window is reduced about once per window length.
+    is renewed from them), so a window is reduced about once per window length. The run's
+    bounds are Python floats (a row has 3 to 9 values): the same maxima, minima and
+    differences as numpy's, without a numpy call per message.
     """
 
     def __init__(self, threshold: float, window_ns: int) -> None:
@@ -244,38 +280,46 @@ class _StillTracker:
     def reset(self) -> None:
         self._blocked_until: int | None = None
         self._run_start: int | None = None
-        self._run_max: NDArray[np.float64] | None = None
-        self._run_min: NDArray[np.float64] | None = None
+        self._run_max: Row = []
+        self._run_min: Row = []
+        self._run_still = False
 
-    def push(self, row: NDArray[np.float64]) -> None:
+    def push(self, row: Row) -> None:
         """Extend the run (if any) by a newly appended row."""
-        if self._run_max is not None and self._run_min is not None:
-            np.maximum(self._run_max, row, out=self._run_max)
-            np.minimum(self._run_min, row, out=self._run_min)
+        if self._run_start is None:
+            return
+        high, low = self._run_max, self._run_min
+        changed = False
+        for i, v in enumerate(row):
+            if v > high[i]:
+                high[i] = v
+                changed = True
+            elif v < low[i]:
+                low[i] = v
+                changed = True
+        if changed:
+            self._run_still = max([h - lo for h, lo in zip(high, low)]) <= self.threshold
 
     def still(self, series: _Series, first: int, now: int) -> bool:
         """Whether rows ``first..`` of `series` (the window ending at `now`) are still."""
         if self._blocked_until is not None and now <= self._blocked_until:
             return False
-        if (
-            self._run_start is not None
-            and self._run_max is not None
-            and self._run_min is not None
-            and self._run_start <= int(series.stamps[first])
-            and float(np.max(self._run_max - self._run_min)) <= self.threshold
-        ):
+        if self._run_start is not None and self._run_still and self._run_start <= series.stamp(first):
             return True
-        values = series.values[first:]
+        values = series.rows(first, len(series))
         high, low = values.max(axis=0), values.min(axis=0)
         if float(np.max(high - low)) <= self.threshold:
-            self._run_start, self._run_max, self._run_min = int(series.stamps[first]), high, low
+            self._run_start, self._run_max, self._run_min = series.stamp(first), high.tolist(), low.tolist()
+            self._run_still = True
             return True
         # The latest row `a` such that rows a.. still span more than the threshold.
         backwards = values[::-1]
         spread = np.maximum.accumulate(backwards, axis=0) - np.minimum.accumulate(backwards, axis=0)
         latest = values.shape[0] - 1 - int(np.argmax(spread.max(axis=1) > self.threshold))
-        self._blocked_until = int(series.stamps[first + latest]) + self.window_ns
-        self._run_start = self._run_max = self._run_min = None
+        self._blocked_until = series.stamp(first + latest) + self.window_ns
+        self._run_start = None
+        self._run_max, self._run_min = [], []
+        self._run_still = False
         return False
 
 
@@ -433,10 +477,10 @@ class StaticPoseCollector:
                 "backwards_time", stamp, f"joint state stamp {stamp} ns is not after {self._last_joint} ns"
             )
         names = tuple(str(n) for n in names)
-        values = np.asarray(positions, dtype=np.float64).reshape(-1)
-        if values.size != len(names):
+        values = _floats(positions)
+        if len(values) != len(names):
             return self._drop(
-                "length_mismatch", stamp, f"joint state has {len(names)} names but {values.size} positions"
+                "length_mismatch", stamp, f"joint state has {len(names)} names but {len(values)} positions"
             )
         if names != self._last_names:
             if len(set(names)) != len(names):
@@ -449,9 +493,9 @@ class StaticPoseCollector:
             if missing:
                 return self._drop("missing_joint", stamp, f"joint state lacks joints {missing}")
             self._last_names, self._last_order = names, [index[n] for n in self.joint_names]
-        q = values[self._last_order]
-        if not np.isfinite(q).all():
-            return self._drop("nan", stamp, f"joint state has NaN or inf positions {q.tolist()}")
+        q = [values[i] for i in self._last_order]
+        if not all(map(math.isfinite, q)):
+            return self._drop("nan", stamp, f"joint state has NaN or inf positions {q}")
         self._last_joint = stamp
         self._joints.append(stamp, q)
         self._joint_still.push(q)
@@ -476,9 +520,7 @@ class StaticPoseCollector:
         """
         return self._add_point(int(stamp_ns), frame_id, xyz, None)
 
-    def _add_point(
-        self, stamp: int, frame_id: str, xyz: ArrayLike, rotation: NDArray[np.float64] | None
-    ) -> CalibrationSample | None:
+    def _add_point(self, stamp: int, frame_id: str, xyz: ArrayLike, rotation: Row | None) -> CalibrationSample | None:
         """Validate and store a tracker position (and, 6-DOF, its rotation matrix, 9 values)."""
         if self._last_point is not None and stamp <= self._last_point:
             return self._drop(
@@ -488,11 +530,11 @@ class StaticPoseCollector:
             return self._drop(
                 "wrong_frame", stamp, f"tracker point in frame {frame_id!r}, expected {self.tracker_frame_id!r}"
             )
-        point = np.array(xyz, dtype=np.float64).reshape(-1)
-        if point.size != 3:
-            return self._drop("length_mismatch", stamp, f"tracker point has {point.size} coordinates, expected 3")
-        if not np.isfinite(point).all():
-            return self._drop("nan", stamp, f"tracker point has NaN or inf coordinates {point.tolist()}")
+        point = _floats(xyz)
+        if len(point) != 3:
+            return self._drop("length_mismatch", stamp, f"tracker point has {len(point)} coordinates, expected 3")
+        if not all(map(math.isfinite, point)):
+            return self._drop("nan", stamp, f"tracker point has NaN or inf coordinates {point}")
         self._last_point = stamp
         if rotation is not None:
             # Stored with the point, so that its update sees the orientation in the window.
@@ -534,7 +576,7 @@ class StaticPoseCollector:
             return self._drop(
                 "bad_quaternion", stamp, f"tracker orientation is not a unit quaternion (norm {np.linalg.norm(q):.6g})"
             )
-        return self._add_point(stamp, frame_id, xyz, quaternion_to_matrix(q).reshape(9))
+        return self._add_point(stamp, frame_id, xyz, quaternion_to_matrix(q).reshape(9).tolist())
 
     def capture_now(self) -> CalibrationSample | None:
         """Emit the current dwell now (data up to the latest message, no trailing guard).
@@ -596,17 +638,17 @@ class StaticPoseCollector:
     def _window_static(self, now: int) -> bool:
         lo = now - self._window_ns
         joints, points = self._joints, self._points
-        if not len(joints) or joints.stamps[0] > lo:
+        if not joints.covers(lo):
             return False  # the window is not covered by joint states yet
-        i0 = joints.index(lo)
-        if len(joints) - i0 < 2 or not self._joint_still.still(joints, i0, now):
+        i0, n = joints.window(lo)
+        if n < 2 or not self._joint_still.still(joints, i0, now):
             return False
-        k0 = points.index(lo)
-        if len(points) - k0 >= 2 and not self._point_still.still(points, k0, now):
+        k0, n = points.window(lo)
+        if n >= 2 and not self._point_still.still(points, k0, now):
             return False
         rotations = self._rotations
-        r0 = rotations.index(lo)
-        return len(rotations) - r0 < 2 or self._rotation_still.still(rotations, r0, now)
+        r0, n = rotations.window(lo)
+        return n < 2 or self._rotation_still.still(rotations, r0, now)
 
     def _prune(self, now: int) -> None:
         """Drop data no window can need: keep one joint state at or before the window start."""
@@ -625,6 +667,8 @@ class StaticPoseCollector:
             keep_until = self._dwell_start + self._guard_ns + self._average_ns
         keep_from = now - self._window_ns - self._guard_ns
         for series in (self._joints, self._points, self._rotations):
+            if len(series) < 256:
+                continue  # the middle cannot reach 256 rows (the condition below)
             i0, i1 = series.index(keep_until, "right"), series.index(keep_from)
             # Amortised: only compact once the unneeded middle is as large as the rest.
             if i1 - i0 >= max(256, len(series) // 2):
@@ -675,15 +719,15 @@ class StaticPoseCollector:
                 f"points (need 2 and {self.settings.min_points}); no sample",
             )
             return None
-        q = joints.values[i0:i1]
-        x = points.values[k0:k1]
-        first = int(min(joints.stamps[i0], points.stamps[k0]))
-        last = int(max(joints.stamps[i1 - 1], points.stamps[k1 - 1]))
+        q = joints.rows(i0, i1)
+        x = points.rows(k0, k1)
+        first = min(joints.stamp(i0), points.stamp(k0))
+        last = max(joints.stamp(i1 - 1), points.stamp(k1 - 1))
         orientation = orientation_cov = None
         rotations = self._rotations
         m0, m1 = rotations.index(t0), rotations.index(t1, "right")
         if m1 - m0 >= 2:
-            r = rotations.values[m0:m1].reshape(-1, 3, 3)
+            r = rotations.rows(m0, m1).reshape(-1, 3, 3)
             mean = chordal_mean(r)
             deviations = rotation_log(r @ mean.T)
             orientation = quaternion_from_matrix(mean)

@@ -9,6 +9,7 @@ if TYPE_CHECKING:
     from robocal_uncertainty.uncertainty.calibration_mc import (
         CalibrationTrials,
         CalibrationUncertainty,
+        EvaluationSettings,
         GumPose,
         OrientationUncertainty,
         PoseUncertainty,
@@ -53,6 +54,7 @@ __all__ = [
     "CalibrationUncertainty",
     "ChordSolver",
     "EvaluationOptions",
+    "EvaluationSettings",
     "GumPose",
     "OrientationUncertainty",
     "PoseUncertainty",

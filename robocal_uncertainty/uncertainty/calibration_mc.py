@@ -27,10 +27,11 @@ chunk size or the number of workers.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,7 +51,7 @@ from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import chordal_mean, quaternion_from_matrix, rotation_exp, rotation_log
 from robocal_uncertainty.core.session import effect_jacobian
 from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, run_trials
+from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, TrialsResult, run_trials
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
 from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
 from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary, coverage_window, summarize
@@ -76,6 +77,7 @@ __all__ = [
     "ROTATION_AXES",
     "CalibrationTrials",
     "CalibrationUncertainty",
+    "EvaluationSettings",
     "GumPose",
     "OrientationUncertainty",
     "PoseUncertainty",
@@ -942,43 +944,20 @@ def prepare_calibration_trials(
     return _prepare(model, campaign, test_q, settings, calibration, lambda_, frame).trials
 
 
-def evaluate_uncertainty(
-    model: RobotModel,
-    campaign: Campaign,
-    test_joint_positions: Array,
-    *,
-    settings: UncertaintySettings | None = None,
-    calibration: IdentificationResult | None = None,
-    lambda_: str | float = "auto",
-    trials: int | str = 10_000,
-    coverage: float = 0.95,
-    seed: int = 0,
-    n_dig: int = 2,
-    max_trials: int = 2_000_000,
-    block_size: int = 10_000,
-    chunk_blocks: int = 1,
-    workers: int = 1,
-    progress: Callable[[int, int | None], None] | None = None,
-    frame: str = "measurement",
-    executor: object | None = None,
-    orientation: bool = True,
-) -> CalibrationUncertainty:
-    """Monte Carlo uncertainty of the calibrated tool pose at test configurations.
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """Everything that determines the result of :func:`evaluate_uncertainty` besides its data.
 
-    Parameters
+    The data are the model, the campaign, the test configurations and (optionally) an existing
+    calibration; how the trials are run (workers, chunks, an executor, a progress callback)
+    never changes the result and is given to :func:`evaluate_uncertainty` separately.
+
+    Attributes
     ----------
-    model : RobotModel
-        Nominal model.
-    campaign : Campaign
-        Calibration data (joint readings [rad], points [m]).
-    test_joint_positions : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
-        Configurations at which the tool position is evaluated.
-    settings : UncertaintySettings, optional
+    uncertainty : UncertaintySettings
         Sources and their models; default tracker and encoder noise at the seed's levels.
-    calibration : IdentificationResult, optional
-        An existing calibration of `campaign`; computed with `lambda_` when omitted.
     lambda_ : {"auto", "gcv"} or float
-        Lambda method of the calibration.
+        Lambda method of the calibration (when it is computed here).
     trials : int or "auto"
         Fixed number of trials, or the JCGM 101 §7.9 adaptive procedure.
     coverage : float
@@ -991,26 +970,94 @@ def evaluate_uncertainty(
         Cap of the adaptive procedure.
     block_size : int
         Trials per independent random stream (part of the result's identity).
-    chunk_blocks : int
-        Blocks evaluated per task (never changes the result). Memory is bounded by a
-        fixed sub-batch of trials re-identified at once.
-    workers : int
-        Local processes (never changes the result).
-    progress : callable, optional
-        ``progress(done, target_or_None)``.
     frame : {"measurement", "base"}
-        Frame of the output positions. ``measurement`` (default): the frame of the
-        campaign's points, so results compare directly with measurements; for a
-        tracker-frame campaign the uncertainty of the identified base enters. ``base``: the
-        robot base frame (the identified base does not enter).
-    executor : Executor-like, optional
-        Runs the trial blocks instead of local processes: anything with a
-        ``concurrent.futures``-style ``submit`` (a process pool, a ``dask.distributed``
-        Client). Never changes the result.
+        Frame of the output positions. ``measurement``: the frame of the campaign's points, so
+        results compare directly with measurements; for a tracker-frame campaign the
+        uncertainty of the identified base enters. ``base``: the robot base frame (the
+        identified base does not enter).
     orientation : bool
         Also evaluate the tool orientation (3 more columns per test configuration, see the
         module docstring); positions and parameters are the same either way, bit for bit.
         The adaptive procedure monitors the positions only.
+    """
+
+    uncertainty: UncertaintySettings = field(default_factory=UncertaintySettings)
+    lambda_: str | float = "auto"
+    trials: int | str = 10_000
+    coverage: float = 0.95
+    seed: int = 0
+    n_dig: int = 2
+    max_trials: int = 2_000_000
+    block_size: int = 10_000
+    frame: str = "measurement"
+    orientation: bool = True
+
+    def replace(self, **keywords: Any) -> EvaluationSettings:
+        """A copy with fields replaced; also takes the keyword names :func:`evaluate_uncertainty`
+        had before this object (``settings`` for :attr:`uncertainty`, None meaning the default).
+
+        Raises
+        ------
+        TypeError
+            An unknown keyword.
+        """
+        changes: dict[str, Any] = {}
+        for given, value in keywords.items():
+            name = "uncertainty" if given == "settings" else given
+            if name not in _EVALUATION_FIELDS:
+                msg = f"evaluate_uncertainty() got an unexpected keyword argument {given!r}"
+                raise TypeError(msg)
+            changes[name] = UncertaintySettings() if given == "settings" and value is None else value
+        return dataclasses.replace(self, **changes) if changes else self
+
+
+_EVALUATION_FIELDS = frozenset(f.name for f in dataclasses.fields(EvaluationSettings))
+
+
+def evaluate_uncertainty(
+    model: RobotModel,
+    campaign: Campaign,
+    test_joint_positions: Array,
+    evaluation: EvaluationSettings | None = None,
+    *,
+    calibration: IdentificationResult | None = None,
+    workers: int = 1,
+    chunk_blocks: int = 1,
+    progress: Callable[[int, int | None], None] | None = None,
+    executor: object | None = None,
+    **fields: Any,
+) -> CalibrationUncertainty:
+    """Monte Carlo uncertainty of the calibrated tool pose at test configurations.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+        Calibration data (joint readings [rad], points [m]).
+    test_joint_positions : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
+        Configurations at which the tool position is evaluated.
+    evaluation : EvaluationSettings, optional
+        What determines the result (sources, lambda method, trials, coverage, seed, ...);
+        the defaults when omitted.
+    calibration : IdentificationResult, optional
+        An existing calibration of `campaign`; computed with ``evaluation.lambda_`` when
+        omitted.
+    workers : int
+        Local processes (never changes the result).
+    chunk_blocks : int
+        Blocks evaluated per task (never changes the result). Memory is bounded by a
+        fixed sub-batch of trials re-identified at once.
+    progress : callable, optional
+        ``progress(done, target_or_None)``.
+    executor : Executor-like, optional
+        Runs the trial blocks instead of local processes: anything with a
+        ``concurrent.futures``-style ``submit`` (a process pool, a ``dask.distributed``
+        Client). Never changes the result.
+    **fields
+        Fields of :class:`EvaluationSettings` replaced in `evaluation` (the keyword call of
+        before: ``settings=``, ``trials=``, ``seed=``, ``frame=``, ...), see
+        :meth:`EvaluationSettings.replace`.
 
     Returns
     -------
@@ -1021,41 +1068,54 @@ def evaluate_uncertainty(
     ConfigError
         Bad settings (trials, coverage, test joints, lambda range, pose counts).
     """
-    settings = settings or UncertaintySettings()
-    if frame not in OUTPUT_FRAMES:
-        msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
+    ev = (evaluation or EvaluationSettings()).replace(**fields)
+    if ev.frame not in OUTPUT_FRAMES:
+        msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {ev.frame!r}"
         raise ConfigError(msg)
-    test_q, n_trials = _validate_inputs(model, test_joint_positions, coverage, trials)
-    prep = _prepare(model, campaign, test_q, settings, calibration, lambda_, frame, orientation=orientation)
-    model = prep.calibration.model
-    calibration = prep.calibration
-    trial_block = prep.trials
-    dim = _N_AXES
+    test_q, n_trials = _validate_inputs(model, test_joint_positions, ev.coverage, ev.trials)
+    prep = _prepare(
+        model, campaign, test_q, ev.uncertainty, calibration, ev.lambda_, ev.frame, orientation=ev.orientation
+    )
     adaptive = None
     if n_trials is None:
         # The measurand is the tool position: its components decide convergence; the
         # parameter columns ride along and report the tolerance they reached.
         adaptive = AdaptiveSettings(
-            n_dig=n_dig, coverage=coverage, max_trials=max_trials, monitored=tuple(range(dim * test_q.shape[0]))
+            n_dig=ev.n_dig,
+            coverage=ev.coverage,
+            max_trials=ev.max_trials,
+            monitored=tuple(range(_N_AXES * test_q.shape[0])),
         )
     result = run_trials(
-        trial_block,
-        seed=seed,
+        prep.trials,
+        seed=ev.seed,
         n_trials=n_trials,
         adaptive=adaptive,
-        block_size=block_size,
+        block_size=ev.block_size,
         chunk_blocks=chunk_blocks,
         workers=workers,
         executor=executor,
         progress=progress,
     )
+    return _statement(prep, ev, result)
+
+
+def _statement(prep: _Prepared, ev: EvaluationSettings, result: TrialsResult) -> CalibrationUncertainty:
+    """The uncertainty statement of the trials `result` (a ``run_trials`` result)."""
+    calibration = prep.calibration
+    model = calibration.model
+    test_q = prep.test_joints
+    dim = _N_AXES
     n_test = test_q.shape[0]
+    k = prep.problem.estimated.size
     # Positions and parameters: the same columns (and numbers) with or without orientation.
-    samples = result.samples[:, : dim * n_test + prep.problem.estimated.size]
-    summary = summarize(samples, coverage)
-    gum = _gum_poses(prep, summary, coverage, n_dig)
+    samples = result.samples[:, : dim * n_test + k]
+    summary = summarize(samples, ev.coverage)
+    gum = _gum_poses(prep, summary, ev.coverage, ev.n_dig)
     orientations = (
-        _orientation_uncertainty(prep, result.samples, summary, coverage, n_dig) if orientation else [None] * n_test
+        _orientation_uncertainty(prep, result.samples, summary, ev.coverage, ev.n_dig)
+        if ev.orientation
+        else [None] * n_test
     )
     poses = []
     warns: list[str] = list(calibration.warnings)
@@ -1063,7 +1123,7 @@ def evaluate_uncertainty(
         cols = slice(dim * i, dim * (i + 1))
         axes = summary.outputs[cols]
         try:
-            region: EllipsoidalRegion | None = coverage_region(result.samples[:, cols], coverage)
+            region: EllipsoidalRegion | None = coverage_region(result.samples[:, cols], ev.coverage)
         except (InputError, ConfigError) as err:
             region = None
             warns.append(f"test configuration {i}: no coverage region ({err})")
@@ -1078,6 +1138,37 @@ def evaluate_uncertainty(
                 orientation=orientations[i],
             )
         )
+    warns += _bias_warnings(prep, poses)
+    if result.adaptive is not None and not result.adaptive.converged:
+        warns.append(
+            f"adaptive Monte Carlo stopped at max_trials={ev.max_trials} before reaching "
+            f"the numerical tolerance of {ev.n_dig} significant digits"
+        )
+    return CalibrationUncertainty(
+        poses=tuple(poses),
+        parameter_names=tuple(model.layout.names[j] for j in prep.problem.estimated),
+        parameters=tuple(summary.outputs[dim * n_test :]),
+        calibration=calibration,
+        settings=ev.uncertainty,
+        coverage_probability=ev.coverage,
+        n_trials=result.n_trials,
+        seed=ev.seed,
+        block_size=ev.block_size,
+        adaptive=result.adaptive,
+        samples=samples,
+        lambda_star=calibration.lambda_,
+        lambda_range=prep.lambda_range,
+        frame=ev.frame,  # type: ignore[arg-type]
+        frame_id=prep.frame_id,
+        model_adequacy=prep.adequacy,
+        warnings=tuple(warns),
+        rotation_samples=result.samples[:, dim * n_test + k :] if ev.orientation else None,
+    )
+
+
+def _bias_warnings(prep: _Prepared, poses: list[PoseUncertainty]) -> list[str]:
+    """Warnings for test configurations whose regularisation bias the interval does not cover."""
+    warns = []
     bias = _regularisation_bias(prep)
     for i, pose in enumerate(poses):
         u = np.array([a.standard_uncertainty for a in pose.axes])
@@ -1085,33 +1176,9 @@ def evaluate_uncertainty(
         j = int(np.argmax(ratio))
         if ratio[j] > _BIAS_WARN_RATIO:
             warns.append(
-                f"test configuration {i}: regularisation (lambda = {calibration.lambda_:.3g}) shifts the "
+                f"test configuration {i}: regularisation (lambda = {prep.calibration.lambda_:.3g}) shifts the "
                 f"calibrated position by about {bias[i, j] * 1e6:.3g} um along {'xyz'[j]}, "
                 f"{ratio[j]:.2g} times its standard uncertainty, and the interval does not contain "
                 "this bias: measure more poses, or use a smaller --lambda"
             )
-    if result.adaptive is not None and not result.adaptive.converged:
-        warns.append(
-            f"adaptive Monte Carlo stopped at max_trials={max_trials} before reaching "
-            f"the numerical tolerance of {n_dig} significant digits"
-        )
-    return CalibrationUncertainty(
-        poses=tuple(poses),
-        parameter_names=tuple(model.layout.names[j] for j in prep.problem.estimated),
-        parameters=tuple(summary.outputs[dim * n_test :]),
-        calibration=calibration,
-        settings=settings,
-        coverage_probability=coverage,
-        n_trials=result.n_trials,
-        seed=seed,
-        block_size=block_size,
-        adaptive=result.adaptive,
-        samples=samples,
-        lambda_star=calibration.lambda_,
-        lambda_range=prep.lambda_range,
-        frame=frame,  # type: ignore[arg-type]
-        frame_id=prep.frame_id,
-        model_adequacy=prep.adequacy,
-        warnings=tuple(warns),
-        rotation_samples=result.samples[:, dim * n_test + prep.problem.estimated.size :] if orientation else None,
-    )
+    return warns

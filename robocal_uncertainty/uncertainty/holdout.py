@@ -31,7 +31,11 @@ from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pos
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration_mc import (
+    CalibrationUncertainty,
+    EvaluationSettings,
+    evaluate_uncertainty,
+)
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
@@ -362,11 +366,8 @@ def validate_holdout(
             model,
             train,
             held.joint_positions,
-            settings=settings,
+            EvaluationSettings(uncertainty=settings, trials=trials, coverage=coverage, seed=seed + f),
             calibration=calibration,
-            trials=trials,
-            coverage=coverage,
-            seed=seed + f,
             workers=workers,
         )
         n_held = held.n_poses

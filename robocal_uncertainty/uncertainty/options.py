@@ -21,7 +21,11 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration_mc import (
+    CalibrationUncertainty,
+    EvaluationSettings,
+    evaluate_uncertainty,
+)
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = ["EvaluationOptions", "Progress", "evaluate_campaign"]
@@ -111,6 +115,20 @@ class EvaluationOptions:
         for name in ("max_trials", "budget_trials", "sweep_trials"):
             _positive_int(name, getattr(self, name))
 
+    def evaluation_settings(self) -> EvaluationSettings:
+        """The settings of the one Monte Carlo evaluation these options ask for."""
+        return EvaluationSettings(
+            uncertainty=self.uncertainty,
+            lambda_=self.lambda_,
+            trials=self.trials,
+            coverage=self.coverage,
+            seed=self.seed,
+            n_dig=self.n_dig,
+            max_trials=self.max_trials,
+            block_size=self.block_size,
+            frame=self.output_frame,
+        )
+
 
 def evaluate_campaign(
     model: RobotModel,
@@ -145,22 +163,13 @@ def evaluate_campaign(
     """
     if options.test_joints is None:
         raise ConfigError("no test joint configurations given for the uncertainty evaluation")
-    extra: dict[str, Any] = {} if executor is None else {"executor": executor}
     return evaluate_uncertainty(
         model,
         campaign,
         options.test_joints,
-        settings=options.uncertainty,
+        options.evaluation_settings(),
         calibration=calibration,
-        lambda_=options.lambda_,
-        trials=options.trials,
-        coverage=options.coverage,
-        seed=options.seed,
-        n_dig=options.n_dig,
-        max_trials=options.max_trials,
-        block_size=options.block_size,
         workers=workers,
         progress=progress,
-        frame=options.output_frame,
-        **extra,
+        executor=executor,
     )

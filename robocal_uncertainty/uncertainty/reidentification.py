@@ -13,6 +13,7 @@ Jacobian and weights), so a new type needs no change here.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -186,6 +187,10 @@ class ChordSolver:
         ``N_ff^-1``.
     normal : ndarray, shape (k, k)
         ``N = J^T J``.
+    predictor : callable or None
+        ``predictor(params, joint_positions)``: the measurement type's prediction near the
+        calibration (:meth:`~robocal_uncertainty.core.measurement.MeasurementType.nearby_predictor`),
+        or None for its plain ``predict``.
     """
 
     problem: BatchProblem
@@ -196,6 +201,7 @@ class ChordSolver:
     coupling: Array
     free_inverse: Array
     normal: Array
+    predictor: Callable[[Array, Array], Array] | None = None
 
     @classmethod
     def at(cls, problem: BatchProblem, params: Array, joint_positions: Array) -> ChordSolver:
@@ -215,7 +221,8 @@ class ChordSolver:
         coupling = normal[np.ix_(pen, ~pen)] @ free_inverse
         schur = normal[np.ix_(pen, pen)] - coupling @ normal[np.ix_(~pen, pen)]
         evals, evecs = np.linalg.eigh(schur)
-        return cls(problem, a_mat, pose_normal, evals, evecs, coupling, free_inverse, normal)
+        predictor = measurement.nearby_predictor(problem.layout, params, joint_positions)
+        return cls(problem, a_mat, pose_normal, evals, evecs, coupling, free_inverse, normal, predictor)
 
     def _step(self, rhs: Array, lam2: Array) -> Array:
         """Solve ``(N + lam^2 M) step = rhs`` for all trials, M the penalty mask."""
@@ -287,7 +294,11 @@ class ChordSolver:
             if done == 1 and initial_prediction is not None:
                 pred = initial_prediction
             else:
-                pred = measurement.predict(self.problem.layout, self.problem.parameters(x), joint_positions)
+                params = self.problem.parameters(x)
+                if self.predictor is not None:
+                    pred = self.predictor(params, joint_positions)
+                else:
+                    pred = measurement.predict(self.problem.layout, params, joint_positions)
             r = stack_residual(measurement, measurement.residual(measured, pred))
             if w_rows is not None:
                 r *= w_rows

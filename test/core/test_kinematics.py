@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core.kinematics import (
+    NearbyPoints,
     forward_points,
     forward_points_and_jacobian,
+    forward_poses,
 )
 from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.core.robot_model import RobotModel
@@ -132,6 +134,56 @@ def test_forward_points_matches_plain_matrix_product_with_beta_and_base() -> Non
         got = forward_points(model, model.parameter_vector(), q)
         want = np.array([modified_dh_point(model, qi) for qi in q])
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("spread", [1e-5, 2e-3, 0.1, 1.0], ids=["urad", "mrad", "0.1rad", "direct"])
+def test_nearby_points_match_plain_matrix_product(spread: float) -> None:
+    # Near the reference the angles come from a Taylor series about it; far from it (1 rad,
+    # past the series' range) directly. Either way: the independent 4x4 product.
+    rng = np.random.default_rng(12)
+    for path in (PAPER_YAML, UR10_YAML):
+        ref = perturbed(load_robot_model(path), rng, beta=True)
+        q_ref = rng.uniform(-np.pi, np.pi, (15, ref.n_joints))
+        near = NearbyPoints.at(ref.layout, ref.parameter_vector(), q_ref)
+        params = ref.parameter_vector() + rng.uniform(-spread, spread, (4, ref.layout.size)) * 0.01
+        theta = [idx["theta"] for idx in ref.layout.joint_slices()]
+        params[:, theta] = ref.parameter_vector()[theta] + rng.uniform(-spread, spread, (4, len(theta)))
+        q = q_ref + rng.uniform(-spread, spread, (4, *q_ref.shape))
+        got = near(params, q)
+        assert got.shape == (4, 15, 3)
+        for t in range(4):
+            model = ref.with_parameters(params[t])
+            want = np.array([modified_dh_point(model, qi) for qi in q[t]])
+            np.testing.assert_allclose(got[t], want, rtol=0, atol=1e-12)
+        # And the package's own chain to a few ulps (it walks the frames the other way).
+        np.testing.assert_allclose(got, forward_points(ref.layout, params, q), rtol=0, atol=5e-15)
+        # Shared readings (no leading axis) broadcast like forward_points.
+        np.testing.assert_allclose(near(params, q_ref), forward_points(ref.layout, params, q_ref), rtol=0, atol=5e-15)
+
+
+@pytest.mark.parametrize("spread", [1e-5, 0.1, 1.0], ids=["urad", "0.1rad", "direct"])
+@pytest.mark.parametrize("tool_rotation", [False, True], ids=["flange", "tool_rotation"])
+def test_nearby_poses_match_forward_poses(spread: float, tool_rotation: bool) -> None:
+    # forward_poses is checked against independent references in test_orientation_kinematics.
+    rng = np.random.default_rng(13)
+    ref = perturbed(load_robot_model(PAPER_YAML), rng, beta=True)
+    if tool_rotation:
+        ref = ref.with_tool_rotation()
+    layout = ref.layout
+    p0 = ref.parameter_vector()
+    if layout.tool_rotation_index is not None:
+        p0[layout.tool_rotation_index : layout.tool_rotation_index + 3] = rng.uniform(-0.5, 0.5, 3)
+    q_ref = rng.uniform(-np.pi, np.pi, (9, ref.n_joints))
+    near = NearbyPoints.at(layout, p0, q_ref)
+    params = p0 + rng.uniform(-spread, spread, (3, layout.size)) * 0.1
+    q = q_ref + rng.uniform(-spread, spread, (3, *q_ref.shape))
+    got = near.poses(params, q)
+    points, rotations = forward_poses(layout, params, q)
+    assert got.shape == (3, 9, 12)
+    np.testing.assert_allclose(got[..., :3], points, rtol=0, atol=5e-15)
+    np.testing.assert_allclose(got[..., 3:].reshape(3, 9, 3, 3), rotations, rtol=0, atol=5e-15)
+    # The point part is the point walk's, bit for bit.
+    assert np.array_equal(got[..., :3], near(params, q))
 
 
 # --- pinocchio ---------------------------------------------------------------------------
