@@ -349,9 +349,24 @@ class NearbyPoints:
     cos_ref: Array
     sin_ref: Array
 
+    @staticmethod
+    def supports(layout: ParameterLayout) -> bool:
+        """Whether the walk covers `layout`: revolute joints only and no mount (models read from
+        a URDF with a prismatic joint or a base-link mount use :func:`forward_points`)."""
+        return not layout.has_mount and not any(layout.prismatic)
+
     @classmethod
     def at(cls, layout: ParameterLayout, params: Array, joint_positions: Array) -> NearbyPoints:
-        """Reference at `params` (n_params,) and readings `joint_positions` (n_poses, n_joints)."""
+        """Reference at `params` (n_params,) and readings `joint_positions` (n_poses, n_joints).
+
+        Raises
+        ------
+        ValueError
+            A layout the walk does not cover (see :meth:`supports`).
+        """
+        if not cls.supports(layout):
+            msg = "NearbyPoints covers revolute chains without a mount; use forward_points for this layout"
+            raise ValueError(msg)
         params = np.asarray(params, dtype=np.float64)
         joints = np.array(joint_positions, dtype=np.float64)
         theta = params[[idx["theta"] for idx in layout.joint_slices()]]

@@ -384,8 +384,11 @@ class PointMeasurement(MeasurementType):
         """
         return forward_points_and_jacobian(layout, params, joint_positions)
 
-    def nearby_predictor(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> NearbyPoints:
-        """Tool points near the reference by :class:`~robocal_uncertainty.core.kinematics.NearbyPoints`."""
+    def nearby_predictor(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> NearbyPoints | None:
+        """Tool points near the reference by :class:`~robocal_uncertainty.core.kinematics.NearbyPoints`
+        (None for a layout it does not cover: prismatic joints or a mount)."""
+        if not NearbyPoints.supports(layout):
+            return None
         return NearbyPoints.at(layout, params, joint_positions)
 
     def positions(self, values: Array) -> Array:

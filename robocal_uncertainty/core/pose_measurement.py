@@ -167,8 +167,11 @@ class PoseMeasurement(MeasurementType):
 
     def nearby_predictor(
         self, layout: ParameterLayout, params: Array, joint_positions: Array
-    ) -> Callable[[Array, Array], Array]:
-        """Tool poses near the reference by :meth:`~robocal_uncertainty.core.kinematics.NearbyPoints.poses`."""
+    ) -> Callable[[Array, Array], Array] | None:
+        """Tool poses near the reference by :meth:`~robocal_uncertainty.core.kinematics.NearbyPoints.poses`
+        (None for a layout it does not cover: prismatic joints or a mount)."""
+        if not NearbyPoints.supports(layout):
+            return None
         return NearbyPoints.at(layout, params, joint_positions).poses
 
     def residual(self, measured: Array, predicted: Array) -> Array:
