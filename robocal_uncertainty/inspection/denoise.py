@@ -26,11 +26,26 @@ by the smoothed minus the raw deviation, ``x̂ = y - (r - r̂)·n``.
 
 Window
 ------
-``h`` is chosen among :func:`window_candidates` by Mallows' Cp (Stein's unbiased risk
-estimate) with the per-point noise variance of the instrument model along the normal, which
-the CMM model states (no estimate from the data is needed):
-``Cp(h) = Σ (r - r̂)² - Σ σ²ᵢ + 2 Σ σ²ᵢ Sᵢᵢ``, ``S`` the smoother's hat matrix. The common
-(thermal) source is a smooth scale error, not noise, and stays in ``x̂``.
+The widest window ``h`` is chosen among :func:`window_candidates` by Mallows' Cp (Stein's
+unbiased risk estimate) with the per-point noise variance of the instrument model along the
+normal, which the CMM model states (no estimate from the data is needed):
+``Cp(h) = Σ (r - r̂)² - Σ σ²ᵢ + 2 Σ σ²ᵢ Sᵢᵢ``, ``S`` the smoother's hat matrix. Cp is one risk
+for the whole contour: a bump or dent a few millimetres wide barely moves it, and the window it
+picks flattens the feature. So the window is then chosen per point (intersection of confidence
+intervals, Lepski / Goldenshluger-Nemirovski): going from the narrowest candidate up to the Cp
+choice, a point keeps the widest window whose fit ± :data:`ICI_FACTOR` standard deviations
+(``sqrt(Σ_j S_ij² σ_j²)``) still overlaps the intervals of every narrower one. Finally the
+residuals are smoothed once more and added back (twicing, ``r̂ = (2S - S²) r``), which restores
+most of a peak a local quadratic flattens. The common (thermal) source is a smooth scale error,
+not noise, and stays in ``x̂``.
+
+Residual check
+--------------
+:class:`ResidualCheck`: the residuals ``r - r̂`` of a cloud whose form the smoother follows are
+the instrument noise through ``I - (2S - S²)``. A scan statistic over runs of consecutive
+standardised residuals, against its null simulated from the instrument's own per-point sources,
+flags a cloud with structure the smoother left (a feature narrower than the window, or one the
+windows could not follow); its intervals are then not verified for that cloud.
 """
 
 from __future__ import annotations
