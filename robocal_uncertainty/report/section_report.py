@@ -233,7 +233,7 @@ def _decimals(u_scaled_to_value_unit: float) -> int:
 def _rows(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...]) -> list[dict[str, Any]]:
     rows = []
     measured = result.parameters.as_array()
-    check = result.check
+    cloud_check = result.check
     for j, name in enumerate(PARAMETER_NAMES):
         mc = result.monte_carlo.outputs[j]
         gum = result.gum.outputs[j]
@@ -277,9 +277,9 @@ def _rows(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...]) -
                 "stated_interval": [fix.interval.low, fix.interval.high]
                 if stated_coverage(name, result.method)[0] != "jcgm101"
                 else [mc.probabilistically_symmetric.low, mc.probabilistically_symmetric.high],
-                "stated_interval_kind": stated_coverage(name, result.method, check)[0],
-                "coverage_measured": stated_coverage(name, result.method, check)[1],
-                "coverage_verified": stated_coverage(name, result.method, check)[2],
+                "stated_interval_kind": stated_coverage(name, result.method, cloud_check)[0],
+                "coverage_measured": stated_coverage(name, result.method, cloud_check)[1],
+                "coverage_verified": stated_coverage(name, result.method, cloud_check)[2],
             }
         )
     return rows
@@ -514,8 +514,8 @@ def _coverage_cell(name: str, result: SectionUncertainty) -> str:
 
 
 GUM_CHECK_LEGEND = (
-    "GUM=MC (JCGM 101 §8): 'agree' when the GUM interval y +- U matches the Monte Carlo interval within the "
-    "numerical tolerance (GUM framework validated for this parameter), 'differ' when not (use the Monte Carlo "
+    "GUM=MC (JCGM 101 §8): agree when the GUM interval y +- U matches the Monte Carlo interval within the "
+    "numerical tolerance (GUM framework validated for this parameter), differ when not (use the Monte Carlo "
     "interval); it is not a pass/fail of the part or the measurement."
 )
 """Legend of the table's §8 column."""
