@@ -251,10 +251,7 @@ def study_scan(family: str, index: int, *, trials: int = 2000, root_seed: int = 
         if name in MAX_MIN_PARAMETERS:  # the report clips the non-negative lengths at 0
             low, high = max(low, 0.0), max(high, 0.0)
         inside[j] = low <= truth[j] <= high
-    check = getattr(setup, "check", None)
-    flagged = bool(check is not None and check.flagged)
-    p_value = float(check.p_value) if check is not None else math.nan
-    return ScanOutcome(family, index, part, inside, flagged, p_value)
+    return ScanOutcome(family, index, part, inside, bool(setup.check.flagged), float(setup.check.p_value))
 
 
 def _scan_job(job: tuple[str, int, int, int]) -> ScanOutcome:
