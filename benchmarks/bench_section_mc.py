@@ -91,7 +91,9 @@ def main() -> None:
     print(f"peak memory: main {own:.0f} MiB, largest worker {children:.0f} MiB")
     print(f"thickness candidates {result.candidate_counts}")
     print()
-    header = f"{'parameter':24s} {'measured':>12s} {'u MC':>10s} {'U95 MC':>10s} {'u GUM':>10s} GUM=MC(§8) seed (value, u)"
+    header = (
+        f"{'parameter':24s} {'measured':>12s} {'u MC':>10s} {'U95 MC':>10s} {'u GUM':>10s} GUM=MC(§8) seed (value, u)"
+    )
     print(header)
     measured = result.parameters.as_array()
     for j, name in enumerate(PARAMETER_NAMES):
