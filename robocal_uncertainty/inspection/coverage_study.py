@@ -37,6 +37,8 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +46,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
+from robocal_uncertainty.inspection.point_cloud import read_rotor37_section
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
 from robocal_uncertainty.inspection.section_mc import prepare_trials, section_sources
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
@@ -140,9 +143,9 @@ def feature_deviation(u: NDArray[np.float64], features: Sequence[Feature], perio
 
 @cache
 def _curve() -> NominalCurve:
-    from robocal_uncertainty.app.section_inspection import load_section_nominal
-
-    return load_section_nominal("rotor37")
+    """The shipped Rotor 37 surface 2 at :data:`ROTOR37_SCALE` (the app's ``rotor37`` nominal)."""
+    path = resources.files("robocal_uncertainty").joinpath("data", "blade_sections", "nasa_rotor37_blade_geometry.dat")
+    return NominalCurve(read_rotor37_section(Path(str(path)), 2, scale=ROTOR37_SCALE))
 
 
 @cache
