@@ -91,7 +91,9 @@ def main() -> None:
     print(f"peak memory: main {own:.0f} MiB, largest worker {children:.0f} MiB")
     print(f"thickness candidates {result.candidate_counts}")
     print()
-    header = f"{'parameter':24s} {'measured':>12s} {'u MC':>10s} {'U95 MC':>10s} {'u GUM':>10s} §8  seed (value, u)"
+    header = (
+        f"{'parameter':24s} {'measured':>12s} {'u MC':>10s} {'U95 MC':>10s} {'u GUM':>10s} GUM=MC(§8) seed (value, u)"
+    )
     print(header)
     measured = result.parameters.as_array()
     for j, name in enumerate(PARAMETER_NAMES):
@@ -105,9 +107,12 @@ def main() -> None:
         print(
             f"{name:24s} {measured[j] * value_scale:12.6f} {out.standard_uncertainty * u_scale:10.5f} "
             f"{out.expanded_uncertainty * u_scale:10.5f} {gum.standard_uncertainty * u_scale:10.5f} "
-            f"{'yes' if result.validation[j].validated else 'no ':3s} {seed_text}"
+            f"{'agree' if result.validation[j].validated else 'differ':10s} {seed_text}"
         )
     print("units: value mm (twist °), u and U95 µm (twist m°); seed column likewise")
+    print("GUM=MC(§8): JCGM 101 §8 validation of the GUM interval by the Monte Carlo one (not a verdict on the part)")
+    if result.check is not None:
+        print(f"this cloud: {result.check.describe()}")
     budget = result.gum.sensitivities[1] * 1e6
     u_c = float(np.sqrt((budget**2).sum()))
     print(

@@ -42,7 +42,8 @@ def test_section_report_equals_api(cloud_file: Path, tmp_path: Path, capsys: pyt
     assert main([*argv, "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "400 points" in text and "maximum thickness" in text and "profile, suction side" in text
-    assert "interval (denoised MC)" in text and "Every stated interval is coverage-verified" in text
+    assert "interval (denoised MC)" in text and "GUM=MC(§8)" in text
+    assert "note: This cloud: residual check passed" in text and "NOT coverage-verified" in text
     assert sorted(p.name for p in out.iterdir()) == [
         "section.csv",
         "section.html",
@@ -70,7 +71,8 @@ def test_seed_method_is_flagged(cloud_file: Path, tmp_path: Path, capsys: pytest
     argv = ["section", str(cloud_file), "--nominal", "rotor37", "--trials", "2000", "--out", str(out)]
     assert main([*argv, "--method", "seed", "--no-progress"]) == 0
     text = capsys.readouterr().out
-    assert "bias-corrected interval" in text and "note: NOT coverage-verified" in text
+    assert "bias-corrected interval" in text and "note: This cloud: residual check passed" in text
+    assert "NOT coverage-verified" in text
     data = json.loads((out / "section.json").read_text())
     assert data["method"] == "seed"
     assert [row["coverage_verified"] for row in data["parameters"]] == [False] * 2 + [True] * 3 + [False] * 4
@@ -85,6 +87,36 @@ def test_section_from_a_point_cloud2_bag(scan: PointCloud, tmp_path: Path, capsy
     assert "frame blade" in capsys.readouterr().out
     data = json.loads((out / "section.json").read_text())
     assert data["frame_id"] == "blade" and data["n_points"] == 400
+
+
+def test_a_cloud_the_check_flags_is_not_verified(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A 1 836-point scan with an 8 µm dent 3 mm wide on the pressure side (narrower than the
+    # narrowest smoothing window) and one draw of the seed's CMM errors.
+    from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
+    from robocal_uncertainty.inspection.coverage_study import Feature, feature_deviation
+    from robocal_uncertainty.inspection.section_mc import section_sources
+
+    curve = load_section_nominal("rotor37")
+    dent = (Feature("dent", 0.2, 8e-6, 3e-3),)
+    true = simulate_section_scan(
+        curve, 1836, form_amplitude=5e-6, deviation=lambda u: feature_deviation(u, dent, curve.period)
+    )
+    clean = evaluate_section(true, curve)
+    sources = section_sources(clean, CmmInstrument(), probe_vectors=true.probe_vectors)
+    noisy = clean.points + point_displacements(sources, np.random.default_rng(7))[0]
+    path = tmp_path / "dented.txt"
+    np.savetxt(path, np.column_stack([noisy, np.zeros(len(noisy))]) * 1e3, fmt="%.9f", header="unit: mm\nx y z")
+    out = tmp_path / "report"
+    assert (
+        main(["section", str(path), "--nominal", "rotor37", "--trials", "2000", "--out", str(out), "--no-progress"])
+        == 0
+    )
+    text = capsys.readouterr().out
+    assert "residual check FLAGGED this cloud" in text and "NOT verified for this cloud" in text
+    assert "verified" not in text.replace("not verified for this cloud", "").replace("NOT verified for this cloud", "")
+    data = json.loads((out / "section.json").read_text())
+    assert data["residual_check"]["flagged"] is True
+    assert not any(row["coverage_verified"] for row in data["parameters"])
 
 
 @pytest.mark.parametrize(

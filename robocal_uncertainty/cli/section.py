@@ -45,7 +45,8 @@ def register(sub: Any) -> None:
         "--method",
         choices=("denoised", "seed"),
         default="denoised",
-        help="denoised: Monte Carlo of the error around the denoised cloud (intervals coverage-verified); "
+        help="denoised: Monte Carlo of the error around the denoised cloud (coverage-verified unless the cloud's "
+        "residual check flags it); "
         "seed: perturb the measured cloud as the seed does (max/min intervals under-cover) (default %(default)s)",
     )
     p.add_argument("--out", default="section_report", help="report directory (default %(default)s)")
@@ -130,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     if result.gum_with_repeatability is not None:
         print(format_repeatability_budget(result))
         print()
-    print(f"note: {coverage_summary(result.method)}")
+    print(f"note: {coverage_summary(result)}")
     from robocal_uncertainty.app.output_paths import clear_earlier_report
 
     clear_earlier_report(args.out)

@@ -3,7 +3,9 @@
 ``read_point_cloud`` / ``read_nominal_section`` (and the shipped blade readers) give SI data;
 ``evaluate_section`` computes the seed's nine section parameters; ``section_uncertainty`` runs
 the batched Monte Carlo under the CMM model (``load_instrument``) with the GUM comparison
-(method ``denoised``: the error sampled around ``denoise_section``'s cloud).
+(method ``denoised``: the error sampled around ``denoise_section``'s cloud, whose residual check
+flags a cloud the denoising did not follow); ``coverage_study`` measures the intervals' coverage
+over scenario families of simulated parts.
 """
 
 from typing import TYPE_CHECKING
@@ -21,7 +23,7 @@ if TYPE_CHECKING:
         point_error_sources,
         seed_instrument,
     )
-    from robocal_uncertainty.inspection.denoise import DenoisedCloud, denoise_section
+    from robocal_uncertainty.inspection.denoise import DenoisedCloud, ResidualCheck, denoise_section
     from robocal_uncertainty.inspection.nominal_curve import ClosestPoints, NominalCurve
     from robocal_uncertainty.inspection.point_cloud import (
         LENGTH_UNITS,
@@ -69,6 +71,7 @@ __all__ = [
     "NominalSection",
     "PointCloud",
     "Registration",
+    "ResidualCheck",
     "SectionEvaluation",
     "SectionOptions",
     "SectionParameters",

@@ -57,7 +57,7 @@ from robocal_uncertainty.inspection.cmm_model import (
     draw_bound,
     point_error_sources,
 )
-from robocal_uncertainty.inspection.denoise import DenoisedCloud, denoise_section
+from robocal_uncertainty.inspection.denoise import DenoisedCloud, ResidualCheck, denoise_section
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud
 from robocal_uncertainty.inspection.section import (
@@ -759,6 +759,8 @@ class TrialSetup:
         The denoised cloud (``denoised`` only).
     options : SectionOptions
         Evaluation settings.
+    check : ResidualCheck
+        The residual check of the measured cloud (:func:`~.denoise.denoise_section`), either method.
     """
 
     measured: SectionEvaluation
@@ -768,6 +770,7 @@ class TrialSetup:
     reflect: NDArray[np.float64] | None
     denoised: DenoisedCloud | None
     options: SectionOptions
+    check: ResidualCheck
 
     def trials(self, batch: int = 1000, *, resegment_edges: bool = True) -> SectionTrials:
         """The batched trial block (model at ``centre``, see :func:`build_frozen_model`)."""
@@ -804,16 +807,20 @@ def prepare_trials(
     evaluation = evaluate_section(cloud, curve, options)
     probe = cloud.probe_vectors if isinstance(cloud, PointCloud) else None
     every = section_sources(evaluation, instrument, probe_vectors=probe, reference=reference)
-    if method == "seed":
-        return TrialSetup(evaluation, evaluation, tuple(every[k] for k in indices), indices, None, None, options)
-    # The noise variance of every per-point source weights the window choice, whichever
-    # sources the Monte Carlo enables: it is the noise in the measured points.
+    # The noise variance of every per-point source weights the window choice and the residual
+    # check, whichever sources the Monte Carlo enables: it is the noise in the measured points.
     denoised = denoise_section(evaluation, every, curve.period, half_width=denoise_half_width)
+    if method == "seed":
+        return TrialSetup(
+            evaluation, evaluation, tuple(every[k] for k in indices), indices, None, None, options, denoised.check
+        )
     centre = evaluate_section(denoised.points, curve, options)
     ordered_probe = None if probe is None else np.asarray(probe, dtype=np.float64)[evaluation.order]
     at_centre = section_sources(centre, instrument, probe_vectors=ordered_probe, reference=reference)
     reflect = evaluation.parameters.as_array() + centre.parameters.as_array()
-    return TrialSetup(evaluation, centre, tuple(at_centre[k] for k in indices), indices, reflect, denoised, options)
+    return TrialSetup(
+        evaluation, centre, tuple(at_centre[k] for k in indices), indices, reflect, denoised, options, denoised.check
+    )
 
 
 def full_section_trials(
@@ -932,6 +939,9 @@ class SectionUncertainty:
         Parameters of the cloud the trials perturb (y for ``seed``, x̂ for ``denoised``).
     denoised : DenoisedCloud or None
         The denoised cloud and its window choice (``denoised`` only).
+    check : ResidualCheck or None
+        The measured cloud's residual check (:class:`~.denoise.ResidualCheck`, either method): when
+        it flags the cloud, the intervals are not verified for it.
     """
 
     parameters: SectionParameters
@@ -947,6 +957,7 @@ class SectionUncertainty:
     method: str = "seed"
     reference_parameters: NDArray[np.float64] | None = None
     denoised: DenoisedCloud | None = None
+    check: ResidualCheck | None = None
 
 
 def section_uncertainty(
@@ -1108,6 +1119,7 @@ def section_uncertainty(
         method=method,
         reference_parameters=model.base.copy(),
         denoised=prepared.denoised,
+        check=prepared.check,
     )
 
 

@@ -1,7 +1,8 @@
 """Simulated CMM scans of a nominal section with known true deviations (no instrument noise).
 
 The true part is the nominal curve displaced along its outward normal by a form error
-``a·sin(2π·waves·u/P + phase)`` (u the curve parameter, P the perimeter), then rotated by the
+``a·sin(2π·waves·u/P + phase)`` (u the curve parameter, P the perimeter) plus an optional
+deviation function of u (local features: :mod:`.coverage_study`), then rotated by the
 twist about the stacking point and shifted by the offset. Points are spaced along the nominal
 parameter with a density ``1 + edge_density·|κ|/max|κ|`` (κ the curvature), so the edges get
 denser scanning than the sides, as CMM blade scans do. Probe vectors are the outward normals.
@@ -11,6 +12,7 @@ Instrument errors are added separately (:func:`~robocal_uncertainty.inspection.c
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -67,6 +69,7 @@ def simulate_section_scan(
     pivot: ArrayLike | None = None,
     edge_density: float = 4.0,
     height: float = 0.0,
+    deviation: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
 ) -> PointCloud:
     """A noise-free scan of the nominal section with a known form error, offset and twist.
 
@@ -92,6 +95,9 @@ def simulate_section_scan(
         See :func:`scan_parameters`.
     height : float
         Section height z of every point [m].
+    deviation : callable, optional
+        ``deviation(u)`` [m], shape (n,), for the nominal-curve parameters u [m] of the points:
+        an extra form error along the outward normal, added to the sinusoid.
 
     Returns
     -------
@@ -101,10 +107,14 @@ def simulate_section_scan(
     u = scan_parameters(curve, n_points, edge_density=edge_density)
     centre = polygon_centroid(curve.section.points) if pivot is None else np.asarray(pivot, dtype=np.float64)
     normal = curve.outward_normal(u)
-    true = (
-        curve.point(u)
-        + (form_amplitude * np.sin(2 * math.pi * form_waves * u / curve.period + form_phase))[:, np.newaxis] * normal
-    )
+    form = form_amplitude * np.sin(2 * math.pi * form_waves * u / curve.period + form_phase)
+    if deviation is not None:
+        extra = np.asarray(deviation(u), dtype=np.float64)
+        if extra.shape != u.shape or not np.isfinite(extra).all():
+            msg = f"deviation(u) must give finite values of shape {u.shape}, got shape {extra.shape}"
+            raise InputError(msg)
+        form = form + extra
+    true = curve.point(u) + form[:, np.newaxis] * normal
     r = rotation(float(twist))
     moved = (true - centre) @ r.T + centre + np.asarray(offset, dtype=np.float64)
     probe = normal @ r.T

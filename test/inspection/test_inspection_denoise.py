@@ -8,8 +8,11 @@ import pytest
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
 from robocal_uncertainty.inspection.denoise import (
+    _hat_matrix,
+    _smoother_rows,
     denoise_section,
     normal_noise_variance,
+    residual_check,
     smooth_normal_deviation,
     window_candidates,
 )
@@ -96,3 +99,87 @@ def test_candidates_and_bad_windows(contour: tuple[np.ndarray, np.ndarray, float
     assert window_candidates(u[::40], period)[0] >= 4 * np.diff(u[::40]).max()
     with pytest.raises(ConfigError, match="half_width must be in"):
         smooth_normal_deviation(u, np.zeros_like(u), normal, period, period)
+
+
+def _noisy_scan(curve: NominalCurve, features: tuple, seed: int) -> tuple[np.ndarray, np.ndarray, object, tuple]:
+    """True deviations, a noisy evaluation and the sources of a 1 836-point scan with features."""
+    from robocal_uncertainty.inspection.coverage_study import feature_deviation
+
+    cloud = simulate_section_scan(
+        curve,
+        1836,
+        form_amplitude=5e-6,
+        deviation=(lambda u: feature_deviation(u, features, curve.period)) if features else None,
+    )
+    clean = evaluate_section(cloud, curve)
+    sources = section_sources(clean, CmmInstrument(), probe_vectors=cloud.probe_vectors)
+    noisy = clean.points + point_displacements(sources, np.random.default_rng(seed))[0]
+    evaluation = evaluate_section(noisy, curve)
+    return clean.registration.residual, clean.registration.parameter, evaluation, sources
+
+
+def test_local_windows_follow_a_bump_the_global_window_flattens(rotor37_curve: NominalCurve) -> None:
+    from robocal_uncertainty.inspection.coverage_study import Feature
+
+    # A 4 µm bump 10 mm wide on the suction side, 20 mm behind the trailing edge: Cp, a global
+    # risk, still picks an 81 mm window (a 6 µm x 12 mm bump would pull it down to 8 mm everywhere).
+    centre = 0.4214
+    true_deviation, u, evaluation, sources = _noisy_scan(rotor37_curve, (Feature("bump", centre, 4e-6, 10e-3),), 5)
+    adaptive = denoise_section(evaluation, sources, rotor37_curve.period)
+    fixed = denoise_section(evaluation, sources, rotor37_curve.period, half_width=adaptive.half_width)
+    at_bump = np.abs(u - centre) < 2e-3
+    far = np.abs(u - centre) > 60e-3
+    # Windows narrow at the bump and stay at the Cp choice far from it.
+    assert adaptive.local_half_width[at_bump].max() < 0.5 * adaptive.half_width
+    assert np.median(adaptive.local_half_width[far]) == adaptive.half_width
+    assert (adaptive.local_half_width <= adaptive.half_width).all()
+    # The bump's top: the fixed Cp window flattens it by micrometres, the local windows follow it.
+    fixed_error = np.abs(fixed.deviation - true_deviation)[at_bump].max()
+    local_error = np.abs(adaptive.deviation - true_deviation)[at_bump].max()
+    assert fixed_error > 3e-6 and local_error < 0.6 * fixed_error, (fixed_error, local_error)
+
+
+def test_residual_check_flags_a_feature_narrower_than_every_window(rotor37_curve: NominalCurve) -> None:
+    from robocal_uncertainty.inspection.coverage_study import Feature
+
+    smooth = denoise_section(*_noisy_scan(rotor37_curve, (), 7)[2:], rotor37_curve.period)
+    assert not smooth.check.flagged and smooth.check.p_value > 0.05
+    # An 8 µm dent 3 mm wide on the pressure side: narrower than the narrowest window (4 mm half-width).
+    centre = 0.2
+    *_, evaluation, sources = _noisy_scan(rotor37_curve, (Feature("dent", centre, 8e-6, 3e-3),), 7)
+    dented = denoise_section(evaluation, sources, rotor37_curve.period)
+    check = dented.check
+    assert check.flagged and check.p_value <= check.level
+    assert abs(check.location - centre) < 2e-3 and check.extent < 3e-3
+    assert "FLAGGED" in check.describe()
+    # Reproducible: the null draws come from the stated seed.
+    again = denoise_section(evaluation, sources, rotor37_curve.period)
+    assert again.check.p_value == check.p_value and again.check.seed == 0
+
+
+def test_residual_check_null_is_calibrated(rotor37_curve: NominalCurve) -> None:
+    # Residuals that are themselves instrument noise through the smoother: the p-value is
+    # uniform, so about `level` of such clouds are flagged (binomial: 0-7 of 40 at 5 %).
+    *_, evaluation, sources = _noisy_scan(rotor37_curve, (), 11)
+    u = evaluation.registration.parameter
+    normal = evaluation.registration.normal
+    n = u.shape[0]
+    weights, source, _ = _smoother_rows(u, normal, rotor37_curve.period, 20e-3, np.arange(n))
+    hat = _hat_matrix([(weights, source)], np.zeros(n, dtype=np.intp), n)
+
+    def smoother(values: np.ndarray) -> np.ndarray:
+        return np.asarray(hat @ values.T).T
+
+    rng = np.random.default_rng(99)
+    per_point = [s for s in sources if s.kind != "common"]
+    noise = sum(s.normal_displacement(s.draw(rng, 40), normal) for s in per_point)
+    residuals = noise - smoother(noise)
+    local = np.full(n, 20e-3)
+    p_values = [residual_check(r, smoother, sources, normal, u, local, seed=3).p_value for r in residuals]
+    flagged = sum(p <= 0.05 for p in p_values)
+    assert flagged <= 7, p_values
+    assert 0.3 < float(np.mean(p_values)) < 0.7, p_values
+    # A 6 µm plateau over 20 consecutive points (about 9 mm on the side), as the smoother leaves it.
+    plateau = np.where((np.arange(n) >= 600) & (np.arange(n) < 620), 6e-6, 0.0)[np.newaxis, :]
+    stepped = residuals[0] + (plateau - smoother(plateau))[0]
+    assert residual_check(stepped, smoother, sources, normal, u, local, seed=3).flagged

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.bias_correction import bias_corrections
 from robocal_uncertainty.inspection.cmm_model import SOURCE_NAMES, CmmInstrument, ErrorSource, point_displacements
+from robocal_uncertainty.inspection.coverage_study import FAMILIES, run_study
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud, read_rotor37_section
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
@@ -330,10 +331,12 @@ def test_coverage_over_200_simulated_scans() -> None:
     scan only, as on a real part. Measured coverage (thickness, chord, axial, circumferential,
     twist, profiles LE/TE/PS/SS):
 
-    - method ``denoised`` (the error sampled around the denoised cloud, window by Cp):
-      94.5, 93.5, 93.5, 94.5, 93.5, 92.5, 92.5, 94, 92 %: every parameter within 92-98 %, the
-      suction-side profile on the lower limit (the offsets, linear in the errors and exact in
-      either method, cover 93.5-94.5 % on the same scans: the binomial standard error is 1.5 %);
+    - method ``denoised`` (the error sampled around the denoised cloud, widest window by Cp,
+      narrowed per point, twicing): 94.5, 93.5, 93.5, 94.5, 93.5, 92.5, 93.5, 93.5, 92 %: every
+      parameter within 92-98 %, the suction-side profile on the lower limit (the offsets, linear
+      in the errors and exact in either method, cover 93.5-94.5 % on the same scans: the
+      binomial standard error is 1.5 %); with one global Cp window (before issue 23) it was
+      94.5, 93.5, 93.5, 94.5, 93.5, 92.5, 92.5, 94, 92 %;
     - method ``seed`` (the measured cloud perturbed), JCGM 101 interval:
       72, 89.5, 93.5, 94.5, 94.5, 0, 0, 0, 0 % (the noise bias of the max/min parameters counted
       twice); reflected about the measured value (bias-corrected): 89, 90.5, 93.5, 94.5, 93.5,
@@ -361,3 +364,35 @@ def test_coverage_over_200_simulated_scans() -> None:
     assert seed_coverage == pytest.approx(study[:, 0], abs=0.003), seed_coverage
     assert reflected_hits / scans == pytest.approx(study[:, 1], abs=0.003), reflected_hits / scans
     assert coverage == pytest.approx(study[:, 2], abs=0.003), coverage
+
+
+@pytest.mark.slow
+def test_coverage_over_scenario_families() -> None:
+    """Issue 23: 10 scans of each scenario family (smooth forms of 2-13 waves; bumps and dents of
+    1-10 µm over 1-20 mm on the sides and at the edges; edge erosion), truth from the noise-free
+    part, method ``denoised`` with 2 000 trials and the residual check; about 2 minutes on two
+    cores. The study the report quotes (``FAMILY_STUDY``) is 50 scans per family of the same
+    seeds (``benchmarks/bench_section_coverage.py --scans 50``); with 10 scans per family one
+    miss is 10 % and the binomial standard uncertainty at 95 % is 7 %.
+    """
+    workers = min(2, os.cpu_count() or 1)
+    outcomes = run_study(FAMILIES, 10, workers=workers)
+    by_family = {f: [o for o in outcomes if o.family == f] for f in FAMILIES}
+    # Results depend only on (family, scan): scan 3 of "edge" alone gives the same outcome.
+    alone = run_study(("edge",), 1, first=3)[0]
+    again = by_family["edge"][3]
+    assert np.array_equal(alone.inside, again.inside) and alone.p_value == again.p_value
+    smooth = by_family["smooth"]
+    assert sum(o.flagged for o in smooth) <= 1  # false alarms: level 5 %
+    inside = np.array([o.inside for o in smooth if not o.flagged])
+    assert (inside.mean(axis=0) >= 0.8).all(), inside.mean(axis=0)
+    local = [o for f in ("side", "edge", "erosion") for o in by_family[f]]
+    # The check fires on local features (10 of 30 here, 35 of 150 in the 50-scan study).
+    assert sum(o.flagged for o in local) >= 4
+    kept = np.array([o.inside for o in local if not o.flagged])
+    coverage = kept.mean(axis=0)
+    # Offsets, twist, thickness, chord and edge profiles hold with local features (89-100 % per
+    # family in the 50-scan study); the side profiles under-cover on unflagged scans (81-88 % in
+    # the 50-scan study), which is why the report never states them verified.
+    assert (coverage[:7] >= 0.85).all(), coverage
+    assert (coverage[7:] >= 0.7).all(), coverage

@@ -1,0 +1,336 @@
+"""Coverage study of the section intervals over families of simulated parts (issue 23).
+
+Each scan of a family is one simulated part: the shipped Rotor 37 section at the seed's size
+(:data:`ROTOR37_SCALE`), 1 836 points (denser at the edges), the seed's offsets and twist, a
+smooth form error and, for the local families, one local feature; one draw of the seed's CMM
+errors is added, as a real scan carries. The method under test sees only the noisy scan. The
+truth is the package's parameter extraction (:func:`~.section.evaluate_section`) on the
+noise-free scan of the same part, which knows nothing of the denoising or the Monte Carlo.
+
+Families (:data:`FAMILIES`; every draw from the scan's own seeded stream):
+
+``smooth``
+    A sinusoidal form error of 2, 3, 5, 8 or 13 waves around the contour (wavelength 405 mm to
+    62 mm), amplitude U(2, 10) µm, random phase.
+``side``
+    The demo's 5 µm three-wave form (random phase) and one bump or dent on the pressure or the
+    suction side, at least 15 mm from either edge: amplitude U(1, 10) µm, full width U(1, 20) mm
+    along the contour, raised-cosine shape.
+``edge``
+    As ``side``, the feature centred within ±10 mm (along the contour) of the leading- or the
+    trailing-edge extreme point: on the edge arc, across its junction with a side, or just
+    beside it.
+``erosion``
+    As ``side``, an edge flattened: material removed (inward) by U(1, 10) µm over a plateau of
+    half the feature's width U(1, 20) mm, with raised-cosine flanks, centred within ±2 mm of the
+    leading- or trailing-edge extreme point.
+
+:func:`study_scan` gives, per scan, whether each parameter's stated 95 % interval (method
+``denoised``, clipped at 0 for the max/min parameters as the report states it) holds the truth,
+and whether the per-scan residual check (:class:`~.denoise.ResidualCheck`) flagged the scan.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS
+from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
+from robocal_uncertainty.inspection.nominal_curve import NominalCurve
+from robocal_uncertainty.inspection.point_cloud import read_rotor37_section
+from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
+from robocal_uncertainty.inspection.section_mc import prepare_trials, section_sources
+from robocal_uncertainty.inspection.simulate import simulate_section_scan
+from robocal_uncertainty.montecarlo.engine import run_trials
+from robocal_uncertainty.montecarlo.summary import summarize
+
+__all__ = [
+    "FAMILIES",
+    "ROTOR37_SCALE",
+    "Feature",
+    "Part",
+    "ScanOutcome",
+    "StudyRow",
+    "draw_part",
+    "feature_deviation",
+    "run_study",
+    "study_scan",
+    "summarize_study",
+]
+
+ROTOR37_SCALE = 7.14
+"""Rotor 37 surface 2 scaled to the seed's blade (maximum thickness 30.37 mm)."""
+
+FAMILIES: tuple[str, ...] = ("smooth", "side", "edge", "erosion")
+"""Scenario families of the study (see the module docstring)."""
+
+OFFSET = (-0.1013e-3, 0.0538e-3)
+"""The seed's measured axial and circumferential offsets [m]."""
+TWIST = math.radians(0.0512)
+"""The seed's measured twist [rad]."""
+N_POINTS = 1836
+"""The seed's point count."""
+
+_SMOOTH_WAVES = (2, 3, 5, 8, 13)
+
+
+@dataclass(frozen=True)
+class Feature:
+    """One local form feature along the outward normal.
+
+    Attributes
+    ----------
+    kind : str
+        ``bump`` (outward), ``dent`` (inward) or ``erosion`` (inward plateau).
+    centre : float
+        Nominal-curve parameter of its centre [m].
+    amplitude : float
+        Height (bump) or depth (dent, erosion) [m], > 0.
+    width : float
+        Full width along the contour [m].
+    """
+
+    kind: str
+    centre: float
+    amplitude: float
+    width: float
+
+
+@dataclass(frozen=True)
+class Part:
+    """A simulated part: smooth form error plus local features."""
+
+    family: str
+    form_amplitude: float
+    form_waves: int
+    form_phase: float
+    features: tuple[Feature, ...]
+
+    def describe(self) -> str:
+        """One line, lengths in µm and mm."""
+        text = f"{self.form_amplitude * 1e6:.1f} um {self.form_waves}-wave form"
+        for f in self.features:
+            text += f", {f.kind} {f.amplitude * 1e6:.1f} um x {f.width * 1e3:.1f} mm at u = {f.centre * 1e3:.1f} mm"
+        return text
+
+
+def feature_deviation(u: NDArray[np.float64], features: Sequence[Feature], period: float) -> NDArray[np.float64]:
+    """Normal deviation [m] of the features at nominal-curve parameters ``u`` [m] (closed contour)."""
+    out = np.zeros_like(np.asarray(u, dtype=np.float64))
+    for f in features:
+        d = (np.asarray(u) - f.centre + period / 2) % period - period / 2
+        if f.kind in ("bump", "dent"):
+            shape = np.where(np.abs(d) < f.width / 2, 0.5 * (1.0 + np.cos(2 * math.pi * d / f.width)), 0.0)
+            out += (1.0 if f.kind == "bump" else -1.0) * f.amplitude * shape
+        elif f.kind == "erosion":
+            plateau, flank = f.width / 4, f.width / 4
+            beyond = np.clip((np.abs(d) - plateau) / flank, 0.0, 1.0)
+            out -= f.amplitude * 0.5 * (1.0 + np.cos(math.pi * beyond))
+        else:
+            msg = f"unknown feature kind {f.kind!r}"
+            raise ValueError(msg)
+    return out
+
+
+@cache
+def _curve() -> NominalCurve:
+    """The shipped Rotor 37 surface 2 at :data:`ROTOR37_SCALE` (the app's ``rotor37`` nominal)."""
+    path = resources.files("robocal_uncertainty").joinpath("data", "blade_sections", "nasa_rotor37_blade_geometry.dat")
+    return NominalCurve(read_rotor37_section(Path(str(path)), 2, scale=ROTOR37_SCALE))
+
+
+@cache
+def _landmarks() -> tuple[float, float]:
+    """Nominal-curve parameters of the leading- and trailing-edge extreme points [m]."""
+    curve = _curve()
+    clean = evaluate_section(simulate_section_scan(curve, N_POINTS), curve)
+    seg = clean.segmentation
+    u = clean.registration.parameter
+    return float(u[seg.leading_edge_point]), float(u[seg.trailing_edge_point])
+
+
+def draw_part(family: str, rng: np.random.Generator) -> Part:
+    """A random part of ``family`` (see the module docstring)."""
+    period = _curve().period
+    le, te = _landmarks()
+    if family == "smooth":
+        return Part(
+            family,
+            float(rng.uniform(2e-6, 10e-6)),
+            int(rng.choice(_SMOOTH_WAVES)),
+            float(rng.uniform(0, 2 * math.pi)),
+            (),
+        )
+    if family not in FAMILIES:
+        msg = f"family must be one of {list(FAMILIES)}, got {family!r}"
+        raise ValueError(msg)
+    phase = float(rng.uniform(0, 2 * math.pi))
+    amplitude = float(rng.uniform(1e-6, 10e-6))
+    width = float(rng.uniform(1e-3, 20e-3))
+    edge = le if rng.random() < 0.5 else te
+    if family == "side":
+        kind = "bump" if rng.random() < 0.5 else "dent"
+        # Pressure side runs LE -> TE, suction side TE -> LE (increasing u, modulo the period).
+        start, stop = (le, te) if rng.random() < 0.5 else (te, le + period)
+        margin = 15e-3 + width / 2
+        centre = float(rng.uniform(start + margin, stop - margin)) % period
+    elif family == "edge":
+        kind = "bump" if rng.random() < 0.5 else "dent"
+        centre = float(edge + rng.uniform(-10e-3, 10e-3)) % period
+    else:
+        kind = "erosion"
+        centre = float(edge + rng.uniform(-2e-3, 2e-3)) % period
+    return Part(family, 5e-6, 3, phase, (Feature(kind, centre, amplitude, width),))
+
+
+@dataclass(frozen=True)
+class ScanOutcome:
+    """One scan of the study.
+
+    Attributes
+    ----------
+    family : str
+        Scenario family.
+    index : int
+        Scan index in the family.
+    part : Part
+        The simulated part.
+    inside : ndarray of bool, shape (9,)
+        Whether each stated 95 % interval holds the truth (:data:`~.section.PARAMETER_NAMES`).
+    flagged : bool
+        Whether the residual check flagged the scan (interval not verified for this cloud).
+    p_value : float
+        The check's p-value.
+    """
+
+    family: str
+    index: int
+    part: Part
+    inside: NDArray[np.bool_]
+    flagged: bool
+    p_value: float
+
+
+def study_scan(family: str, index: int, *, trials: int = 2000, root_seed: int = 23) -> ScanOutcome:
+    """Simulate scan ``index`` of ``family``, run method ``denoised`` on it, compare with the truth.
+
+    The part, the instrument-noise draw and the Monte Carlo seed come from
+    ``SeedSequence(root_seed, spawn_key=(family index, index))``.
+    """
+    curve = _curve()
+    family_index = FAMILIES.index(family) if family in FAMILIES else -1
+    part_seq, noise_seq, mc_seq = np.random.SeedSequence(root_seed, spawn_key=(family_index, index)).spawn(3)
+    part = draw_part(family, np.random.default_rng(part_seq))
+    true_scan = simulate_section_scan(
+        curve,
+        N_POINTS,
+        offset=OFFSET,
+        twist=TWIST,
+        form_amplitude=part.form_amplitude,
+        form_waves=part.form_waves,
+        form_phase=part.form_phase,
+        deviation=(lambda u: feature_deviation(u, part.features, curve.period)) if part.features else None,
+    )
+    clean = evaluate_section(true_scan, curve)
+    truth = clean.parameters.as_array()
+    sources = section_sources(clean, CmmInstrument(), probe_vectors=true_scan.probe_vectors)
+    noisy = clean.points + point_displacements(sources, np.random.default_rng(noise_seq))[0]
+    setup = prepare_trials(noisy, curve, method="denoised")
+    seed = int(mc_seq.generate_state(1)[0])
+    samples = run_trials(setup.trials(), seed=seed, n_trials=trials, block_size=trials).samples
+    outputs = summarize(samples, 0.95, bins=10).outputs
+    inside = np.empty(len(PARAMETER_NAMES), dtype=bool)
+    for j, (name, out) in enumerate(zip(PARAMETER_NAMES, outputs)):
+        low, high = out.probabilistically_symmetric.low, out.probabilistically_symmetric.high
+        if name in MAX_MIN_PARAMETERS:  # the report clips the non-negative lengths at 0
+            low, high = max(low, 0.0), max(high, 0.0)
+        inside[j] = low <= truth[j] <= high
+    return ScanOutcome(family, index, part, inside, bool(setup.check.flagged), float(setup.check.p_value))
+
+
+def _scan_job(job: tuple[str, int, int, int]) -> ScanOutcome:
+    family, index, trials, root_seed = job
+    return study_scan(family, index, trials=trials, root_seed=root_seed)
+
+
+def run_study(
+    families: Sequence[str] = FAMILIES,
+    scans: int = 40,
+    *,
+    trials: int = 2000,
+    root_seed: int = 23,
+    workers: int = 1,
+    first: int = 0,
+) -> list[ScanOutcome]:
+    """Scans ``first .. first + scans - 1`` of every family; independent of ``workers``."""
+    jobs = [(f, k, trials, root_seed) for f in families for k in range(first, first + scans)]
+    if workers <= 1:
+        return [_scan_job(job) for job in jobs]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        return list(pool.map(_scan_job, jobs, chunksize=max(1, len(jobs) // (4 * workers))))
+
+
+@dataclass(frozen=True)
+class StudyRow:
+    """Coverage of one parameter in one family.
+
+    Attributes
+    ----------
+    family, parameter : str
+        Scenario family and parameter name.
+    scans : int
+        Scans of the family.
+    flagged : int
+        Scans the residual check flagged.
+    coverage_all : float
+        Fraction of all scans whose interval holds the truth.
+    coverage_unflagged : float
+        The same over the scans the check did not flag (nan if all were flagged).
+    u_unflagged : float
+        Binomial standard uncertainty of ``coverage_unflagged`` at 95 %: sqrt(0.95·0.05/N).
+    """
+
+    family: str
+    parameter: str
+    scans: int
+    flagged: int
+    coverage_all: float
+    coverage_unflagged: float
+    u_unflagged: float
+
+
+def summarize_study(outcomes: Sequence[ScanOutcome]) -> list[StudyRow]:
+    """Per family and parameter: coverage over all and over the unflagged scans."""
+    rows = []
+    for family in dict.fromkeys(o.family for o in outcomes):
+        chosen = [o for o in outcomes if o.family == family]
+        inside = np.array([o.inside for o in chosen])
+        flagged = np.array([o.flagged for o in chosen])
+        kept = inside[~flagged]
+        for j, name in enumerate(PARAMETER_NAMES):
+            n_kept = int(kept.shape[0])
+            rows.append(
+                StudyRow(
+                    family=family,
+                    parameter=name,
+                    scans=len(chosen),
+                    flagged=int(flagged.sum()),
+                    coverage_all=float(inside[:, j].mean()),
+                    coverage_unflagged=float(kept[:, j].mean()) if n_kept else math.nan,
+                    u_unflagged=math.sqrt(0.95 * 0.05 / n_kept) if n_kept else math.nan,
+                )
+            )
+    return rows
