@@ -1,0 +1,109 @@
+"""CLI: what used to be silently overridden, ignored or unnoticed is now said (issue 18).
+
+Each case ends in one line: ``robocal-uncertainty CMD: error: ...`` with exit status 1, or a
+``warning:``/note line with the run going on.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from robocal_uncertainty.bagio import write_campaign
+from robocal_uncertainty.cli import main
+from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_model import rpy_to_matrix
+from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "config" / "paper_arm.yaml"
+TRIALS = ["--trials", "400"]
+
+
+def _error(capsys: pytest.CaptureFixture[str], command: str) -> str:
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1, captured.err
+    prefix = f"robocal-uncertainty {command}: error: "
+    assert lines[0].startswith(prefix), lines[0]
+    return lines[0][len(prefix) :]
+
+
+@pytest.fixture(scope="module")
+def two_series(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """One simulated robot, tracker frame: 40 training poses, 30 validation poses in the same
+    set-up, and the same 30 poses measured after the tracker moved by 20 mm and 5 mrad."""
+    model = load_robot_model(PAPER)
+    sim = simulate_campaign(model, SimulationSettings(n_poses=70, frame="tracker"), seed=7).campaign
+    train, same = sim.subset(np.arange(40)), sim.subset(np.arange(40, 70))
+    rot = rpy_to_matrix(np.array([0.003, 0.0, -0.004]))
+    moved = dataclasses.replace(same, points=same.points @ rot.T + np.array([0.012, -0.016, 0.0]))
+    out = tmp_path_factory.mktemp("series")
+    paths = {"train": out / "train.mcap", "same": out / "same.mcap", "moved": out / "moved.mcap"}
+    for key, campaign in (("train", train), ("same", same), ("moved", moved)):
+        write_campaign(paths[key], campaign)
+    return paths
+
+
+def test_validate_refuses_a_split_option_with_a_validation_campaign(two_series, tmp_path, capsys) -> None:
+    capsys.readouterr()
+    argv = ["validate", str(two_series["train"]), "--robot", "paper_arm", "--validation-campaign"]
+    argv += [str(two_series["same"]), "--train-poses", "20", "--out", str(tmp_path / "v"), *TRIALS]
+    assert main(argv) == 1
+    assert _error(capsys, "validate") == (
+        "--train-poses splits the campaign, --validation-campaign holds out a second campaign whole and "
+        "trains on the first whole: give one or the other"
+    )
+    assert not (tmp_path / "v").exists()
+
+
+def test_validate_refuses_a_validation_campaign_of_a_moved_tracker(two_series, tmp_path, capsys) -> None:
+    capsys.readouterr()
+    argv = ["validate", str(two_series["train"]), "--robot", "paper_arm", "--validation-campaign"]
+    argv += [str(two_series["moved"]), "--out", str(tmp_path / "v"), *TRIALS]
+    assert main(argv) == 1
+    msg = _error(capsys, "validate")
+    assert msg.startswith("the validation campaign was measured in another set-up than the calibration campaign")
+    # The simulated move: 5 mrad, and the points' centroid displaced by the rotation and the 20 mm.
+    mm, mrad = (float(v) for v in msg.split("the measured points sit ")[1].split(" mrad")[0].split(" mm and "))
+    assert mrad == pytest.approx(5.0, abs=0.05)
+    assert 10.0 < mm < 40.0
+    assert not (tmp_path / "v").exists()
+
+
+def test_validate_of_the_same_set_up_states_the_frame_check(two_series, tmp_path, capsys) -> None:
+    capsys.readouterr()
+    argv = ["validate", str(two_series["train"]), "--robot", "paper_arm", "--validation-campaign"]
+    argv += [str(two_series["same"]), "--out", str(tmp_path / "v"), *TRIALS]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    (line,) = [x for x in out.splitlines() if x.startswith("validation campaign's frame:")]
+    assert "within the stated uncertainty; the measured points sit" in line
+    assert "(campaign, 1 fold(s), 30 held-out measurements" in out
+
+
+def test_a_robot_yaml_typo_is_an_error_naming_the_close_match(tmp_path, capsys) -> None:
+    data = yaml.safe_load(PAPER.read_text(encoding="utf-8"))
+    data["tool_piont"] = data.pop("tool_point")
+    robot = tmp_path / "arm.yaml"
+    robot.write_text(yaml.safe_dump(data), encoding="utf-8")
+    capsys.readouterr()
+    assert main(["fk", "--robot", str(robot), "--joints", "0", "0", "0", "0", "0", "0"]) == 1
+    assert _error(capsys, "fk") == (
+        f"{robot}: unknown top-level field 'tool_piont' (did you mean 'tool_point'?) "
+        "(known: base, convention, hayati_beta_joints, joints, name, tool_point, units)"
+    )
+
+
+def test_calibrate_says_when_the_known_base_is_replaced(two_series, capsys) -> None:
+    """paper_arm states its base known at the tracker origin; the simulated tracker stands 2.08 m away."""
+    capsys.readouterr()
+    assert main(["calibrate", str(two_series["train"]), "--robot", "paper_arm"]) == 0
+    out = capsys.readouterr().out
+    (line,) = [x for x in out.splitlines() if "known base" in x]
+    assert line.strip().startswith("warning: the robot config's known base is 20")
+    assert "set base.known: false in the robot config" in line
