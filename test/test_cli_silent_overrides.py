@@ -107,3 +107,38 @@ def test_calibrate_says_when_the_known_base_is_replaced(two_series, capsys) -> N
     (line,) = [x for x in out.splitlines() if "known base" in x]
     assert line.strip().startswith("warning: the robot config's known base is 20")
     assert "set base.known: false in the robot config" in line
+
+
+def test_fk_refuses_joints_and_a_joints_file_together(tmp_path, capsys) -> None:
+    joints = tmp_path / "q.txt"
+    joints.write_text("0 -2 1 0 1 0\n", encoding="utf-8")
+    capsys.readouterr()
+    assert (
+        main(["fk", "--robot", "paper_arm", "--joints-file", str(joints), "--joints", "0", "-2", "1", "0", "1", "0"])
+        == 1
+    )
+    assert (
+        _error(capsys, "fk")
+        == f"give --joints or --joints-file, not both (--joints-file {joints} and 6 --joints values)"
+    )
+
+
+def test_fk_of_a_nominal_model_never_labels_base_points_as_the_measurement_frame(capsys) -> None:
+    """ur10: base unknown in the tracker frame, so the nominal model has no measurement-frame
+    points: refused. paper_arm: the config states the base known at the tracker's origin, so the
+    points are the base frame's, and now carry the measurement frame's name (they carried the
+    base frame's name under the words "measurement frame")."""
+    capsys.readouterr()
+    assert main(["fk", "--robot", "ur10", "--joints", "0", "-2", "1", "0", "1", "0", "--frame", "measurement"]) == 1
+    assert _error(capsys, "fk") == (
+        "the ur10 model's base is unknown in the measurement frame laser_tracker (base.known: false) and the "
+        "nominal model cannot place it: give a calibration of a campaign measured in that frame, or --frame base"
+    )
+    joints = ["--joints", "0", "-2", "1", "0", "1", "0"]
+    assert main(["fk", "--robot", "paper_arm", *joints, "--frame", "measurement"]) == 0
+    measurement = capsys.readouterr().out.splitlines()
+    assert measurement[0].endswith("in frame laser_tracker (measurement frame), mm")
+    assert main(["fk", "--robot", "paper_arm", *joints, "--frame", "base"]) == 0
+    base = capsys.readouterr().out.splitlines()
+    assert base[0].endswith("in frame base_link (base frame), mm")
+    assert measurement[2] == base[2]  # the same numbers: the frames coincide by the config
