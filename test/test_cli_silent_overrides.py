@@ -142,3 +142,44 @@ def test_fk_of_a_nominal_model_never_labels_base_points_as_the_measurement_frame
     base = capsys.readouterr().out.splitlines()
     assert base[0].endswith("in frame base_link (base frame), mm")
     assert measurement[2] == base[2]  # the same numbers: the frames coincide by the config
+
+
+def test_a_second_command_on_the_same_out_refuses_while_the_first_runs(two_series, tmp_path, capsys) -> None:
+    """A real second process claims --out (as a running 'validate' does before its work): this
+    command refuses, --force or not, and writes nothing there; once that process is gone its
+    lock is stale and the command runs."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "report"
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\n"
+            "from robocal_uncertainty.app.output_paths import claim_report_directory\n"
+            f"claim_report_directory({str(out)!r})\n"
+            "print('claimed', flush=True)\n"
+            "time.sleep(120)\n",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "claimed"
+        capsys.readouterr()
+        argv = ["validate", str(two_series["train"]), "--robot", "paper_arm", "--out", str(out), *TRIALS]
+        for force in ([], ["--force"]):
+            assert main([*argv, *force]) == 1
+            assert _error(capsys, "validate") == (
+                f"report directory --out {out} is being written by another command (process {holder.pid}, "
+                "lock file .robocal-uncertainty.lock): wait for it to finish, or give another --out"
+            )
+        assert [p.name for p in out.iterdir()] == [".robocal-uncertainty.lock"]
+    finally:
+        holder.kill()
+        holder.wait()
+    assert main(argv) == 0
+    assert (out / "validation.json").is_file()
+    assert not (out / ".robocal-uncertainty.lock").exists()  # released when the command ended

@@ -12,7 +12,10 @@ The criterion is the displacement the fitted transform makes at the measured poi
 over the points of ``|R p + t - p|``), against a limit the caller states (e.g. the expanded
 3-D uncertainty of a predicted point, or the calibration's residual RMS, whichever is
 larger): a move smaller than that cannot be told from the model error, a larger one
-dominates every comparison.
+dominates every comparison. It is a move only when the rigid fit also explains the error
+(the RMS error after the fit at most :data:`EXPLAINED_RATIO` of the RMS error before it):
+errors the fit does not explain (another robot, a wrong model, an over-confident statement)
+are no frame move and are left for the comparison itself to show.
 """
 
 from __future__ import annotations
@@ -27,9 +30,11 @@ from robocal_uncertainty.core.robot_model import rpy_to_matrix
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.errors import InputError
 
-__all__ = ["FrameComparison", "compare_frames"]
+__all__ = ["EXPLAINED_RATIO", "FrameComparison", "compare_frames"]
 
 Array = NDArray[np.float64]
+EXPLAINED_RATIO = 0.5
+"""A rigid transform is a frame move only when it leaves at most this fraction of the RMS error."""
 
 
 @dataclass(frozen=True)
@@ -68,8 +73,8 @@ class FrameComparison:
 
     @property
     def moved(self) -> bool:
-        """Whether the frame moved by more than the stated uncertainty."""
-        return self.displacement_rms > self.limit
+        """Whether the frame moved by more than the stated uncertainty (and the move explains the error)."""
+        return self.displacement_rms > self.limit and self.rms_after <= EXPLAINED_RATIO * self.rms_before
 
     def describe(self) -> str:
         """One line: the move in mm and mrad, and what it is compared with."""

@@ -40,6 +40,18 @@ def test_noise_alone_is_no_move() -> None:
     assert c.displacement_rms < 1e-4  # a fit over 300 points averages the noise out
 
 
+def test_an_error_the_rigid_fit_does_not_explain_is_no_move() -> None:
+    """Another robot, or a wrong model: a smooth non-rigid error of 3 mm with a small rigid part
+    (0.5 mm) beyond the limit, but the fit leaves most of the error: not a frame move."""
+    p = _points()
+    bend = 3e-3 * np.stack((np.sin(3 * p[:, 1]), np.cos(2 * p[:, 0]), np.sin(2 * p[:, 2] + 1)), axis=1)
+    m = p + bend
+    c = compare_frames(p, m, limit=1e-4)
+    assert c.displacement_rms > c.limit
+    assert c.rms_after > 0.5 * c.rms_before
+    assert not c.moved
+
+
 @pytest.mark.parametrize(
     ("predicted", "measured", "limit", "match"),
     [
