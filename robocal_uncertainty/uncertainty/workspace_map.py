@@ -31,6 +31,7 @@ from robocal_uncertainty.montecarlo.engine import ProgressCallback, reduce_trial
 from robocal_uncertainty.montecarlo.region import coverage_region
 from robocal_uncertainty.montecarlo.streaming import Reduction
 from robocal_uncertainty.uncertainty.calibration_mc import OUTPUT_FRAMES, prepare_calibration_trials
+from robocal_uncertainty.uncertainty.memory import check_fits, grid_bytes, grid_size, map_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
@@ -182,6 +183,12 @@ def grid_configurations(model: RobotModel, steps: int | Sequence[int], *, limits
     ):
         msg = f"grid steps must be {model.n_joints} integers >= 1 (one per joint), got {steps!r}"
         raise ConfigError(msg)
+    n = grid_size([int(c) for c in counts])
+    check_fits(
+        grid_bytes(n, model.n_joints),
+        f"a grid of {' x '.join(str(int(c)) for c in counts)} = {n:,} configurations".replace(",", " "),
+        "use fewer values per joint (--grid), or --configurations N random ones",
+    )
     ranges = joint_ranges(model, limits)
     axes = [
         np.linspace(lo, hi, int(c)) if c > 1 else np.array([0.5 * (lo + hi)]) for (lo, hi), c in zip(ranges, counts)
@@ -318,6 +325,21 @@ def map_workspace(
     n = q.shape[0]
     kept_configs = _check_regions(regions, n)
     campaign = campaign.reorder_joints(model.joint_names)
+    rows = min(int(block_size), int(trials)) * max(1, int(chunk_blocks))
+    check_fits(
+        map_bytes(
+            n,
+            model.n_joints,
+            campaign.n_poses,
+            block_rows=rows,
+            workers=1 if executor is not None else int(workers),
+            n_trials=int(trials),
+            n_regions=int(kept_configs.size),
+        ),
+        f"a map of {n:,} configurations x {int(trials):,} trials ({rows:,} trials per block, "
+        f"{int(workers)} worker{'s' if int(workers) != 1 else ''})".replace(",", " "),
+        "use fewer configurations, a smaller --block-size or fewer --workers",
+    )
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     trial_block = prepare_calibration_trials(
