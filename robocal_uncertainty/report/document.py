@@ -172,10 +172,13 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
             f"(sum-of-squares test p = {ad.p_value:.3g} >= {ad.significance:g}); the residual source adds nothing."
         )
     else:
-        u_m = ", ".join(_um(v) for v in ad.standard_uncertainty)
+        std = [float(v) for v in ad.standard_uncertainty]
+        u_m = f"({', '.join(_um(v) for v in std[:3])}) µm"
+        if len(std) > 3:  # 6-DOF residuals: the rotation part is in rad
+            u_m = f"{u_m} and rotation ({', '.join(f'{v * 1e3:.3f}' for v in std[3:])}) mrad"
         adequacy = (
             f"Model adequacy: the residuals exceed the stated noise (p = {ad.p_value:.3g} < {ad.significance:g}); "
-            f"model error per axis of the measurement frame u = ({u_m}) µm, carried by the residual "
+            f"model error per axis of the measurement frame u = {u_m}, carried by the residual "
             "source when enabled."
         )
     items.append(adequacy)
