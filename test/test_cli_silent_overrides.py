@@ -183,3 +183,38 @@ def test_a_second_command_on_the_same_out_refuses_while_the_first_runs(two_serie
     assert main(argv) == 0
     assert (out / "validation.json").is_file()
     assert not (out / ".robocal-uncertainty.lock").exists()  # released when the command ended
+
+
+UR10_CSV = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
+
+
+def test_validate_on_the_real_ur10_series_tells_the_same_set_up_from_a_moved_tracker(tmp_path, capsys) -> None:
+    """The UR10 series split at random into two halves of one set-up: the second validates the
+    first (rigid fit 0.045 mm and 0.09 mrad, far within the stated 0.65 mm). The same half with
+    the tracker turned by 0.35 rad and moved by 1.27 m: refused, naming the move."""
+    from robocal_uncertainty.bagio import read_campaign
+
+    if not UR10_CSV.exists():
+        pytest.skip("UR10 data not present")
+    whole = tmp_path / "ur10.mcap"
+    assert main(["import-csv", str(UR10_CSV), "--out", str(whole)]) == 0
+    campaign = read_campaign(whole)
+    perm = np.random.default_rng(0).permutation(campaign.n_poses)
+    train, held = campaign.subset(np.sort(perm[:316])), campaign.subset(np.sort(perm[316:]))
+    rot = rpy_to_matrix(np.array([0.0, 0.0, 0.35]))
+    moved = dataclasses.replace(held, points=held.points @ rot.T + np.array([1.2, -0.4, 0.05]))
+    paths = {name: tmp_path / f"{name}.mcap" for name in ("train", "held", "moved")}
+    for name, c in (("train", train), ("held", held), ("moved", moved)):
+        write_campaign(paths[name], c)
+    capsys.readouterr()
+    argv = ["validate", str(paths["train"]), "--robot", "ur10", "--trials", "500", "--validation-campaign"]
+    assert main([*argv, str(paths["held"]), "--out", str(tmp_path / "same")]) == 0
+    (line,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("validation campaign's frame:")]
+    mm, mrad = (float(v) for v in line.split("points sit ")[1].split(" mrad")[0].split(" mm and "))
+    assert mm < 0.1 and mrad < 0.2  # the residual model error (0.4 mm RMS) averaged over 316 points
+    assert main([*argv, str(paths["moved"]), "--out", str(tmp_path / "moved")]) == 1
+    msg = _error(capsys, "validate")
+    mm, mrad = (float(v) for v in msg.split("points sit ")[1].split(" mrad")[0].split(" mm and "))
+    assert mrad == pytest.approx(350.0, abs=0.5)
+    assert 1000.0 < mm < 2000.0
+    assert "RMS error" in msg and "0.40" in msg.split("before the fit, ")[1]  # after the fit: the model error
