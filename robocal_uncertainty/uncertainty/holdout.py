@@ -35,6 +35,7 @@ from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.memory import check_fits, validation_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
@@ -453,6 +454,18 @@ def validate_holdout(
     fold_results = []
     frame_comparison: FrameComparison | None = None
     chunk = holdout_chunk_size(trials)
+    largest = min(chunk, max(held.n_poses for _, held in folds))
+    check_fits(
+        validation_bytes(
+            int(trials),
+            largest,
+            model.layout.size,
+            n_poses=max(train.n_poses for train, _ in folds),
+            n_joints=model.n_joints,
+        ),
+        f"--trials {int(trials)} with {largest} held-out poses per Monte Carlo",
+        "use fewer --trials",
+    )
     for f, (train, held_all) in enumerate(folds):
         calibration = identify(model, train, lambda_=lambda_)
         n_held = held_all.n_poses

@@ -30,6 +30,7 @@ __all__ = [
     "grid_bytes",
     "grid_size",
     "map_bytes",
+    "validation_bytes",
 ]
 
 USABLE_FRACTION = 0.9
@@ -140,6 +141,19 @@ def evaluation_bytes(
     columns = 3 * n_test + n_parameters + (3 * n_test if orientation else 0)
     per_block = n_poses * (2 * n_joints + 6) + n_test * (n_joints + 3) + columns
     return int(_FLOAT * (2 * n_trials * columns + max(1, workers) * min(block_rows, n_trials) * per_block))
+
+
+def validation_bytes(n_trials: int, n_chunk: int, n_parameters: int, *, n_poses: int, n_joints: int) -> int:
+    """Peak memory of one chunk of :func:`~robocal_uncertainty.uncertainty.holdout.validate_holdout`.
+
+    Per trial and held-out pose of the chunk: the Monte Carlo's rows and draws and the
+    statistics' copies (the prediction plus noise, the sorted quantiles, the centred region
+    samples). Measured with ``benchmarks/bench_validate_memory.py`` (5 000 trials): 1.26 MB
+    per held-out pose, 31.5 values per trial and pose; the estimate counts 40, plus the
+    campaign's part of :func:`evaluation_bytes`.
+    """
+    campaign = evaluation_bytes(n_trials, 0, n_parameters, n_poses=n_poses, n_joints=n_joints, block_rows=10_000)
+    return int(_FLOAT * 40 * n_trials * n_chunk + campaign)
 
 
 def grid_bytes(n_configurations: int, n_joints: int) -> int:

@@ -160,6 +160,11 @@ def sample_configurations(
     return np.asarray(rng.uniform(ranges[:, 0], ranges[:, 1], size=(int(n), model.n_joints)), dtype=np.float64)
 
 
+def _grouped(n: int) -> str:
+    """``15 625 000 000``: thousands grouped with spaces."""
+    return f"{n:,}".replace(",", " ")
+
+
 def grid_configurations(model: RobotModel, steps: int | Sequence[int], *, limits: ArrayLike | None = None) -> Array:
     """A full grid over the joint ranges: ``steps[j]`` evenly spaced values of joint j.
 
@@ -186,7 +191,7 @@ def grid_configurations(model: RobotModel, steps: int | Sequence[int], *, limits
     n = grid_size([int(c) for c in counts])
     check_fits(
         grid_bytes(n, model.n_joints),
-        f"a grid of {' x '.join(str(int(c)) for c in counts)} = {n:,} configurations".replace(",", " "),
+        f"a grid of {' x '.join(str(int(c)) for c in counts)} = {_grouped(n)} configurations",
         "use fewer values per joint (--grid), or --configurations N random ones",
     )
     ranges = joint_ranges(model, limits)
@@ -336,9 +341,11 @@ def map_workspace(
             n_trials=int(trials),
             n_regions=int(kept_configs.size),
         ),
-        f"a map of {n:,} configurations x {int(trials):,} trials ({rows:,} trials per block, "
-        f"{int(workers)} worker{'s' if int(workers) != 1 else ''})".replace(",", " "),
-        "use fewer configurations, a smaller --block-size or fewer --workers",
+        f"a map of {_grouped(n)} configurations x {_grouped(int(trials))} trials ({_grouped(rows)} trials per "
+        f"block, {int(workers)} worker{'s' if int(workers) != 1 else ''}"
+        f"{f', {kept_configs.size} with a region' if kept_configs.size else ''})",
+        "use fewer configurations, a smaller --block-size, fewer --workers"
+        + (", or fewer --trials or --regions" if kept_configs.size else ""),
     )
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)

@@ -155,3 +155,28 @@ def test_available_memory_follows_the_address_space_limit() -> None:
     value = int(got.stdout)
     assert 0 < value < LIMIT
     assert available_memory() is not None
+
+
+def test_validate_and_map_trials_that_cannot_fit_are_refused(tmp_path, capsys) -> None:
+    """validate holds every trial of a chunk of held-out poses (at least 16, or all of them);
+    map --regions N keeps every trial of N configurations: 10^8 and 10^9 trials cannot fit.
+    (A map without regions streams its trials: its memory does not grow with --trials.)"""
+    path = tmp_path / "c.mcap"
+    assert main(["simulate", "--robot", "paper_arm", "--frame", "tracker", "--out", str(path), "--seed", "1"]) == 0
+    capsys.readouterr()
+    argv = ["validate", str(path), "--robot", "paper_arm", "--trials", "100000000", "--out", str(tmp_path / "v")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(
+        "robocal-uncertainty validate: error: --trials 100000000 with 13 held-out poses per Monte Carlo needs about "
+    )
+    assert err.endswith("available to this process: use fewer --trials")
+    argv = ["map", str(path), "--robot", "paper_arm", "--configurations", "100", "--regions", "50"]
+    assert main([*argv, "--trials", "1000000000", "--out", str(tmp_path / "m")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(
+        "robocal-uncertainty map: error: a map of 100 configurations x 1 000 000 000 trials (1 000 trials per block, "
+        "1 worker, 50 with a region) needs about 1.09 TiB of memory"
+    )
+    assert err.endswith("or fewer --trials or --regions")
+    assert not (tmp_path / "v").exists() and not (tmp_path / "m").exists()
