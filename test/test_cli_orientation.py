@@ -115,6 +115,12 @@ def test_six_dof_campaign_prints_the_result_objects_orientation(
     if not result.model_adequacy.adequate:
         std = result.model_adequacy.standard_uncertainty
         assert f"rotation ({', '.join(f'{v * 1e6:.1f}' for v in std[3:])}) urad" in adequacy
+    # ... and report.md in mrad (it printed all six values as µm)
+    assert not result.model_adequacy.adequate  # the UR10's unmodelled errors: 0.2-0.3 mm, 0.6-0.7 mrad
+    std = result.model_adequacy.standard_uncertainty
+    rot = f"and rotation ({', '.join(f'{v * 1e3:.3f}' for v in std[3:])}) mrad, carried by the residual source"
+    assert rot in md
+    assert all(0.3e-3 < v < 1.5e-3 for v in std[3:]) and all(0.1e-3 < v < 0.4e-3 for v in std[:3])
 
 
 def test_point_campaign_names_the_undetermined_tool_axis(

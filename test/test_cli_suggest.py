@@ -117,7 +117,7 @@ def test_printed_json_and_csv_numbers_are_those_of_suggest_poses(
         assert cells[:-2] == [f"{v:.4f}" for v in np.degrees(s.joint_positions)]
         assert cells[-2:] == [_um(s.predicted_u_m), _um(s.monte_carlo_u_m)]
     assert "joint1 / deg" in printed.out and "predicted RMS u_pos / µm" in printed.out
-    assert "Monte Carlo: 300 trials, seed 7" in printed.out
+    assert "Monte Carlo: 300 trials, random seed 7" in printed.out
 
     data = json.loads(out_json.read_text())
     assert data["joint_names"] == list(paper_arm.joint_names)
@@ -162,7 +162,7 @@ def test_same_seed_same_output_other_seed_other_candidates(
         out = capsys.readouterr().out.replace(str(path), "OUT")
         outputs.append((out, json.loads(path.read_text())))
     assert outputs[0] == outputs[1]
-    assert "(seed 4)" in outputs[0][0]
+    assert "(random seed 4)" in outputs[0][0]
     first = [s["joint_positions_rad"] for s in outputs[0][1]["suggestions"]]
     other = [s["joint_positions_rad"] for s in outputs[2][1]["suggestions"]]
     assert first != other

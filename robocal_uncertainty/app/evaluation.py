@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
+
 from robocal_uncertainty.bagio.campaign_reader import READ_WARNINGS_KEY
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
@@ -22,6 +24,7 @@ from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.budget import evaluate_budget
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.memory import check_fits, evaluation_bytes
 from robocal_uncertainty.uncertainty.options import EvaluationOptions, Progress, evaluate_campaign
 from robocal_uncertainty.uncertainty.sweeps import Sweep, evaluate_sweeps
 
@@ -173,6 +176,23 @@ def evaluate(
     if calibration is None:
         calibration = identify(model, campaign, lambda_=options.lambda_, accept_unconverged=options.accept_unconverged)
     options, notes = small_campaign_options(campaign, calibration, options)
+    if options.trials != "auto":
+        # Refuse a size that cannot fit before the work, naming it, instead of an allocation
+        # traceback after minutes (the adaptive procedure is bounded by its own cap).
+        n_test = int(np.atleast_2d(options.test_joints).shape[0])
+        check_fits(
+            evaluation_bytes(
+                int(options.trials),
+                n_test,
+                int(np.count_nonzero(calibration.estimated)),
+                n_poses=campaign.n_poses,
+                n_joints=model.n_joints,
+                block_rows=options.block_size,
+                workers=workers if executor is None else 1,
+            ),
+            f"--trials {int(options.trials)} at {n_test} test configuration{'s' if n_test != 1 else ''}",
+            "use fewer --trials (or fewer test configurations)",
+        )
     uncertainty = evaluate_campaign(
         model, campaign, options, calibration=calibration, workers=workers, progress=progress, executor=executor
     )

@@ -92,13 +92,15 @@ def tool_points(model: RobotModel, joints: Array, *, calibrated: bool, frame: st
         identified base gives measurement-frame points).
     frame : {"measurement", "base"}, optional
         Frame of :attr:`ToolPoints.points`; default the measurement frame when the model has
-        one distinct from the base, else the base frame. ``"measurement"`` without such a
-        frame gives the base-frame points (the frames coincide).
+        one distinct from the base, else the base frame. ``"measurement"`` of a model whose
+        config states the base known at the measurement frame's origin gives those points
+        labelled with the measurement frame (the frames coincide).
 
     Raises
     ------
     ConfigError
-        Unknown `frame`.
+        Unknown `frame`; ``"measurement"`` for a model whose base is unknown
+        (``base.known: false``) and not identified by a calibration.
     """
     if frame is not None and frame not in FRAMES:
         msg = f"frame must be one of {', '.join(FRAMES)}, got {frame!r}"
@@ -113,7 +115,18 @@ def tool_points(model: RobotModel, joints: Array, *, calibrated: bool, frame: st
     placed = model.base_known and bool(np.any(model.base_xyz != 0) or np.any(model.base_rpy != 0))
     has_world = (calibrated and not np.allclose(p[b0 : b0 + 6], 0.0)) or placed
     chosen = frame or ("measurement" if has_world else "base")
-    if chosen == "measurement" and has_world:
+    if chosen == "measurement" and not has_world and not model.base_known:
+        # The base frame's points must not be labelled as the measurement frame's.
+        kind = "calibration identified no base" if calibrated else "nominal model cannot place it"
+        msg = (
+            f"the {model.name} model's base is unknown in the measurement frame {model.measurement_frame_id} "
+            f"(base.known: false) and the {kind}: give a calibration of a campaign measured in that frame, "
+            "or --frame base"
+        )
+        raise ConfigError(msg)
+    if chosen == "measurement":
+        # Without a placed base the config states the base at the measurement frame's origin
+        # (base.known: true, xyz and rpy 0): the frames coincide, the points are the same.
         frame_id, points = model.measurement_frame_id, world_points
     else:
         frame_id, points = model.base_frame_id, base_points

@@ -11,6 +11,14 @@ not rewrite) are removed; files that no report writes are left alone.
 option, so a command fails before its computation instead of after it.
 :func:`clear_earlier_report` removes the stale files and is called just before the new
 report is written (a run that fails keeps the earlier report).
+
+Two commands must not write one report directory at once (the later one would silently
+replace the earlier's files, or mix them): :func:`claim_report_directory` creates the
+directory and, atomically (``O_CREAT | O_EXCL``), a lock file :data:`LOCK_NAME` holding the
+process id, before the work starts; a second command finds it and refuses, ``--force`` or
+not. :func:`release_report_directories` removes the lock when the command ends (and the
+directory, if the claim created it and nothing was written). A lock whose process is gone
+(a killed run) is stale and taken over.
 """
 
 from __future__ import annotations
@@ -21,7 +29,18 @@ from pathlib import Path
 
 from robocal_uncertainty.errors import ConfigError
 
-__all__ = ["REPORT_FILE_PATTERNS", "check_output_file", "check_report_directory", "clear_earlier_report"]
+__all__ = [
+    "LOCK_NAME",
+    "REPORT_FILE_PATTERNS",
+    "check_output_file",
+    "check_report_directory",
+    "claim_report_directory",
+    "clear_earlier_report",
+    "release_report_directories",
+]
+
+LOCK_NAME = ".robocal-uncertainty.lock"
+"""Lock file of a report directory being written (holds the writer's process id)."""
 
 REPORT_FILE_PATTERNS: tuple[str, ...] = (
     "report.json",
@@ -130,7 +149,8 @@ def check_report_directory(path: str | Path, *, force: bool, option: str = "--ou
         msg = f"cannot write the report to {_where(option)}{out}: it is a file, not a directory"
         raise ConfigError(msg)
     if out.is_dir():
-        if any(out.iterdir()) and not force:
+        _refuse_foreign_lock(out, option)
+        if any(p.name != LOCK_NAME for p in out.iterdir()) and not force:
             msg = (
                 f"report directory {_where(option)}{out} exists and is not empty "
                 "(give --force to replace the earlier report, or another --out)"
@@ -168,3 +188,94 @@ def clear_earlier_report(path: str | Path) -> list[Path]:
                 stale.unlink()
                 removed.append(stale)
     return removed
+
+
+_CLAIMS: list[tuple[Path, Path, bool]] = []
+"""This process's claims: (lock file, directory, whether the claim created the directory)."""
+
+
+def _lock_owner(lock: Path) -> int | None:
+    """Process id written in `lock`, or None when unreadable (being written, or garbage)."""
+    try:
+        text = lock.read_text(encoding="utf-8").strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def _alive(pid: int) -> bool:
+    """Whether process `pid` exists (signal 0 sends nothing)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # exists, another user's
+    except OSError:
+        return False
+    return True
+
+
+def _refuse_foreign_lock(out: Path, option: str) -> None:
+    """Raise when another live process holds `out`'s lock; remove a stale lock."""
+    lock = out / LOCK_NAME
+    if not lock.exists():
+        return
+    owner = _lock_owner(lock)
+    if owner == os.getpid():
+        return
+    if owner is None or _alive(owner):
+        who = f"process {owner}" if owner is not None else "another process"
+        msg = (
+            f"report directory {_where(option)}{out} is being written by another command ({who}, lock file "
+            f"{LOCK_NAME}): wait for it to finish, or give another --out"
+        )
+        raise ConfigError(msg)
+    lock.unlink(missing_ok=True)  # its writer is gone
+
+
+def claim_report_directory(path: str | Path, *, option: str = "--out") -> Path:
+    """Create report directory `path` if needed and lock it for this process; return it.
+
+    Call after :func:`check_report_directory`, before the work; the claim lasts until
+    :func:`release_report_directories`.
+
+    Raises
+    ------
+    ConfigError
+        Another live process holds the directory's lock (one line naming it), or the
+        directory cannot be created.
+    """
+    out = Path(path)
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        msg = f"cannot create the report directory {_where(option)}{out}: {err.strerror or err}"
+        raise ConfigError(msg) from err
+    lock = out / LOCK_NAME
+    for _ in range(2):
+        _refuse_foreign_lock(out, option)
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            if _lock_owner(lock) == os.getpid():
+                return out
+            continue  # a stale lock just removed, or a writer that won the race: look again
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(f"{os.getpid()}\n")
+        _CLAIMS.append((lock, out, created))
+        return out
+    _refuse_foreign_lock(out, option)
+    msg = f"cannot lock the report directory {_where(option)}{out}: its lock file {LOCK_NAME} keeps reappearing"
+    raise ConfigError(msg)
+
+
+def release_report_directories() -> None:
+    """Remove this process's locks (and the directories a claim created that stayed empty)."""
+    while _CLAIMS:
+        lock, out, created = _CLAIMS.pop()
+        if _lock_owner(lock) == os.getpid():
+            lock.unlink(missing_ok=True)
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()

@@ -60,7 +60,11 @@ def validate(
     Raises
     ------
     ConfigError
-        Adaptive trials, the base frame, or more than one split option.
+        Adaptive trials, the base frame, more than one split option, or a split option with
+        a validation campaign.
+    InputError
+        A validation campaign measured in another set-up (its frame moved, see
+        :func:`~robocal_uncertainty.uncertainty.holdout.validate_holdout`).
     """
     if options.trials == "auto":
         raise ConfigError("validate needs a fixed number of --trials, not auto")
@@ -73,6 +77,15 @@ def validate(
     chosen = [x is not None for x in (train_poses, holdout_fraction, k_folds)]
     if sum(chosen) > 1:
         raise ConfigError("give only one of --train-poses, --holdout-fraction, --k-folds")
+    if validation_campaign is not None and any(chosen):
+        # The second campaign is held out whole and the first used whole for training: a split
+        # option would be ignored without a word.
+        given = next(o for o, c in zip(("--train-poses", "--holdout-fraction", "--k-folds"), chosen) if c)
+        msg = (
+            f"{given} splits the campaign, --validation-campaign holds out a second campaign whole and "
+            "trains on the first whole: give one or the other"
+        )
+        raise ConfigError(msg)
     splits = None
     if validation_campaign is None:
         fraction = holdout_fraction if any(chosen) else DEFAULT_HOLDOUT_FRACTION

@@ -125,7 +125,7 @@ _DASK_ADDRESS = re.compile(
 
 def check_outputs(args: argparse.Namespace) -> None:
     """Refuse output paths that cannot or must not be written, before any work (--force rule)."""
-    from robocal_uncertainty.app.output_paths import check_output_file, check_report_directory
+    from robocal_uncertainty.app.output_paths import check_output_file, check_report_directory, claim_report_directory
     from robocal_uncertainty.app.simulation import truth_path
 
     force = bool(getattr(args, "force", False))
@@ -138,6 +138,9 @@ def check_outputs(args: argparse.Namespace) -> None:
             check_output_file(truth_path(args.out), force=force, option="truth file")
     elif args.command in ("demo", "evaluate", "replay", "validate", "map", "section"):
         check_report_directory(args.out, force=force, option="--out")
+        # Claimed before the work: a second command on the same --out refuses instead of
+        # silently replacing this one's report (released when the command ends).
+        claim_report_directory(args.out, option="--out")
     if getattr(args, "csv_out", None):
         check_output_file(args.csv_out, force=force, option="--csv")
         if args.json and Path(args.json).resolve() == Path(args.csv_out).resolve():

@@ -323,6 +323,10 @@ def joint_configurations(
     """Configurations [rad] from ``{flag}-file`` `path` or ``{flag}`` `values`, within the joint limits."""
     from robocal_uncertainty.core import check_joint_limits
 
+    if path and values:
+        # One of them would be ignored without a word.
+        msg = f"give {flag} or {flag}-file, not both ({flag}-file {path} and {len(values)} {flag} values)"
+        raise ConfigError(msg)
     if path:
         q = read_joints_file(path, model.n_joints, degrees=degrees)
         what = f"{path}: {noun}"

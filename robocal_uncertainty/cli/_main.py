@@ -88,3 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"robocal-uncertainty {args.command}: error: cannot access{where}: {err.strerror or err}", file=sys.stderr
         )
         return 1
+    finally:
+        from robocal_uncertainty.app.output_paths import release_report_directories
+
+        release_report_directories()

@@ -22,7 +22,9 @@ DEMO_SOURCES = ("tracker", "encoder", "lambda", "n_poses", "pose_choice")
 def register(sub: Any) -> None:
     """Add the ``demo`` command and its options to the subparsers `sub`."""
     p = sub.add_parser(
-        "demo", help="the main job on the embedded default: seed's arm, simulated 53-pose campaign, Table 2 and report"
+        "demo",
+        help="the main job on the embedded default: the arm of Jiang et al. (Table 1), simulated 53-pose campaign, "
+        "Table 2 and report",
     )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
@@ -35,8 +37,8 @@ def run(args: argparse.Namespace) -> int:
 
     model = load_robot("paper_arm")
     sim = simulate_campaign(model, SimulationSettings(n_poses=53), seed=args.seed)
-    print("Demo: the seed's arm (Table 1), a simulated 53-pose campaign with tracker noise +-5 um and")
-    print("encoder noise +-0.005 deg (uniform), evaluated at the seed's test joints")
+    print("Demo: the arm of Jiang et al. (Table 1), a simulated 53-pose campaign with tracker noise +-5 um and")
+    print("encoder noise +-0.005 deg (uniform), evaluated at their test joints")
     print(f"({', '.join(f'{v:g}' for v in PAPER_TEST_JOINTS_DEG)}) deg. Sources: {', '.join(DEMO_SOURCES)}.")
     print()
     test_q = np.radians(np.array(PAPER_TEST_JOINTS_DEG))[None, :]

@@ -209,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
     source = (
         f"the {count(len(result.candidates), 'configuration')} of {args.candidates_file}"
         if args.candidates_file
-        else f"{len(result.candidates)} candidates drawn inside the joint limits (seed {args.seed})"
+        else f"{len(result.candidates)} candidates drawn inside the joint limits (random seed {args.seed})"
     )
     print(f"Next-best poses for {model.name} ({campaign.n_poses} poses measured), ranked among {source}")
     print(
@@ -219,8 +219,8 @@ def run(args: argparse.Namespace) -> int:
     print(_format_suggestions(result, unit))
     if result.trials:
         print(
-            f"Monte Carlo: {result.trials} trials, seed {result.seed}, with suggestions 1..rank added as simulated "
-            "measurements at the calibrated model's points"
+            f"Monte Carlo: {result.trials} trials, random seed {result.seed}, with suggestions 1..rank added as "
+            "simulated measurements at the calibrated model's points"
         )
     if args.json:
         text = json.dumps(_suggestions_dict(result, model, args, test_q, settings), indent=2, allow_nan=False)

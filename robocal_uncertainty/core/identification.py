@@ -28,7 +28,7 @@ from robocal_uncertainty.core.measurement import POINT, MeasurementType, stack_e
 from robocal_uncertainty.core.observability import structural_observability
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement
 from robocal_uncertainty.core.regularization import LCurve, lcurve
-from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_from_matrix
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_from_matrix, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, ConvergenceError, IdentifiabilityError, InputError
 
 __all__ = [
@@ -531,12 +531,17 @@ def _identify_weighted(
     b0 = layout.base_index
     candidates = np.ones(layout.size, dtype=bool)
     base_init: Literal["nominal", "rigid_fit", "identity"]
+    base_note: str | None = None
     if campaign.frame == "base":
         p0[b0 : b0 + 6] = 0.0
         candidates[b0 : b0 + 6] = False
         base_init = "identity"
     else:
+        p_model = p0
         p0, base_init = _initial_base(model, measurement, p0, q, measured)
+        if base_init == "rigid_fit":
+            # A known base that the data contradict is replaced (correctly): say so.
+            base_note = _replaced_base_note(model, p_model[b0 : b0 + 6], p0[b0 : b0 + 6])
 
     obs = structural_observability(model, p0, candidates, measurement=measurement)
     est = np.flatnonzero(obs.identifiable)
@@ -634,7 +639,7 @@ def _identify_weighted(
     full_scale[est] = scale
     full_penalized = np.zeros(layout.size, dtype=bool)
     full_penalized[est] = penalized
-    warns: list[str] = []
+    warns: list[str] = [] if base_note is None else [base_note]
     cond = float(s_final[0] / s_final[-1])
     if cond > 1e6:
         warns.append(f"ill-conditioned pose set: condition number {cond:.3g} of the scaled Jacobian")
@@ -740,6 +745,28 @@ def _rigid_base(
         return None
     xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), positions)
     return np.concatenate((xyz, rpy))
+
+
+BASE_NOTE_TRANSLATION = 10e-3
+"""A known base the rigid fit replaces is reported when it is this far [m] from the fit ..."""
+BASE_NOTE_ROTATION = 10e-3
+"""... or turned by this angle [rad] from it."""
+
+
+def _replaced_base_note(model: RobotModel, stated: Array, fitted: Array) -> str | None:
+    """One line when the robot config's known base was replaced by the rigid fit and is far from it."""
+    if not model.base_known:
+        return None
+    shift = float(np.linalg.norm(fitted[:3] - stated[:3]))
+    turn_cos = (np.trace(rpy_to_matrix(stated[3:]).T @ rpy_to_matrix(fitted[3:])) - 1.0) / 2.0
+    turn = float(np.arccos(np.clip(turn_cos, -1.0, 1.0)))
+    if shift <= BASE_NOTE_TRANSLATION and turn <= BASE_NOTE_ROTATION:
+        return None
+    return (
+        f"the robot config's known base is {shift * 1e3:.1f} mm and {turn * 1e3:.1f} mrad from the rigid fit "
+        "of the nominal model to the measured points, which fits the data better: the base starts from the "
+        "fit and is identified (set base.known: false in the robot config if the base is not known)"
+    )
 
 
 def _initial_base(

@@ -22,6 +22,7 @@ and the last row's ``alpha_n, a_n`` move into the tool point (they commute, both
 
 from __future__ import annotations
 
+from difflib import get_close_matches
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -32,11 +33,26 @@ import yaml
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 
-__all__ = ["ANGLE_UNITS", "LENGTH_UNITS", "load_robot_model", "robot_model_from_dict"]
+__all__ = ["ANGLE_UNITS", "LENGTH_UNITS", "TOP_LEVEL_KEYS", "load_robot_model", "robot_model_from_dict"]
 
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6}
 ANGLE_UNITS: dict[str, float] = {"rad": 1.0, "deg": float(np.pi / 180.0)}
 _JOINT_KEYS = {"name", "alpha", "a", "d", "theta", "limits"}
+TOP_LEVEL_KEYS: tuple[str, ...] = ("name", "convention", "units", "joints", "hayati_beta_joints", "tool_point", "base")
+"""Every top-level field a robot YAML may have; any other (a typo) is refused."""
+_BASE_KEYS: tuple[str, ...] = ("known", "xyz", "rpy", "frame_id", "measurement_frame_id")
+
+
+def _unknown_fields(given: dict[Any, Any], known: tuple[str, ...] | set[str], what: str) -> str | None:
+    """One line naming the unknown fields of `given` and the known field each resembles."""
+    unknown = sorted(str(k) for k in given if k not in known)
+    if not unknown:
+        return None
+    parts = []
+    for key in unknown:
+        close = get_close_matches(key, sorted(known), n=1, cutoff=0.6)
+        parts.append(f"{key!r} (did you mean {close[0]!r}?)" if close else repr(key))
+    return f"{what} {'field' if len(unknown) == 1 else 'fields'} {', '.join(parts)} (known: {', '.join(sorted(known))})"
 
 
 def _unit(units: dict[str, Any], key: str, table: dict[str, float], where: str) -> float:
@@ -83,6 +99,11 @@ def robot_model_from_dict(data: object, *, where: str = "robot config") -> Robot
     if not isinstance(data, dict):
         msg = f"{where}: expected a mapping at top level, got {type(data).__name__}"
         raise ConfigError(msg)
+    unknown_top = _unknown_fields(data, TOP_LEVEL_KEYS, "unknown top-level")
+    if unknown_top is not None:
+        # A misspelt optional field (tool_piont, hayati_beta_joint) would otherwise give
+        # another model without a word.
+        raise ConfigError(f"{where}: {unknown_top}")
     for key in ("name", "convention", "units", "joints"):
         if key not in data:
             msg = f"{where}: missing required field '{key}'"
@@ -108,10 +129,9 @@ def robot_model_from_dict(data: object, *, where: str = "robot config") -> Robot
         if not isinstance(joint, dict):
             msg = f"{where}: joint {i} must be a mapping"
             raise ConfigError(msg)
-        unknown = set(joint) - _JOINT_KEYS
-        if unknown:
-            msg = f"{where}: joint {i} has unknown fields {sorted(unknown)}"
-            raise ConfigError(msg)
+        unknown = _unknown_fields(joint, _JOINT_KEYS, f"joint {i} has unknown")
+        if unknown is not None:
+            raise ConfigError(f"{where}: {unknown}")
         for key in ("name", "alpha", "a", "d"):
             if key not in joint:
                 msg = f"{where}: joint {i} is missing '{key}'"
@@ -149,10 +169,9 @@ def robot_model_from_dict(data: object, *, where: str = "robot config") -> Robot
     if not isinstance(base, dict):
         msg = f"{where}: 'base' must be a mapping with known, xyz, rpy"
         raise ConfigError(msg)
-    unknown_base = set(base) - {"known", "xyz", "rpy", "frame_id", "measurement_frame_id"}
-    if unknown_base:
-        msg = f"{where}: base has unknown fields {sorted(unknown_base)}"
-        raise ConfigError(msg)
+    unknown_base = _unknown_fields(base, _BASE_KEYS, "base has unknown")
+    if unknown_base is not None:
+        raise ConfigError(f"{where}: {unknown_base}")
     return RobotModel(
         name=str(data["name"]),
         joint_names=tuple(names),

@@ -47,6 +47,7 @@ from robocal_uncertainty.report.plots import (
     plot_uncertainty_vs,
     plot_uncertainty_vs_reach,
 )
+from robocal_uncertainty.report.references import ROBOT_PAPER
 from robocal_uncertainty.report.table2 import (
     RELATIVE_NOTE,
     budget_rows,
@@ -171,10 +172,13 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
             f"(sum-of-squares test p = {ad.p_value:.3g} >= {ad.significance:g}); the residual source adds nothing."
         )
     else:
-        u_m = ", ".join(_um(v) for v in ad.standard_uncertainty)
+        std = [float(v) for v in ad.standard_uncertainty]
+        u_m = f"({', '.join(_um(v) for v in std[:3])}) µm"
+        if len(std) > 3:  # 6-DOF residuals: the rotation part is in rad
+            u_m = f"{u_m} and rotation ({', '.join(f'{v * 1e3:.3f}' for v in std[3:])}) mrad"
         adequacy = (
             f"Model adequacy: the residuals exceed the stated noise (p = {ad.p_value:.3g} < {ad.significance:g}); "
-            f"model error per axis of the measurement frame u = ({u_m}) µm, carried by the residual "
+            f"model error per axis of the measurement frame u = {u_m}, carried by the residual "
             "source when enabled."
         )
     items.append(adequacy)
@@ -183,7 +187,7 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
     items.append(
         f"Monte Carlo: {result.n_trials} trials"
         + (" (adaptive)" if result.adaptive is not None else "")
-        + f", converged: {conv}, seed {result.seed}, sources: {', '.join(result.settings.sources)}."
+        + f", converged: {conv}, random seed {result.seed}, sources: {', '.join(result.settings.sources)}."
     )
     items.append(
         f"Calibration: residual RMS {_um(cal.rms_before)} µm before, "
@@ -255,7 +259,7 @@ def _detail_note(result: CalibrationUncertainty, indices: Sequence[int], worst: 
 
 
 def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) -> list[_Block]:
-    blocks: list[_Block] = [_Heading(2, "Uncertainty of the tool position (seed Table 2)")]
+    blocks: list[_Block] = [_Heading(2, f"Uncertainty of the tool position (layout of {ROBOT_PAPER} Table 2)")]
     blocks += _detail_note(result, indices, worst)
     for i in indices:
         pose = result.poses[i]
@@ -267,7 +271,7 @@ def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) 
                 f"Positions in frame `{result.frame_id}` ({result.frame} frame). Joints / deg: ({joints}). "
                 f"{result.n_trials} trials, coverage probability "
                 f"{100 * result.coverage_probability:g} %, {_INTERVAL_NAMES.get(kind, kind)} "
-                f"interval, seed {result.seed}, sources: {', '.join(result.settings.sources)}. "
+                f"interval, random seed {result.seed}, sources: {', '.join(result.settings.sources)}. "
                 f"GUM validated: {gum_verdict(pose)}."
             )
         )
@@ -529,7 +533,7 @@ def _settings(
         f"software: robocal_uncertainty {software_version()}",
         f"robot: {robot_name}; campaign: {campaign_source or 'not stated'}",
         (
-            f"seed: {result.seed}; block size: {result.block_size}; trials: {result.n_trials}; "
+            f"random seed: {result.seed}; block size: {result.block_size}; trials: {result.n_trials}; "
             f"coverage probability: {result.coverage_probability:g}"
         ),
         f"tracker noise: uniform ±(a + b·L), a = {s.tracker_noise.a * 1e6:g} µm, b = {s.tracker_noise.b * 1e6:g} µm/m",
@@ -747,7 +751,7 @@ def write_report(
             _Image(
                 name,
                 f"Tool position per axis, test configuration {i + 1}, with mean, "
-                "coverage intervals and the GUM normal pdf (cf. seed Fig. 10)",
+                f"coverage intervals and the GUM normal pdf (cf. {ROBOT_PAPER} Fig. 10)",
             )
         )
         name = f"position_error_{i + 1}.png"
@@ -755,7 +759,7 @@ def write_report(
         figures.append(
             _Image(
                 name,
-                f"Position error |p − p̄|, test configuration {i + 1} (cf. seed Fig. 11)",
+                f"Position error |p − p̄|, test configuration {i + 1} (cf. {ROBOT_PAPER} Fig. 11)",
             )
         )
         if result.poses[i].orientation is not None:
@@ -775,7 +779,7 @@ def write_report(
         figures.append(
             _Image(
                 "parameters.png",
-                "Monte Carlo distributions of the identified parameter errors (cf. seed Fig. 5)",
+                f"Monte Carlo distributions of the identified parameter errors (cf. {ROBOT_PAPER} Fig. 5)",
             )
         )
     for sw in sweeps or ():
@@ -788,7 +792,7 @@ def write_report(
             reference=sw.reference,
             log_x=sw.log_x,
         )
-        figures.append(_Image(name, f"Standard uncertainty vs {sw.xlabel} (cf. seed Figs. 7-9)"))
+        figures.append(_Image(name, f"Standard uncertainty vs {sw.xlabel} (cf. {ROBOT_PAPER} Figs. 7-9)"))
 
     blocks: list[_Block] = [_Heading(1, title)]
     blocks += _summary(result, cs)

@@ -158,6 +158,10 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
         "noise_covariance_m2": ad.noise_covariance,
         "model_error_covariance_m2": ad.inadequacy_covariance,
         "model_error_standard_uncertainty_m": ad.standard_uncertainty,
+        # 6-DOF residuals: components x, y, z [m] then rx, ry, rz [rad] (the key's "_m" is the
+        # position part's unit); every covariance above is in these units.
+        "components": ["x", "y", "z", "rx", "ry", "rz"][: len(ad.standard_uncertainty)],
+        "component_units": ["m", "m", "m", "rad", "rad", "rad"][: len(ad.standard_uncertainty)],
     }
 
 

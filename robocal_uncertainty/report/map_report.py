@@ -243,7 +243,7 @@ def _plot(path: Path, wmap: WorkspaceMap, weak: WeakestRegion) -> Path:
     fig.axes[0].legend(fontsize=8, loc="best")
     fig.suptitle(
         f"{wmap.calibration.model.name}: u_pos at {len(wmap)} configurations, "
-        f"{wmap.n_trials} trials, seed {wmap.seed}, frame {wmap.frame_id}",
+        f"{wmap.n_trials} trials, random seed {wmap.seed}, frame {wmap.frame_id}",
         fontsize=11,
     )
     fig.savefig(path, format="png")
@@ -267,7 +267,7 @@ def _markdown(wmap: WorkspaceMap, weak: WeakestRegion, files: tuple[str, str, st
     lines = [
         f"# Workspace uncertainty map: {meta['robot']}",
         "",
-        f"{len(wmap)} configurations, {wmap.n_trials} Monte Carlo trials (seed {wmap.seed}, block size "
+        f"{len(wmap)} configurations, {wmap.n_trials} Monte Carlo trials (random seed {wmap.seed}, block size "
         f"{wmap.block_size}), sources {', '.join(wmap.settings.sources)}, positions in frame "
         f"`{wmap.frame_id}` ({wmap.frame}). Each trial re-identifies once and evaluates every configuration.",
         "",

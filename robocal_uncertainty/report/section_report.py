@@ -593,7 +593,7 @@ def _markdown(data: dict[str, Any], table: str) -> str:
         f"- cloud: {data.get('cloud', '')}",
         f"- nominal: {data.get('nominal', '')}",
         f"- instrument: {data['instrument']['name']} ({data.get('instrument_file', '')})",
-        f"- trials: {data['n_trials']}, seed: {data['seed']}, block size {data['block_size']}, "
+        f"- trials: {data['n_trials']}, random seed: {data['seed']}, block size {data['block_size']}, "
         f"coverage probability {data['coverage_probability']}",
         f"- sources: {', '.join(data['sources'])}; MPE/thermal reference point "
         f"({', '.join(f'{v * 1e3:.3f}' for v in data['reference_point_m'])}) mm",

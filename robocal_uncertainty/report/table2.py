@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.report.references import ROBOT_PAPER, ROBOT_PAPER_REFERENCE
 from robocal_uncertainty.uncertainty.calibration_mc import (
     ROTATION_AXES,
     CalibrationUncertainty,
@@ -145,7 +146,7 @@ def pose_header(result: CalibrationUncertainty, index: int) -> list[str]:
     return [
         f"Test configuration {index + 1} of {len(result.poses)}",
         f"  joints / deg: ({joints})",
-        (f"  trials: {result.n_trials}{adaptive}   seed: {result.seed}   block size: {result.block_size}"),
+        (f"  trials: {result.n_trials}{adaptive}   random seed: {result.seed}   block size: {result.block_size}"),
         (
             f"  coverage probability: {100 * result.coverage_probability:g} %   "
             f"interval: {_INTERVAL_NAMES.get(kind, kind)}"
@@ -388,12 +389,12 @@ def seed_difference_note() -> str:
     with larger ones, 5 simulated robots per scenario, 5000 trials each.
     """
     return (
-        "With the seed's stated inputs (tracker ±5 µm, encoders ±0.005°, random 33-pose subsets "
+        f"With {ROBOT_PAPER}'s stated inputs (tracker ±5 µm, encoders ±0.005°, random 33-pose subsets "
         "of 53, its lambda range, below 1e-13 in our column-scaled units: no regularisation) our "
         "Monte Carlo gives u = 0.01-0.04 mm per axis at the test joints (up to 0.1 mm if its 33 "
         "error equations mean 11 poses), whether the poses lie near those joints or span the "
-        "whole range: the seed's z (0.03 mm, mostly the test joints' own encoder noise) is "
-        "reproduced, its x and y are not. Reaching 0.5 mm in x and y takes inputs the seed "
+        "whole range: their z (0.03 mm, mostly the test joints' own encoder noise) is "
+        "reproduced, their x and y are not. Reaching 0.5 mm in x and y takes inputs the paper "
         "does not state (lambda 100-1000 times the L-curve corner, 0.1° encoder noise, or about "
         "3 mm of unmodelled error per pose), and each of them also lifts z to 0.08-0.6 mm."
     )
@@ -423,7 +424,7 @@ def format_seed_comparison(result: CalibrationUncertainty, *, pose: int = 0, not
         msg = f"pose must be an index of the {len(result.poses)} test configuration(s), got {pose!r}"
         raise ConfigError(msg)
     ours = result.poses[pose]
-    header = ["Axis", "Output value", "u", "U", "Coverage interval", "u seed/ours"]
+    header = ["Axis", "Output value", "u", "U", "Coverage interval", f"u {ROBOT_PAPER.split()[0]}/ours"]
     rows = []
     for name, axis in zip("xyz", ours.axes):
         seed = SEED_TABLE2[name]
@@ -441,7 +442,10 @@ def format_seed_comparison(result: CalibrationUncertainty, *, pose: int = 0, not
                 format_significant(ratio),
             ]
         )
-    lines = [f"Seed Table 2 (real arm) / this run (test configuration {pose + 1}), mm"]
+    lines = [
+        f"{ROBOT_PAPER} Table 2 (real arm) / this run (test configuration {pose + 1}), mm",
+        *textwrap.wrap(f"({ROBOT_PAPER_REFERENCE})", width=100, initial_indent="  ", subsequent_indent="   "),
+    ]
     lines.extend(_grid(header, rows))
     if note:
         lines.append(textwrap.fill(seed_difference_note(), width=100))

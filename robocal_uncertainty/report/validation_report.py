@@ -68,8 +68,28 @@ def validation_to_dict(validation: HoldoutValidation, *, extra: Mapping[str, Any
             }
             for f in v.folds
         ],
+        "frame_comparison": None
+        if v.frame_comparison is None
+        else {
+            "shift_m": v.frame_comparison.shift,
+            "angle_rad": v.frame_comparison.angle,
+            "displacement_rms_m": v.frame_comparison.displacement_rms,
+            "limit_m": v.frame_comparison.limit,
+            "moved": v.frame_comparison.moved,
+            "method": "rigid fit of the calibration's predictions to the validation campaign's measured positions",
+        },
         "extra_settings": dict(extra or {}),
     }
+
+
+def _model_error(std: Any) -> str:
+    """Model error u of a fold with the units of each component: (x, y, z) in um, then the
+    rotation (rx, ry, rz) in mrad for a 6-DOF campaign."""
+    values = [float(u) for u in std]
+    text = "model error u = (" + ", ".join(f"{u * 1e6:.1f}" for u in values[:3]) + ") um"
+    if len(values) > 3:
+        text += ", (" + ", ".join(f"{u * 1e3:.3f}" for u in values[3:]) + ") mrad"
+    return text
 
 
 def format_validation(validation: HoldoutValidation) -> str:
@@ -96,6 +116,8 @@ def format_validation(validation: HoldoutValidation) -> str:
         obs = ", ".join(f"{100 * a.reliability[i]:.1f}" for a in v.axes)
         rot = "".join(f", {100 * a.reliability[i]:.1f}" for a in v.orientation_axes)
         lines.append(f"  {100 * level:5.1f} %: {obs}, {100 * v.region_reliability[i]:.1f}{rot}")
+    if v.frame_comparison is not None:
+        lines.append(f"validation campaign's frame: within the stated uncertainty; {v.frame_comparison.describe()}")
     lines.append("An honest statement has normalised RMS near 1 and observed near stated coverage.")
     return "\n".join(lines)
 
@@ -163,11 +185,7 @@ def write_validation_report(
         "Folds: "
         + "; ".join(
             f"{f.n_train} training / {f.n_held_out} held out, residual RMS {f.rms_train_after * 1e6:.1f} um, "
-            + (
-                "model adequate"
-                if f.model_adequate
-                else "model error u = (" + ", ".join(f"{u * 1e6:.1f}" for u in f.model_error_std) + ") um"
-            )
+            + ("model adequate" if f.model_adequate else _model_error(f.model_error_std))
             for f in validation.folds
         ),
         "",

@@ -23,9 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import chi2
 
 from robocal_uncertainty.core.campaign import Campaign
-from robocal_uncertainty.core.identification import identify
+from robocal_uncertainty.core.frame_check import FrameComparison, compare_frames
+from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.measurement import POSITION_AXES
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
 from robocal_uncertainty.core.robot_model import RobotModel
@@ -36,14 +39,17 @@ from robocal_uncertainty.uncertainty.calibration_mc import (
     EvaluationSettings,
     evaluate_uncertainty,
 )
+from robocal_uncertainty.uncertainty.memory import check_fits, validation_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
+    "HOLDOUT_POSE_TRIALS",
     "RELIABILITY_LEVELS",
     "AxisValidation",
     "FoldResult",
     "HoldoutSplit",
     "HoldoutValidation",
+    "holdout_chunk_size",
     "split_campaign",
     "validate_holdout",
 ]
@@ -179,6 +185,9 @@ class HoldoutValidation:
         fixed x, y, z axes (``rx, ry, rz``; errors ``log(R_measured R_predicted^T)`` [rad],
         predictive distribution with the ``tracker_orientation`` noise when enabled); empty
         for points.
+    frame_comparison : FrameComparison or None
+        Mode ``"campaign"``: the validation campaign's frame against the calibration's (a rigid
+        fit of predicted to measured positions), within the stated uncertainty.
     """
 
     coverage_probability: float
@@ -194,6 +203,7 @@ class HoldoutValidation:
     seed: int
     mode: str
     orientation_axes: tuple[AxisValidation, ...] = ()
+    frame_comparison: FrameComparison | None = None
 
     @property
     def n_held_out(self) -> int:
@@ -274,6 +284,92 @@ def _orientation_fold(
     q = np.quantile(dev, tails, axis=0)
     lo, hi = q[: levels.size], q[levels.size :]
     return measured - mean, std, (measured[None] >= lo) & (measured[None] <= hi)
+
+
+HOLDOUT_POSE_TRIALS = 3_200_000
+"""Held-out poses x Monte Carlo trials evaluated at once (640 poses at 5000 trials): what bounds
+the memory of :func:`validate_holdout` whatever the number of held-out poses."""
+MIN_HOLDOUT_CHUNK = 16
+"""Fewest held-out poses per chunk (with very many trials)."""
+
+
+def holdout_chunk_size(trials: int) -> int:
+    """Held-out poses per Monte Carlo run of :func:`validate_holdout` at `trials` trials.
+
+    A fold with more held-out poses runs one Monte Carlo per chunk (each re-identifying the
+    trials of the same calibration): peak memory is set by this chunk, not by the number of
+    held-out poses. Up to this many poses the result is the single run's, bit for bit.
+    """
+    return max(MIN_HOLDOUT_CHUNK, HOLDOUT_POSE_TRIALS // max(int(trials), 1))
+
+
+def _chunk_seed(seed: int, fold: int, chunk: int) -> int:
+    """Root seed of chunk > 0 of a fold: its own stream, distinct from every fold's ``seed + f``."""
+    return int(np.random.SeedSequence([seed, fold, chunk, 0xC4A1]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def _chunk_statistics(
+    result: CalibrationUncertainty,
+    held: Campaign,
+    settings: UncertaintySettings,
+    levels: Array,
+    seed: int,
+    fold: int,
+    chunk: int,
+) -> tuple[Array, Array, NDArray[np.bool_], NDArray[np.bool_], tuple[Array, Array, NDArray[np.bool_]] | None]:
+    """Errors, predictive std, inside flags (L, n, 3), region flags (L, n) and the orientation's
+    of one chunk of held-out poses; the Monte Carlo samples are not kept."""
+    n_held = held.n_poses
+    n_axes = len(AXES)
+    held_points = _held_out_positions(held)
+    pred = result.samples[:, : n_axes * n_held].reshape(-1, n_held, n_axes)
+    # The held-out measurement carries its own tracker noise: the predictive distribution
+    # of what the tracker will read is the prediction plus that noise.
+    key = [seed, fold, 0xB0B] if chunk == 0 else [seed, fold, 0xB0B, chunk]
+    rng = np.random.default_rng(np.random.SeedSequence(key))
+    dist = _tracker_distances(held_points, held, settings)
+    if "tracker" in settings.sources:
+        pred = pred + settings.tracker_noise.sample(rng, np.broadcast_to(dist, pred.shape[:2]))
+    mean = pred.mean(axis=0)
+    std = pred.std(axis=0, ddof=1)
+    if not (std > 0).all():
+        raise InputError("a held-out prediction has zero spread: enable at least one noise source")
+    tails = np.concatenate(((1.0 - levels) / 2.0, (1.0 + levels) / 2.0))
+    q = np.quantile(pred, tails, axis=0)  # (2 L, n_held, n_axes)
+    lo, hi = q[: levels.size], q[levels.size :]
+    inside = (held_points[None] >= lo) & (held_points[None] <= hi)
+    region = _inside_regions(pred, held_points, levels)
+    rot = _orientation_fold(result, held, settings, levels, rng) if held.measurement.measures_orientation else None
+    return held_points - mean, std, inside, region, rot
+
+
+def _check_frame(calibration: IdentificationResult, held: Campaign, std: Array, coverage: float) -> FrameComparison:
+    """Compare the validation campaign's frame with the calibration's; refuse a move.
+
+    The calibrated model predicts every held-out position in the training campaign's frame; a
+    rigid fit of those predictions to the measured positions is a moved instrument when it
+    displaces the points by more than the statement's p-region radius (sqrt of the chi-square
+    3-quantile times the RMS predictive standard uncertainty of the first chunk) or the
+    training residual RMS, whichever is larger.
+
+    Raises
+    ------
+    InputError
+        The frame moved beyond that limit (names the move in mm and mrad).
+    """
+    layout = calibration.model.layout
+    predicted = forward_points(layout, calibration.estimate, held.joint_positions)
+    u_axis = float(np.sqrt(np.mean(std**2)))
+    radius = float(np.sqrt(chi2.ppf(coverage, len(AXES)))) * u_axis
+    comparison = compare_frames(predicted, _held_out_positions(held), max(radius, calibration.rms_after))
+    if comparison.moved:
+        msg = (
+            f"the validation campaign was measured in another set-up than the calibration campaign (same frame "
+            f"name {held.frame_id!r}): {comparison.describe()}; its errors would be the move, not the "
+            "calibration's: validate it with a campaign of the same set-up, or calibrate that set-up's base"
+        )
+        raise InputError(msg)
+    return comparison
 
 
 def validate_holdout(
@@ -360,42 +456,54 @@ def validate_holdout(
     rot_stds: list[Array] = []
     rot_inside: list[NDArray[np.bool_]] = []
     fold_results = []
-    for f, (train, held) in enumerate(folds):
+    frame_comparison: FrameComparison | None = None
+    chunk = holdout_chunk_size(trials)
+    largest = min(chunk, max(held.n_poses for _, held in folds))
+    check_fits(
+        validation_bytes(
+            int(trials),
+            largest,
+            model.layout.size,
+            n_poses=max(train.n_poses for train, _ in folds),
+            n_joints=model.n_joints,
+        ),
+        f"--trials {int(trials)} with {largest} held-out poses per Monte Carlo",
+        "use fewer --trials",
+    )
+    for f, (train, held_all) in enumerate(folds):
         calibration = identify(model, train, lambda_=lambda_)
-        result = evaluate_uncertainty(
-            model,
-            train,
-            held.joint_positions,
-            EvaluationSettings(uncertainty=settings, trials=trials, coverage=coverage, seed=seed + f),
-            calibration=calibration,
-            workers=workers,
-        )
-        n_held = held.n_poses
-        n_axes = len(AXES)
-        held_points = _held_out_positions(held)
-        pred = result.samples[:, : n_axes * n_held].reshape(-1, n_held, n_axes)
-        # The held-out measurement carries its own tracker noise: the predictive distribution
-        # of what the tracker will read is the prediction plus that noise.
-        rng = np.random.default_rng(np.random.SeedSequence([seed, f, 0xB0B]))
-        dist = _tracker_distances(held_points, held, settings)
-        if "tracker" in settings.sources:
-            pred = pred + settings.tracker_noise.sample(rng, np.broadcast_to(dist, pred.shape[:2]))
-        mean = pred.mean(axis=0)
-        std = pred.std(axis=0, ddof=1)
-        if not (std > 0).all():
-            raise InputError("a held-out prediction has zero spread: enable at least one noise source")
-        tails = np.concatenate(((1.0 - levels_arr) / 2.0, (1.0 + levels_arr) / 2.0))
-        q = np.quantile(pred, tails, axis=0)  # (2 L, n_held, n_axes)
-        lo, hi = q[: levels_arr.size], q[levels_arr.size :]
-        inside.append((held_points[None] >= lo) & (held_points[None] <= hi))
-        errors.append(held_points - mean)
-        stds.append(std)
-        region_inside.append(_inside_regions(pred, held_points, levels_arr))
-        if held.measurement.measures_orientation:
-            rot_stats = _orientation_fold(result, held, settings, levels_arr, rng)
-            rot_errors.append(rot_stats[0])
-            rot_stds.append(rot_stats[1])
-            rot_inside.append(rot_stats[2])
+        n_held = held_all.n_poses
+        result: CalibrationUncertainty | None = None
+        # The held-out poses in chunks of a size fixed by the trial count: peak memory does not
+        # grow with their number (the Monte Carlo of a chunk holds trials x poses values).
+        for c, lo in enumerate(range(0, n_held, chunk)):
+            held = held_all if n_held <= chunk else held_all.subset(np.arange(lo, min(n_held, lo + chunk)))
+            result = evaluate_uncertainty(
+                model,
+                train,
+                held.joint_positions,
+                EvaluationSettings(
+                    uncertainty=settings,
+                    trials=trials,
+                    coverage=coverage,
+                    seed=seed + f if c == 0 else _chunk_seed(seed, f, c),
+                    orientation=held.measurement.measures_orientation,
+                ),
+                calibration=calibration,
+                workers=workers,
+            )
+            stats = _chunk_statistics(result, held, settings, levels_arr, seed, f, c)
+            if mode == "campaign" and c == 0:
+                frame_comparison = _check_frame(calibration, held_all, stats[1], coverage)
+            errors.append(stats[0])
+            stds.append(stats[1])
+            inside.append(stats[2])
+            region_inside.append(stats[3])
+            if stats[4] is not None:
+                rot_errors.append(stats[4][0])
+                rot_stds.append(stats[4][1])
+                rot_inside.append(stats[4][2])
+        assert result is not None
         adequacy = result.model_adequacy
         fold_results.append(
             FoldResult(
@@ -458,4 +566,5 @@ def validate_holdout(
         sources=tuple(settings.sources),
         seed=seed,
         mode=mode,
+        frame_comparison=frame_comparison,
     )

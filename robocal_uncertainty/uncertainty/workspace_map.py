@@ -31,6 +31,7 @@ from robocal_uncertainty.montecarlo.engine import ProgressCallback, reduce_trial
 from robocal_uncertainty.montecarlo.region import coverage_region
 from robocal_uncertainty.montecarlo.streaming import Reduction
 from robocal_uncertainty.uncertainty.calibration_mc import OUTPUT_FRAMES, prepare_calibration_trials
+from robocal_uncertainty.uncertainty.memory import check_fits, grid_bytes, grid_size, map_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
@@ -159,6 +160,11 @@ def sample_configurations(
     return np.asarray(rng.uniform(ranges[:, 0], ranges[:, 1], size=(int(n), model.n_joints)), dtype=np.float64)
 
 
+def _grouped(n: int) -> str:
+    """``15 625 000 000``: thousands grouped with spaces."""
+    return f"{n:,}".replace(",", " ")
+
+
 def grid_configurations(model: RobotModel, steps: int | Sequence[int], *, limits: ArrayLike | None = None) -> Array:
     """A full grid over the joint ranges: ``steps[j]`` evenly spaced values of joint j.
 
@@ -182,6 +188,12 @@ def grid_configurations(model: RobotModel, steps: int | Sequence[int], *, limits
     ):
         msg = f"grid steps must be {model.n_joints} integers >= 1 (one per joint), got {steps!r}"
         raise ConfigError(msg)
+    n = grid_size([int(c) for c in counts])
+    check_fits(
+        grid_bytes(n, model.n_joints),
+        f"a grid of {' x '.join(str(int(c)) for c in counts)} = {_grouped(n)} configurations",
+        "use fewer values per joint (--grid), or --configurations N random ones",
+    )
     ranges = joint_ranges(model, limits)
     axes = [
         np.linspace(lo, hi, int(c)) if c > 1 else np.array([0.5 * (lo + hi)]) for (lo, hi), c in zip(ranges, counts)
@@ -318,6 +330,23 @@ def map_workspace(
     n = q.shape[0]
     kept_configs = _check_regions(regions, n)
     campaign = campaign.reorder_joints(model.joint_names)
+    rows = min(int(block_size), int(trials)) * max(1, int(chunk_blocks))
+    check_fits(
+        map_bytes(
+            n,
+            model.n_joints,
+            campaign.n_poses,
+            block_rows=rows,
+            workers=1 if executor is not None else int(workers),
+            n_trials=int(trials),
+            n_regions=int(kept_configs.size),
+        ),
+        f"a map of {_grouped(n)} configurations x {_grouped(int(trials))} trials ({_grouped(rows)} trials per "
+        f"block, {int(workers)} worker{'s' if int(workers) != 1 else ''}"
+        f"{f', {kept_configs.size} with a region' if kept_configs.size else ''})",
+        "use fewer configurations, a smaller --block-size, fewer --workers"
+        + (", or fewer --trials or --regions" if kept_configs.size else ""),
+    )
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     trial_block = prepare_calibration_trials(

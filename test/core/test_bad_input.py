@@ -216,7 +216,8 @@ def test_joint_without_d(tmp_path: Path, paper_dict: dict) -> None:
 def test_unknown_joint_field_and_convention(paper_dict: dict) -> None:
     bad = copy.deepcopy(paper_dict)
     bad["joints"][0]["offset"] = 1.0
-    with pytest.raises(ConfigError, match=r"joint 1 has unknown fields \['offset'\]") as exc:
+    known = r"\(known: a, alpha, d, limits, name, theta\)$"
+    with pytest.raises(ConfigError, match=r"joint 1 has unknown field 'offset' " + known) as exc:
         robot_model_from_dict(bad)
     one_line(exc)
     bad = copy.deepcopy(paper_dict)
@@ -227,6 +228,33 @@ def test_unknown_joint_field_and_convention(paper_dict: dict) -> None:
     ) as exc:
         robot_model_from_dict(bad)
     one_line(exc)
+
+
+@pytest.mark.parametrize(
+    ("typo", "meant"),
+    [("tool_piont", "tool_point"), ("hayati_beta_joint", "hayati_beta_joints"), ("Base", "base")],
+)
+def test_top_level_typo_is_refused_naming_the_close_match(
+    tmp_path: Path, paper_dict: dict, typo: str, meant: str
+) -> None:
+    """A misspelt optional field used to be ignored: another model, exit 0 (issue 18)."""
+    bad = copy.deepcopy(paper_dict)
+    bad[typo] = bad.pop(meant) if meant in bad else [0.0, 0.0, 0.1]
+    with pytest.raises(ConfigError, match=rf"unknown top-level field '{typo}' \(did you mean '{meant}'\?\)") as exc:
+        load_robot_model(write(tmp_path, bad))
+    one_line(exc)
+
+
+def test_unknown_field_without_a_close_match_lists_the_known_ones(paper_dict: dict) -> None:
+    bad = copy.deepcopy(paper_dict)
+    bad["payload_kg"] = 3.0
+    with pytest.raises(ConfigError, match=r"unknown top-level field 'payload_kg' \(known: base, convention, ") as exc:
+        robot_model_from_dict(bad)
+    one_line(exc)
+    bad = copy.deepcopy(paper_dict)
+    bad["base"]["xzy"] = [0.0, 0.0, 0.0]
+    with pytest.raises(ConfigError, match=r"base has unknown field 'xzy' \(did you mean 'xyz'\?\)"):
+        robot_model_from_dict(bad)
 
 
 def test_malformed_yaml(tmp_path: Path) -> None:

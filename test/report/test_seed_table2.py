@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.report.references import ROBOT_PAPER_REFERENCE
 from robocal_uncertainty.report.table2 import (
     SEED_TABLE2,
     format_seed_comparison,
@@ -87,7 +88,10 @@ def test_format_seed_comparison_shows_both(setup):
     result = setup.result
     text = format_seed_comparison(result)
     lines = text.splitlines()
-    assert "mm" in lines[0]
+    assert lines[0] == "Jiang et al. Table 2 (real arm) / this run (test configuration 1), mm"
+    head = lines.index(next(line for line in lines if line.startswith("Axis")))
+    assert " ".join(" ".join(lines[1:head]).split()) == f"({ROBOT_PAPER_REFERENCE})"
+    assert lines[head].split()[-1] == "Jiang/ours"  # column "u Jiang/ours": never "seed", the random seed's word
     pose = result.poses[0]
     for axis, ours in zip("xyz", pose.axes):
         seed = SEED_TABLE2[axis]
@@ -104,10 +108,24 @@ def test_format_seed_comparison_shows_both(setup):
             assert needle in row
         # Ratio of the two u, two significant digits.
         assert float(row.split()[-1]) == pytest.approx(seed.standard_uncertainty / u, rel=0.06)
-    # Short: title, grid (column names, rule, 3 rows), then the wrapped note.
-    assert " ".join(lines[6:]) == " ".join(seed_difference_note().split())
-    assert len(format_seed_comparison(result, note=False).splitlines()) == 6
+    # Short: title, reference, grid (column names, rule, 3 rows), then the wrapped note.
+    assert " ".join(lines[head + 5 :]) == " ".join(seed_difference_note().split())
+    assert "seed" not in text.lower()
+    assert len(format_seed_comparison(result, note=False).splitlines()) == head + 5
     assert all(len(line) <= 120 for line in lines)
+
+
+def test_the_paper_is_named_as_its_text_names_it():
+    """Authors, title and DOI of the printed reference, as in the paper's own text."""
+    path = next((p for p in SEED_CANDIDATES if p.is_file()), None)
+    if path is None:
+        pytest.skip("seed text not available (checkout without shared/)")
+    text = path.read_text(encoding="utf-8")
+    assert "Uncertainty evaluation of calibration model of six DOF robot arm" in text
+    assert "Jiang Wensong¹, Li Xuan¹, Luo Zai¹, Yang Li², Guo Bin¹" in text
+    assert "DOI: 10.19650/j.cnki.cjsi.J2209613" in text
+    assert ROBOT_PAPER_REFERENCE.startswith("Jiang W., Li X., Luo Z., Yang L., Guo B., 'Uncertainty evaluation of ")
+    assert "six DOF robot arm'" in ROBOT_PAPER_REFERENCE and "J2209613" in ROBOT_PAPER_REFERENCE
 
 
 def test_format_seed_comparison_rejects_a_bad_pose(setup):

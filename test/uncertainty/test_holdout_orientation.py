@@ -16,6 +16,7 @@ import numpy as np
 
 from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.importers import read_tracker_csv
+from robocal_uncertainty.report.validation_report import write_validation_report
 from robocal_uncertainty.uncertainty.holdout import split_campaign, validate_holdout
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
@@ -23,7 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 SERIES = REPO / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
 
 
-def test_ur10_6dof_holdout_orientation_coverage() -> None:
+def test_ur10_6dof_holdout_orientation_coverage(tmp_path: Path) -> None:
     poses = read_tracker_csv(SERIES, orientation_convention="intrinsic_xyz")
     model = load_robot_model(REPO / "config" / "ur10.yaml")
     v = validate_holdout(
@@ -39,3 +40,12 @@ def test_ur10_6dof_holdout_orientation_coverage() -> None:
     inside = np.array([a.inside_fraction for a in v.orientation_axes])
     assert np.all((inside > 0.90) & (inside < 0.99)), inside
     assert all(0.93 < a.inside_fraction < 0.99 for a in v.axes)
+    # validation.md states the fold's model error with each component's unit: positions in um,
+    # rotations in mrad (it printed the rotations in urad under "um").
+    (fold,) = v.folds
+    std = fold.model_error_std
+    assert all(0.3e-3 < r < 1.5e-3 for r in std[3:]) and all(0.1e-3 < p < 0.4e-3 for p in std[:3])
+    md = (write_validation_report(tmp_path, v) / "validation.md").read_text(encoding="utf-8")
+    positions = ", ".join(f"{p * 1e6:.1f}" for p in std[:3])
+    rotations = ", ".join(f"{r * 1e3:.3f}" for r in std[3:])
+    assert f"model error u = ({positions}) um, ({rotations}) mrad" in md
