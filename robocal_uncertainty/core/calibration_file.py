@@ -26,6 +26,7 @@ def _finite_or_none(values: NDArray[np.float64]) -> list[float | None]:
 def calibration_to_dict(result: IdentificationResult, *, robot: str) -> dict[str, Any]:
     """JSON-ready description of a calibration, SI units stated."""
     kinds = result.model.layout.kinds
+    held = result.held_by_regularisation
     return {
         "format": CALIBRATION_FORMAT,
         "units": {"length": "m", "angle": "rad"},
@@ -40,6 +41,10 @@ def calibration_to_dict(result: IdentificationResult, *, robot: str) -> dict[str
                 "estimate": float(result.estimate[i]),
                 "estimated": bool(result.estimated[i]),
                 "linearized_std": _finite_or_none(result.linearized_std[i : i + 1])[0],
+                "held_by_regularisation": bool(held[i]),
+                "data_only_std": (
+                    None if result.data_only_std is None else _finite_or_none(result.data_only_std[i : i + 1])[0]
+                ),
             }
             for i, name in enumerate(result.parameter_names)
         ],

@@ -110,6 +110,7 @@ from robocal_uncertainty.uncertainty import (
     CalibrationUncertainty,
     EvaluationOptions,
     UncertaintySettings,
+    default_sources,
     parse_sources,
     sources_help,
 )
@@ -191,8 +192,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("test_joints_in_degrees", True, "test_joints are in degrees (else radians)", read_only=True),
     ParamSpec(
         "sources",
-        "tracker,encoder",
-        f"Comma list of uncertainty sources: {sources_help()}",
+        ",".join(default_sources()),
+        f"Comma list of uncertainty sources: {sources_help()} (default: the validated set; "
+        "add tracker_orientation for a 6-DOF tracker)",
         check=_sources,
     ),
     ParamSpec(

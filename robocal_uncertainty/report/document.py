@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.identification import HELD_STD_RATIO, IdentificationResult
 from robocal_uncertainty.core.observability import describe_dependency
 from robocal_uncertainty.report.configurations import (
     DETAIL_LIMIT,
@@ -467,24 +467,41 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
         ),
         _Para(
             "Estimate rounded to its Monte Carlo standard uncertainty; lengths in mm with u in µm, "
-            "angles in deg with u in mdeg."
+            "angles in deg with u in mdeg. A parameter *held by regularisation* is one the data "
+            f"alone determine more than {HELD_STD_RATIO:g} times less well than the regularised fit "
+            "states: the Tikhonov term fixes it, its regularised u is no measurement's, and the "
+            "data-only u (lambda = 0) is given instead."
         ),
     ]
     rows = []
+    held = cal.held_by_regularisation
     for i, name in enumerate(cal.parameter_names):
         if not cal.estimated[i]:
             continue
         scale, unit, uscale, uunit = _param_display(kinds.get(name, "length"))
         summary = mc.get(name)
         u = summary.standard_uncertainty if summary is not None else float(cal.linearized_std[i])
+        if held[i]:
+            # The Tikhonov term, not the data, fixes it: no u of a measurement to state.
+            data_u = float(cal.data_only_std[i]) if cal.data_only_std is not None else math.inf
+            u = data_u if math.isfinite(data_u) else u
+            note = (
+                f"held by regularisation; data-only u = {format_significant(data_u * uscale)} {uunit}"
+                if math.isfinite(data_u)
+                else "held by regularisation; not identifiable from the data alone"
+            )
+            mc_cell = lin_cell = note
+        else:
+            mc_cell = f"{format_significant(u * uscale)} {uunit}" if summary is not None else "n/a"
+            lin_cell = f"{format_significant(float(cal.linearized_std[i]) * uscale)} {uunit}"
         rows.append(
             (
                 name,
                 f"{cal.nominal[i] * scale:.6g} {unit}",
                 f"{round_to_uncertainty(cal.estimate[i] * scale, u * scale)} {unit}",
                 f"{round_to_uncertainty((cal.estimate[i] - cal.nominal[i]) * uscale, u * uscale)} {uunit}",
-                f"{format_significant(u * uscale)} {uunit}" if summary is not None else "n/a",
-                f"{format_significant(float(cal.linearized_std[i]) * uscale)} {uunit}",
+                mc_cell,
+                lin_cell,
             )
         )
     blocks.append(

@@ -282,6 +282,7 @@ def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
     """Calibration summary of an :class:`IdentificationResult` as JSON-ready values."""
     units = _param_units(calibration)
     lc = calibration.lcurve
+    held = calibration.held_by_regularisation
     return {
         "parameters": [
             {
@@ -294,6 +295,9 @@ def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
                 "estimated": bool(calibration.estimated[i]),
                 "identifiable": bool(calibration.identifiable[i]),
                 "linearized_std": calibration.linearized_std[i],
+                "data_only_std": np.nan if calibration.data_only_std is None else calibration.data_only_std[i],
+                "data_share": np.nan if calibration.data_share is None else calibration.data_share[i],
+                "held_by_regularisation": bool(held[i]),
             }
             for i, name in enumerate(calibration.parameter_names)
         ],
