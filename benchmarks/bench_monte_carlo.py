@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 
-# One BLAS thread for both engine and baseline, as the command line does (see cli.py).
+# One BLAS thread for both engine and baseline, as the command line does (see robocal_uncertainty/cli/__init__.py).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 

@@ -1,0 +1,166 @@
+"""Option groups several commands share (argparse), declared once."""
+
+from __future__ import annotations
+
+import argparse
+
+from robocal_uncertainty.cli._common import DEFAULT_PAIRING_TOLERANCE_MS
+
+
+def add_force_arg(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--force", action="store_true", help=f"replace {what} if it exists (default: refuse)")
+
+
+def add_base_unknown_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--base-unknown",
+        action="store_true",
+        help="identify the base transform even if the robot config says it is known",
+    )
+
+
+def add_campaign_args(p: argparse.ArgumentParser) -> None:
+    """The campaign positional, --robot, --base-unknown and --pairing-tolerance-ms."""
+    p.add_argument("campaign", help="campaign: .mcap file or rosbag2 directory")
+    p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    add_base_unknown_arg(p)
+    p.add_argument(
+        "--pairing-tolerance-ms",
+        type=float,
+        default=DEFAULT_PAIRING_TOLERANCE_MS,
+        help="recordings without our campaign metadata: pair each tracker point with the joint reading nearest in "
+        "stamp when it is at most this far, ms (default %(default)g)",
+    )
+
+
+def add_test_joint_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--test-joints", nargs="+", help="joint values of the test configurations, n_joints each")
+    p.add_argument("--test-joints-file", help="CSV/whitespace file of test configurations, one per row")
+    p.add_argument("--degrees", action="store_true", help="test joint values are in degrees (default radians)")
+
+
+def add_noise_args(p: argparse.ArgumentParser) -> None:
+    """The tracker and encoder noise models, shared by simulate and the Monte Carlo commands."""
+    p.add_argument(
+        "--tracker-noise-um",
+        type=float,
+        default=5.0,
+        help="tracker error half-width a per coordinate, um (default %(default)s, uniform)",
+    )
+    p.add_argument(
+        "--tracker-noise-um-per-m",
+        type=float,
+        default=0.0,
+        help="distance-proportional part b of the MPE a + b L, um/m (default %(default)s)",
+    )
+    p.add_argument(
+        "--encoder-noise-deg",
+        type=float,
+        default=0.005,
+        help="encoder error half-width, deg (default %(default)s, uniform)",
+    )
+
+
+def add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> None:
+    p.add_argument(
+        "--trials",
+        default=trials_default,
+        help="number of Monte Carlo trials, or 'auto' for the JCGM 101 adaptive procedure (default %(default)s)",
+    )
+    p.add_argument(
+        "--max-trials", type=int, default=2_000_000, help="cap of the adaptive procedure (default %(default)s)"
+    )
+    p.add_argument("--coverage", type=float, default=0.95, help="coverage probability p (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
+    p.add_argument(
+        "--lambda",
+        dest="lambda_",
+        default="auto",
+        help="auto (L-curve corner), gcv, or a fixed value (default %(default)s)",
+    )
+    p.add_argument(
+        "--lambda-range",
+        type=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        help="range of lambda for the 'lambda' source (default lambda*/5 .. 5 lambda*)",
+    )
+    p.add_argument(
+        "--min-poses",
+        type=int,
+        help="smallest pose count of the 'n_poses' source (default: 40 equations or 1.5 x the identifiable "
+        "parameters, whichever is more; lowered for a smaller campaign)",
+    )
+    p.add_argument(
+        "--subset-size",
+        type=int,
+        help="pose count of the 'pose_choice' source (default: 33/53 of the campaign's poses)",
+    )
+    add_noise_args(p)
+    p.add_argument(
+        "--workers", type=int, default=1, help="worker processes (never changes the result; default %(default)s)"
+    )
+    p.add_argument(
+        "--budget",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run each source alone (uncertainty budget; default on)",
+    )
+    p.add_argument(
+        "--budget-trials", type=int, default=2000, help="trials per source of the budget (default %(default)s)"
+    )
+    p.add_argument(
+        "--sweeps",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="uncertainty against lambda and against the number of equations (report plots; default on)",
+    )
+    p.add_argument("--sweep-trials", type=int, default=300, help="trials per sweep point (default %(default)s)")
+    p.add_argument(
+        "--no-progress", action="store_true", help="no progress bars (default: shown when stderr is a terminal)"
+    )
+    p.add_argument(
+        "--histograms",
+        type=histogram_count,
+        metavar="N|all",
+        help="report: histogram figures for the first N test configurations, or all (default: all of up to 10, "
+        "else the first 6 and the worst); not used by validate",
+    )
+    add_frame_and_convergence_args(p)
+
+
+def histogram_count(text: str) -> int | str:
+    if text == "all":
+        return text
+    try:
+        count = int(text)
+    except ValueError:
+        count = -1
+    if count < 0:
+        msg = f"expected a count >= 0 or 'all', got {text!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return count
+
+
+def add_frame_and_convergence_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--frame",
+        choices=("measurement", "base"),
+        default="measurement",
+        help="frame of the output positions: the frame of the campaign's points (default), or the robot base "
+        "frame (for a tracker campaign the base transform's uncertainty then does not enter)",
+    )
+    p.add_argument(
+        "--accept-unconverged",
+        action="store_true",
+        help="use an identification that did not converge instead of stopping with an error",
+    )
+
+
+def add_dask_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run the trial blocks on a Dask cluster: scheduler address, or 'local' for a LocalCluster of "
+        "--workers processes (needs the [dask] extra; never changes the result)",
+    )

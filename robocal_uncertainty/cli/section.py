@@ -1,0 +1,150 @@
+"""``robocal-uncertainty section``: its options (:func:`register`) and its work and printing (:func:`run`)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from robocal_uncertainty.cli._common import parse_trials, timed_progress
+from robocal_uncertainty.cli._options import add_force_arg
+from robocal_uncertainty.errors import ConfigError
+
+
+def register(sub: Any) -> None:
+    """Add the ``section`` command and its options to the subparsers `sub`."""
+    p = sub.add_parser(
+        "section",
+        help="blade-section parameters (thickness, chord, offsets, twist, profiles) and their Monte Carlo "
+        "uncertainty from a CMM point cloud or a PointCloud2 bag",
+    )
+    p.add_argument("cloud", nargs="?", help="CMM export (x y z [i j k], unit stated) or .mcap/rosbag2 with PointCloud2")
+    p.add_argument("--demo", action="store_true", help="simulated 1836-point scan of the shipped Rotor 37 section")
+    p.add_argument("--nominal", help="nominal section file, or a shipped blade: rotor37, rotor37:K, cascade")
+    p.add_argument(
+        "--unit", help="length unit of CLOUD when the file states none: m, mm, um, in (default: none assumed)"
+    )
+    p.add_argument("--nominal-unit", help="length unit of the --nominal file when it states none")
+    p.add_argument("--instrument", help="instrument YAML or shipped name (default: cmm_seed, the seed's CMM)")
+    p.add_argument("--topic", help="PointCloud2 topic of a bag (default: its only PointCloud2 topic)")
+    p.add_argument("--message", type=int, help="0-based message index in the topic (default: all messages joined)")
+    p.add_argument(
+        "--repeat-scans",
+        nargs="+",
+        metavar="CLOUD",
+        help="2 or more repeated scans of the same section (formats and --unit as CLOUD): their standard "
+        "deviation is the GUM budget's u3 (repeatability), shown for the chord as in the seed's table",
+    )
+    p.add_argument(
+        "--trials", help="Monte Carlo trials, or auto (JCGM 101 7.9) (default 1000000, the seed's; --demo 100000)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
+    p.add_argument(
+        "--workers", type=int, default=1, help="worker processes (never changes the result; default %(default)s)"
+    )
+    p.add_argument(
+        "--method",
+        choices=("denoised", "seed"),
+        default="denoised",
+        help="denoised: Monte Carlo of the error around the denoised cloud (intervals coverage-verified); "
+        "seed: perturb the measured cloud as the seed does (max/min intervals under-cover) (default %(default)s)",
+    )
+    p.add_argument("--out", default="section_report", help="report directory (default %(default)s)")
+    add_force_arg(p, "an earlier report in --out")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from robocal_uncertainty.app.section_inspection import DEMO_SCENARIO, inspect_section, section_demo
+    from robocal_uncertainty.montecarlo.engine import AdaptiveSettings
+    from robocal_uncertainty.report.section_report import (
+        coverage_summary,
+        format_repeatability_budget,
+        format_section_table,
+        write_section_report,
+    )
+
+    if args.demo == (args.cloud is not None):
+        raise ConfigError("section needs a CLOUD file or bag, or --demo (not both)")
+    if args.cloud is not None and args.nominal is None:
+        raise ConfigError("section needs --nominal (a file, or a shipped blade: rotor37, rotor37:K, cascade)")
+    if args.demo and (args.nominal or args.unit or args.topic or args.message is not None):
+        raise ConfigError(
+            "--demo uses the shipped Rotor 37 scenario: --nominal, --unit, --topic, --message do not apply"
+        )
+    if args.demo and args.repeat_scans is not None:
+        raise ConfigError("--repeat-scans needs measured scans of CLOUD's section; --demo simulates no repeats")
+    if args.repeat_scans is not None and len(args.repeat_scans) < 2:
+        raise ConfigError(
+            f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(args.repeat_scans)}"
+        )
+    trials = parse_trials(args.trials) if args.trials is not None else (100_000 if args.demo else 1_000_000)
+    adaptive = AdaptiveSettings() if trials == "auto" else None
+    count = None if trials == "auto" else int(trials)
+    progress, finish = timed_progress(not args.no_progress, "section")
+    try:
+        if args.demo:
+            print(
+                "Demo: NASA Rotor 37 surface 2 at the seed's size (x7.14), a simulated "
+                f"{DEMO_SCENARIO['n_points']}-point "
+                "CMM scan with offsets (-0.1013, 0.0538) mm, twist 0.0512 deg, a 5 um 3-wave form error and one draw "
+                "of the instrument errors; the true parameters are known."
+            )
+            run = section_demo(
+                trials=count,
+                adaptive=adaptive,
+                seed=args.seed,
+                workers=args.workers,
+                instrument=args.instrument,
+                progress=progress,
+                method=args.method,
+            )
+        else:
+            run = inspect_section(
+                args.cloud,
+                args.nominal,
+                unit=args.unit,
+                nominal_unit=args.nominal_unit,
+                instrument=args.instrument,
+                trials=count,
+                adaptive=adaptive,
+                seed=args.seed,
+                workers=args.workers,
+                topic=args.topic,
+                message=args.message,
+                progress=progress,
+                method=args.method,
+                repeat_scans=args.repeat_scans,
+            )
+    finally:
+        finish()
+    result = run.result
+    frame = f", frame {run.cloud.frame_id}" if run.cloud.frame_id else ""
+    print(
+        f"{run.cloud.n_points} points ({run.cloud.source}{frame}); nominal {run.nominal}; instrument {run.instrument}; "
+        f"{result.monte_carlo.n_trials} trials, seed {result.monte_carlo.seed}, {run.elapsed_s:.1f} s"
+    )
+    print()
+    print(format_section_table(result, run.corrections, truth=run.truth))
+    print()
+    if result.gum_with_repeatability is not None:
+        print(format_repeatability_budget(result))
+        print()
+    print(f"note: {coverage_summary(result.method)}")
+    from robocal_uncertainty.app.output_paths import clear_earlier_report
+
+    clear_earlier_report(args.out)
+    extra = {
+        "cloud": run.cloud.source,
+        "frame_id": run.cloud.frame_id,
+        "n_points": run.cloud.n_points,
+        "nominal": run.nominal,
+        "instrument_file": run.instrument,
+        "elapsed_s": run.elapsed_s,
+        "workers": run.workers,
+        "demo": bool(args.demo),
+        "repeat_scans": list(run.repeats),
+    }
+    files = write_section_report(result, run.corrections, args.out, truth=run.truth, extra=extra)
+    print(f"section report written to {files.markdown.parent}")
+    return 0
