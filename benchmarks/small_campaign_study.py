@@ -29,15 +29,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from robocal_uncertainty.core.campaign import Campaign  # noqa: E402
-from robocal_uncertainty.core.identification import identify  # noqa: E402
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config  # noqa: E402
-from robocal_uncertainty.core.robot_model import RobotModel  # noqa: E402
-from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledErrors, simulate_campaign  # noqa: E402
-from robocal_uncertainty.importers.tracker_csv import read_tracker_csv  # noqa: E402
-from robocal_uncertainty.uncertainty.holdout import split_campaign, validate_holdout  # noqa: E402
-from robocal_uncertainty.uncertainty.model_adequacy import assess_model_adequacy  # noqa: E402
-from robocal_uncertainty.uncertainty.sources import UncertaintySettings  # noqa: E402
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import identify
+from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledErrors, simulate_campaign
+from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
+from robocal_uncertainty.uncertainty.holdout import split_campaign, validate_holdout
+from robocal_uncertainty.uncertainty.model_adequacy import assess_model_adequacy
+from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 UR10_CSV = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
 SIZES = (10, 15, 20, 30, 53)
@@ -96,9 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     sizes = tuple(args.sizes)
     if args.series in ("ur10", "both"):
         campaign = read_tracker_csv(UR10_CSV)
-        _print(f"UR10 series ({campaign.n_poses} poses), {args.draws} draws per size", study(
-            model, campaign, sizes, args.draws, args.trials, args.seed
-        ))
+        _print(
+            f"UR10 series ({campaign.n_poses} poses), {args.draws} draws per size",
+            study(model, campaign, sizes, args.draws, args.trials, args.seed),
+        )
     if args.series in ("simulated", "both"):
         for gear, sag in ((2e-4, 4e-4), (5e-5, 1e-4)):
             sim = simulate_campaign(

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from robocal_uncertainty.cli._common import campaign_and_robot, default_sources, read_test_joints
+from robocal_uncertainty.cli._common import SOURCES_DEFAULT_HELP, campaign_and_robot, default_sources, read_test_joints
 from robocal_uncertainty.cli._evaluation import run_evaluation
 from robocal_uncertainty.cli._options import (
     add_campaign_args,
@@ -26,7 +26,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--sources",
         default=None,
-        help=f"comma list of {sources_help()} (default tracker,encoder; and tracker_orientation for a 6-DOF campaign)",
+        help=f"comma list of {sources_help()} ({SOURCES_DEFAULT_HELP})",
     )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
         model,
         campaign,
         test_q,
-        sources=parse_sources(default_sources(args.sources, campaign, "tracker,encoder")),
+        sources=parse_sources(default_sources(args.sources, campaign)),
         args=args,
         out_dir=Path(args.out),
         label="evaluate",

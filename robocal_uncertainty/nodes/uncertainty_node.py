@@ -537,6 +537,7 @@ class UncertaintyNode(Node):
             "finished_ns": self.get_clock().now().nanoseconds,
             "elapsed_s": elapsed,
             "latency_s": latency,
+            "trust_note": result.model_adequacy.trust_note,
         }
         u = result.poses[0].axes
         self.get_logger().info(
@@ -620,6 +621,7 @@ class UncertaintyNode(Node):
             last_evaluation_ns=health.get("finished_ns"),
             last_evaluation_s=health.get("elapsed_s"),
             error=health.get("error"),
+            trust_note=health.get("trust_note") or "",
         )
 
     def _publish_diagnostics(self) -> None:

@@ -178,6 +178,8 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
             "source when enabled."
         )
     items.append(adequacy)
+    if not ad.trustworthy:
+        items.append(f"**{ad.trust_note}.**")
     cal = result.calibration
     conv = "yes" if result.converged else "NO"
     items.append(

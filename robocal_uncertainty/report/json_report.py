@@ -158,6 +158,10 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
         "noise_covariance_m2": ad.noise_covariance,
         "model_error_covariance_m2": ad.inadequacy_covariance,
         "model_error_standard_uncertainty_m": ad.standard_uncertainty,
+        "residual_dof": ad.residual_dof,
+        "min_residual_dof": ad.min_residual_dof,
+        "trustworthy": ad.trustworthy,
+        "trust_note": ad.trust_note,
     }
 
 
@@ -486,6 +490,7 @@ def uncertainty_to_dict(
     names = result.parameter_names
     units = _param_units(result.calibration)
     summary = summarize_configurations(result)
+    trust = result.model_adequacy.trust_note
     report: dict[str, Any] = {
         "format": REPORT_FORMAT,
         "format_version": REPORT_FORMAT_VERSION,
@@ -541,7 +546,7 @@ def uncertainty_to_dict(
         ],
         "budget": None if budget is None else _budget(budget),
         "sweeps": None if sweeps is None else _sweeps(sweeps),
-        "warnings": merge_warnings(input_warnings, result.warnings),
+        "warnings": merge_warnings(input_warnings, result.warnings, [trust] if trust else []),
     }
     return to_json_value(report)
 
