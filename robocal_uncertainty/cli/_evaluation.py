@@ -64,13 +64,11 @@ def print_calibration(result: Any) -> None:
         u = float(result.linearized_std[i])
         if held[i]:
             # The Tikhonov term, not the data, fixes it: its regularised std is no measurement.
+            from robocal_uncertainty.report.document import held_note
+
             data_u = float(result.data_only_std[i])
             finite = bool(np.isfinite(data_u))
-            why = (
-                f"held by regularisation; data-only u = {format_significant(data_u * uscale)} {uunit}"
-                if finite
-                else "held by regularisation; not identifiable from the data alone"
-            )
+            why = held_note(data_u, kinds[i], micro="u")
             print(
                 f"  {name:<16} {result.nominal[i] * scale:12.6g} {unit:<3} "
                 f"{round_to_uncertainty(result.estimate[i] * scale, (data_u if finite else u) * scale):>12} "

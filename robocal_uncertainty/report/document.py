@@ -59,7 +59,7 @@ from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertaint
 from robocal_uncertainty.uncertainty.sources import SOURCE_DESCRIPTIONS
 from robocal_uncertainty.uncertainty.sweeps import Sweep
 
-__all__ = ["REPORT_FILES", "write_report"]
+__all__ = ["REPORT_FILES", "held_note", "write_report"]
 
 REPORT_FILES = ("report.json", "report.md", "report.html", "configurations.csv")
 """Files every report directory holds, besides the PNG figures."""
@@ -487,12 +487,7 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
             # The Tikhonov term, not the data, fixes it: no u of a measurement to state.
             data_u = float(cal.data_only_std[i]) if cal.data_only_std is not None else math.inf
             u = data_u if math.isfinite(data_u) else u
-            note = (
-                f"held by regularisation; data-only u = {format_significant(data_u * uscale)} {uunit}"
-                if math.isfinite(data_u)
-                else "held by regularisation; not identifiable from the data alone"
-            )
-            mc_cell = lin_cell = note
+            mc_cell = lin_cell = held_note(data_u, kinds.get(name, "length"))
         else:
             mc_cell = f"{format_significant(u * uscale)} {uunit}" if summary is not None else "n/a"
             lin_cell = f"{format_significant(float(cal.linearized_std[i]) * uscale)} {uunit}"
@@ -532,6 +527,20 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
     if others:
         blocks.append(_Para("Other dependencies: " + "; ".join(describe_dependency(d) for d in others)))
     return blocks
+
+
+def held_note(data_only_std: float, kind: str, *, micro: str = "µ") -> str:
+    """How a parameter held by regularisation is shown instead of its u: its data-only u.
+
+    ``data_only_std`` in m or rad (``inf``: the data carry no information); ``kind`` is
+    ``"length"`` or ``"angle"``. Lengths above 1 mm in mm, else µm (``micro`` + m: ``"u"``
+    for the console); angles in deg or mdeg.
+    """
+    if not math.isfinite(data_only_std):
+        return "held by regularisation; not identifiable from the data alone"
+    scale, unit, uscale, uunit = _param_display(kind)
+    value, shown = (data_only_std * scale, unit) if data_only_std * uscale >= 1000 else (data_only_std * uscale, uunit)
+    return f"held by regularisation; data-only u = {format_significant(value)} {shown.replace('µ', micro)}"
 
 
 def _settings(
