@@ -387,11 +387,19 @@ def in_cli_words(message: str) -> str:
     return message
 
 
-def default_sources(given: str | None, campaign: Any, default: str) -> str:
-    """``--sources`` as given, else `default` plus the orientation noise of a 6-DOF campaign."""
+SOURCES_DEFAULT_HELP = (
+    "default tracker,encoder,residual: the validated set; and tracker_orientation for a 6-DOF campaign"
+)
+
+
+def default_sources(given: str | None, campaign: Any) -> str:
+    """``--sources`` as given, else the validated default of the campaign's measurement type
+    (:func:`robocal_uncertainty.uncertainty.default_sources`)."""
+    from robocal_uncertainty.uncertainty import default_sources as validated_default
+
     if given is not None:
         return given
-    return default + ",tracker_orientation" if campaign.measurement.measures_orientation else default
+    return ",".join(validated_default(bool(campaign.measurement.measures_orientation)))
 
 
 def parse_sources_arg(text: str) -> tuple[str, ...]:

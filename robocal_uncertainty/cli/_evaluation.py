@@ -52,6 +52,7 @@ def print_calibration(result: Any) -> None:
 
     print("  parameter            nominal        estimate   1st-order std")
     kinds = result.model.layout.kinds
+    held = result.held_by_regularisation
     for i, name in enumerate(result.parameter_names):
         if not result.estimated[i]:
             continue
@@ -61,6 +62,19 @@ def print_calibration(result: Any) -> None:
             else (float(np.degrees(1.0)), "deg", float(np.degrees(1.0)) * 1e3, "mdeg")
         )
         u = float(result.linearized_std[i])
+        if held[i]:
+            # The Tikhonov term, not the data, fixes it: its regularised std is no measurement.
+            from robocal_uncertainty.report.document import held_note
+
+            data_u = float(result.data_only_std[i])
+            finite = bool(np.isfinite(data_u))
+            why = held_note(data_u, kinds[i], micro="u")
+            print(
+                f"  {name:<16} {result.nominal[i] * scale:12.6g} {unit:<3} "
+                f"{round_to_uncertainty(result.estimate[i] * scale, (data_u if finite else u) * scale):>12} "
+                f"{unit:<3} {why}"
+            )
+            continue
         print(
             f"  {name:<16} {result.nominal[i] * scale:12.6g} {unit:<3} "
             f"{round_to_uncertainty(result.estimate[i] * scale, u * scale):>12} {unit:<3} "
@@ -72,6 +86,15 @@ def print_calibration(result: Any) -> None:
 
         for dep in result.dependencies:
             print(f"    {describe_dependency(dep)}")
+    if held.any():
+        from robocal_uncertainty.core.identification import HELD_STD_RATIO
+
+        names = ", ".join(n for n, h in zip(result.parameter_names, held) if h)
+        print(
+            f"  held by regularisation ({names}): the data alone determine them more than "
+            f"{HELD_STD_RATIO:g} times less well than the regularised fit says (data-only u: lambda = 0); "
+            "their values come from the Tikhonov term, not from a measurement"
+        )
     for warning in result.warnings:
         print(f"  warning: {warning}")
 
@@ -93,6 +116,8 @@ def print_adequacy(result: Any) -> None:
             f"Model adequacy: residuals exceed the stated noise (p = {ad.p_value:.3g}); model error "
             f"u = {u} per measurement-frame axis, {used}"
         )
+    if not ad.trustworthy:
+        print(f"warning: {ad.trust_note}")
 
 
 def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Sequence[str]) -> Any:

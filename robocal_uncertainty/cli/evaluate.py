@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from robocal_uncertainty.cli._common import campaign_and_robot, default_sources, read_test_joints
+from robocal_uncertainty.cli._common import SOURCES_DEFAULT_HELP, campaign_and_robot, default_sources, read_test_joints
 from robocal_uncertainty.cli._evaluation import run_evaluation
 from robocal_uncertainty.cli._options import (
     add_campaign_args,
@@ -26,7 +26,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--sources",
         default=None,
-        help=f"comma list of {sources_help()} (default tracker,encoder; and tracker_orientation for a 6-DOF campaign)",
+        help=f"comma list of {sources_help()} ({SOURCES_DEFAULT_HELP})",
     )
     p.add_argument(
         "--between-session",
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     test_q = read_test_joints(args, model)
     from robocal_uncertainty.uncertainty import parse_sources
 
-    sources = parse_sources(default_sources(args.sources, campaign, "tracker,encoder"))
+    sources = parse_sources(default_sources(args.sources, campaign))
     if args.between_session and "between_session" not in sources:
         sources = (*sources, "between_session")
     run_evaluation(

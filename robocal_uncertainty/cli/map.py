@@ -7,7 +7,14 @@ from typing import Any
 
 import numpy as np
 
-from robocal_uncertainty.cli._common import campaign_and_robot, parse_lambda, read_joints_file, timed_progress
+from robocal_uncertainty.cli._common import (
+    SOURCES_DEFAULT_HELP,
+    campaign_and_robot,
+    default_sources,
+    parse_lambda,
+    read_joints_file,
+    timed_progress,
+)
 from robocal_uncertainty.cli._evaluation import uncertainty_settings
 from robocal_uncertainty.cli._options import add_dask_arg, add_force_arg, add_frame_and_convergence_args
 from robocal_uncertainty.uncertainty.sources import sources_help
@@ -30,7 +37,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--within-campaign", action="store_true", help="sample inside the campaign's joint span, not the joint limits"
     )
-    p.add_argument("--sources", default="tracker,encoder", help=f"comma list of {sources_help()} (default %(default)s)")
+    p.add_argument("--sources", default=None, help=f"comma list of {sources_help()} ({SOURCES_DEFAULT_HELP})")
     p.add_argument("--trials", type=int, default=10_000, help="Monte Carlo trials (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="root seed of the trials and of random configurations")
     p.add_argument(
@@ -68,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         q = grid_configurations(model, args.grid[0] if len(args.grid) == 1 else args.grid, limits=limits)
     else:
         q = sample_configurations(model, args.configurations, rng=np.random.default_rng(args.seed), limits=limits)
-    settings = uncertainty_settings(args, None, parse_sources(args.sources))
+    settings = uncertainty_settings(args, None, parse_sources(default_sources(args.sources, campaign)))
     progress, finish = timed_progress(not args.no_progress, "map")
     try:
         with open_executor(workers=args.workers, dask=args.dask) as executor:

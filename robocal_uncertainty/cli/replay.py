@@ -23,6 +23,7 @@ from robocal_uncertainty.cli._options import (
     add_uncertainty_args,
     add_urdf_chain_args,
 )
+from robocal_uncertainty.uncertainty.sources import default_sources as default_source_names
 from robocal_uncertainty.uncertainty.sources import sources_help
 
 
@@ -41,8 +42,8 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--sources",
         default=None,
-        help=f"comma list of {sources_help()} (default tracker,encoder; and tracker_orientation with "
-        "--tracker-pose-topic)",
+        help=f"comma list of {sources_help()} (default tracker,encoder,residual: the validated set; and "
+        "tracker_orientation with --tracker-pose-topic)",
     )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out and the --campaign-out file")
@@ -101,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     sources = args.sources
     if sources is None:
         # A tracker pose topic means a 6-DOF campaign: its orientation noise is an input too.
-        sources = "tracker,encoder,tracker_orientation" if args.tracker_pose_topic else "tracker,encoder"
+        sources = ",".join(default_source_names(bool(args.tracker_pose_topic)))
     options = evaluation_options(args, parse_sources_arg(sources), read_test_joints(args, model))
     window = parse_window(args.window_s)
     settings = CollectorSettings(

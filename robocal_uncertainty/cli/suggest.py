@@ -11,8 +11,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.cli._common import (
+    SOURCES_DEFAULT_HELP,
     campaign_and_robot,
     count,
+    default_sources,
     joint_configurations,
     parse_lambda,
     read_test_joints,
@@ -151,9 +153,9 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--sources",
-        default="tracker,encoder",
+        default=None,
         help="the ranking weighs the poses with the tracker and encoder noise (each only if listed); the checks use "
-        f"every listed source: {sources_help()} (default %(default)s)",
+        f"every listed source: {sources_help()} ({SOURCES_DEFAULT_HELP})",
     )
     p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
     add_noise_args(p)
@@ -187,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
                 f"in --candidates-file {args.candidates_file}"
             )
             raise ConfigError(msg)
-    settings = uncertainty_settings(args, None, parse_sources(args.sources))
+    settings = uncertainty_settings(args, None, parse_sources(default_sources(args.sources, campaign)))
     lambda_ = parse_lambda(args.lambda_)
     calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=args.accept_unconverged)
     result = suggest_poses(

@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from robocal_uncertainty.cli._common import (
+    SOURCES_DEFAULT_HELP,
     campaign_and_robot,
     check_campaign_joints,
     default_sources,
@@ -32,8 +33,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--sources",
         default=None,
-        help=f"sources of the statement under test: {sources_help()} (default tracker,encoder,residual; "
-        "and tracker_orientation for a 6-DOF campaign)",
+        help=f"sources of the statement under test: {sources_help()} ({SOURCES_DEFAULT_HELP})",
     )
     p.add_argument("--out", default="robocal_validation", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
@@ -46,9 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.report.validation_report import format_validation, write_validation_report
 
     campaign, model = campaign_and_robot(args)
-    options = evaluation_options(
-        args, parse_sources_arg(default_sources(args.sources, campaign, "tracker,encoder,residual")), None
-    )
+    options = evaluation_options(args, parse_sources_arg(default_sources(args.sources, campaign)), None)
     validation_campaign = None
     if args.validation_campaign:
         validation_campaign = read_campaign_checked(args, args.validation_campaign)

@@ -156,6 +156,7 @@ def calibration_to_dict(
         file says ``scope: session`` and carries no ``parameter_covariance``.
     """
     kinds = result.model.layout.kinds
+    held = result.held_by_regularisation
     out = {
         "format": CALIBRATION_FORMAT,
         "units": {"length": "m", "angle": "rad"},
@@ -170,6 +171,10 @@ def calibration_to_dict(
                 "estimate": float(result.estimate[i]),
                 "estimated": bool(result.estimated[i]),
                 "linearized_std": _finite_or_none(result.linearized_std[i : i + 1])[0],
+                "held_by_regularisation": bool(held[i]),
+                "data_only_std": (
+                    None if result.data_only_std is None else _finite_or_none(result.data_only_std[i : i + 1])[0]
+                ),
             }
             for i, name in enumerate(result.parameter_names)
         ],

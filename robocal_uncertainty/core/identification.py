@@ -32,6 +32,7 @@ from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rp
 from robocal_uncertainty.errors import ConfigError, ConvergenceError, IdentifiabilityError, InputError
 
 __all__ = [
+    "HELD_STD_RATIO",
     "IDENTIFICATION_MESSAGES",
     "WEIGHTINGS",
     "IdentificationResult",
@@ -53,6 +54,9 @@ IDENTIFICATION_MESSAGES: dict[int, str] = {
     1: "stopped: maximum number of iterations reached before the step fell below tolerance",
 }
 _DEGENERATE_RCOND = 1e-10
+HELD_STD_RATIO = 10.0
+"""A parameter whose data-only standard uncertainty exceeds this multiple of the stated
+(regularised) one is held by the Tikhonov term, not measured by the data."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,14 @@ class IdentificationResult:
     linearized_std : ndarray, shape (n_params,) [m, rad]
         First-order standard uncertainty of each estimate from the residual scatter
         (NaN where not estimated); the Monte Carlo gives the full statement.
+    data_only_std : ndarray, shape (n_params,) [m, rad]
+        The same from the data alone, without the Tikhonov term (lambda = 0 at the
+        solution's linearisation): ``inf`` where the data carry no information on the
+        parameter, NaN where not estimated.
+    data_share : ndarray, shape (n_params,)
+        Diagonal of the resolution matrix ``(A^T A + lambda^2 P)^-1 A^T A`` of the scaled
+        problem: the part of each estimate that the data determine (1: the data alone; 0:
+        the regularisation alone holds it at its start). NaN where not estimated.
     lambda_ : float
         Regularisation parameter, in units of the column-scaled problem.
     lambda_method : {"lcurve", "gcv", "fixed"}
@@ -155,11 +167,28 @@ class IdentificationResult:
     rotation_rms_after: float = float("nan")
     weighting: Weighting = "none"
     weighting_iterations: int = 0
+    data_only_std: Array | None = None
+    data_share: Array | None = None
 
     @property
     def success(self) -> bool:
         """True when the iteration converged."""
         return self.status == 0
+
+    @property
+    def held_by_regularisation(self) -> NDArray[np.bool_]:
+        """Estimated parameters that the Tikhonov term, not the data, determines, shape (n_params,).
+
+        True where ``data_only_std`` exceeds :data:`HELD_STD_RATIO` times ``linearized_std``
+        (infinite when the data carry no information on it): its ``linearized_std`` is the
+        regularisation's, not a measurement's. A penalised parameter so held stays near its
+        start; an unpenalised one (the base) follows a held one it is tied to.
+        """
+        if self.data_only_std is None:
+            return np.zeros(len(self.parameter_names), dtype=bool)
+        with np.errstate(invalid="ignore"):
+            held = self.data_only_std > HELD_STD_RATIO * self.linearized_std
+        return np.asarray(self.estimated & held, dtype=bool)
 
 
 def residual_stats(residuals: Array) -> tuple[float, float]:
@@ -633,6 +662,11 @@ def _identify_weighted(
     cov_x = sigma2 * inv @ ata @ inv
     std = np.full(layout.size, np.nan)
     std[est] = np.sqrt(np.diag(cov_x)) / scale
+    share, data_std = _data_determination(ata, inv, sigma2)
+    data_share = np.full(layout.size, np.nan)
+    data_share[est] = share
+    data_only_std = np.full(layout.size, np.nan)
+    data_only_std[est] = data_std / scale
     estimated = np.zeros(layout.size, dtype=bool)
     estimated[est] = True
     full_scale = np.zeros(layout.size)
@@ -658,6 +692,8 @@ def _identify_weighted(
         candidates=candidates,
         dependencies=obs.dependencies,
         linearized_std=std,
+        data_only_std=data_only_std,
+        data_share=data_share,
         lambda_=float(lam),
         lambda_method=method,
         lcurve=curve,
@@ -685,6 +721,24 @@ def _identify_weighted(
 
 
 _WEIGHTING_MISMATCH = 30.0
+
+
+def _data_determination(ata: Array, inv: Array, sigma2: float) -> tuple[Array, Array]:
+    """Data share (resolution-matrix diagonal) and data-only std of each scaled parameter.
+
+    ``ata`` is ``A^T A`` of the scaled problem, ``inv`` the inverse of ``A^T A + lambda^2 P``.
+    The data-only covariance is ``sigma2 (A^T A)^-1``; a direction of ``A^T A`` with an
+    eigenvalue below ``1e-14`` of the largest carries no information, and every parameter
+    with a component along it gets an infinite data-only std.
+    """
+    share = np.clip(np.einsum("ij,ji->i", inv, ata), 0.0, 1.0)
+    evals, evecs = np.linalg.eigh(ata)
+    informative = evals > 1e-14 * max(float(evals[-1]), np.finfo(float).tiny)
+    with np.errstate(divide="ignore"):
+        var = (evecs[:, informative] ** 2) @ (1.0 / evals[informative])
+    blind = (evecs[:, ~informative] ** 2).sum(axis=1) > 1e-12
+    var = np.where(blind, np.inf, var)
+    return share, np.sqrt(sigma2 * var)
 
 
 def _weighting_mismatch(measurement: MeasurementType, whitened: Array) -> str | None:

@@ -110,6 +110,7 @@ from robocal_uncertainty.uncertainty import (
     CalibrationUncertainty,
     EvaluationOptions,
     UncertaintySettings,
+    default_sources,
     parse_sources,
     sources_help,
 )
@@ -191,8 +192,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("test_joints_in_degrees", True, "test_joints are in degrees (else radians)", read_only=True),
     ParamSpec(
         "sources",
-        "tracker,encoder",
-        f"Comma list of uncertainty sources: {sources_help()}",
+        ",".join(default_sources()),
+        f"Comma list of uncertainty sources: {sources_help()} (default: the validated set; "
+        "add tracker_orientation for a 6-DOF tracker)",
         check=_sources,
     ),
     ParamSpec(
@@ -535,6 +537,7 @@ class UncertaintyNode(Node):
             "finished_ns": self.get_clock().now().nanoseconds,
             "elapsed_s": elapsed,
             "latency_s": latency,
+            "trust_note": result.model_adequacy.trust_note,
         }
         u = result.poses[0].axes
         self.get_logger().info(
@@ -618,6 +621,7 @@ class UncertaintyNode(Node):
             last_evaluation_ns=health.get("finished_ns"),
             last_evaluation_s=health.get("elapsed_s"),
             error=health.get("error"),
+            trust_note=health.get("trust_note") or "",
         )
 
     def _publish_diagnostics(self) -> None:

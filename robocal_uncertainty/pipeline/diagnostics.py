@@ -13,9 +13,10 @@ that topic). The rules live here, so CI tests them without ROS:
 * calibration: samples, condition number, residual RMS, lambda, time since the last
   calibration. ERROR when the last calibration failed or did not converge; WARN while too
   few samples are held, or when the condition number or the residual RMS exceeds its limit.
-* uncertainty: state, trials, Monte Carlo convergence, largest standard uncertainty, time
-  the last evaluation took and since it finished. ERROR when it failed; WARN while none
-  finished yet or when the adaptive procedure did not converge.
+* uncertainty: state, trials, Monte Carlo convergence, largest standard uncertainty, whether
+  the statement is trustworthy, time the last evaluation took and since it finished. ERROR
+  when it failed; WARN while none finished yet, when the adaptive procedure did not converge,
+  or when the campaign is too small for a trustworthy statement (``ModelAdequacy.trust_note``).
 
 Times are int ns on the node's clock; values are SI (s, m), written with their unit in the
 key, e.g. ``residual_rms_m``.
@@ -286,6 +287,7 @@ def uncertainty_status(
     last_evaluation_ns: int | None,
     last_evaluation_s: float | None,
     error: str | None = None,
+    trust_note: str = "",
 ) -> DiagnosticStatus:
     """Status of the Monte Carlo evaluation.
 
@@ -308,12 +310,17 @@ def uncertainty_status(
         How long it took (sample to published result, the latency).
     error : str, optional
         Why the last evaluation failed.
+    trust_note : str, optional
+        ``ModelAdequacy.trust_note`` of the last evaluation: non-empty when the campaign is
+        too small for a trustworthy statement (WARN, and ``trustworthy`` false).
     """
     findings: list[tuple[DiagnosticLevel, str]] = []
     if state == "failed" or error:
         findings.append((DiagnosticLevel.ERROR, f"evaluation failed: {error or 'see the log'}"))
     if converged is False:
         findings.append((DiagnosticLevel.WARN, "the adaptive Monte Carlo did not converge (trial cap reached)"))
+    if trust_note:
+        findings.append((DiagnosticLevel.WARN, trust_note))
     if last_evaluation_ns is None and not findings:
         findings.append((DiagnosticLevel.WARN, f"no evaluation yet ({state})"))
     level, message = _worst(findings)
@@ -325,6 +332,7 @@ def uncertainty_status(
         ("trials", "n/a" if trials is None else str(trials)),
         ("monte_carlo_converged", "n/a" if converged is None else str(converged).lower()),
         ("max_standard_uncertainty_m", _fmt(max_standard_uncertainty_m)),
+        ("trustworthy", "n/a" if last_evaluation_ns is None else str(not trust_note).lower()),
         ("last_evaluation_duration_s", _fmt(last_evaluation_s)),
         ("time_since_last_evaluation_s", _fmt(_age_s(now_ns, last_evaluation_ns))),
     )

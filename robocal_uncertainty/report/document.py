@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.identification import HELD_STD_RATIO, IdentificationResult
 from robocal_uncertainty.core.observability import describe_dependency
 from robocal_uncertainty.report.configurations import (
     DETAIL_LIMIT,
@@ -60,7 +60,7 @@ from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertaint
 from robocal_uncertainty.uncertainty.sources import SOURCE_DESCRIPTIONS
 from robocal_uncertainty.uncertainty.sweeps import Sweep
 
-__all__ = ["REPORT_FILES", "write_report"]
+__all__ = ["REPORT_FILES", "held_note", "write_report"]
 
 REPORT_FILES = ("report.json", "report.md", "report.html", "configurations.csv")
 """Files every report directory holds, besides the PNG figures."""
@@ -182,6 +182,8 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
             "source when enabled."
         )
     items.append(adequacy)
+    if not ad.trustworthy:
+        items.append(f"**{ad.trust_note}.**")
     cal = result.calibration
     conv = "yes" if result.converged else "NO"
     items.append(
@@ -471,24 +473,36 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
         ),
         _Para(
             "Estimate rounded to its Monte Carlo standard uncertainty; lengths in mm with u in µm, "
-            "angles in deg with u in mdeg."
+            "angles in deg with u in mdeg. A parameter *held by regularisation* is one the data "
+            f"alone determine more than {HELD_STD_RATIO:g} times less well than the regularised fit "
+            "states: the Tikhonov term fixes it, its regularised u is no measurement's, and the "
+            "data-only u (lambda = 0) is given instead."
         ),
     ]
     rows = []
+    held = cal.held_by_regularisation
     for i, name in enumerate(cal.parameter_names):
         if not cal.estimated[i]:
             continue
         scale, unit, uscale, uunit = _param_display(kinds.get(name, "length"))
         summary = mc.get(name)
         u = summary.standard_uncertainty if summary is not None else float(cal.linearized_std[i])
+        if held[i]:
+            # The Tikhonov term, not the data, fixes it: no u of a measurement to state.
+            data_u = float(cal.data_only_std[i]) if cal.data_only_std is not None else math.inf
+            u = data_u if math.isfinite(data_u) else u
+            mc_cell = lin_cell = held_note(data_u, kinds.get(name, "length"))
+        else:
+            mc_cell = f"{format_significant(u * uscale)} {uunit}" if summary is not None else "n/a"
+            lin_cell = f"{format_significant(float(cal.linearized_std[i]) * uscale)} {uunit}"
         rows.append(
             (
                 name,
                 f"{cal.nominal[i] * scale:.6g} {unit}",
                 f"{round_to_uncertainty(cal.estimate[i] * scale, u * scale)} {unit}",
                 f"{round_to_uncertainty((cal.estimate[i] - cal.nominal[i]) * uscale, u * uscale)} {uunit}",
-                f"{format_significant(u * uscale)} {uunit}" if summary is not None else "n/a",
-                f"{format_significant(float(cal.linearized_std[i]) * uscale)} {uunit}",
+                mc_cell,
+                lin_cell,
             )
         )
     blocks.append(
@@ -517,6 +531,20 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
     if others:
         blocks.append(_Para("Other dependencies: " + "; ".join(describe_dependency(d) for d in others)))
     return blocks
+
+
+def held_note(data_only_std: float, kind: str, *, micro: str = "µ") -> str:
+    """How a parameter held by regularisation is shown instead of its u: its data-only u.
+
+    ``data_only_std`` in m or rad (``inf``: the data carry no information); ``kind`` is
+    ``"length"`` or ``"angle"``. Lengths above 1 mm in mm, else µm (``micro`` + m: ``"u"``
+    for the console); angles in deg or mdeg.
+    """
+    if not math.isfinite(data_only_std):
+        return "held by regularisation; not identifiable from the data alone"
+    scale, unit, uscale, uunit = _param_display(kind)
+    value, shown = (data_only_std * scale, unit) if data_only_std * uscale >= 1000 else (data_only_std * uscale, uunit)
+    return f"held by regularisation; data-only u = {format_significant(value)} {shown.replace('µ', micro)}"
 
 
 def _settings(

@@ -162,6 +162,10 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
         # position part's unit); every covariance above is in these units.
         "components": ["x", "y", "z", "rx", "ry", "rz"][: len(ad.standard_uncertainty)],
         "component_units": ["m", "m", "m", "rad", "rad", "rad"][: len(ad.standard_uncertainty)],
+        "residual_dof": ad.residual_dof,
+        "min_residual_dof": ad.min_residual_dof,
+        "trustworthy": ad.trustworthy,
+        "trust_note": ad.trust_note,
     }
 
 
@@ -286,6 +290,7 @@ def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
     """Calibration summary of an :class:`IdentificationResult` as JSON-ready values."""
     units = _param_units(calibration)
     lc = calibration.lcurve
+    held = calibration.held_by_regularisation
     return {
         "parameters": [
             {
@@ -298,6 +303,9 @@ def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
                 "estimated": bool(calibration.estimated[i]),
                 "identifiable": bool(calibration.identifiable[i]),
                 "linearized_std": calibration.linearized_std[i],
+                "data_only_std": np.nan if calibration.data_only_std is None else calibration.data_only_std[i],
+                "data_share": np.nan if calibration.data_share is None else calibration.data_share[i],
+                "held_by_regularisation": bool(held[i]),
             }
             for i, name in enumerate(calibration.parameter_names)
         ],
@@ -486,6 +494,7 @@ def uncertainty_to_dict(
     names = result.parameter_names
     units = _param_units(result.calibration)
     summary = summarize_configurations(result)
+    trust = result.model_adequacy.trust_note
     report: dict[str, Any] = {
         "format": REPORT_FORMAT,
         "format_version": REPORT_FORMAT_VERSION,
@@ -541,7 +550,7 @@ def uncertainty_to_dict(
         ],
         "budget": None if budget is None else _budget(budget),
         "sweeps": None if sweeps is None else _sweeps(sweeps),
-        "warnings": merge_warnings(input_warnings, result.warnings),
+        "warnings": merge_warnings(input_warnings, result.warnings, [trust] if trust else []),
     }
     return to_json_value(report)
 

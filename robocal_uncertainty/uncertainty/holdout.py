@@ -155,6 +155,7 @@ class FoldResult:
     model_adequate: bool
     model_error_std: Array
     n_trials: int
+    trustworthy: bool = True
 
 
 @dataclass(frozen=True)
@@ -514,6 +515,7 @@ def validate_holdout(
                 model_adequate=adequacy.adequate,
                 model_error_std=adequacy.standard_uncertainty,
                 n_trials=result.n_trials,
+                trustworthy=adequacy.trustworthy,
             )
         )
         if progress is not None:

