@@ -78,10 +78,8 @@ def test_with_the_defaults_the_node_finds_what_replay_finds_with_its_defaults(ro
     offline = replay_bag(BASE_BAG, model, calibrate=False, auto_window=True)
     assert len(offline.samples) == 30
     assert offline.collector.window_s < 0.5
-    node = CollectorNode(
-        context=ros_context,
-        parameter_overrides=[Parameter("campaign_path", value=str(tmp_path / "c.mcap")), Parameter("fsync", value=False)],
-    )
+    overrides = [Parameter("campaign_path", value=str(tmp_path / "c.mcap")), Parameter("fsync", value=False)]
+    node = CollectorNode(context=ros_context, parameter_overrides=overrides)
     try:
         assert node.collector.learning
         messages = bag_messages()
