@@ -47,8 +47,9 @@ def replay(model):
     return replay_bag(BASE_BAG, model, collector=CollectorSettings(window_s=0.1, guard_s=0.025), calibrate=False)
 
 
-def _node(cls, context, **params):
-    return cls(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+def _node(cls, context, node_name=None, **params):
+    extra = {} if node_name is None else {"node_name": node_name}
+    return cls(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()], **extra)
 
 
 def _sample_msgs(replay):
@@ -101,7 +102,7 @@ def test_uncertainty_node_publishes_the_offline_numbers(ros_context, tmp_path, m
         UncertaintyNode,
         ros_context,
         campaign_path=str(tmp_path / "none.mcap"),
-        test_joints=TEST_JOINTS_DEG,
+        test_joints_deg=TEST_JOINTS_DEG,
         trials=TRIALS,
         seed=SEED,
     )
@@ -139,12 +140,18 @@ def test_uncertainty_node_publishes_the_offline_numbers(ros_context, tmp_path, m
             assert msg.trials == TRIALS
             covariance = np.reshape(pose_msg.pose.covariance, (6, 6))
             assert np.array_equal(covariance[:3, :3], pose.covariance)
-            assert np.all(np.diag(covariance)[3:] == 1e6)
+            # Points on joint 6's axis determine no rotation: exactly 1e6 rad^2, uncorrelated
+            # (was 1e6 + 2e-10 with cross terms up to 2.5e-10, issue 17 item 8).
+            assert np.array_equal(covariance[3:, 3:], 1e6 * np.eye(3))
+            assert not covariance[:3, 3:].any() and not covariance[3:, :3].any()
+            assert not msg.has_orientation
+            assert np.isnan(msg.orientation_standard_uncertainty).all()
+            assert np.array_equal(np.reshape(msg.orientation_covariance, (3, 3)), 1e6 * np.eye(3))
         assert not node.set_parameters([Parameter("coverage", value=1.5)])[0].successful
         refused = node.set_parameters([Parameter("sources", value="tracker,telepathy")])[0]
         assert not refused.successful
         assert "telepathy" in refused.reason
-        assert not node.set_parameters([Parameter("test_joints", value=[0.0] * 6)])[0].successful  # read-only
+        assert not node.set_parameters([Parameter("test_joints_deg", value=[0.0] * 6)])[0].successful  # read-only
     finally:
         executor.shutdown()
         peer.destroy_node()
@@ -177,4 +184,36 @@ def test_a_newer_calibration_supersedes_the_running_one(ros_context, tmp_path, m
 
 def test_bad_test_joints_stop_the_node_at_start(ros_context, tmp_path) -> None:
     with pytest.raises(ConfigError, match="multiple"):
-        _node(UncertaintyNode, ros_context, campaign_path=str(tmp_path / "x.mcap"), test_joints=[0.0] * 7)
+        _node(UncertaintyNode, ros_context, campaign_path=str(tmp_path / "x.mcap"), test_joints_deg=[0.0] * 7)
+    with pytest.raises(ConfigError, match="both set"):
+        _node(
+            UncertaintyNode,
+            ros_context,
+            campaign_path=str(tmp_path / "x.mcap"),
+            test_joints_deg=[0.0] * 6,
+            test_joints_rad=[0.0] * 6,
+        )
+
+
+def test_test_joints_in_degrees_and_in_radians_name_the_same_configuration(ros_context, tmp_path) -> None:
+    q_deg = [10.0, -45.0, 90.0, 0.0, 30.0, -60.0]
+    by_deg = _node(UncertaintyNode, ros_context, campaign_path=str(tmp_path / "x.mcap"), test_joints_deg=q_deg)
+    by_rad = _node(
+        UncertaintyNode,
+        ros_context,
+        node_name="uncertainty_rad",
+        campaign_path=str(tmp_path / "x.mcap"),
+        test_joints_rad=list(np.radians(q_deg)),
+    )
+    default = _node(UncertaintyNode, ros_context, node_name="uncertainty_seed", campaign_path=str(tmp_path / "x.mcap"))
+    try:
+        assert np.array_equal(by_deg.test_joints, by_rad.test_joints)
+        assert np.array_equal(by_deg.test_joints, np.radians([q_deg]))
+        seed_deg = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]  # the seed's Table 2
+        assert np.array_equal(default.test_joints, np.radians([seed_deg]))
+        # The README's example value in degrees is far outside what radians would be read as.
+        assert by_deg.describe_parameter("test_joints_deg").description.endswith("[deg]")
+        assert by_rad.describe_parameter("test_joints_rad").description.endswith("[rad]")
+    finally:
+        for node in (by_deg, by_rad, default):
+            node.destroy_node()
