@@ -10,8 +10,10 @@ Arguments left empty keep the value of ``config_file`` (default: the installed
 (``test_joints_deg``) or in radians (``test_joints_rad``), never both: n_joints numbers per
 configuration, flattened, separated by commas and/or spaces, with or without brackets;
 neither = the seed's test configuration. Remap the inputs with ``joint_states_topic`` and
-``tracker_point_topic``; ``tracker_pose_topic`` subscribes a 6-DOF tracker's poses instead
-of points. ``use_sim_time:=true`` puts the nodes on ``/clock`` (``ros2 bag play --clock``).
+``tracker_point_topic``; ``input_reliability:=reliable`` delivers every message of a
+played recording (default best effort, for live sensors); ``tracker_pose_topic`` subscribes
+a 6-DOF tracker's poses instead of points. ``use_sim_time:=true`` puts the nodes on
+``/clock`` (``ros2 bag play --clock``).
 
 The launch arguments reach the nodes through a small parameter file with node-name
 sections (a node-name section of ``config_file`` would win over ``-p`` overrides); it is
@@ -85,6 +87,8 @@ def _nodes(context: LaunchContext) -> list[Node | RegisterEventHandler]:
         collector["tracker_frame_id"] = arg("tracker_frame_id")
     if arg("tracker_pose_topic"):
         collector["tracker_pose_topic"] = arg("tracker_pose_topic")
+    if arg("input_reliability"):
+        collector["input_reliability"] = arg("input_reliability")
     uncertainty: dict[str, object] = dict(shared)
     if arg("test_joints_deg") and arg("test_joints_rad"):
         raise ValueError("give test_joints_deg or test_joints_rad, not both")
@@ -125,6 +129,11 @@ def generate_launch_description() -> LaunchDescription:
         ("test_joints_rad", "", "test configurations in RADIANS, n_joints numbers each, flattened; empty = none"),
         ("tracker_frame_id", "", "frame_id of the tracker points; empty = config_file's"),
         ("tracker_pose_topic", "", "6-DOF tracker: PoseStamped topic used instead of points; empty = points"),
+        (
+            "input_reliability",
+            "",
+            "collector inputs: best_effort (sensors) or reliable (bag play); empty = config's",
+        ),
         ("use_sim_time", "", "true: the nodes use /clock (ros2 bag play --clock); empty = config_file's"),
         ("joint_states_topic", "/joint_states", "sensor_msgs/JointState input"),
         ("tracker_point_topic", "/tracker/point", "geometry_msgs/PointStamped input"),

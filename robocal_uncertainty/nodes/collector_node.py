@@ -64,6 +64,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -82,7 +83,14 @@ from robocal_uncertainty.nodes.common import (
     stamp_ns,
     to_ros,
 )
-from robocal_uncertainty.nodes.parameters import DIAGNOSTICS_PERIOD, ParamSpec, declare_parameters, non_empty, positive
+from robocal_uncertainty.nodes.parameters import (
+    DIAGNOSTICS_PERIOD,
+    ParamSpec,
+    declare_parameters,
+    non_empty,
+    one_of,
+    positive,
+)
 from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_qos, sensor_qos
 from robocal_uncertainty.pipeline.auto_window import AutoWindowCollector
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
@@ -95,6 +103,8 @@ from robocal_uncertainty.pipeline.stream_merge import StreamMerger
 __all__ = ["PARAMETERS", "CollectorNode", "main"]
 
 _JOINTS, _POINTS = 0, 1
+RELIABLE_HOLD_S = 1.0
+"""With reliable inputs, the least wall time [s] a message waits for the other stream (see reorder_window_s)."""
 # rclpy >= 4 (Iron, Jazzy) hands a subscription callback taking two arguments the message
 # info with the DDS source timestamp; Humble's rclpy cannot.
 _HAS_MESSAGE_INFO = hasattr(Subscription, "CallbackType")
@@ -209,6 +219,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         5.0,
     ),
     ParamSpec(
+        "input_reliability",
+        "best_effort",
+        "QoS reliability of the two input subscriptions: best_effort (sensor-data profile, live sensors: a late "
+        "reading is dropped, not retransmitted) or reliable (keep all; replaying a recording with ros2 bag play: "
+        "nothing lost, the player is slowed down if the node falls behind; messages wait at least 1 s for the "
+        "other stream)",
+        read_only=True,
+        check=one_of("best_effort", "reliable"),
+    ),
+    ParamSpec(
         "input_queue_depth",
         100,
         "Subscription queue of each input (sensor-data QoS); >= rate x longest pause (e.g. an fsync)",
@@ -277,21 +297,30 @@ class CollectorNode(Node):
         self.received = {"joint_states": 0, "tracker_points": 0}
         self.published = 0
         self.record_failures = 0
-        self._merger = StreamMerger(self._feed, hold_ns=round(p["reorder_window_s"] * 1e9))
+        hold_s = p["reorder_window_s"]
+        if p["input_reliability"] == "reliable":
+            # Nothing is lost, but a stream slowed by flow control can lag the other by far more
+            # than a sensor's transport latency: wait up to RELIABLE_HOLD_S for it.
+            hold_s = max(hold_s, RELIABLE_HOLD_S)
+        self._merger = StreamMerger(self._feed, hold_ns=round(hold_s * 1e9))
 
         self._sample_pub = self.create_publisher(CalibrationSampleMsg, "robocal/samples", SAMPLE_QOS)
         self._status_pub = self.create_publisher(String, "robocal/collector_status", latched_qos())
-        depth = p["input_queue_depth"]
+        input_qos = sensor_qos(p["input_queue_depth"])
+        if p["input_reliability"] == "reliable":
+            # Keep all: a node that falls behind slows the publisher instead of losing readings.
+            input_qos.reliability = ReliabilityPolicy.RELIABLE
+            input_qos.history = HistoryPolicy.KEEP_ALL
         pose_topic = p["tracker_pose_topic"]
         pose_type: Any = PoseWithCovarianceStamped if p["tracker_pose_with_covariance"] else PoseStamped
         tracker_type: Any = pose_type if pose_topic else PointStamped
         tracker_topic = pose_topic or "/tracker/point"
         if _HAS_MESSAGE_INFO:
-            self.create_subscription(JointState, "/joint_states", self._on_joint_state_info, sensor_qos(depth))
-            self.create_subscription(tracker_type, tracker_topic, self._on_point_info, sensor_qos(depth))
+            self.create_subscription(JointState, "/joint_states", self._on_joint_state_info, input_qos)
+            self.create_subscription(tracker_type, tracker_topic, self._on_point_info, input_qos)
         else:
-            self.create_subscription(JointState, "/joint_states", self._on_joint_state, sensor_qos(depth))
-            self.create_subscription(tracker_type, tracker_topic, self._on_point, sensor_qos(depth))
+            self.create_subscription(JointState, "/joint_states", self._on_joint_state, input_qos)
+            self.create_subscription(tracker_type, tracker_topic, self._on_point, input_qos)
         self.create_service(Trigger, "~/capture_now", self._capture_now)
         self.create_service(Trigger, "~/clear", self._clear)
         self.create_service(Trigger, "~/save_copy", self._save_copy)
