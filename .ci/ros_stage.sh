@@ -52,7 +52,7 @@ set -u
 built=$(date +%s)
 
 echo "== ROS stage: colcon test (ament: test/nodes and test/ros_live, label ros)"
-colcon test --event-handlers console_direct+ --ctest-args -L ros
+colcon test --event-handlers console_direct+ --ctest-args -L '^ros$'
 colcon test-result --verbose
 ros2 daemon stop >/dev/null 2>&1 || true
 echo "ROS stage passed: build $((built - started)) s, tests $(($(date +%s) - built)) s, total $(($(date +%s) - started)) s"

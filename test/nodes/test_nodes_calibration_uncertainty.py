@@ -217,3 +217,59 @@ def test_test_joints_in_degrees_and_in_radians_name_the_same_configuration(ros_c
     finally:
         for node in (by_deg, by_rad, default):
             node.destroy_node()
+
+
+def _status_after_evaluation(context, tmp_path, samples, calibration, *, sim_now_ns: int | None) -> dict:
+    """The node's final status JSON; with `sim_now_ns`, on use_sim_time with /clock at that time."""
+    import json
+
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+
+    node = _node(
+        UncertaintyNode,
+        context,
+        node_name=f"uncertainty_sim_{sim_now_ns is not None}",
+        campaign_path=str(tmp_path / "none.mcap"),
+        trials=TRIALS,
+        use_sim_time=sim_now_ns is not None,
+    )
+    peer = rclpy.create_node("clock_source", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(peer)
+    status: list[dict] = []
+    peer.create_subscription(String, "robocal/uncertainty_status", lambda m: status.append(json.loads(m.data)), 10)
+    clock = peer.create_publisher(Clock, "/clock", 10)
+    try:
+        if sim_now_ns is not None:
+            message = Clock()
+            message.clock.sec, message.clock.nanosec = divmod(sim_now_ns, 1_000_000_000)
+
+            def on_bag_clock() -> bool:
+                clock.publish(message)
+                return node.get_clock().now().nanoseconds == sim_now_ns
+
+            assert spin_until(executor, on_bag_clock)
+        for msg in samples:
+            node._on_sample(msg)
+        node._on_calibration(calibration)
+        assert spin_until(executor, lambda: bool(status) and status[-1]["state"] == "done", timeout_s=120.0)
+        return status[-1]
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
+
+
+def test_sample_to_result_on_sim_time_and_none_on_another_clock(ros_context, tmp_path, model, replay) -> None:
+    """Playing a recording (2023 stamps): with use_sim_time and /clock from the bag the latency is
+    stated on the bag's clock; on the wall clock it is left out (was 3 years)."""
+    samples = _sample_msgs(replay)
+    newest = max(s.stamp_ns for s in replay.samples)
+    calibration = to_ros(calibration_to_msg(identify(model, replay.campaign), stamp_ns=1), CalibrationResultMsg)
+    # The bag's clock 0.25 s after the newest sample.
+    on_sim = _status_after_evaluation(ros_context, tmp_path, samples, calibration, sim_now_ns=newest + 250_000_000)
+    assert on_sim["sample_to_result_s"] == 0.25
+    on_wall = _status_after_evaluation(ros_context, tmp_path, samples, calibration, sim_now_ns=None)
+    assert on_wall["sample_to_result_s"] is None
