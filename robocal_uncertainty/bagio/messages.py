@@ -321,8 +321,11 @@ def pose_uncertainty_to_msg(
     else:
         q = orientation.mean_quaternion
         quaternion = types["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
-        rot_cov = _f64(orientation.covariance).reshape(-1)
         determined = orientation.determined
+        pose_cov = ros_pose_covariance(pose).reshape(-1)
+        # The rotation block of pose_covariance: the Monte Carlo covariance where determined,
+        # the huge variance along undetermined directions (never a finite number there).
+        rot_cov = pose_cov.reshape(6, 6)[3:, 3:].reshape(-1).copy()
         rot_axes = orientation.axes
 
         def rot_axis(values: list[float | None]) -> NDArray[np.float64]:
@@ -340,9 +343,9 @@ def pose_uncertainty_to_msg(
             "hh": rot_axis([a.shortest.high for a in rot_axes]),
         }
         undetermined = ~np.array(determined, dtype=bool)
-        pose_cov = ros_pose_covariance(pose).reshape(-1)
     return types[POSE_UNCERTAINTY](
-        has_orientation=orientation is not None,
+        # A statement about the orientation only where some rotation is determined.
+        has_orientation=orientation is not None and bool(np.any(orientation.determined)),
         mean_orientation=quaternion,
         orientation_covariance=rot_cov,
         orientation_standard_uncertainty=rot["u"],

@@ -22,6 +22,17 @@ and, with OK/WARN/ERROR and the time since the last sample and input, on ``/diag
 (``diagnostic_msgs/DiagnosticArray`` every ``diagnostics_period_s``; rules in
 :mod:`robocal_uncertainty.pipeline.diagnostics`).
 
+Static detection is the one ``replay`` uses, with the same defaults: with ``auto_window``
+(default) the window and guards are learnt from the first dwells of the stream
+(:class:`~robocal_uncertainty.pipeline.auto_window.AutoWindowCollector`; ``window_s`` and
+``guard_s`` are then upper bounds), so a recording played to the node gives the samples
+``robocal-uncertainty replay`` finds in it; the first samples come out when the fifth dwell
+ends. After a restart the window is learnt again from the new stream; set ``auto_window``
+false for fixed settings.
+
+Lost messages: each input's stamps are checked against its rate (:mod:`.input_gaps`); the
+gaps and the messages missing in them are on ``/diagnostics`` and in the status JSON.
+
 A static dwell gives its sample as soon as it is complete (static through ``guard_s +
 average_s + guard_s``), so the last pose of a campaign is taken while the arm is still
 there, exactly as ``replay`` takes it.
@@ -42,6 +53,7 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+import dataclasses
 import json
 import time
 from collections.abc import Sequence
@@ -52,6 +64,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -67,19 +80,31 @@ from robocal_uncertainty.nodes.common import (
     diagnostic_array,
     load_model,
     run_node,
+    stamp_ns,
     to_ros,
 )
-from robocal_uncertainty.nodes.parameters import DIAGNOSTICS_PERIOD, ParamSpec, declare_parameters, non_empty, positive
+from robocal_uncertainty.nodes.parameters import (
+    DIAGNOSTICS_PERIOD,
+    ParamSpec,
+    declare_parameters,
+    non_empty,
+    one_of,
+    positive,
+)
 from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_qos, sensor_qos
+from robocal_uncertainty.pipeline.auto_window import AutoWindowCollector
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
-from robocal_uncertainty.pipeline.collector import CollectorSettings, StaticPoseCollector
+from robocal_uncertainty.pipeline.collector import CollectorSettings
 from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus, DiagnosticThresholds, collector_status
+from robocal_uncertainty.pipeline.input_gaps import GapCounter
 from robocal_uncertainty.pipeline.replay import feed_joint_state, feed_tracker_message
 from robocal_uncertainty.pipeline.stream_merge import StreamMerger
 
 __all__ = ["PARAMETERS", "CollectorNode", "main"]
 
 _JOINTS, _POINTS = 0, 1
+RELIABLE_HOLD_S = 1.0
+"""With reliable inputs, the least wall time [s] a message waits for the other stream (see reorder_window_s)."""
 # rclpy >= 4 (Iron, Jazzy) hands a subscription callback taking two arguments the message
 # info with the DDS source timestamp; Humble's rclpy cannot.
 _HAS_MESSAGE_INFO = hasattr(Subscription, "CallbackType")
@@ -128,6 +153,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         read_only=True,
     ),
     ParamSpec("fsync", True, "fsync the campaign file after every sample (survives power loss)", read_only=True),
+    ParamSpec(
+        "auto_window",
+        True,
+        "Learn the window and guards from the first dwells (as replay does without --window-s); window_s and guard_s "
+        "are then upper bounds",
+        read_only=True,
+    ),
     ParamSpec("window_s", 0.5, "Sliding window deciding whether the arm is static", "s", True, 0.001, 60.0, positive),
     ParamSpec(
         "joint_motion_threshold_rad",
@@ -187,6 +219,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         5.0,
     ),
     ParamSpec(
+        "input_reliability",
+        "best_effort",
+        "QoS reliability of the two input subscriptions: best_effort (sensor-data profile, live sensors: a late "
+        "reading is dropped, not retransmitted) or reliable (keep all; replaying a recording with ros2 bag play: "
+        "nothing lost, the player is slowed down if the node falls behind; messages wait at least 1 s for the "
+        "other stream)",
+        read_only=True,
+        check=one_of("best_effort", "reliable"),
+    ),
+    ParamSpec(
         "input_queue_depth",
         100,
         "Subscription queue of each input (sensor-data QoS); >= rate x longest pause (e.g. an fsync)",
@@ -235,9 +277,10 @@ class CollectorNode(Node):
             ignore_extra_joints=p["ignore_extra_joints"],
             orientation_scatter_threshold=p["orientation_scatter_threshold_rad"],
         )
-        self.collector = StaticPoseCollector.from_settings(
-            self.model.joint_names, frame_id, settings, log=self._causes.warning
+        self.collector = AutoWindowCollector(
+            self.model.joint_names, frame_id, settings, auto=p["auto_window"], log=self._causes.warning
         )
+        self._gaps = {"joint_states": GapCounter(), "tracker_points": GapCounter()}
         self.campaign_path = campaign_file(p["campaign_path"])
         self.campaign_path.parent.mkdir(parents=True, exist_ok=True)
         self.recorder = CalibrationPipeline(
@@ -250,24 +293,34 @@ class CollectorNode(Node):
             self.get_logger().warning(f"campaign {self.campaign_path}: {warning}")
         if self.recorder.n_samples:
             self.get_logger().info(f"resumed {self.recorder.n_samples} samples from {self.campaign_path}")
+        self._learning = self.collector.learning
         self.received = {"joint_states": 0, "tracker_points": 0}
         self.published = 0
         self.record_failures = 0
-        self._merger = StreamMerger(self._feed, hold_ns=round(p["reorder_window_s"] * 1e9))
+        hold_s = p["reorder_window_s"]
+        if p["input_reliability"] == "reliable":
+            # Nothing is lost, but a stream slowed by flow control can lag the other by far more
+            # than a sensor's transport latency: wait up to RELIABLE_HOLD_S for it.
+            hold_s = max(hold_s, RELIABLE_HOLD_S)
+        self._merger = StreamMerger(self._feed, hold_ns=round(hold_s * 1e9))
 
         self._sample_pub = self.create_publisher(CalibrationSampleMsg, "robocal/samples", SAMPLE_QOS)
         self._status_pub = self.create_publisher(String, "robocal/collector_status", latched_qos())
-        depth = p["input_queue_depth"]
+        input_qos = sensor_qos(p["input_queue_depth"])
+        if p["input_reliability"] == "reliable":
+            # Keep all: a node that falls behind slows the publisher instead of losing readings.
+            input_qos.reliability = ReliabilityPolicy.RELIABLE
+            input_qos.history = HistoryPolicy.KEEP_ALL
         pose_topic = p["tracker_pose_topic"]
         pose_type: Any = PoseWithCovarianceStamped if p["tracker_pose_with_covariance"] else PoseStamped
         tracker_type: Any = pose_type if pose_topic else PointStamped
         tracker_topic = pose_topic or "/tracker/point"
         if _HAS_MESSAGE_INFO:
-            self.create_subscription(JointState, "/joint_states", self._on_joint_state_info, sensor_qos(depth))
-            self.create_subscription(tracker_type, tracker_topic, self._on_point_info, sensor_qos(depth))
+            self.create_subscription(JointState, "/joint_states", self._on_joint_state_info, input_qos)
+            self.create_subscription(tracker_type, tracker_topic, self._on_point_info, input_qos)
         else:
-            self.create_subscription(JointState, "/joint_states", self._on_joint_state, sensor_qos(depth))
-            self.create_subscription(tracker_type, tracker_topic, self._on_point, sensor_qos(depth))
+            self.create_subscription(JointState, "/joint_states", self._on_joint_state, input_qos)
+            self.create_subscription(tracker_type, tracker_topic, self._on_point, input_qos)
         self.create_service(Trigger, "~/capture_now", self._capture_now)
         self.create_service(Trigger, "~/clear", self._clear)
         self.create_service(Trigger, "~/save_copy", self._save_copy)
@@ -310,15 +363,24 @@ class CollectorNode(Node):
 
     def _feed(self, stream: int, msg: Any) -> None:
         """Hand one message (in publication order) to the collector."""
+        self._gaps["joint_states" if stream == _JOINTS else "tracker_points"].add(stamp_ns(msg.header))
         try:
             if stream == _JOINTS:
-                sample = feed_joint_state(self.collector, msg)
+                samples = feed_joint_state(self.collector, msg)
             else:  # a point, or a pose from a 6-DOF tracker
-                sample = feed_tracker_message(self.collector, msg)
+                samples = feed_tracker_message(self.collector, msg)
         except CalibError as err:  # the collector drops bad input itself; this is a last resort
             self._causes.warning("internal", f"message dropped: {err}")
             return
-        if sample is not None:
+        was_learning = self._learning
+        self._learning = self.collector.learning
+        if was_learning and not self._learning:
+            used = self.collector.settings
+            self.get_logger().info(
+                f"static window {used.window_s:g} s, guards {used.guard_s:g} s (learnt from the first dwells); "
+                f"{len(samples)} held samples follow"
+            )
+        for sample in samples:
             self._take(sample)
 
     def _take(self, sample: CalibrationSample) -> bool:
@@ -345,25 +407,29 @@ class CollectorNode(Node):
 
     def _capture_now(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self._merger.drain()
+        samples = self.collector.capture_now()  # while learning: decides the window first
+        self._learning = self.collector.learning
         static = self.collector.is_static
-        sample = self.collector.capture_now()
-        if sample is None:
+        taken = [self._take(sample) for sample in samples]
+        if not samples:
             response.success = False
             response.message = (
                 "the arm is not static" if not static else "this dwell was already captured or holds too few data"
             )
-        elif self._take(sample):
+        elif all(taken):
             response.success = True
-            response.message = f"sample {self.recorder.n_samples} taken at {sample.stamp_ns} ns"
+            response.message = f"sample {self.recorder.n_samples} taken at {samples[-1].stamp_ns} ns"
         else:
             response.success = False
-            response.message = "the sample could not be recorded (see the log)"
+            response.message = "a sample could not be recorded (see the log)"
         return response
 
     def _clear(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self._merger.drain()
         was_static = self.collector.is_static
-        self.collector.flush()  # forget the window and the current dwell, emit nothing
+        for sample in self.collector.clear():  # forget the current dwell; finished ones held while learning stay
+            self._take(sample)
+        self._learning = self.collector.learning
         response.success = True
         response.message = "window cleared" + (" (the current static dwell was discarded)" if was_static else "")
         return response
@@ -405,6 +471,11 @@ class CollectorNode(Node):
             "record_failures": self.record_failures,
             "static": self.collector.is_static,
             "campaign_path": str(self.campaign_path),
+            "learning_window": self.collector.learning,
+            "window_s": self.collector.settings.window_s,
+            "guard_s": self.collector.settings.guard_s,
+            "input_gaps": {name: counter.gaps for name, counter in self._gaps.items()},
+            "missing": {name: counter.missing for name, counter in self._gaps.items()},
         }
 
     def _publish_status(self) -> None:
@@ -414,8 +485,9 @@ class CollectorNode(Node):
             self._status_pub.publish(String(data=text))
 
     def diagnostic_status(self) -> DiagnosticStatus:
-        """The collector's health (rules in :mod:`robocal_uncertainty.pipeline.diagnostics`)."""
-        return collector_status(
+        """The collector's health (rules in :mod:`robocal_uncertainty.pipeline.diagnostics`), with the
+        input gaps (messages lost in transport, estimated from each stream's stamps and rate)."""
+        status = collector_status(
             name=f"{self.get_name()}: static-pose collector",
             hardware_id=self.model.name,
             now_ns=self.get_clock().now().nanoseconds,
@@ -429,6 +501,12 @@ class CollectorNode(Node):
             static=self.collector.is_static,
             thresholds=self._thresholds,
         )
+        extra = [("learning window", str(self.collector.learning).lower())]
+        extra.append(("window [s]", f"{self.collector.settings.window_s:g}"))
+        for name, counter in self._gaps.items():
+            extra.append((f"{name} gaps", str(counter.gaps)))
+            extra.append((f"{name} missing", str(counter.missing)))
+        return dataclasses.replace(status, values=tuple(status.values) + tuple(extra))
 
     def _publish_diagnostics(self) -> None:
         self._diagnostics_pub.publish(diagnostic_array(self, [self.diagnostic_status()]))

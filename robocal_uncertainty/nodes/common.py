@@ -15,6 +15,7 @@ stamp, so "the first n samples" names the same campaign in both.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -189,6 +190,10 @@ def run_node(factory: Callable[[], Node], args: Iterable[str] | None = None) -> 
         print(f"[FATAL] {err}", file=sys.stderr)
         status = 1
     finally:
+        # Ctrl-C in a terminal reaches a launched node twice (from the terminal's process group
+        # and forwarded by ros2 launch): the second must not interrupt the cleanup, which closes
+        # the campaign file and the worker processes.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

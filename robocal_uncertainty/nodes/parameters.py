@@ -48,9 +48,9 @@ class ParamSpec:
     Parameters
     ----------
     name : str
-    default : bool, int, float, str or list
+    default : bool, int, float, str, list or None
         Default value; its type is the parameter's type (never an empty list: ROS would
-        take it for a byte array).
+        take it for a byte array). None: not set unless given (with `dynamic_typing`).
     description : str
         What it is; the unit is appended as `` [unit]``.
     unit : str

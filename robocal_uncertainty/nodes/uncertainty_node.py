@@ -117,6 +117,11 @@ from robocal_uncertainty.uncertainty import (
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
 
+_LATENCY_LIMIT_S = 3600.0
+"""A sample older than this on the node's clock is on another clock (a recording's)."""
+_CLOCK_SLACK_S = 1.0
+"""Stamps this far ahead of the node's clock are tolerated (clock offsets between machines)."""
+
 SEED_TEST_JOINTS_DEG = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]
 """The robot seed's test configuration (Table 2), degrees."""
 
@@ -163,6 +168,10 @@ def _numbers(value: Any) -> str | None:
     return None
 
 
+def _joints(value: Any) -> str | None:
+    return None if value is None else _numbers(value)
+
+
 def _xyz(value: Any) -> str | None:
     reason = _numbers(value)
     if reason is None and len(value) != 3:
@@ -180,16 +189,26 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     CAMPAIGN_PATH_READ,
     READ_CAMPAIGN_AT_START,
     ParamSpec(
-        "test_joints",
-        SEED_TEST_JOINTS_DEG,
-        "Test joint configurations, n_joints values per configuration, flattened; one result per configuration "
-        "(fixed at start: the output topics keep one message per configuration)",
-        "rad, or deg with test_joints_in_degrees",
+        "test_joints_deg",
+        None,
+        "Test joint configurations in DEGREES, n_joints values per configuration, flattened; one result per "
+        "configuration (fixed at start); set this or test_joints_rad, not both; neither: the seed's test "
+        "configuration",
+        "deg",
         read_only=True,
-        check=_numbers,
+        check=_joints,
         dynamic_typing=True,
     ),
-    ParamSpec("test_joints_in_degrees", True, "test_joints are in degrees (else radians)", read_only=True),
+    ParamSpec(
+        "test_joints_rad",
+        None,
+        "Test joint configurations in RADIANS, n_joints values per configuration, flattened; set this or "
+        "test_joints_deg, not both",
+        "rad",
+        read_only=True,
+        check=_joints,
+        dynamic_typing=True,
+    ),
     ParamSpec(
         "sources",
         ",".join(default_sources()),
@@ -325,12 +344,17 @@ class UncertaintyNode(Node):
         p = declare_parameters(self, PARAMETERS, on_change=self._note_change)
         self.model = load_model(p["robot_config"], base_unknown=p["base_unknown"])
         n = self.model.n_joints
-        values = np.array(p["test_joints"], dtype=np.float64)
+        degrees, radians = p["test_joints_deg"], p["test_joints_rad"]
+        if degrees is not None and radians is not None:
+            raise ConfigError("parameters test_joints_deg and test_joints_rad are both set: give one")
+        name = "test_joints_rad" if radians is not None else "test_joints_deg"
+        given = radians if radians is not None else degrees if degrees is not None else SEED_TEST_JOINTS_DEG
+        values = np.array(given, dtype=np.float64)
         if values.size % n:
-            msg = f"parameter test_joints: {values.size} values are not a multiple of the {n} joints"
+            msg = f"parameter {name}: {values.size} values are not a multiple of the {n} joints"
             raise ConfigError(msg)
         q = values.reshape(-1, n)
-        self.test_joints = np.radians(q) if p["test_joints_in_degrees"] else q
+        self.test_joints = q if radians is not None else np.radians(q)
         self.store = SampleStore(self.model)
         self.campaign_path = campaign_file(p["campaign_path"])
         self._causes = CauseLogger(self, 5.0)
@@ -400,7 +424,16 @@ class UncertaintyNode(Node):
                 self.get_logger().info("Monte Carlo settings changed: re-evaluating the latest calibration")
                 self._submit()
 
-    def _options(self, msg: CalibrationResultMsg) -> EvaluationOptions:
+    def _sources_for(self, measures_orientation: bool) -> str:
+        """The ``sources`` parameter; at its default, a 6-DOF campaign adds its orientation noise
+        (``tracker_orientation``), as ``evaluate``, ``validate`` and ``replay`` do."""
+        given = str(self.get_parameter("sources").value)
+        default = next(spec.default for spec in PARAMETERS if spec.name == "sources")
+        if given == default and measures_orientation and "tracker_orientation" not in given.split(","):
+            return given + ",tracker_orientation"
+        return given
+
+    def _options(self, msg: CalibrationResultMsg, *, measures_orientation: bool = False) -> EvaluationOptions:
         """The :class:`EvaluationOptions` of the parameters, with the calibration's lambda choice."""
 
         def get(name: str) -> Any:
@@ -408,7 +441,7 @@ class UncertaintyNode(Node):
 
         low, high = float(get("lambda_range_low")), float(get("lambda_range_high"))
         settings = UncertaintySettings(
-            sources=parse_sources(str(get("sources"))),
+            sources=parse_sources(self._sources_for(measures_orientation)),
             tracker_noise=TrackerNoise(a=get("tracker_noise_um") * 1e-6, b=get("tracker_noise_um_per_m") * 1e-6),
             encoder_noise=EncoderNoise(half_width=float(np.radians(get("encoder_noise_deg")))),
             lambda_range=None if low == high == 0.0 else (low, high),
@@ -447,14 +480,15 @@ class UncertaintyNode(Node):
             self._status({"state": "waiting_for_samples", "samples": len(self.store), "sample_count": need})
             return
         self._waiting = False
+        samples = tuple(self.store.first(need))
         try:
-            options = self._options(msg)
+            options = self._options(msg, measures_orientation=bool(samples) and samples[0].orientation is not None)
         except CalibError as err:
             self.get_logger().error(f"invalid Monte Carlo settings: {err}")
             return
         with self._wake:
             self._generation += 1
-            self._pending = _Job(self._generation, tuple(self.store.first(need)), msg, options)
+            self._pending = _Job(self._generation, samples, msg, options)
             self._wake.notify()
 
     # -- worker ----------------------------------------------------------------------------
@@ -526,9 +560,18 @@ class UncertaintyNode(Node):
         self._evaluated = (campaign, calibration, job.options)
         self.completed += 1
         elapsed = time.monotonic() - started
-        # Latency: from the newest sample's stamp (when the pose was taken) to publication.
+        # Latency: from the newest sample's stamp (when the pose was taken) to publication, on
+        # this node's clock: a played recording needs `ros2 bag play --clock` and use_sim_time,
+        # else its stamps are not on the node's clock and no latency is stated.
         newest = max(sample.stamp_ns for sample in job.samples)
-        latency = (self.get_clock().now().nanoseconds - newest) / 1e9
+        latency: float | None = (self.get_clock().now().nanoseconds - newest) / 1e9
+        if latency is not None and not (-_CLOCK_SLACK_S <= latency <= _LATENCY_LIMIT_S):
+            self._causes.warning(
+                "clock",
+                f"sample stamps are {latency:.3g} s from this node's clock: no sample_to_result_s "
+                "(playing a recording? use `ros2 bag play --clock` and use_sim_time:=true)",
+            )
+            latency = None
         self._health = {
             "state": "done",
             "trials": result.n_trials,
@@ -551,7 +594,7 @@ class UncertaintyNode(Node):
                 "trials": result.n_trials,
                 "converged": result.converged,
                 "elapsed_s": round(elapsed, 3),
-                "sample_to_result_s": round(latency, 3),
+                "sample_to_result_s": None if latency is None else round(latency, 3),
                 **_extras(evaluation),
             }
         )
@@ -597,9 +640,10 @@ class UncertaintyNode(Node):
 
     def _publish_markers(self, result: CalibrationUncertainty, campaign: Campaign, msg: CalibrationResultMsg) -> None:
         scale = float(self.get_parameter("marker_scale").value)
+        # A 6-DOF campaign stores n x 12 pose values: the markers show their positions.
         specs = uncertainty_markers(
             result,
-            campaign_points=campaign.points,
+            campaign_points=campaign.measurement.positions(campaign.points),
             campaign_frame=campaign.frame,
             scale=scale or None,
             target_size_m=float(self.get_parameter("marker_size_m").value),

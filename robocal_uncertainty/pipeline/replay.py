@@ -36,8 +36,9 @@ from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import BagError, CampaignError
+from robocal_uncertainty.pipeline.auto_window import AutoWindowCollector
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
-from robocal_uncertainty.pipeline.collector import CollectorSettings, LogCallback, StaticPoseCollector
+from robocal_uncertainty.pipeline.collector import CollectorSettings, LogCallback
 from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
 __all__ = [
@@ -178,18 +179,19 @@ def _stamp(header: Any) -> int:
     return int(header.stamp.sec) * _NS_PER_S + int(header.stamp.nanosec)
 
 
-def feed_joint_state(collector: StaticPoseCollector, message: Any) -> CalibrationSample | None:
+def feed_joint_state(collector: Any, message: Any) -> Any:
     """Hand one ``sensor_msgs/JointState`` (a rosbags or an rclpy message) to `collector`.
 
-    Returns the sample of a dwell the message ended, if any (see
-    :meth:`StaticPoseCollector.add_joint_state`).
+    `collector` is a :class:`StaticPoseCollector` (returns the sample of a dwell the message
+    ended, or None) or an :class:`~robocal_uncertainty.pipeline.auto_window.AutoWindowCollector`
+    (returns the list of samples completed).
     """
     return collector.add_joint_state(
         _stamp(message.header), [str(n) for n in message.name], np.asarray(message.position, dtype=np.float64)
     )
 
 
-def feed_tracker_message(collector: StaticPoseCollector, message: Any) -> CalibrationSample | None:
+def feed_tracker_message(collector: Any, message: Any) -> Any:
     """Hand one tracker message (a rosbags or an rclpy message) to `collector`.
 
     ``geometry_msgs/PointStamped`` goes to :meth:`StaticPoseCollector.add_tracker_point`;
@@ -199,7 +201,7 @@ def feed_tracker_message(collector: StaticPoseCollector, message: Any) -> Calibr
     covariance of a ``PoseWithCovarianceStamped`` is not used: a sample's covariances are
     those of the mean over its dwell, from the scatter of the readings averaged.
 
-    Returns the sample of a dwell the message ended, if any.
+    Returns what the collector's method returns (see :func:`feed_joint_state`).
     """
     stamp, frame_id = _stamp(message.header), str(message.header.frame_id)
     if hasattr(message, "pose"):
@@ -311,7 +313,9 @@ def replay_bag(
     log : callable, optional
         ``log(cause, message)`` for dropped messages and rejected dwells (throttled).
     auto_window : bool
-        Shorten the window and guards of `collector` to the recording's dwells (see
+        Shorten the window and guards of `collector` to the dwells of the recording, learnt
+        from its first dwells as the collector node does live
+        (:class:`~robocal_uncertainty.pipeline.auto_window.AutoWindowCollector`,
         :func:`auto_collector_settings`).
 
     Returns
@@ -359,28 +363,23 @@ def replay_bag(
             raise BagError(msg)
         tracker_frame_id = frames.most_common(1)[0][0]
     settings = collector or CollectorSettings()
-    # The still intervals of the joints serve the auto window and the diagnosis only.
-    still = _still_of(events, model.joint_names, settings.joint_motion_threshold) if auto_window else None
-    if still is not None:
-        settings = auto_collector_settings(settings, still)
-    pose_collector = StaticPoseCollector.from_settings(model.joint_names, tracker_frame_id, settings, log=log)
+    # The collector node's detector: with auto_window, the window is learnt from the first
+    # dwells as they arrive (pipeline.auto_window), so a live run finds the same samples.
+    pose_collector = AutoWindowCollector(model.joint_names, tracker_frame_id, settings, auto=auto_window, log=log)
     pipeline = CalibrationPipeline(model, options=options, min_samples=min_samples, campaign_path=campaign_path)
     with pipeline:
         samples: list[CalibrationSample] = []
         for is_joint, message in events:
-            if is_joint:
-                sample = feed_joint_state(pose_collector, message)
-            else:
-                sample = feed_tracker_message(pose_collector, message)
-            if sample is not None:
+            feed = feed_joint_state if is_joint else feed_tracker_message
+            for sample in feed(pose_collector, message):
                 samples.append(sample)
                 pipeline.add_sample(sample)
-        last = pose_collector.flush()
-        if last is not None:
-            samples.append(last)
-            pipeline.add_sample(last)
+        for sample in pose_collector.flush():
+            samples.append(sample)
+            pipeline.add_sample(sample)
         calibration = pipeline.calibrate() if calibrate else None
         campaign = pipeline.campaign
+    settings = pose_collector.settings
     dropped = pose_collector.dropped
     dropped["undecodable"] = undecodable
     return ReplayResult(
@@ -393,17 +392,7 @@ def replay_bag(
         tracker_frame_id=tracker_frame_id,
         truncated=bag.truncated,
         collector=settings,
-        diagnosis=""
-        if samples
-        else _diagnose(
-            bag,
-            events,
-            model,
-            tracker_frame_id,
-            settings,
-            still if still is not None else _still_of(events, model.joint_names, settings.joint_motion_threshold),
-            pose_collector,
-        ),
+        diagnosis="" if samples else _diagnose(bag, events, model, tracker_frame_id, settings, pose_collector),
     )
 
 
@@ -437,8 +426,7 @@ def _diagnose(
     model: RobotModel,
     tracker_frame_id: str,
     settings: CollectorSettings,
-    still: StillIntervals,
-    pose_collector: StaticPoseCollector,
+    pose_collector: AutoWindowCollector,
 ) -> str:
     """The likely reason why a replay found no static pose, in one line."""
     from robocal_uncertainty.bagio.campaign_format import METADATA_NAME
@@ -460,6 +448,7 @@ def _diagnose(
     if frames and tracker_frame_id not in frames:
         seen = ", ".join(f"{f} ({c})" for f, c in frames.most_common())
         return f"no tracker point is in frame {tracker_frame_id!r} (points by frame: {seen}): check --tracker-frame"
+    still = _still_of(events, model.joint_names, settings.joint_motion_threshold)
     durations = still.durations_s
     if durations.size == 0:
         return "the joint states cannot be read"

@@ -244,7 +244,13 @@ class OrientationUncertainty:
         out = np.array(self.pose_covariance, dtype=np.float64, copy=True)
         out[:3, :3] = position_covariance
         u = np.asarray(self.undetermined_directions, dtype=np.float64).reshape(-1, 3)
-        if u.shape[0]:
+        if u.shape[0] == 3:
+            # No rotation determined: exactly the stated variance, uncorrelated (u^T u is the
+            # identity only to rounding, which left 1e-10 rad^2 cross terms and 1e6 + 2e-10).
+            out[3:, :] = 0.0
+            out[:, 3:] = 0.0
+            out[3:, 3:] = undetermined_variance * np.eye(3)
+        elif u.shape[0]:
             proj = np.eye(6)
             proj[3:, 3:] -= u.T @ u
             out = proj @ out @ proj.T

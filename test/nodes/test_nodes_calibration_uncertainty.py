@@ -47,8 +47,9 @@ def replay(model):
     return replay_bag(BASE_BAG, model, collector=CollectorSettings(window_s=0.1, guard_s=0.025), calibrate=False)
 
 
-def _node(cls, context, **params):
-    return cls(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+def _node(cls, context, node_name=None, **params):
+    extra = {} if node_name is None else {"node_name": node_name}
+    return cls(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()], **extra)
 
 
 def _sample_msgs(replay):
@@ -101,7 +102,7 @@ def test_uncertainty_node_publishes_the_offline_numbers(ros_context, tmp_path, m
         UncertaintyNode,
         ros_context,
         campaign_path=str(tmp_path / "none.mcap"),
-        test_joints=TEST_JOINTS_DEG,
+        test_joints_deg=TEST_JOINTS_DEG,
         trials=TRIALS,
         seed=SEED,
     )
@@ -139,12 +140,18 @@ def test_uncertainty_node_publishes_the_offline_numbers(ros_context, tmp_path, m
             assert msg.trials == TRIALS
             covariance = np.reshape(pose_msg.pose.covariance, (6, 6))
             assert np.array_equal(covariance[:3, :3], pose.covariance)
-            assert np.all(np.diag(covariance)[3:] == 1e6)
+            # Points on joint 6's axis determine no rotation: exactly 1e6 rad^2, uncorrelated
+            # (was 1e6 + 2e-10 with cross terms up to 2.5e-10, issue 17 item 8).
+            assert np.array_equal(covariance[3:, 3:], 1e6 * np.eye(3))
+            assert not covariance[:3, 3:].any() and not covariance[3:, :3].any()
+            assert not msg.has_orientation
+            assert np.isnan(msg.orientation_standard_uncertainty).all()
+            assert np.array_equal(np.reshape(msg.orientation_covariance, (3, 3)), 1e6 * np.eye(3))
         assert not node.set_parameters([Parameter("coverage", value=1.5)])[0].successful
         refused = node.set_parameters([Parameter("sources", value="tracker,telepathy")])[0]
         assert not refused.successful
         assert "telepathy" in refused.reason
-        assert not node.set_parameters([Parameter("test_joints", value=[0.0] * 6)])[0].successful  # read-only
+        assert not node.set_parameters([Parameter("test_joints_deg", value=[0.0] * 6)])[0].successful  # read-only
     finally:
         executor.shutdown()
         peer.destroy_node()
@@ -177,4 +184,92 @@ def test_a_newer_calibration_supersedes_the_running_one(ros_context, tmp_path, m
 
 def test_bad_test_joints_stop_the_node_at_start(ros_context, tmp_path) -> None:
     with pytest.raises(ConfigError, match="multiple"):
-        _node(UncertaintyNode, ros_context, campaign_path=str(tmp_path / "x.mcap"), test_joints=[0.0] * 7)
+        _node(UncertaintyNode, ros_context, campaign_path=str(tmp_path / "x.mcap"), test_joints_deg=[0.0] * 7)
+    with pytest.raises(ConfigError, match="both set"):
+        _node(
+            UncertaintyNode,
+            ros_context,
+            campaign_path=str(tmp_path / "x.mcap"),
+            test_joints_deg=[0.0] * 6,
+            test_joints_rad=[0.0] * 6,
+        )
+
+
+def test_test_joints_in_degrees_and_in_radians_name_the_same_configuration(ros_context, tmp_path) -> None:
+    q_deg = [10.0, -45.0, 90.0, 0.0, 30.0, -60.0]
+    by_deg = _node(UncertaintyNode, ros_context, campaign_path=str(tmp_path / "x.mcap"), test_joints_deg=q_deg)
+    by_rad = _node(
+        UncertaintyNode,
+        ros_context,
+        node_name="uncertainty_rad",
+        campaign_path=str(tmp_path / "x.mcap"),
+        test_joints_rad=list(np.radians(q_deg)),
+    )
+    default = _node(UncertaintyNode, ros_context, node_name="uncertainty_seed", campaign_path=str(tmp_path / "x.mcap"))
+    try:
+        assert np.array_equal(by_deg.test_joints, by_rad.test_joints)
+        assert np.array_equal(by_deg.test_joints, np.radians([q_deg]))
+        seed_deg = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]  # the seed's Table 2
+        assert np.array_equal(default.test_joints, np.radians([seed_deg]))
+        # The README's example value in degrees is far outside what radians would be read as.
+        assert by_deg.describe_parameter("test_joints_deg").description.endswith("[deg]")
+        assert by_rad.describe_parameter("test_joints_rad").description.endswith("[rad]")
+    finally:
+        for node in (by_deg, by_rad, default):
+            node.destroy_node()
+
+
+def _status_after_evaluation(context, tmp_path, samples, calibration, *, sim_now_ns: int | None) -> dict:
+    """The node's final status JSON; with `sim_now_ns`, on use_sim_time with /clock at that time."""
+    import json
+
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+
+    node = _node(
+        UncertaintyNode,
+        context,
+        node_name=f"uncertainty_sim_{sim_now_ns is not None}",
+        campaign_path=str(tmp_path / "none.mcap"),
+        trials=TRIALS,
+        use_sim_time=sim_now_ns is not None,
+    )
+    peer = rclpy.create_node("clock_source", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(peer)
+    status: list[dict] = []
+    peer.create_subscription(String, "robocal/uncertainty_status", lambda m: status.append(json.loads(m.data)), 10)
+    clock = peer.create_publisher(Clock, "/clock", 10)
+    try:
+        if sim_now_ns is not None:
+            message = Clock()
+            message.clock.sec, message.clock.nanosec = divmod(sim_now_ns, 1_000_000_000)
+
+            def on_bag_clock() -> bool:
+                clock.publish(message)
+                return node.get_clock().now().nanoseconds == sim_now_ns
+
+            assert spin_until(executor, on_bag_clock)
+        for msg in samples:
+            node._on_sample(msg)
+        node._on_calibration(calibration)
+        assert spin_until(executor, lambda: bool(status) and status[-1]["state"] == "done", timeout_s=120.0)
+        return status[-1]
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
+
+
+def test_sample_to_result_on_sim_time_and_none_on_another_clock(ros_context, tmp_path, model, replay) -> None:
+    """Playing a recording (2023 stamps): with use_sim_time and /clock from the bag the latency is
+    stated on the bag's clock; on the wall clock it is left out (was 3 years)."""
+    samples = _sample_msgs(replay)
+    newest = max(s.stamp_ns for s in replay.samples)
+    calibration = to_ros(calibration_to_msg(identify(model, replay.campaign), stamp_ns=1), CalibrationResultMsg)
+    # The bag's clock 0.25 s after the newest sample.
+    on_sim = _status_after_evaluation(ros_context, tmp_path, samples, calibration, sim_now_ns=newest + 250_000_000)
+    assert on_sim["sample_to_result_s"] == 0.25
+    on_wall = _status_after_evaluation(ros_context, tmp_path, samples, calibration, sim_now_ns=None)
+    assert on_wall["sample_to_result_s"] is None

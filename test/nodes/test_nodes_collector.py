@@ -41,7 +41,8 @@ def replay():
 
 
 def _collector(context, tmp_path: Path, **params) -> CollectorNode:
-    values = {"campaign_path": str(tmp_path / "campaign.mcap"), "fsync": False, **WINDOW, **params}
+    values = {"campaign_path": str(tmp_path / "campaign.mcap"), "fsync": False, "auto_window": False, **WINDOW}
+    values.update(params)
     overrides = [Parameter(name, value=value) for name, value in values.items()]
     return CollectorNode(context=context, parameter_overrides=overrides)
 
@@ -67,6 +68,36 @@ def test_fed_in_recorded_order_the_node_takes_the_replays_samples(ros_context, t
     on_disk = read_campaign(tmp_path / "campaign.mcap")
     assert np.array_equal(on_disk.points, expected.points)
     assert np.array_equal(on_disk.point_std, expected.point_std)
+
+
+def test_with_the_defaults_the_node_finds_what_replay_finds_with_its_defaults(ros_context, tmp_path) -> None:
+    """One static-pose detector, one set of defaults: the shipped raw bag (0.3 s dwells, shorter
+    than the default 0.5 s window) gives the node with its defaults the 30 samples the offline
+    replay finds with its defaults (window learnt from the first dwells), bit for bit."""
+    model = load_robot_model(robot_config_path("paper_arm"))
+    offline = replay_bag(BASE_BAG, model, calibrate=False, auto_window=True)
+    assert len(offline.samples) == 30
+    assert offline.collector.window_s < 0.5
+    overrides = [Parameter("campaign_path", value=str(tmp_path / "c.mcap")), Parameter("fsync", value=False)]
+    node = CollectorNode(context=ros_context, parameter_overrides=overrides)
+    try:
+        assert node.collector.learning
+        messages = bag_messages()
+        for log_time, topic, msg in messages:
+            node._push(_STREAM[topic], msg, log_time)
+        node._merger.drain()
+        assert not node.collector.learning
+        assert node.collector.settings == offline.collector
+        # The base bag ends at home after its last dwell: every sample is out without a flush.
+        campaign = node.recorder.campaign
+        assert campaign.n_poses == 30
+        for name in ("joint_positions", "points", "point_std", "stamps_ns"):
+            assert np.array_equal(getattr(campaign, name), getattr(offline.campaign, name)), name
+        status = node.status()
+        assert status["window_s"] == offline.collector.window_s
+        assert status["input_gaps"]["joint_states"] == 0
+    finally:
+        node.destroy_node()
 
 
 def test_restart_resumes_the_campaign_file(ros_context, tmp_path, replay) -> None:
