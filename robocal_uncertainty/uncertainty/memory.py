@@ -175,17 +175,18 @@ def map_bytes(
 
     Each worker holds a block of ``block_rows`` trials: per trial and configuration the tool
     position, the test joints' encoder draws, the residual draws and the forward-kinematics
-    temporaries and the reduction's centred copies (``3 + 2 n_joints + 24`` values); the
+    temporaries and the reduction's centred copies (``3 + 2 n_joints + 32`` values); the
     campaign's draws per trial; the
     reduction keeps the configurations' means and 3x3 covariances, and every trial of the
     configurations with a coverage region. Also the grid of configurations itself. Measured
     with ``map --configurations 4000 --trials 2000`` of a simulated paper_arm tracker campaign
     (1 000 trials per block): peak RSS 852 MB above that of 100 configurations, 27.3 values
     per trial and configuration; tracemalloc's peak of 1 500 configurations at 500 trials
-    per block is 35 (``test/uncertainty/test_memory_checks.py``); the estimate counts 39
-    (6 joints).
+    per block was 35 (``test/uncertainty/test_memory_checks.py``), and 44 since the map draws
+    the residual source by default and predicts through the nearby-point walk; the estimate
+    counts 47 (6 joints).
     """
-    per_row = n_configurations * (3 + 2 * n_joints + 24) + n_poses * (2 * n_joints + 6)
+    per_row = n_configurations * (3 + 2 * n_joints + 32) + n_poses * (2 * n_joints + 6)
     blocks = max(1, workers) * block_rows * per_row
     kept = n_trials * 3 * n_regions + 12 * n_configurations
     return int(_FLOAT * (blocks + kept) + grid_bytes(n_configurations, n_joints))
