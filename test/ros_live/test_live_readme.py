@@ -189,7 +189,11 @@ def test_readme_example_live_equals_offline_replay(ros_env, tmp_path) -> None:
     collector_diag = {kv.key: kv.value for kv in diagnostics["collector_node"].values}
     assert collector_diag["learning window"] == "false"
     assert int(collector_diag["joint_states missing"]) >= 0 and "tracker_points gaps" in collector_diag
-    assert diagnostics["uncertainty_node"].level == b"\x00", diagnostics["uncertainty_node"].message
+    # 30 samples leave fewer residual degrees of freedom than a model-error estimate needs (issue 18):
+    # the statement is published, and diagnostics WARN that it is not trustworthy (never "OK").
+    status = diagnostics["uncertainty_node"]
+    assert status.level == b"\x01", status.message
+    assert "NOT TRUSTWORTHY" in status.message, status.message
     assert diagnostics["calibration_node"].level in (b"\x00", b"\x01")
 
     # ~/suggest_poses equals the command line's suggest on the same campaign and settings.

@@ -121,7 +121,11 @@ def test_six_dof_campaign_live(ros_env, tmp_path) -> None:
     # Was "no evaluated calibration yet" (the evaluation crashed); next-best poses are ranked
     # for point campaigns only (app.suggest_poses), and the service says so in one line.
     assert not suggested.success and suggested.message == "next-best poses need point measurements, got measured pose"
-    assert diagnostics["uncertainty_node"].level == b"\x00", diagnostics["uncertainty_node"].message
+    # a small 6-DOF campaign leave fewer residual degrees of freedom than a model-error estimate needs (issue 18):
+    # the statement is published, and diagnostics WARN that it is not trustworthy (never "OK").
+    status = diagnostics["uncertainty_node"]
+    assert status.level == b"\x01", status.message
+    assert "NOT TRUSTWORTHY" in status.message, status.message
     u = last["u"]
     assert "tracker_orientation" in list(u.sources)
     assert u.has_orientation and np.isfinite(u.orientation_standard_uncertainty).all()
