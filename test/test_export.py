@@ -148,6 +148,11 @@ def test_ur_kinematics_of_the_shipped_series(tmp_path: Path, capsys: pytest.Capt
     printed = capsys.readouterr().out
     assert "measured point in wrist_3_link" in printed
     doc = yaml.safe_load(out.read_text())["kinematics"]
+    # The header names the calibration in a few short lines: the session record's covariances
+    # belong to the sidecar, not to a comment.
+    header = [line for line in out.read_text().splitlines() if line.startswith("#")]
+    assert any(line.startswith("# session: campaign") for line in header)
+    assert max(len(line) for line in header) < 200 and not any("covariance" in line for line in header)
     assert list(doc) == ["shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3", "hash"]
     assert all(set(doc[k]) == {"x", "y", "z", "roll", "pitch", "yaw"} for k in list(doc)[:6])
     assert isinstance(doc["hash"], str) and doc["hash"].startswith("calib_")

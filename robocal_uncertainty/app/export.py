@@ -205,9 +205,15 @@ def _comment(data: dict[str, Any], where: str, what: str, uncertainty: str = "th
         f"{what} written by robocal-uncertainty export from {where}.",
         f"robot {ident['robot']!r}, model {ident['model_name']!r}, {ident['n_poses']} poses",
     ]
-    for key in ("created", "date", "campaign", "session", "sources"):
+    for key in ("created", "date", "campaign", "sources"):
         if key in ident:
             lines.append(f"{key}: {ident[key]}")
+    session = ident.get("session")
+    if isinstance(session, dict):  # format 2: the session record (its covariances are in the sidecar)
+        lines.append(
+            f"session: campaign {session.get('campaign')}, {session.get('n_poses')} poses in the "
+            f"{session.get('frame')} frame {session.get('frame_id')}; scope: {data.get('scope', 'session')}"
+        )
     rms_b, rms_a = ident.get("residual_rms_before_m"), ident.get("residual_rms_after_m")
     if isinstance(rms_b, (int, float)) and isinstance(rms_a, (int, float)):
         lines.append(f"residual RMS {1e3 * rms_b:.4g} mm before, {1e3 * rms_a:.4g} mm after calibration")
