@@ -200,7 +200,11 @@ def open_executor(
         Dask scheduler address (``tcp://host:8786``) or ``"local"`` for a ``LocalCluster``
         started here and closed on exit.
     mp_context : str, optional
-        Start method of the local processes; None is the platform default.
+        Start method of the local processes. Default ``"forkserver"`` where the platform has
+        it (else the platform default): ``fork`` copies a process whose other threads (BLAS,
+        a ROS node's middleware, a Dask client) may hold locks, which can deadlock the child
+        (Python 3.12 warns of it; 3.14 makes ``forkserver`` the default on Linux). Results do
+        not depend on the start method.
 
     Yields
     ------
@@ -216,9 +220,7 @@ def open_executor(
     if executor is not None and (workers > 1 or dask is not None):
         msg = "give either an executor or workers/dask, not both"
         raise ConfigError(msg)
-    if mp_context is not None and mp_context not in multiprocessing.get_all_start_methods():
-        msg = f"mp_context must be one of {multiprocessing.get_all_start_methods()}, got {mp_context!r}"
-        raise ConfigError(msg)
+    mp_context = _start_method(mp_context)
     if executor is not None:
         yield check_executor(executor)
         return
@@ -241,6 +243,17 @@ def open_executor(
         yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _start_method(mp_context: str | None) -> str | None:
+    """The start method to use: ``mp_context``, else ``"forkserver"`` where the platform has it."""
+    methods = multiprocessing.get_all_start_methods()
+    if mp_context is None:
+        return "forkserver" if "forkserver" in methods else None
+    if mp_context not in methods:
+        msg = f"mp_context must be one of {methods}, got {mp_context!r}"
+        raise ConfigError(msg)
+    return mp_context
 
 
 def _import_modules(modules: tuple[str, ...]) -> None:
@@ -289,13 +302,7 @@ class WorkerPool:
 
     def __init__(self, workers: int = 1, *, mp_context: str | None = None, preload: tuple[str, ...] = ()) -> None:
         self.workers = _check_workers(workers)
-        methods = multiprocessing.get_all_start_methods()
-        if mp_context is None and "forkserver" in methods:
-            mp_context = "forkserver"
-        if mp_context is not None and mp_context not in methods:
-            msg = f"mp_context must be one of {methods}, got {mp_context!r}"
-            raise ConfigError(msg)
-        self.mp_context = mp_context
+        self.mp_context = _start_method(mp_context)
         self.preload = tuple(preload)
         self.started = 0
         """How many times worker processes were started (1 after the first run, more after a crash)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import sys
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
@@ -50,7 +51,9 @@ def dask_client():
 
 def test_run_trials_bit_identical_on_processes_threads_and_dask(dask_client) -> None:
     reference = run_trials(TRIALS, **KWARGS)
-    with ThreadPoolExecutor(2) as threads, ProcessPoolExecutor(2) as processes:
+    # forkserver: fork() beside the Dask client's threads can deadlock (Python 3.12 warns).
+    forkserver = multiprocessing.get_context("forkserver")
+    with ThreadPoolExecutor(2) as threads, ProcessPoolExecutor(2, mp_context=forkserver) as processes:
         runs = [
             run_trials(TRIALS, workers=2, **KWARGS),
             run_trials(TRIALS, executor=threads, chunk_blocks=2, **KWARGS),
