@@ -269,6 +269,19 @@ def _tracker_base(settings: SimulationSettings) -> tuple[Array, Array]:
     return -r_tb @ t_bt, rpy_from_matrix(r_tb)
 
 
+def _metadata(model: RobotModel, settings: SimulationSettings, seed: int | None) -> dict[str, object]:
+    """What a simulated campaign records of how it was made (noise in SI units)."""
+    return {
+        "source": "simulation",
+        "robot": model.name,
+        "seed": seed,
+        "n_poses": settings.n_poses,
+        "tracker_noise_a_m": settings.tracker_noise.a,
+        "tracker_noise_b_m_per_m": settings.tracker_noise.b,
+        "encoder_noise_half_width_rad": settings.encoder_noise.half_width,
+    }
+
+
 def simulate_measurements(
     true_params: Array,
     model: RobotModel,
@@ -355,15 +368,7 @@ def simulate_campaign(
         frame_id=frame_id,
         point_std=std,
         stamps_ns=np.arange(settings.n_poses, dtype=np.int64) * 10_000_000_000,
-        metadata={
-            "source": "simulation",
-            "robot": model.name,
-            "seed": seed,
-            "n_poses": settings.n_poses,
-            "tracker_noise_a_m": settings.tracker_noise.a,
-            "tracker_noise_b_m_per_m": settings.tracker_noise.b,
-            "encoder_noise_half_width_rad": settings.encoder_noise.half_width,
-        },
+        metadata=_metadata(model, settings, seed),
     )
     return SimulatedCampaign(
         campaign=campaign,
@@ -615,16 +620,7 @@ def simulate_session(
         frame_id=model.measurement_frame_id,
         point_std=std,
         stamps_ns=np.arange(settings.n_poses, dtype=np.int64) * 10_000_000_000,
-        metadata={
-            "source": "simulation",
-            "robot": model.name,
-            "seed": seed,
-            "n_poses": settings.n_poses,
-            "tracker_noise_a_m": settings.tracker_noise.a,
-            "tracker_noise_b_m_per_m": settings.tracker_noise.b,
-            "encoder_noise_half_width_rad": settings.encoder_noise.half_width,
-            "session": change.to_dict(),
-        },
+        metadata={**_metadata(model, settings, seed), "session": change.to_dict()},
     )
     deflected = q_true + settings.unmodelled.deflection(q_true)
     return SimulatedCampaign(
