@@ -24,18 +24,28 @@ seconds apart)."""
 
 
 def load_robot(
-    name: str, *, base_known: bool | None = None, base_link: str | None = None, tip_link: str | None = None
+    name: str,
+    *,
+    base_known: bool | None = None,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    tool_point: Sequence[float] | None = None,
 ) -> Any:
-    """``--robot``: a robot YAML, a shipped model name, or a URDF (``.urdf``) with its chain ends."""
+    """``--robot``: a robot YAML, a shipped model name, or a URDF (``.urdf``) with its chain ends
+    and, when known, the measured point in the tip link (``--tool-point``, m)."""
     from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
 
     if Path(name).suffix.lower() == ".urdf":
         from robocal_uncertainty.core.urdf_model import load_urdf, robot_model_from_urdf
 
-        model = robot_model_from_urdf(load_urdf(name), base_link, tip_link)
+        point = None if tool_point is None else np.asarray(tool_point, dtype=np.float64)
+        model = robot_model_from_urdf(load_urdf(name), base_link, tip_link, tool_point=point)
         return replace(model, base_known=base_known) if base_known is not None else model
-    if base_link is not None or tip_link is not None:
-        msg = f"--base-link and --tip-link choose a URDF chain; --robot {name} is not a .urdf file"
+    if base_link is not None or tip_link is not None or tool_point is not None:
+        msg = (
+            f"--base-link, --tip-link and --tool-point describe a URDF chain; --robot {name} is not a .urdf file "
+            "(a robot YAML gives its tool_point)"
+        )
         raise ConfigError(msg)
     path = resolve_robot_config(name)
     try:
@@ -250,9 +260,37 @@ def campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
         base_known=False if args.base_unknown else None,
         base_link=getattr(args, "base_link", None),
         tip_link=getattr(args, "tip_link", None),
+        tool_point=getattr(args, "tool_point", None),
     )
     check_campaign_joints(model, campaign, args.campaign)
+    check_campaign_frame(args.robot, model, campaign, args.campaign)
     return campaign, model
+
+
+def check_campaign_frame(robot: str, model: Any, campaign: Any, path: str) -> None:
+    """A campaign in the robot base frame must be in the model's base frame.
+
+    Its points are taken as given in the model's base frame. When the campaign names another
+    link of the same URDF (UR's ``base`` is ``base_link`` turned by 180 degrees), that is a known,
+    different frame: refused, naming ``--base-link``. Another name is warned about.
+    """
+    frame_id = str(getattr(campaign, "frame_id", "") or "")
+    if campaign.frame != "base" or not frame_id or frame_id == model.base_frame_id:
+        return
+    if Path(robot).suffix.lower() == ".urdf":
+        from robocal_uncertainty.core.urdf_model import load_urdf
+
+        if frame_id in load_urdf(robot).links:
+            msg = (
+                f"{path}: the points are in URDF link {frame_id!r}, the chain starts at {model.base_frame_id!r} "
+                f"(another frame of {robot}): give --base-link {frame_id}"
+            )
+            raise InputError(msg)
+    print(
+        f"warning: {path}: the points are in frame {frame_id!r}, the robot model's base frame is "
+        f"{model.base_frame_id!r}: taken as the same frame",
+        file=sys.stderr,
+    )
 
 
 def read_campaign_checked(args: argparse.Namespace, path: str) -> Any:

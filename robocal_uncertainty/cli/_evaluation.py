@@ -28,6 +28,11 @@ def print_calibration(result: Any) -> None:
         f"  residual RMS {result.rms_before * 1e3:.4f} mm -> {result.rms_after * 1e3:.4f} mm, "
         f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm"
     )
+    if getattr(result, "tool_initialised", "nominal") == "fit":
+        print(
+            "  tool point: not given (URDF: --tool-point), started from a least-squares fit to the campaign "
+            "and not regularised"
+        )
     if result.measurement.measures_orientation:
         stated, used = result.measurement.std, 1.0 / result.measurement.weights
         print(

@@ -170,10 +170,19 @@ def add_dask_arg(p: argparse.ArgumentParser) -> None:
 
 
 def add_urdf_chain_args(p: argparse.ArgumentParser) -> None:
-    """--base-link and --tip-link: the chain of a ``--robot X.urdf``."""
+    """--base-link, --tip-link and --tool-point: the chain and the measured point of a ``--robot X.urdf``."""
     p.add_argument("--base-link", help="--robot X.urdf: the chain's base link (default: the URDF's root link)")
     p.add_argument(
         "--tip-link",
         help="--robot X.urdf: the chain's tip link, where the measured point is (default: the end of the first "
         "serial chain)",
+    )
+    p.add_argument(
+        "--tool-point",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="--robot X.urdf: the measured point (probe centre, reflector) in the tip link, in METRES, when it is "
+        "known ('0 0 0': the tip link is the probe, e.g. a fixed link added at it). Default: unknown, started "
+        "from a least-squares fit to the campaign and not regularised",
     )

@@ -466,7 +466,8 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
                 ),
                 f"condition number of the scaled Jacobian: {cal.condition_number:.3g}",
                 f"iterations: {cal.iterations}, converged: {'yes' if cal.converged else 'NO'} ({cal.message})",
-                f"poses: {cal.n_poses}; base initialised: {cal.base_initialised}",
+                f"poses: {cal.n_poses}; base initialised: {cal.base_initialised}; tool point initialised: "
+                f"{cal.tool_initialised}",
                 f"estimated parameters: {int(cal.estimated.sum())} of {int(cal.candidates.sum())} candidates",
                 *_weighting_lines(cal),
             )

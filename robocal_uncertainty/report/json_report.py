@@ -324,6 +324,7 @@ def calibration_to_dict(calibration: IdentificationResult) -> dict[str, Any]:
         "status": calibration.status,
         "message": calibration.message,
         "base_initialised": calibration.base_initialised,
+        "tool_initialised": calibration.tool_initialised,
         "n_poses": calibration.n_poses,
         "warnings": list(calibration.warnings),
         "measurement": _measurement(calibration),
