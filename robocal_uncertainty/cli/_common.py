@@ -60,7 +60,17 @@ def load_robot(
     return model
 
 
-def parse_joint_values(values: Sequence[str], n_joints: int, *, degrees: bool, what: str) -> NDArray[np.float64]:
+def _in_radians(q: NDArray[np.float64], degrees: bool, prismatic: Sequence[bool]) -> NDArray[np.float64]:
+    """`q` [rad, or deg with `degrees`] in rad; a prismatic joint's column is in m either way."""
+    if not degrees:
+        return q
+    linear = np.zeros(q.shape[1], dtype=bool) if not prismatic else np.asarray(prismatic, dtype=bool)
+    return np.asarray(np.where(linear, q, np.radians(q)), dtype=np.float64)
+
+
+def parse_joint_values(
+    values: Sequence[str], n_joints: int, *, degrees: bool, what: str, prismatic: Sequence[bool] = ()
+) -> NDArray[np.float64]:
     try:
         numbers = [float(v) for item in values for v in item.replace(",", " ").split()]
     except ValueError as err:
@@ -73,12 +83,13 @@ def parse_joint_values(values: Sequence[str], n_joints: int, *, degrees: bool, w
     if not np.isfinite(q).all():
         msg = f"{what} contain NaN or inf"
         raise InputError(msg)
-    return np.radians(q) if degrees else q
+    return _in_radians(q, degrees, prismatic)
 
 
-def read_joints_file(path: str, n_joints: int, *, degrees: bool) -> NDArray[np.float64]:
+def read_joints_file(path: str, n_joints: int, *, degrees: bool, prismatic: Sequence[bool] = ()) -> NDArray[np.float64]:
     """Joint configurations from a text file: one per row, numbers separated by commas,
-    semicolons or whitespace; blank lines, ``#`` comments and a header row are skipped."""
+    semicolons or whitespace; blank lines, ``#`` comments and a header row are skipped.
+    With `degrees`, the revolute joints' values are converted to rad (prismatic ones stay in m)."""
     try:
         text = Path(path).read_text(encoding="utf-8")
     except UnicodeDecodeError as err:
@@ -109,7 +120,7 @@ def read_joints_file(path: str, n_joints: int, *, degrees: bool) -> NDArray[np.f
         msg = f"joints file {path} has no configuration (one row of {n_joints} numbers per configuration)"
         raise ConfigError(msg)
     q = np.array(rows)
-    return np.radians(q) if degrees else q
+    return _in_radians(q, degrees, prismatic)
 
 
 def is_number(text: str) -> bool:
@@ -366,10 +377,10 @@ def joint_configurations(
         msg = f"give {flag} or {flag}-file, not both ({flag}-file {path} and {len(values)} {flag} values)"
         raise ConfigError(msg)
     if path:
-        q = read_joints_file(path, model.n_joints, degrees=degrees)
+        q = read_joints_file(path, model.n_joints, degrees=degrees, prismatic=model.prismatic)
         what = f"{path}: {noun}"
     elif values:
-        q = parse_joint_values(values, model.n_joints, degrees=degrees, what=flag)
+        q = parse_joint_values(values, model.n_joints, degrees=degrees, what=flag, prismatic=model.prismatic)
         what = f"{flag} configuration"
     else:
         msg = f"give {flag} or {flag}-file"

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     span = np.column_stack([campaign.joint_positions.min(axis=0), campaign.joint_positions.max(axis=0)])
     limits = span if args.within_campaign else None
     if args.from_file:
-        q = read_joints_file(args.from_file, model.n_joints, degrees=args.degrees)
+        q = read_joints_file(args.from_file, model.n_joints, degrees=args.degrees, prismatic=model.prismatic)
     elif args.grid:
         q = grid_configurations(model, args.grid[0] if len(args.grid) == 1 else args.grid, limits=limits)
     else:

@@ -371,6 +371,7 @@ def _settings(result: CalibrationUncertainty) -> dict[str, Any]:
         "tracker_noise_kind": s.tracker_noise.kind,
         "tracker_xyz_m": list(s.tracker_xyz),
         "encoder_half_width_rad": s.encoder_noise.half_width,
+        "linear_encoder_half_width_m": s.encoder_noise.linear_half_width,
         "lambda_range_setting": None if s.lambda_range is None else list(s.lambda_range),
         "lambda_range_used": None if result.lambda_range is None else list(result.lambda_range),
         "lambda_star": result.lambda_star,
