@@ -96,7 +96,10 @@ def run(args: argparse.Namespace) -> int:
         b = state.tracker_noise.b if args.tracker_noise_um_per_m is None else args.tracker_noise_um_per_m * 1e-6
         tracker = TrackerNoise(a=a, b=b)
     if args.encoder_noise_deg is not None:
-        encoder = EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg)))
+        encoder = EncoderNoise(
+            half_width=float(np.radians(args.encoder_noise_deg)),
+            linear_half_width=state.encoder_noise.linear_half_width,
+        )
     run_ = verify(
         model,
         args.calibration,
