@@ -49,6 +49,9 @@ def register(sub: Any) -> None:
     p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker half-width a, um (uniform)")
     p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m")
     p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder half-width, deg (uniform)")
+    p.add_argument(
+        "--linear-encoder-noise-um", type=float, default=5.0, help="prismatic joint reading half-width, um (uniform)"
+    )
     p.add_argument("--base-unknown", action="store_true", help="identify the base transform even if known")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (never changes the result)")
     add_dask_arg(p)
