@@ -41,6 +41,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -103,6 +104,19 @@ from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
 __all__ = ["PARAMETERS", "CalibrationNode", "main"]
 
+
+def _tool_point(value: Any) -> str | None:
+    if value is None:
+        return None
+    if (
+        not isinstance(value, (list, tuple))
+        or len(value) != 3
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
+        return f"must be 3 finite numbers (x, y, z in m), got {value!r}"
+    return None
+
+
 PARAMETERS: tuple[ParamSpec, ...] = (
     ROBOT_CONFIG,
     BASE_UNKNOWN,
@@ -162,6 +176,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "Calibration JSON of an earlier session (written by robocal-uncertainty calibrate --json) that ~/verify "
         "checks the samples held against; empty = ~/verify refuses",
     ),
+    ParamSpec(
+        "tool_point_m",
+        None,
+        "With robot_description: the measured point (probe, reflector) in tip_link, x y z, when known; unset = "
+        "fitted to the campaign and not regularised",
+        "m",
+        read_only=True,
+        check=_tool_point,
+        dynamic_typing=True,
+    ),
     ParamSpec("verify_retool", False, "~/verify re-registers the tool point too (the probe was remounted)"),
     ParamSpec(
         "verify_significance",
@@ -203,9 +227,18 @@ class CalibrationNode(Node):
         chain = {k: str(self.declare_parameter(k, "").value) or None for k in ("base_link", "tip_link")}
         self._source = None
         if self._description.strip():
-            self._source = robot_source_from_description(self._description, **chain)
+            point = p["tool_point_m"]
+            self._source = robot_source_from_description(
+                self._description, **chain, tool_point=None if point is None else [float(v) for v in point]
+            )
             self.model = replace(self._source.model, base_known=not p["base_unknown"] and self._source.model.base_known)
             self.robot_config = "robot_description"
+        elif p["tool_point_m"] is not None:
+            msg = (
+                "parameter tool_point_m describes the probe of a robot_description (URDF); "
+                "a robot YAML gives tool_point"
+            )
+            raise ConfigError(msg)
         self.store = SampleStore(self.model)
         self.campaign_path = campaign_file(p["campaign_path"])
         self.calibration_path = (
