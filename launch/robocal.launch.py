@@ -13,7 +13,9 @@ neither = the seed's test configuration. Remap the inputs with ``joint_states_to
 ``tracker_point_topic``; ``input_reliability:=reliable`` delivers every message of a
 played recording (default best effort, for live sensors); ``tracker_pose_topic`` subscribes
 a 6-DOF tracker's poses instead of points. ``use_sim_time:=true`` puts the nodes on
-``/clock`` (``ros2 bag play --clock``).
+``/clock`` (``ros2 bag play --clock``). ``verify_calibration:=cal.json`` (a calibration
+written by ``robocal-uncertainty calibrate --json`` in an earlier session) lets
+``/calibration_node/verify`` check this session's samples against it.
 
 The launch arguments reach the nodes through a small parameter file with node-name
 sections (a node-name section of ``config_file`` would win over ``-p`` overrides); it is
@@ -89,6 +91,9 @@ def _nodes(context: LaunchContext) -> list[Node | RegisterEventHandler]:
         collector["tracker_pose_topic"] = arg("tracker_pose_topic")
     if arg("input_reliability"):
         collector["input_reliability"] = arg("input_reliability")
+    calibration: dict[str, object] = dict(shared)
+    if arg("verify_calibration"):
+        calibration["verify_calibration"] = os.path.abspath(os.path.expanduser(arg("verify_calibration")))
     uncertainty: dict[str, object] = dict(shared)
     if arg("test_joints_deg") and arg("test_joints_rad"):
         raise ValueError("give test_joints_deg or test_joints_rad, not both")
@@ -98,7 +103,7 @@ def _nodes(context: LaunchContext) -> list[Node | RegisterEventHandler]:
     config = arg("config_file")
     folder = tempfile.mkdtemp(prefix="robocal_launch_")
     overrides = _override_file(
-        {"collector_node": collector, "calibration_node": shared, "uncertainty_node": uncertainty}, folder
+        {"collector_node": collector, "calibration_node": calibration, "uncertainty_node": uncertainty}, folder
     )
     cleanup = RegisterEventHandler(OnShutdown(on_shutdown=lambda event, context: shutil.rmtree(folder, True)))
     log_level = arg("log_level") or "info"
@@ -133,6 +138,12 @@ def generate_launch_description() -> LaunchDescription:
             "input_reliability",
             "",
             "collector inputs: best_effort (sensors) or reliable (bag play); empty = config's",
+        ),
+        (
+            "verify_calibration",
+            "",
+            "calibration JSON (calibrate --json) that /calibration_node/verify checks this session against; "
+            "empty = config_file's",
         ),
         ("use_sim_time", "", "true: the nodes use /clock (ros2 bag play --clock); empty = config_file's"),
         ("joint_states_topic", "/joint_states", "sensor_msgs/JointState input"),

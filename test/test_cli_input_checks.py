@@ -205,3 +205,24 @@ def test_truncated_campaign_warning_reaches_the_evaluate_report(
     report = json.loads((tmp_path / "r" / "report.json").read_text())
     assert any("is truncated" in w for w in report["warnings"])
     assert "is truncated" in (tmp_path / "r" / "report.md").read_text()
+
+
+def test_base_frame_points_in_another_urdf_link_and_the_tool_point(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Points in UR's `base` (the DH frame; base_link turned by 180 degrees) calibrated with the
+    URDF chain from base_link: refused, naming --base-link (it made a 1-8 mm 'model error').
+    --tool-point is a URDF option: refused for a robot YAML."""
+    campaign = tmp_path / "ur10.mcap"
+    assert main(["simulate", "--robot", "ur10", "--poses", "40", "--out", str(campaign), "--seed", "2"]) == 0
+    capsys.readouterr()
+    urdf = str(ROOT / "robocal_uncertainty" / "data" / "ur10.urdf")
+    assert main(["calibrate", str(campaign), "--robot", urdf]) == 1
+    message = _error(capsys, "calibrate")
+    assert "the points are in URDF link 'base', the chain starts at 'base_link'" in message
+    assert message.endswith("give --base-link base")
+    assert main(["calibrate", str(campaign), "--robot", urdf, "--base-link", "base", "--tip-link", "tool0"]) == 0
+    out = capsys.readouterr().out
+    assert "residual RMS" in out and "-> 0.04" in out  # the noise level (0.0448 mm)
+    assert main(["calibrate", str(campaign), "--robot", "ur10", "--tool-point", "0", "0", "0.109"]) == 1
+    assert "--robot ur10 is not a .urdf file" in _error(capsys, "calibrate")

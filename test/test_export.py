@@ -85,6 +85,7 @@ def base_frame_points(model: RobotModel, q: np.ndarray) -> np.ndarray:
         (str(URDF_DIR / "rail_arm.urdf"), None, None, "floor"),
         (str(URDF_DIR / "panda_arm.urdf"), None, None, "panda_link0"),
         (str(URDF_DIR / "ur10.urdf"), "base_link", "tool0", "base_link"),
+        (str(URDF_DIR / "ur10.urdf"), "base", "tool0", "base"),  # a base fixed beside the arm (UR's DH frame)
         ("ur10", None, None, "base"),  # DH model on the shipped ur10.urdf
         ("paper_arm", None, None, "base_link"),  # DH model, URDF generated
     ],

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -154,11 +155,19 @@ def load_robot_source(
 
 
 def robot_source_from_description(
-    text: str, *, base_link: str | None = None, tip_link: str | None = None, where: str = "robot_description"
+    text: str,
+    *,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    where: str = "robot_description",
+    tool_point: Sequence[float] | None = None,
 ) -> RobotSource:
-    """A :class:`RobotSource` from URDF text (a ``robot_description`` parameter or topic)."""
+    """A :class:`RobotSource` from URDF text (a ``robot_description`` parameter or topic);
+    `tool_point` [m, in the tip link] when the measured point is known (None: fitted, not
+    regularised; see :func:`~robocal_uncertainty.core.urdf_model.robot_model_from_urdf`)."""
     robot = parse_urdf(text, where=where)
-    model = robot_model_from_urdf(robot, base_link, tip_link)
+    point = None if tool_point is None else np.asarray(tool_point, dtype=np.float64)
+    model = robot_model_from_urdf(robot, base_link, tip_link, tool_point=point)
     return RobotSource(model=model, urdf=robot, base_link=base_link, tip_link=tip_link, from_urdf=True)
 
 

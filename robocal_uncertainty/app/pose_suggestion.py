@@ -89,8 +89,9 @@ class Linearization:
         Tracker position in the campaign frame (for distance-dependent noise).
     tracker_a, tracker_b : float [m, m/m]
         Tracker MPE a + b L (0 when the tracker source is off).
-    encoder_var : float [rad^2]
-        Encoder variance per joint (0 when the encoder source is off).
+    encoder_var : float [rad^2] or ndarray, shape (n_joints,) [rad^2; m^2 for prismatic joints]
+        Encoder variance per joint (0 when the encoder source is off); one per joint when the
+        robot has a prismatic joint.
     """
 
     information: Array
@@ -105,7 +106,7 @@ class Linearization:
     tracker_origin: Array
     tracker_a: float
     tracker_b: float
-    encoder_var: float
+    encoder_var: float | Array
 
     def test_covariances(self, information: Array | None = None) -> Array:
         """C_k for `information` (default: the campaign's), shape (n_test, 3, 3) [m^2]."""
@@ -220,8 +221,10 @@ def linearize(
     encoder_on = "encoder" in settings.sources
     a = settings.tracker_noise.a if tracker_on else 0.0
     b = settings.tracker_noise.b if tracker_on else 0.0
-    encoder_var = (settings.encoder_noise.half_width**2 / 3.0) if encoder_on else 0.0
-    if a == b == encoder_var == 0.0:
+    encoder_var: float | Array = (settings.encoder_noise.half_width**2 / 3.0) if encoder_on else 0.0
+    if encoder_on and any(model.prismatic):
+        encoder_var = settings.encoder_noise.variances(model.prismatic)  # rad^2 and m^2
+    if a == b == 0.0 and not np.any(encoder_var):
         msg = "no tracker or encoder noise in the settings: nothing to weight the poses with"
         raise InputError(msg)
     layout = model.layout
@@ -269,9 +272,16 @@ def linearize(
         information=information,
         covariance=np.linalg.inv(information),
         test_jacobian=g,
-        test_encoder_covariance=encoder_var * np.einsum("kaj,kbj->kab", gq, gq),
+        test_encoder_covariance=_encoder_covariance(encoder_var, gq),
         frame_id=frame_id,
     )
+
+
+def _encoder_covariance(encoder_var: float | Array, jq: Array) -> Array:
+    """``J diag(var) J^T`` per pose of joint Jacobians `jq` (n, 3, n_joints)."""
+    if np.ndim(encoder_var) == 0:
+        return np.asarray(encoder_var * np.einsum("paj,pbj->pab", jq, jq), dtype=np.float64)
+    return np.asarray(np.einsum("paj,j,pbj->pab", jq, encoder_var, jq), dtype=np.float64)
 
 
 def _pose_terms(model: RobotModel, lin: Linearization, joints: Array) -> tuple[Array, Array]:
@@ -281,7 +291,7 @@ def _pose_terms(model: RobotModel, lin: Linearization, joints: Array) -> tuple[A
     jq = jac[:, :, joint_columns(model.layout)]
     distance = np.linalg.norm(points - lin.tracker_origin, axis=1)
     tracker_var = (lin.tracker_a + lin.tracker_b * distance) ** 2 / 3.0
-    noise = tracker_var[:, None, None] * np.eye(3) + lin.encoder_var * np.einsum("paj,pbj->pab", jq, jq)
+    noise = tracker_var[:, None, None] * np.eye(3) + _encoder_covariance(lin.encoder_var, jq)
     # A floor keeps R invertible when only one source is on and a Jacobian is degenerate.
     noise += np.eye(3) * 1e-30
     return a_mat, noise

@@ -25,11 +25,22 @@ from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, verify_session
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import CalibError, ConfigError
-from robocal_uncertainty.uncertainty.between_sessions import estimate_between_sessions, with_between_sessions
+from robocal_uncertainty.uncertainty.between_sessions import (
+    estimate_between_sessions,
+    identifiable_effects,
+    with_between_sessions,
+)
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
 from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state
 
-__all__ = ["SessionCalibration", "VerificationRun", "calibrate_session", "load_session_calibration", "verify"]
+__all__ = [
+    "SessionCalibration",
+    "VerificationRun",
+    "calibrate_session",
+    "load_session_calibration",
+    "scope_text",
+    "verify",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,6 +168,16 @@ class VerificationRun:
     robot: str
     scope: Literal["session", "future sessions"] | str
 
+    @property
+    def scope_text(self) -> str:
+        """Whom the statement holds for, in words (:func:`scope_text`)."""
+        return scope_text(self.scope)
+
+
+def scope_text(scope: str) -> str:
+    """The words ``verify`` prints for a calibration's scope."""
+    return "this calibration's session set-up only" if scope == "session" else "a future session"
+
 
 def verify(
     model: RobotModel,
@@ -170,8 +191,11 @@ def verify(
     encoder_noise: EncoderNoise | None = None,
     null_trials: int = DEFAULT_NULL_TRIALS,
     seed: int = 0,
+    effects: bool = False,
 ) -> VerificationRun:
     """Verify a calibration on a check campaign of a new session.
+
+    The call ``robocal-uncertainty verify`` and the calibration node's ``~/verify`` make.
 
     Parameters
     ----------
@@ -187,8 +211,18 @@ def verify(
         Re-register the tool point (probe remounted).
     significance, tracker_noise, encoder_noise, null_trials, seed
         See :func:`~robocal_uncertainty.core.session.verify_session`.
+    effects : bool
+        Also estimate what changed since the calibration (joint offsets, length scale) on
+        the check (:func:`~robocal_uncertainty.uncertainty.between_sessions.identifiable_effects`).
+
+    Raises
+    ------
+    CalibError
+        The calibration cannot be read or has no session record, or the check cannot
+        re-register (too few poses, degenerate): the message says which.
     """
     calibrated, state, _ = load_session_calibration(model, calibration_path)
+    names = identifiable_effects(calibrated, check, retool=retool) if effects else ()
     result = verify_session(
         calibrated,
         state,
@@ -199,6 +233,7 @@ def verify(
         encoder_noise=encoder_noise,
         null_trials=null_trials,
         seed=seed,
+        effects=names,
     )
     return VerificationRun(
         verification=result,

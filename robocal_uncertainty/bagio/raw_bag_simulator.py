@@ -354,7 +354,7 @@ def simulate_raw_recording(
 
     params = model.parameter_vector()
     q_joint = _joints_at(jt, waypoints, settings)
-    readings = q_joint + sim.encoder_noise.sample(rng_encoder, q_joint.shape)
+    readings = q_joint + sim.encoder_noise.sample_joints(rng_encoder, q_joint.shape, model.prismatic)
     q_point = _joints_at(pt, waypoints, settings)
     points = forward_points(model.layout, params, q_point)
     if sim.frame == "tracker":

@@ -35,6 +35,7 @@ _NON_NEGATIVE_FLOATS = (
     ("tracker_noise_um", "um"),
     ("tracker_noise_um_per_m", "um/m"),
     ("encoder_noise_deg", "deg"),
+    ("linear_encoder_noise_um", "um"),
     ("pairing_tolerance_ms", "ms"),
 )
 

@@ -24,18 +24,28 @@ seconds apart)."""
 
 
 def load_robot(
-    name: str, *, base_known: bool | None = None, base_link: str | None = None, tip_link: str | None = None
+    name: str,
+    *,
+    base_known: bool | None = None,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    tool_point: Sequence[float] | None = None,
 ) -> Any:
-    """``--robot``: a robot YAML, a shipped model name, or a URDF (``.urdf``) with its chain ends."""
+    """``--robot``: a robot YAML, a shipped model name, or a URDF (``.urdf``) with its chain ends
+    and, when known, the measured point in the tip link (``--tool-point``, m)."""
     from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
 
     if Path(name).suffix.lower() == ".urdf":
         from robocal_uncertainty.core.urdf_model import load_urdf, robot_model_from_urdf
 
-        model = robot_model_from_urdf(load_urdf(name), base_link, tip_link)
+        point = None if tool_point is None else np.asarray(tool_point, dtype=np.float64)
+        model = robot_model_from_urdf(load_urdf(name), base_link, tip_link, tool_point=point)
         return replace(model, base_known=base_known) if base_known is not None else model
-    if base_link is not None or tip_link is not None:
-        msg = f"--base-link and --tip-link choose a URDF chain; --robot {name} is not a .urdf file"
+    if base_link is not None or tip_link is not None or tool_point is not None:
+        msg = (
+            f"--base-link, --tip-link and --tool-point describe a URDF chain; --robot {name} is not a .urdf file "
+            "(a robot YAML gives its tool_point)"
+        )
         raise ConfigError(msg)
     path = resolve_robot_config(name)
     try:
@@ -50,7 +60,17 @@ def load_robot(
     return model
 
 
-def parse_joint_values(values: Sequence[str], n_joints: int, *, degrees: bool, what: str) -> NDArray[np.float64]:
+def _in_radians(q: NDArray[np.float64], degrees: bool, prismatic: Sequence[bool]) -> NDArray[np.float64]:
+    """`q` [rad, or deg with `degrees`] in rad; a prismatic joint's column is in m either way."""
+    if not degrees:
+        return q
+    linear = np.zeros(q.shape[1], dtype=bool) if not prismatic else np.asarray(prismatic, dtype=bool)
+    return np.asarray(np.where(linear, q, np.radians(q)), dtype=np.float64)
+
+
+def parse_joint_values(
+    values: Sequence[str], n_joints: int, *, degrees: bool, what: str, prismatic: Sequence[bool] = ()
+) -> NDArray[np.float64]:
     try:
         numbers = [float(v) for item in values for v in item.replace(",", " ").split()]
     except ValueError as err:
@@ -63,12 +83,13 @@ def parse_joint_values(values: Sequence[str], n_joints: int, *, degrees: bool, w
     if not np.isfinite(q).all():
         msg = f"{what} contain NaN or inf"
         raise InputError(msg)
-    return np.radians(q) if degrees else q
+    return _in_radians(q, degrees, prismatic)
 
 
-def read_joints_file(path: str, n_joints: int, *, degrees: bool) -> NDArray[np.float64]:
+def read_joints_file(path: str, n_joints: int, *, degrees: bool, prismatic: Sequence[bool] = ()) -> NDArray[np.float64]:
     """Joint configurations from a text file: one per row, numbers separated by commas,
-    semicolons or whitespace; blank lines, ``#`` comments and a header row are skipped."""
+    semicolons or whitespace; blank lines, ``#`` comments and a header row are skipped.
+    With `degrees`, the revolute joints' values are converted to rad (prismatic ones stay in m)."""
     try:
         text = Path(path).read_text(encoding="utf-8")
     except UnicodeDecodeError as err:
@@ -99,7 +120,7 @@ def read_joints_file(path: str, n_joints: int, *, degrees: bool) -> NDArray[np.f
         msg = f"joints file {path} has no configuration (one row of {n_joints} numbers per configuration)"
         raise ConfigError(msg)
     q = np.array(rows)
-    return np.radians(q) if degrees else q
+    return _in_radians(q, degrees, prismatic)
 
 
 def is_number(text: str) -> bool:
@@ -250,9 +271,37 @@ def campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
         base_known=False if args.base_unknown else None,
         base_link=getattr(args, "base_link", None),
         tip_link=getattr(args, "tip_link", None),
+        tool_point=getattr(args, "tool_point", None),
     )
     check_campaign_joints(model, campaign, args.campaign)
+    check_campaign_frame(args.robot, model, campaign, args.campaign)
     return campaign, model
+
+
+def check_campaign_frame(robot: str, model: Any, campaign: Any, path: str) -> None:
+    """A campaign in the robot base frame must be in the model's base frame.
+
+    Its points are taken as given in the model's base frame. When the campaign names another
+    link of the same URDF (UR's ``base`` is ``base_link`` turned by 180 degrees), that is a known,
+    different frame: refused, naming ``--base-link``. Another name is warned about.
+    """
+    frame_id = str(getattr(campaign, "frame_id", "") or "")
+    if campaign.frame != "base" or not frame_id or frame_id == model.base_frame_id:
+        return
+    if Path(robot).suffix.lower() == ".urdf":
+        from robocal_uncertainty.core.urdf_model import load_urdf
+
+        if frame_id in load_urdf(robot).links:
+            msg = (
+                f"{path}: the points are in URDF link {frame_id!r}, the chain starts at {model.base_frame_id!r} "
+                f"(another frame of {robot}): give --base-link {frame_id}"
+            )
+            raise InputError(msg)
+    print(
+        f"warning: {path}: the points are in frame {frame_id!r}, the robot model's base frame is "
+        f"{model.base_frame_id!r}: taken as the same frame",
+        file=sys.stderr,
+    )
 
 
 def read_campaign_checked(args: argparse.Namespace, path: str) -> Any:
@@ -328,10 +377,10 @@ def joint_configurations(
         msg = f"give {flag} or {flag}-file, not both ({flag}-file {path} and {len(values)} {flag} values)"
         raise ConfigError(msg)
     if path:
-        q = read_joints_file(path, model.n_joints, degrees=degrees)
+        q = read_joints_file(path, model.n_joints, degrees=degrees, prismatic=model.prismatic)
         what = f"{path}: {noun}"
     elif values:
-        q = parse_joint_values(values, model.n_joints, degrees=degrees, what=flag)
+        q = parse_joint_values(values, model.n_joints, degrees=degrees, what=flag, prismatic=model.prismatic)
         what = f"{flag} configuration"
     else:
         msg = f"give {flag} or {flag}-file"

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.cli._common import Progress, count, in_cli_words, parse_lambda, parse_trials, seconds
+from robocal_uncertainty.cli._options import encoder_noise
 from robocal_uncertainty.errors import ConfigError
 
 
@@ -28,6 +29,11 @@ def print_calibration(result: Any) -> None:
         f"  residual RMS {result.rms_before * 1e3:.4f} mm -> {result.rms_after * 1e3:.4f} mm, "
         f"max {result.max_before * 1e3:.4f} mm -> {result.max_after * 1e3:.4f} mm"
     )
+    if getattr(result, "tool_initialised", "nominal") == "fit":
+        print(
+            "  tool point: not given (URDF: --tool-point), started from a least-squares fit to the campaign "
+            "and not regularised"
+        )
     if result.measurement.measures_orientation:
         stated, used = result.measurement.std, 1.0 / result.measurement.weights
         print(
@@ -121,7 +127,7 @@ def print_adequacy(result: Any) -> None:
 
 
 def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Sequence[str]) -> Any:
-    from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+    from robocal_uncertainty.core import TrackerNoise
     from robocal_uncertainty.uncertainty import UncertaintySettings
 
     between = None
@@ -133,7 +139,7 @@ def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Seque
         between_session=between,
         sources=tuple(sources),
         tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
-        encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
+        encoder_noise=encoder_noise(args),
         lambda_range=None if args.lambda_range is None else (args.lambda_range[0], args.lambda_range[1]),
         min_poses=args.min_poses,
         subset_size=args.subset_size,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from robocal_uncertainty.cli._common import DEFAULT_PAIRING_TOLERANCE_MS
 
@@ -39,7 +40,11 @@ def add_campaign_args(p: argparse.ArgumentParser) -> None:
 def add_test_joint_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--test-joints", nargs="+", help="joint values of the test configurations, n_joints each")
     p.add_argument("--test-joints-file", help="CSV/whitespace file of test configurations, one per row")
-    p.add_argument("--degrees", action="store_true", help="test joint values are in degrees (default radians)")
+    p.add_argument(
+        "--degrees",
+        action="store_true",
+        help="test joint values are in degrees (default radians); a prismatic joint's are in m either way",
+    )
 
 
 def add_noise_args(p: argparse.ArgumentParser) -> None:
@@ -60,7 +65,24 @@ def add_noise_args(p: argparse.ArgumentParser) -> None:
         "--encoder-noise-deg",
         type=float,
         default=0.005,
-        help="encoder error half-width, deg (default %(default)s, uniform)",
+        help="encoder error half-width, deg (default %(default)s, uniform); revolute joints",
+    )
+    p.add_argument(
+        "--linear-encoder-noise-um",
+        type=float,
+        default=5.0,
+        help="reading error half-width of a prismatic joint, um (default %(default)s, uniform)",
+    )
+
+
+def encoder_noise(args: argparse.Namespace) -> Any:
+    """The :class:`EncoderNoise` of --encoder-noise-deg and --linear-encoder-noise-um (SI)."""
+    import numpy as np
+
+    from robocal_uncertainty.core import EncoderNoise
+
+    return EncoderNoise(
+        half_width=float(np.radians(args.encoder_noise_deg)), linear_half_width=args.linear_encoder_noise_um * 1e-6
     )
 
 
@@ -170,10 +192,19 @@ def add_dask_arg(p: argparse.ArgumentParser) -> None:
 
 
 def add_urdf_chain_args(p: argparse.ArgumentParser) -> None:
-    """--base-link and --tip-link: the chain of a ``--robot X.urdf``."""
+    """--base-link, --tip-link and --tool-point: the chain and the measured point of a ``--robot X.urdf``."""
     p.add_argument("--base-link", help="--robot X.urdf: the chain's base link (default: the URDF's root link)")
     p.add_argument(
         "--tip-link",
         help="--robot X.urdf: the chain's tip link, where the measured point is (default: the end of the first "
         "serial chain)",
+    )
+    p.add_argument(
+        "--tool-point",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="--robot X.urdf: the measured point (probe centre, reflector) in the tip link, in METRES, when it is "
+        "known ('0 0 0': the tip link is the probe, e.g. a fixed link added at it). Default: unknown, started "
+        "from a least-squares fit to the campaign and not regularised",
     )

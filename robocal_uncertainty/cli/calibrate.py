@@ -7,7 +7,7 @@ from typing import Any
 
 from robocal_uncertainty.cli._common import campaign_and_robot, parse_lambda
 from robocal_uncertainty.cli._evaluation import print_calibration
-from robocal_uncertainty.cli._options import add_campaign_args, add_force_arg, add_noise_args
+from robocal_uncertainty.cli._options import add_campaign_args, add_force_arg, add_noise_args, encoder_noise
 
 
 def register(sub: Any) -> None:
@@ -83,11 +83,10 @@ def session_lines(state: Any) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
 
     from robocal_uncertainty.app.verification import calibrate_session
     from robocal_uncertainty.cli._common import check_campaign_joints, read_campaign_checked
-    from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+    from robocal_uncertainty.core import TrackerNoise
     from robocal_uncertainty.core.calibration_file import write_calibration
     from robocal_uncertainty.errors import ConfigError
 
@@ -104,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         model,
         campaign,
         tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
-        encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
+        encoder_noise=encoder_noise(args),
         lambda_=parse_lambda(args.lambda_),
         accept_unconverged=args.accept_unconverged,
         campaign_name=str(args.campaign),

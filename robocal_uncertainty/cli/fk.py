@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import tool_points
     from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration
 
-    model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link)
+    model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link, tool_point=args.tool_point)
     if args.calibration:
         model = apply_calibration(model, read_calibration(args.calibration), where=f"calibration {args.calibration}")
     q = joint_configurations(

@@ -49,6 +49,9 @@ def register(sub: Any) -> None:
     p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker half-width a, um (uniform)")
     p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m")
     p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder half-width, deg (uniform)")
+    p.add_argument(
+        "--linear-encoder-noise-um", type=float, default=5.0, help="prismatic joint reading half-width, um (uniform)"
+    )
     p.add_argument("--base-unknown", action="store_true", help="identify the base transform even if known")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (never changes the result)")
     add_dask_arg(p)
@@ -70,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     span = np.column_stack([campaign.joint_positions.min(axis=0), campaign.joint_positions.max(axis=0)])
     limits = span if args.within_campaign else None
     if args.from_file:
-        q = read_joints_file(args.from_file, model.n_joints, degrees=args.degrees)
+        q = read_joints_file(args.from_file, model.n_joints, degrees=args.degrees, prismatic=model.prismatic)
     elif args.grid:
         q = grid_configurations(model, args.grid[0] if len(args.grid) == 1 else args.grid, limits=limits)
     else:

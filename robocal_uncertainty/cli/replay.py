@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
         base_known=False if args.base_unknown else None,
         base_link=args.base_link,
         tip_link=args.tip_link,
+        tool_point=args.tool_point,
     )
     sources = args.sources
     if sources is None:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from robocal_uncertainty.cli._common import count, load_robot
-from robocal_uncertainty.cli._options import add_force_arg, add_noise_args
+from robocal_uncertainty.cli._options import add_force_arg, add_noise_args, encoder_noise
 
 
 def register(sub: Any) -> None:
@@ -54,14 +54,14 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import simulate
-    from robocal_uncertainty.core import EncoderNoise, SimulationSettings, TrackerNoise
+    from robocal_uncertainty.core import SimulationSettings, TrackerNoise
 
     model = load_robot(args.robot)
     settings = SimulationSettings(
         n_poses=args.poses,
         frame=args.frame,
         tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
-        encoder_noise=EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg))),
+        encoder_noise=encoder_noise(args),
     )
     if args.sessions is not None or args.session_poses is not None:
         return _run_sessions(args, model, settings)

@@ -73,12 +73,10 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app.output_paths import check_report_directory
-    from robocal_uncertainty.app.verification import load_session_calibration
+    from robocal_uncertainty.app.verification import load_session_calibration, verify
     from robocal_uncertainty.core import EncoderNoise, TrackerNoise
-    from robocal_uncertainty.core.session import verify_session
     from robocal_uncertainty.errors import ConfigError
     from robocal_uncertainty.report.verification_report import verification_lines, write_verification_report
-    from robocal_uncertainty.uncertainty.between_sessions import identifiable_effects
 
     if not 0.0 < args.significance < 1.0:
         msg = f"--significance is a probability in (0, 1), got {args.significance:g}"
@@ -89,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         check_report_directory(args.out, force=args.force, option="--out")
     model = load_robot(args.robot)
-    calibrated, state, _ = load_session_calibration(model, args.calibration)
+    _, state, _ = load_session_calibration(model, args.calibration)  # a bad file is named before the campaign
     check = read_campaign_checked(args, args.check_campaign)
     check_campaign_joints(model, check, args.check_campaign)
     tracker = encoder = None
@@ -98,24 +96,25 @@ def run(args: argparse.Namespace) -> int:
         b = state.tracker_noise.b if args.tracker_noise_um_per_m is None else args.tracker_noise_um_per_m * 1e-6
         tracker = TrackerNoise(a=a, b=b)
     if args.encoder_noise_deg is not None:
-        encoder = EncoderNoise(half_width=float(np.radians(args.encoder_noise_deg)))
-    effects: tuple[str, ...] = ()
-    if args.effects:
-        effects = identifiable_effects(calibrated, check, retool=args.retool)
-    result = verify_session(
-        calibrated,
-        state,
+        encoder = EncoderNoise(
+            half_width=float(np.radians(args.encoder_noise_deg)),
+            linear_half_width=state.encoder_noise.linear_half_width,
+        )
+    run_ = verify(
+        model,
+        args.calibration,
         check,
+        check_name=str(args.check_campaign),
         retool=args.retool,
         significance=args.significance,
         tracker_noise=tracker,
         encoder_noise=encoder,
         null_trials=args.null_trials,
         seed=args.seed,
-        effects=effects,
+        effects=args.effects,
     )
-    scope = "this calibration's session set-up only" if state.scope == "session" else "a future session"
-    for line in verification_lines(result, scope=scope):
+    result = run_.verification
+    for line in verification_lines(result, scope=run_.scope_text):
         print(line)
     if args.out:
         for path in write_verification_report(
@@ -124,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
             calibration=str(args.calibration),
             check_campaign=str(args.check_campaign),
             robot=model.name,
-            scope=state.scope,
+            scope=run_.scope,
         ):
             print(f"wrote {path}")
     return 0 if result.consistent else DRIFTED_EXIT_STATUS

@@ -27,7 +27,8 @@ existed), a JSON object with
     (``point_m`` and its ``covariance``), ``campaign`` (the file it came from, when known).
 ``noise``
     The stated instruments: ``tracker_noise_a_m``, ``tracker_noise_b_m_per_m``,
-    ``encoder_noise_half_width_rad``.
+    ``encoder_noise_half_width_rad``, ``linear_encoder_noise_half_width_m`` (prismatic joints;
+    files without it read the default).
 ``model_error``
     ``covariance_base_m2``: per-pose covariance of what the kinematic model cannot represent,
     robot base frame; ``draws_base_m``: the residuals it is resampled from (whitened to it,
@@ -64,7 +65,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, SessionState
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.simulation import LINEAR_ENCODER_HALF_WIDTH, EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
@@ -127,6 +128,7 @@ def session_state_to_dict(state: SessionState) -> dict[str, Any]:
             "tracker_noise_a_m": state.tracker_noise.a,
             "tracker_noise_b_m_per_m": state.tracker_noise.b,
             "encoder_noise_half_width_rad": state.encoder_noise.half_width,
+            "linear_encoder_noise_half_width_m": state.encoder_noise.linear_half_width,
         },
         "model_error": {
             "covariance_base_m2": _matrix(state.model_error_covariance),
@@ -266,7 +268,10 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         noise = data["noise"]
         model_error = data["model_error"]
         tracker = TrackerNoise(a=float(noise["tracker_noise_a_m"]), b=float(noise["tracker_noise_b_m_per_m"]))
-        encoder = EncoderNoise(half_width=float(noise["encoder_noise_half_width_rad"]))
+        encoder = EncoderNoise(
+            half_width=float(noise["encoder_noise_half_width_rad"]),
+            linear_half_width=float(noise.get("linear_encoder_noise_half_width_m", LINEAR_ENCODER_HALF_WIDTH)),
+        )
         frame = session["frame"]
         reg = np.asarray(registration["world_T_base"], dtype=np.float64)
     except (KeyError, TypeError, ValueError) as err:

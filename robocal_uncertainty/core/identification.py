@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.campaign import Campaign
-from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.measurement import POINT, MeasurementType, stack_equations, stack_jacobian, stack_residual
 from robocal_uncertainty.core.observability import structural_observability
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement
@@ -131,6 +131,11 @@ class IdentificationResult:
         by standard deviations estimated from the residual scatter (``measurement.weight_std``).
     weighting_iterations : int
         Fits made to estimate the variance components (0 unless ``variance_components``).
+    tool_initialised : {"nominal", "fit"}
+        Where the tool point started: the model's (``tool_known``), or a linear least-squares
+        fit to the measured positions given the nominal kinematics (and the base) when the
+        model does not know it (a URDF's tip link is not the probe); it is then not
+        regularised.
     """
 
     model: RobotModel
@@ -169,6 +174,7 @@ class IdentificationResult:
     weighting_iterations: int = 0
     data_only_std: Array | None = None
     data_share: Array | None = None
+    tool_initialised: Literal["nominal", "fit"] = "nominal"
 
     @property
     def success(self) -> bool:
@@ -572,7 +578,16 @@ def _identify_weighted(
             # A known base that the data contradict is replaced (correctly): say so.
             base_note = _replaced_base_note(model, p_model[b0 : b0 + 6], p0[b0 : b0 + 6])
 
+    # What the data can tell apart is decided on the nominal geometry (a tool point on the last
+    # axis makes some columns exactly alike), before an unknown tool point is fitted: a fitted
+    # point a fraction of a millimetre off the axis must not turn those into weak parameters.
     obs = structural_observability(model, p0, candidates, measurement=measurement)
+    tool_init: Literal["nominal", "fit"] = "nominal"
+    if not model.tool_known:
+        fitted = _initial_tool(layout, measurement, p0, q, measured, refit_base=campaign.frame != "base")
+        if fitted is not None:
+            p0, tool_init = fitted, "fit"
+
     est = np.flatnonzero(obs.identifiable)
     dim = measurement.dimension
     n_eq = dim * campaign.n_poses
@@ -587,6 +602,10 @@ def _identify_weighted(
     if r0 is not None:
         # Nor is the tool rotation: like the base, a mounting the nominal model says little about.
         penalized &= (est < r0) | (est >= r0 + 3)
+    if not model.tool_known:
+        # Nor is a tool point the model does not know: a penalty would hold it near the tip link.
+        t0 = layout.tool_index
+        penalized &= (est < t0) | (est >= t0 + 3)
 
     pred0, jac0_poses = measurement.predict_and_jacobian(layout, p0, q)
     jac0 = stack_jacobian(measurement, jac0_poses, est)
@@ -710,6 +729,7 @@ def _identify_weighted(
         status=status,
         message=IDENTIFICATION_MESSAGES[status],
         base_initialised=base_init,
+        tool_initialised=tool_init,
         n_poses=campaign.n_poses,
         penalized=full_penalized,
         effective_parameters=dof_used,
@@ -821,6 +841,48 @@ def _replaced_base_note(model: RobotModel, stated: Array, fitted: Array) -> str 
         "of the nominal model to the measured points, which fits the data better: the base starts from the "
         "fit and is identified (set base.known: false in the robot config if the base is not known)"
     )
+
+
+_TOOL_FIT_ITERATIONS = 50
+_TOOL_FIT_TOLERANCE = 1e-10
+"""Alternating tool / rigid base fit: stop when the tool point moves less than this [m]."""
+
+
+def _initial_tool(
+    layout: ParameterLayout,
+    measurement: MeasurementType,
+    p0: Array,
+    q: Array,
+    measured: Array,
+    *,
+    refit_base: bool,
+) -> Array | None:
+    """`p0` with the tool point fitted to the measured positions (linear least squares).
+
+    The measured point is affine in the tool point (``R_b (R_i t + p_i) + t_b``), so with every
+    other parameter nominal the best tool point is one linear solve. With an unknown base
+    (`refit_base`: a tracker-frame campaign) the rigid base fit and the tool fit alternate
+    until the tool point settles (each step lowers the same sum of squares). None when the
+    measurements hold no 3-D positions.
+    """
+    positions = measurement.positions(measured)
+    if positions is None:
+        return None
+    t0, b0 = layout.tool_index, layout.base_index
+    p = p0.copy()
+    for _ in range(_TOOL_FIT_ITERATIONS):
+        pred, jac = forward_points_and_jacobian(layout, p, q)
+        a_mat = jac[:, :, t0 : t0 + 3].reshape(-1, 3)
+        step = np.linalg.lstsq(a_mat, (positions - pred).reshape(-1), rcond=None)[0]
+        p[t0 : t0 + 3] += step
+        if refit_base:
+            p_kin = p.copy()
+            p_kin[b0 : b0 + 6] = 0.0
+            xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), positions)
+            p[b0 : b0 + 3], p[b0 + 3 : b0 + 6] = xyz, rpy
+        if not refit_base or float(np.linalg.norm(step)) < _TOOL_FIT_TOLERANCE:
+            break
+    return p
 
 
 def _initial_base(

@@ -225,6 +225,11 @@ class RobotModel:
         Whether the mount is part of the parameter vector (``mount.*``); set for models read
         from a URDF and whenever the mount is not the identity. With measurements in the base
         frame it carries the first axis's place, which the first row alone cannot.
+    tool_known : bool
+        Whether `tool_point` is a known nominal value (a robot YAML's ``tool_point``, a URDF
+        read with a given tool point). False (a URDF whose tip link is not said to be the
+        measured point): the identification starts the tool point from a least-squares fit
+        to the campaign and does not regularise it, as it does the base.
     """
 
     name: str
@@ -248,6 +253,7 @@ class RobotModel:
     mount_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     mount_rpy: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     mounted: bool = False
+    tool_known: bool = True
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)

@@ -388,11 +388,15 @@ def _check_campaign(model: RobotModel, campaign: Campaign, retool: bool) -> tupl
 
 
 def _pose_noise(
-    jac: Array, theta_cols: list[int], distances: Array, tracker: TrackerNoise, encoder: EncoderNoise
+    jac: Array,
+    theta_cols: list[int],
+    distances: Array,
+    tracker: TrackerNoise,
+    encoder: EncoderNoise,
+    prismatic: tuple[bool, ...] = (),
 ) -> Array:
     """Per-pose covariance of tracker and encoder noise, shape (n, 3, 3) [m^2]."""
-    jq = jac[:, :, theta_cols]
-    cov: Array = (encoder.half_width**2 / 3.0) * np.einsum("pij,pkj->pik", jq, jq)
+    cov = encoder.covariance(jac[:, :, theta_cols], prismatic)
     cov += np.eye(3) * (tracker.std(distances) ** 2)[:, None, None]
     return cov
 
@@ -472,6 +476,7 @@ def _null_statistics(
     model_error_dof: float | None = None,
     between_factor: Array | None = None,
     between_dof: float | None = None,
+    prismatic: tuple[bool, ...] = (),
 ) -> Array:
     """The check statistic for `trials` draws of the errors "nothing changed" allows, shape (trials,).
 
@@ -499,7 +504,7 @@ def _null_statistics(
         rng = np.random.default_rng(child)
         m = min(_NULL_BLOCK, trials - b * _NULL_BLOCK)
         e = tracker.sample(rng, np.broadcast_to(distances, (m, n)))
-        dq = encoder.sample(rng, (m, n, n_joints))
+        dq = encoder.sample_joints(rng, (m, n, n_joints), prismatic)
         e = e + np.einsum("pij,tpj->tpi", joint_jacobian, dq)
         me = None
         if model_error_draws is not None and model_error_draws.shape[0]:
@@ -613,7 +618,7 @@ def verify_session(
 
     def covariance(jac: Array, params: Array) -> Array:
         r_wb = rpy_to_matrix(params[b0 + 3 : b0 + 6])
-        blocks = _pose_noise(jac, theta_cols, distances, tracker, encoder)
+        blocks = _pose_noise(jac, theta_cols, distances, tracker, encoder, model.prismatic)
         blocks = blocks + r_wb @ state.model_error_covariance @ r_wb.T
         cov = linalg.block_diag(*blocks)
         if kin.size:
@@ -683,6 +688,7 @@ def verify_session(
         if between is None
         else effect_jacobian(layout, p, q, state.between_session_names).reshape(3 * n, -1) @ _sqrt_psd(between),
         state.between_session_dof,
+        model.prismatic,
     )
     p_value = float((1 + np.count_nonzero(null >= chi2)) / (1 + null.size))
     res_cov = c_mat - a_mat @ reg_cov @ a_mat.T

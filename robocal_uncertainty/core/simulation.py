@@ -8,6 +8,7 @@ distance (the blade seed's form); encoder noise uniform within +-0.005 deg.
 from __future__ import annotations
 
 import numbers
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -23,6 +24,7 @@ from robocal_uncertainty.core.rotation import rotation_exp
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
+    "LINEAR_ENCODER_HALF_WIDTH",
     "EncoderNoise",
     "ParameterErrorRanges",
     "SessionChange",
@@ -93,20 +95,59 @@ class TrackerNoise:
         return rng.uniform(-1.0, 1.0, size=(*np.shape(distance), 3)) * half
 
 
+LINEAR_ENCODER_HALF_WIDTH = 5e-6
+"""Default reading error half-width of a prismatic joint [m]: a linear scale of accuracy class
+±5 µm (no source paper states one; give the axis's own value)."""
+
+
 @dataclass(frozen=True)
 class EncoderNoise:
-    """Joint reading error, uniform within +-half_width [rad] (seed: 0.005 deg)."""
+    """Joint reading error, uniform within ±`half_width` [rad] for a revolute joint (seed: 0.005
+    deg) and ±`linear_half_width` [m] for a prismatic one (default
+    :data:`LINEAR_ENCODER_HALF_WIDTH`)."""
 
     half_width: float = float(np.radians(0.005))
+    linear_half_width: float = LINEAR_ENCODER_HALF_WIDTH
 
     def __post_init__(self) -> None:
-        if not _real(self.half_width) or not np.isfinite(self.half_width) or self.half_width < 0:
-            msg = f"encoder noise half-width must be finite and >= 0, got {self.half_width}"
-            raise ConfigError(msg)
+        for name, what in (("half_width", "encoder noise half-width"), ("linear_half_width", "linear encoder")):
+            value = getattr(self, name)
+            if not _real(value) or not np.isfinite(value) or value < 0:
+                msg = f"{what} noise half-width must be finite and >= 0, got {value}"
+                raise ConfigError(msg)
 
     def sample(self, rng: np.random.Generator, shape: tuple[int, ...]) -> Array:
-        """Errors of the given shape [rad]."""
+        """Errors of the given shape [rad] (revolute joints)."""
         return rng.uniform(-self.half_width, self.half_width, size=shape)
+
+    def half_widths(self, prismatic: Sequence[bool]) -> Array:
+        """Half-width of each joint, shape (n_joints,) [rad; m where `prismatic`]."""
+        linear = np.asarray(prismatic, dtype=bool)
+        return np.where(linear, self.linear_half_width, self.half_width).astype(np.float64)
+
+    def variances(self, prismatic: Sequence[bool]) -> Array:
+        """Variance of each joint's reading error, shape (n_joints,) [rad^2; m^2 where `prismatic`]."""
+        return np.asarray(self.half_widths(prismatic) ** 2 / 3.0, dtype=np.float64)
+
+    def covariance(self, joint_jacobian: Array, prismatic: Sequence[bool]) -> Array:
+        """``J diag(var) J^T`` of the reading errors through `joint_jacobian`, shape (..., d, d).
+
+        `joint_jacobian` has shape (..., d, n_joints) [m/rad; m/m in prismatic columns]. Without a
+        prismatic joint it is ``half_width^2 / 3 J J^T``, computed as such.
+        """
+        jq = np.asarray(joint_jacobian, dtype=np.float64)
+        if not any(prismatic):
+            return np.asarray((self.half_width**2 / 3.0) * np.einsum("...ij,...kj->...ik", jq, jq), dtype=np.float64)
+        return np.asarray(np.einsum("...ij,j,...kj->...ik", jq, self.variances(prismatic), jq), dtype=np.float64)
+
+    def sample_joints(self, rng: np.random.Generator, shape: tuple[int, ...], prismatic: Sequence[bool]) -> Array:
+        """Errors of readings of shape ``(..., n_joints)`` [rad; m in the prismatic columns].
+
+        Without a prismatic joint the same draws as :meth:`sample`.
+        """
+        if not any(prismatic):
+            return self.sample(rng, shape)
+        return rng.uniform(-1.0, 1.0, size=shape) * self.half_widths(prismatic)
 
 
 @dataclass(frozen=True)
@@ -306,7 +347,9 @@ def simulate_measurements(
     else:
         distance = np.linalg.norm(true_points - np.asarray(settings.tracker_xyz), axis=-1)
     noise = settings.tracker_noise.sample(rng, distance)
-    readings = true_joint_positions + settings.encoder_noise.sample(rng, true_joint_positions.shape)
+    readings = true_joint_positions + settings.encoder_noise.sample_joints(
+        rng, true_joint_positions.shape, model.prismatic
+    )
     std = np.repeat(settings.tracker_noise.std(distance)[:, None], 3, axis=1)
     return readings, true_points + noise, std
 

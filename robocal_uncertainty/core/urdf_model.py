@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -160,12 +160,18 @@ class UrdfRobot:
 
 @dataclass(frozen=True)
 class UrdfChain:
-    """The joints from `base_link` to `tip_link` (fixed ones included), in order."""
+    """The joints from `base_link` to `tip_link` (fixed ones included), in order.
+
+    `base_link` may hang off the chain by fixed joints (UR's ``base``, a child of ``base_link``
+    like the arm): `joints` then start at the link both descend from and `base_offset` is
+    ``base_link <- that link`` (identity when `base_link` is upstream of the tip).
+    """
 
     robot: UrdfRobot
     base_link: str
     tip_link: str
     joints: tuple[UrdfJoint, ...]
+    base_offset: Array = field(default_factory=lambda: np.eye(4))
 
     @property
     def movable(self) -> tuple[UrdfJoint, ...]:
@@ -350,6 +356,10 @@ def urdf_chain(robot: UrdfRobot, base_link: str | None = None, tip_link: str | N
     """The joint chain from `base_link` (default: the root link) to `tip_link` (default: the end
     of the first serial chain below the base).
 
+    `base_link` may also be a link fixed to the chain off its path (UR's ``base``, the frame
+    the controller and the DH parameters use, a fixed child of ``base_link``): the chain is
+    then expressed in it (``UrdfChain.base_offset``).
+
     Raises
     ------
     ConfigError
@@ -362,14 +372,32 @@ def urdf_chain(robot: UrdfRobot, base_link: str | None = None, tip_link: str | N
             msg = f"{where}: {flag} {link!r} is not a link of robot {robot.name!r}"
             raise ConfigError(msg)
     base = base_link if base_link is not None else next(k for k in robot.links if robot.parent_joint(k) is None)
-    tip = tip_link if tip_link is not None else _default_tip(robot, base)
-    joints: list[UrdfJoint] = []
-    link = tip
-    while link != base:
-        joint = robot.parent_joint(link)
-        if joint is None:
+    if tip_link is None:
+        # Below a base that hangs off the arm by fixed joints (UR's `base`), the arm starts higher up.
+        top = base
+        while _movable_below(robot, top) == 0 and (joint := robot.parent_joint(top)) is not None:
+            if joint.type != "fixed":
+                break
+            top = joint.parent
+        tip_link = _default_tip(robot, top)
+    tip = tip_link
+    upstream = [tip]  # the tip and its ancestors, up to the root
+    while (joint := robot.parent_joint(upstream[-1])) is not None:
+        upstream.append(joint.parent)
+    # A base off that path must hang on it by fixed joints: its pose is then fixed in the chain.
+    anchor, offset = base, np.eye(4)  # offset: anchor <- base
+    while anchor not in upstream:
+        joint = robot.parent_joint(anchor)
+        if joint is None or joint.type != "fixed":
             msg = f"{where}: tip link {tip!r} is not downstream of base link {base!r}"
             raise ConfigError(msg)
+        offset = joint.origin @ offset
+        anchor = joint.parent
+    joints: list[UrdfJoint] = []
+    link = tip
+    while link != anchor:
+        joint = robot.parent_joint(link)
+        assert joint is not None  # anchor is upstream of the tip
         joints.append(joint)
         link = joint.parent
     joints.reverse()
@@ -392,7 +420,7 @@ def urdf_chain(robot: UrdfRobot, base_link: str | None = None, tip_link: str | N
         if joint.type in ("revolute", "prismatic") and not joint.lower < joint.upper:  # type: ignore[operator]
             msg = f"{where}: joint {joint.name!r} has limits lower={joint.lower} >= upper={joint.upper}"
             raise ConfigError(msg)
-    chain = UrdfChain(robot=robot, base_link=base, tip_link=tip, joints=tuple(joints))
+    chain = UrdfChain(robot=robot, base_link=base, tip_link=tip, joints=tuple(joints), base_offset=_inv(offset))
     if not chain.movable:
         msg = f"{where}: no revolute, continuous or prismatic joint between {base!r} and {tip!r}"
         raise ConfigError(msg)
@@ -416,7 +444,7 @@ def chain_frames(chain: UrdfChain, q: Array | None = None) -> tuple[list[Array],
         Base link <- tip link at `q`.
     """
     values = np.zeros(len(chain.movable)) if q is None else np.asarray(q, dtype=np.float64)
-    current = np.eye(4)
+    current = chain.base_offset.copy()
     frames: list[Array] = []
     k = 0
     for joint in chain.joints:
@@ -518,7 +546,7 @@ def robot_model_from_urdf(
     base_link: str | None = None,
     tip_link: str | None = None,
     *,
-    tool_point: Array | tuple[float, float, float] = (0.0, 0.0, 0.0),
+    tool_point: Array | tuple[float, float, float] | None = None,
     measurement_frame_id: str = "laser_tracker",
 ) -> RobotModel:
     """The modified-DH identification model of a URDF chain (see the module docstring).
@@ -529,9 +557,12 @@ def robot_model_from_urdf(
         From :func:`parse_urdf` or :func:`load_urdf`.
     base_link, tip_link : str, optional
         Chain ends (see :func:`urdf_chain`).
-    tool_point : array_like, shape (3,) [m]
-        The measured point (reflector, probe centre) in the tip link frame; zeros: the tip
-        link's origin. A URDF may instead end in a fixed link at the probe.
+    tool_point : array_like, shape (3,) [m], optional
+        The measured point (reflector, probe centre) in the tip link frame, when it is known
+        (zeros: the tip link is the probe, e.g. a fixed link added at the probe centre). None
+        (default): unknown; the model's tool point starts at the tip link's origin and
+        ``tool_known`` is False, so the identification starts it from a least-squares fit to
+        the campaign and does not regularise it towards the tip link.
     measurement_frame_id : str
         TF name of the measurement frame.
 
@@ -589,8 +620,12 @@ def robot_model_from_urdf(
     frames, _ = model_frames(model)
     _, tip = chain_frames(chain)
     last_t_tip = _inv(frames[-1]) @ tip
-    point = last_t_tip[:3, :3] @ np.asarray(tool_point, dtype=np.float64) + last_t_tip[:3, 3]
-    return replace(model, tool_point=point, tool_rpy=urdf_rpy(last_t_tip[:3, :3]))
+    given = np.zeros(3) if tool_point is None else np.asarray(tool_point, dtype=np.float64)
+    if given.shape != (3,) or not np.isfinite(given).all():
+        msg = f"tool point must be 3 finite numbers [m] in the tip link {chain.tip_link!r}, got {given.tolist()}"
+        raise ConfigError(msg)
+    point = last_t_tip[:3, :3] @ given + last_t_tip[:3, 3]
+    return replace(model, tool_point=point, tool_rpy=urdf_rpy(last_t_tip[:3, :3]), tool_known=tool_point is not None)
 
 
 def calibrated_joint_origins(
@@ -658,7 +693,7 @@ def calibrated_joint_origins(
             raise ConfigError(msg)
         offsets.append(k)
     origins: dict[str, tuple[Array, Array]] = {}
-    current = np.eye(4)
+    current = chain.base_offset.copy()
     k_index = 0
     last = np.eye(4)
     for joint in chain.joints:

@@ -12,6 +12,23 @@ calibration; OK/WARN/ERROR) goes to ``/diagnostics`` every ``diagnostics_period_
 After each calibration the calibrated URDF goes to ``~/robot_description`` (``std_msgs/String``,
 reliable, transient local, depth 1). A URDF in the ``robot_description`` parameter (with
 ``base_link``/``tip_link``, default the first serial chain) replaces ``robot_config``.
+
+Check measurement (``verify``, the shop-floor question "is my robot still within its
+calibration today?"): with ``verify_calibration`` naming a calibration written by
+``robocal-uncertainty calibrate --json`` in an earlier session, ``~/verify``
+(``std_srvs/Trigger``) runs :func:`robocal_uncertainty.app.verification.verify`, the call of
+``robocal-uncertainty verify``, on the samples held (the check campaign of this session,
+5-20 poses): it re-registers the tracker (and the tool point with ``verify_retool``) and tests
+the robot against its calibration. The answer is one line (consistent/drifted, p-value,
+tracker move in mm and mrad; ``success`` false with the reason when the check is refused:
+no or an unusable calibration file, too few or degenerate poses, a calibration without a
+session record such as a 6-DOF one). The verdict goes to ``/diagnostics`` (OK consistent, WARN
+drifted, ERROR refused), the full result as JSON (SI units, the ``verify --out`` report's
+``verify.json`` plus ``summary`` and ``stamp_ns``) to ``robocal/verification``
+(``std_msgs/String``, reliable, transient local, depth 1), and the report
+(``verify.json``, ``verify.md``, ``verify.png``) to ``verify_report_dir`` (default
+``<campaign>.verify/`` next to the campaign), replaced by each check. The check blocks this
+node's callbacks while it runs (about a second with the default 20 000 null draws).
 """
 
 from __future__ import annotations
@@ -23,6 +40,8 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+import json
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -40,10 +59,12 @@ from robocal_uncertainty.app.export import (
     load_robot_source,
     robot_source_from_description,
 )
+from robocal_uncertainty.app.verification import VerificationRun, verify
 from robocal_uncertainty.bagio.messages import calibration_to_msg, msg_to_sample
 from robocal_uncertainty.core.calibration_file import calibration_to_dict
 from robocal_uncertainty.core.identification import IdentificationResult
-from robocal_uncertainty.errors import CalibError
+from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE
+from robocal_uncertainty.errors import CalibError, ConfigError, InputError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.nodes.common import (
@@ -70,11 +91,31 @@ from robocal_uncertainty.pipeline.diagnostics import (
     DiagnosticStatus,
     DiagnosticThresholds,
     calibration_status,
+    verification_status,
 )
 from robocal_uncertainty.pipeline.sample_store import SampleStore
+from robocal_uncertainty.report.verification_report import (
+    verification_lines,
+    verification_summary,
+    verification_to_dict,
+    write_verification_report,
+)
 from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
 __all__ = ["PARAMETERS", "CalibrationNode", "main"]
+
+
+def _tool_point(value: Any) -> str | None:
+    if value is None:
+        return None
+    if (
+        not isinstance(value, (list, tuple))
+        or len(value) != 3
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
+        return f"must be 3 finite numbers (x, y, z in m), got {value!r}"
+    return None
+
 
 PARAMETERS: tuple[ParamSpec, ...] = (
     ROBOT_CONFIG,
@@ -129,6 +170,46 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         1e-12,
         1.0,
     ),
+    ParamSpec(
+        "verify_calibration",
+        "",
+        "Calibration JSON of an earlier session (written by robocal-uncertainty calibrate --json) that ~/verify "
+        "checks the samples held against; empty = ~/verify refuses",
+    ),
+    ParamSpec(
+        "tool_point_m",
+        None,
+        "With robot_description: the measured point (probe, reflector) in tip_link, x y z, when known; unset = "
+        "fitted to the campaign and not regularised",
+        "m",
+        read_only=True,
+        check=_tool_point,
+        dynamic_typing=True,
+    ),
+    ParamSpec("verify_retool", False, "~/verify re-registers the tool point too (the probe was remounted)"),
+    ParamSpec(
+        "verify_significance",
+        DEFAULT_SIGNIFICANCE,
+        "Level of ~/verify's test: its false-alarm rate when nothing changed",
+        "",
+        low=1e-6,
+        high=0.5,
+    ),
+    ParamSpec(
+        "verify_null_trials",
+        DEFAULT_NULL_TRIALS,
+        "Monte Carlo draws of ~/verify's test statistic when nothing changed",
+        "draws",
+        low=100,
+        high=10_000_000,
+    ),
+    ParamSpec("verify_seed", 0, "Seed of those draws (same seed, same p-value)", low=0, high=2**62),
+    ParamSpec(
+        "verify_report_dir",
+        "",
+        "Directory ~/verify writes verify.json, verify.md and verify.png to (replaced by each check); "
+        "empty = <campaign>.verify next to the campaign",
+    ),
 )
 
 
@@ -146,9 +227,18 @@ class CalibrationNode(Node):
         chain = {k: str(self.declare_parameter(k, "").value) or None for k in ("base_link", "tip_link")}
         self._source = None
         if self._description.strip():
-            self._source = robot_source_from_description(self._description, **chain)
+            point = p["tool_point_m"]
+            self._source = robot_source_from_description(
+                self._description, **chain, tool_point=None if point is None else [float(v) for v in point]
+            )
             self.model = replace(self._source.model, base_known=not p["base_unknown"] and self._source.model.base_known)
             self.robot_config = "robot_description"
+        elif p["tool_point_m"] is not None:
+            msg = (
+                "parameter tool_point_m describes the probe of a robot_description (URDF); "
+                "a robot YAML gives tool_point"
+            )
+            raise ConfigError(msg)
         self.store = SampleStore(self.model)
         self.campaign_path = campaign_file(p["campaign_path"])
         self.calibration_path = (
@@ -172,6 +262,9 @@ class CalibrationNode(Node):
         self._description_pub = self.create_publisher(String, "~/robot_description", latched_qos())
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
         self.create_service(Trigger, "~/calibrate", self._calibrate_service)
+        self._verification_pub = self.create_publisher(String, "robocal/verification", latched_qos())
+        self.create_service(Trigger, "~/verify", self._verify_service)
+        self._check: dict[str, Any] = {}  # the last ~/verify: result or refusal
         self.create_timer(0.5, self._after_parameter_change)
         self._last_calibration_ns: int | None = None
         self._last_error: str | None = None
@@ -275,8 +368,113 @@ class CalibrationNode(Node):
             thresholds=self._thresholds,
         )
 
+    def verification_diagnostic_status(self) -> DiagnosticStatus:
+        """The last check's verdict (rules in :mod:`robocal_uncertainty.pipeline.diagnostics`)."""
+        check = self._check
+        run: VerificationRun | None = check.get("run")
+        result = None if run is None else run.verification
+        move = None if result is None else result.move
+        return verification_status(
+            name=f"{self.get_name()}: verify",
+            hardware_id=self.model.name,
+            now_ns=self.get_clock().now().nanoseconds,
+            calibration=str(self.get_parameter("verify_calibration").value),
+            last_check_ns=check.get("stamp_ns"),
+            consistent=None if result is None else bool(result.consistent),
+            summary=str(check.get("summary", "")),
+            error=check.get("error"),
+            p_value=None if result is None else float(result.p_value),
+            n_poses=None if result is None else int(result.n_poses),
+            tracker_move_m=None if move is None else float(move.distance),
+            tracker_turn_rad=None if move is None else float(move.angle),
+        )
+
     def _publish_diagnostics(self) -> None:
-        self._diagnostics_pub.publish(diagnostic_array(self, [self.diagnostic_status()]))
+        statuses = [self.diagnostic_status()]
+        if self._check or str(self.get_parameter("verify_calibration").value).strip():
+            statuses.append(self.verification_diagnostic_status())
+        self._diagnostics_pub.publish(diagnostic_array(self, statuses))
+
+    # -- check measurement -------------------------------------------------------------------
+
+    @property
+    def verify_report_dir(self) -> Path:
+        """Where ``~/verify`` writes its report."""
+        given = str(self.get_parameter("verify_report_dir").value).strip()
+        if given:
+            return Path(given).expanduser()
+        return self.campaign_path.with_name(self.campaign_path.stem + ".verify")
+
+    def _verify_service(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        response.success, response.message = self.verify_samples()
+        return response
+
+    def verify_samples(self) -> tuple[bool, str]:
+        """Check the samples held against ``verify_calibration``: (ran, one-line answer).
+
+        A refusal (no or an unusable calibration, a check that cannot re-register) is
+        ``(False, "refused: <reason>")``, logged, and ERROR on ``/diagnostics``; it never
+        stops the node.
+        """
+
+        def get(name: str) -> Any:
+            return self.get_parameter(name).value
+
+        stamp = self.get_clock().now().nanoseconds
+        path = str(get("verify_calibration")).strip()
+        try:
+            if not path:
+                msg = (
+                    "no calibration to check against: set the parameter verify_calibration "
+                    "(a calibration JSON written by robocal-uncertainty calibrate --json)"
+                )
+                raise ConfigError(msg)
+            campaign = self.store.pipeline().campaign
+            if campaign is None:
+                msg = "no samples held: measure the check poses (5-20 spread over the workspace) first"
+                raise InputError(msg)
+            run = verify(
+                self.model,
+                Path(path).expanduser(),
+                campaign,
+                check_name=str(self.campaign_path),
+                retool=bool(get("verify_retool")),
+                significance=float(get("verify_significance")),
+                null_trials=int(get("verify_null_trials")),
+                seed=int(get("verify_seed")),
+            )
+        except CalibError as err:
+            reason = " ".join(str(err).split())  # one line
+            self._check = {"error": reason, "stamp_ns": stamp}
+            self.get_logger().error(f"verify refused ({len(self.store)} samples): {reason}")
+            return False, f"refused: {reason}"
+        result = run.verification
+        summary = verification_summary(result)
+        self._check = {"run": run, "summary": summary, "stamp_ns": stamp}
+        for line in verification_lines(result, scope=run.scope_text):
+            self.get_logger().info(f"verify: {line}")
+        data = verification_to_dict(
+            result,
+            calibration=path,
+            check_campaign=run.check_campaign,
+            robot=self.model.name,
+            scope=run.scope,
+        )
+        data.update(summary=summary, stamp_ns=stamp)
+        self._verification_pub.publish(String(data=json.dumps(data)))
+        try:
+            write_verification_report(
+                result,
+                self.verify_report_dir,
+                calibration=path,
+                check_campaign=run.check_campaign,
+                robot=self.model.name,
+                scope=run.scope,
+            )
+        except OSError as err:
+            self.get_logger().error(f"cannot write the verify report to {self.verify_report_dir}: {err}")
+            summary += f" (report not written: {err})"
+        return True, summary
 
     def _publish_description(self, result: IdentificationResult) -> None:
         """The calibrated URDF on the latched ``~/robot_description`` (for robot_description topic readers)."""

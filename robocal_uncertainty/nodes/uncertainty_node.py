@@ -137,6 +137,7 @@ _MONTE_CARLO = frozenset(
         "tracker_noise_um",
         "tracker_noise_um_per_m",
         "encoder_noise_deg",
+        "linear_encoder_noise_um",
         "lambda_range_low",
         "lambda_range_high",
         "min_poses",
@@ -233,6 +234,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         high=1e6,
     ),
     ParamSpec("encoder_noise_deg", 0.005, "Encoder error half-width (uniform)", "deg", low=0.0, high=10.0),
+    ParamSpec(
+        "linear_encoder_noise_um",
+        5.0,
+        "Reading error half-width of a prismatic joint (uniform)",
+        "um",
+        low=0.0,
+        high=1e6,
+    ),
     ParamSpec(
         "lambda_range_low",
         0.0,
@@ -443,7 +452,10 @@ class UncertaintyNode(Node):
         settings = UncertaintySettings(
             sources=parse_sources(self._sources_for(measures_orientation)),
             tracker_noise=TrackerNoise(a=get("tracker_noise_um") * 1e-6, b=get("tracker_noise_um_per_m") * 1e-6),
-            encoder_noise=EncoderNoise(half_width=float(np.radians(get("encoder_noise_deg")))),
+            encoder_noise=EncoderNoise(
+                half_width=float(np.radians(get("encoder_noise_deg"))),
+                linear_half_width=float(get("linear_encoder_noise_um")) * 1e-6,
+            ),
             lambda_range=None if low == high == 0.0 else (low, high),
             min_poses=int(get("min_poses")) or None,
             subset_size=int(get("subset_size")) or None,

@@ -13,6 +13,9 @@ that topic). The rules live here, so CI tests them without ROS:
 * calibration: samples, condition number, residual RMS, lambda, time since the last
   calibration. ERROR when the last calibration failed or did not converge; WARN while too
   few samples are held, or when the condition number or the residual RMS exceeds its limit.
+* verification (the calibration node's ``~/verify``): the last check's verdict, p-value and
+  tracker move. OK when consistent (or none run yet), WARN when drifted, ERROR when the
+  check was refused (no or an unusable calibration file, too few or degenerate poses).
 * uncertainty: state, trials, Monte Carlo convergence, largest standard uncertainty, whether
   the statement is trustworthy, time the last evaluation took and since it finished. ERROR
   when it failed; WARN while none finished yet, when the adaptive procedure did not converge,
@@ -38,6 +41,7 @@ __all__ = [
     "calibration_status",
     "collector_status",
     "uncertainty_status",
+    "verification_status",
 ]
 
 _NS_PER_S = 1_000_000_000
@@ -335,5 +339,57 @@ def uncertainty_status(
         ("trustworthy", "n/a" if last_evaluation_ns is None else str(not trust_note).lower()),
         ("last_evaluation_duration_s", _fmt(last_evaluation_s)),
         ("time_since_last_evaluation_s", _fmt(_age_s(now_ns, last_evaluation_ns))),
+    )
+    return DiagnosticStatus(name, hardware_id, level, message, values)
+
+
+def verification_status(
+    *,
+    name: str,
+    hardware_id: str,
+    now_ns: int,
+    calibration: str,
+    last_check_ns: int | None,
+    consistent: bool | None,
+    summary: str = "",
+    error: str | None = None,
+    p_value: float | None = None,
+    n_poses: int | None = None,
+    tracker_move_m: float | None = None,
+    tracker_turn_rad: float | None = None,
+) -> DiagnosticStatus:
+    """Status of the last check measurement (``verify``) of the samples held.
+
+    Parameters
+    ----------
+    calibration : str
+        The calibration file checked against ("" when none is set).
+    last_check_ns : int or None [ns]
+        When the last check (or refusal) happened; None: none yet.
+    consistent : bool or None
+        Its verdict (None: none yet, or refused).
+    summary : str
+        Its one-line verdict (:func:`~robocal_uncertainty.report.verification_report.verification_summary`).
+    error : str, optional
+        Why the last check was refused.
+    p_value, n_poses, tracker_move_m, tracker_turn_rad : optional
+        The last check's p-value, poses and tracker move [m, rad] (None: not stated).
+    """
+    if error:
+        level, message = DiagnosticLevel.ERROR, f"verify refused: {error}"
+    elif consistent is None:
+        level, message = DiagnosticLevel.OK, "no check run yet (call ~/verify)"
+    elif consistent:
+        level, message = DiagnosticLevel.OK, summary or "consistent"
+    else:
+        level, message = DiagnosticLevel.WARN, summary or "drifted"
+    values = (
+        ("calibration", calibration or "n/a"),
+        ("verdict", "n/a" if consistent is None else ("consistent" if consistent else "drifted")),
+        ("p_value", _fmt(p_value)),
+        ("check_poses", "n/a" if n_poses is None else str(n_poses)),
+        ("tracker_move_m", _fmt(tracker_move_m)),
+        ("tracker_turn_rad", _fmt(tracker_turn_rad)),
+        ("time_since_last_check_s", _fmt(_age_s(now_ns, last_check_ns))),
     )
     return DiagnosticStatus(name, hardware_id, level, message, values)

@@ -466,7 +466,8 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
                 ),
                 f"condition number of the scaled Jacobian: {cal.condition_number:.3g}",
                 f"iterations: {cal.iterations}, converged: {'yes' if cal.converged else 'NO'} ({cal.message})",
-                f"poses: {cal.n_poses}; base initialised: {cal.base_initialised}",
+                f"poses: {cal.n_poses}; base initialised: {cal.base_initialised}; tool point initialised: "
+                f"{cal.tool_initialised}",
                 f"estimated parameters: {int(cal.estimated.sum())} of {int(cal.candidates.sum())} candidates",
                 *_weighting_lines(cal),
             )
@@ -565,7 +566,12 @@ def _settings(
             f"coverage probability: {result.coverage_probability:g}"
         ),
         f"tracker noise: uniform ±(a + b·L), a = {s.tracker_noise.a * 1e6:g} µm, b = {s.tracker_noise.b * 1e6:g} µm/m",
-        f"encoder noise: uniform ±{math.degrees(s.encoder_noise.half_width):g} deg",
+        f"encoder noise: uniform ±{math.degrees(s.encoder_noise.half_width):g} deg"
+        + (
+            f", prismatic joints ±{s.encoder_noise.linear_half_width * 1e6:g} µm"
+            if any(result.calibration.model.prismatic)
+            else ""
+        ),
         f"lambda range (lambda source): {lam_range}; λ* = {result.lambda_star:.4g}",
         (
             f"min_poses: {s.min_poses if s.min_poses is not None else 'default'}; "

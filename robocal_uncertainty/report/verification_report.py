@@ -26,6 +26,7 @@ __all__ = [
     "plot_verification",
     "verification_lines",
     "verification_markdown",
+    "verification_summary",
     "verification_to_dict",
     "write_verification_report",
 ]
@@ -42,6 +43,33 @@ def _effect_text(name: str, value: float, std: float) -> str:
     if name == LENGTH_SCALE:
         return f"{name} {value * 1e6:+.1f} ± {std * 1e6:.1f} ppm"
     return f"{name} {np.degrees(value) * 1e3:+.2f} ± {np.degrees(std) * 1e3:.2f} mdeg"
+
+
+def verification_summary(result: Verification) -> str:
+    """One line: the verdict with its p-value and how far the tracker (and tool point) moved.
+
+    What the calibration node's ``~/verify`` answers and logs; the full lines are
+    :func:`verification_lines`.
+    """
+    if result.consistent:
+        head = f"consistent (p = {result.p_value:.3g} >= {result.significance:g}"
+    else:
+        head = (
+            f"drifted by about {result.excess_std * 1e3:.3g} mm per axis beyond the stated uncertainty "
+            f"(p = {result.p_value:.3g} < {result.significance:g}"
+        )
+    parts = [f"{head}, chi2 = {result.chi2:.3g} on {result.dof} degrees of freedom, {result.n_poses} poses)"]
+    move = result.move
+    if move is not None:
+        parts.append(
+            f"tracker moved {move.distance * 1e3:.3f} ± {move.distance_std * 1e3:.3f} mm and turned "
+            f"{move.angle * 1e3:.3f} ± {move.angle_std * 1e3:.3f} mrad"
+        )
+    if result.tool_change is not None:
+        parts.append(f"tool point moved {float(np.linalg.norm(result.tool_change)) * 1e3:.3f} mm")
+    if not result.consistent:
+        parts.append("re-calibrate")
+    return "; ".join(parts)
 
 
 def verification_lines(result: Verification, *, scope: str = "session") -> list[str]:

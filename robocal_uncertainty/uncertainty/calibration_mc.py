@@ -891,6 +891,7 @@ def _prepare(
         subset_size=subset_size,
         rotation_std=np.asarray(measurement.rotation_std) if isinstance(measurement, PoseMeasurement) else None,
         test_effect_jacobian=test_effect_jacobian(calibration, test_q, settings),
+        prismatic=model.prismatic if any(model.prismatic) else (),
     )
     trials = CalibrationTrials(
         problem=problem,

@@ -154,8 +154,8 @@ def pose_noise_covariances(
     """
     measurement = calibration.measurement
     jq = measurement.joint_jacobian(calibration.model.layout, calibration.estimate, joint_positions)
-    # Variance of the uniform encoder error: half-width^2 / 3 (not a point dimension).
-    cov: Array = (encoder_noise.half_width**2 / 3.0) * np.einsum("pij,pkj->pik", jq, jq)
+    # Variance of the uniform encoder error: half-width^2 / 3 (not a point dimension; rad or m per joint).
+    cov: Array = encoder_noise.covariance(jq, calibration.model.prismatic)
     cov += measurement.instrument_covariance(tracker_noise.std(distances))
     return cov
 

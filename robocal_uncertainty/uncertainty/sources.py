@@ -89,6 +89,8 @@ class TrialContext:
     test_effect_jacobian : ndarray, shape (n_test, 3, k) or None
         Derivative of the predicted tool point w.r.t. the between-session effects (the
         ``between_session`` source); None without a between-session component.
+    prismatic : tuple of bool, length n_joints (or empty: all revolute)
+        Joints whose reading is a length [m] (their encoder noise is ``linear_half_width``).
     """
 
     n_poses: int
@@ -103,6 +105,7 @@ class TrialContext:
     subset_size: int
     rotation_std: Array | None = None
     test_effect_jacobian: Array | None = None
+    prismatic: tuple[bool, ...] = ()
 
     @property
     def rotation_components(self) -> tuple[int, ...]:
@@ -314,14 +317,15 @@ def _tracker_orientation(settings: UncertaintySettings, ctx: TrialContext) -> So
 
 
 def _encoder(settings: UncertaintySettings, ctx: TrialContext) -> Source:
+    segments = (("joints", (ctx.n_poses, ctx.n_joints)), ("test_joints", (ctx.n_test, ctx.n_joints)))
+    if any(ctx.prismatic):
+        # Revolute readings in rad, prismatic ones in m: one half-width per joint.
+        half = np.tile(settings.encoder_noise.half_widths(ctx.prismatic), ctx.n_poses + ctx.n_test)
+        return AdditiveSource("encoder", IndependentRectangular(half), segments)
     h = settings.encoder_noise.half_width
     count = (ctx.n_poses + ctx.n_test) * ctx.n_joints
     one = Rectangular(-h, h) if h > 0 else IndependentRectangular([0.0])
-    return AdditiveSource(
-        "encoder",
-        IndependentCopies(one, count),
-        (("joints", (ctx.n_poses, ctx.n_joints)), ("test_joints", (ctx.n_test, ctx.n_joints))),
-    )
+    return AdditiveSource("encoder", IndependentCopies(one, count), segments)
 
 
 def _residual(settings: UncertaintySettings, ctx: TrialContext) -> Source:
@@ -527,7 +531,7 @@ class UncertaintySettings:
         Uniform +-(a + b L) per coordinate [m]; L is the distance from the tracker
         (the tracker frame origin, or `tracker_xyz` when points are in the base frame).
     encoder_noise : EncoderNoise
-        Uniform +-half_width per joint [rad].
+        Uniform +-half_width per revolute joint [rad], +-linear_half_width per prismatic one [m].
     lambda_range : (float, float) or None
         Range of lambda for the ``lambda`` source, in the column-scaled units of the
         identification; None means [lambda*/5, 5 lambda*] around the chosen lambda*.

@@ -19,6 +19,7 @@ from robocal_uncertainty.pipeline.diagnostics import (
     calibration_status,
     collector_status,
     uncertainty_status,
+    verification_status,
 )
 from robocal_uncertainty.pipeline.markers import (
     ellipsoid_axes,
@@ -134,6 +135,22 @@ def test_uncertainty_levels() -> None:
     assert uncertainty_status(**none_yet).level == DiagnosticLevel.WARN
     failed = uncertainty_status(**base | {"state": "failed", "error": "singular"})
     assert failed.level == DiagnosticLevel.ERROR and "singular" in failed.message
+
+
+def test_verification_levels() -> None:
+    base = {"name": "calibration_node: verify", "hardware_id": "ur10", "now_ns": NOW, "calibration": "cal.json"}
+    none_yet = verification_status(**base, last_check_ns=None, consistent=None)
+    assert none_yet.level == DiagnosticLevel.OK and none_yet.value("verdict") == "n/a"
+    assert "call ~/verify" in none_yet.message
+    checked = base | {"last_check_ns": NOW - 2 * S, "p_value": 0.42, "n_poses": 10, "tracker_move_m": 1.5}
+    ok = verification_status(**checked, consistent=True, summary="consistent (p = 0.42 >= 0.05)")
+    assert ok.level == DiagnosticLevel.OK and ok.message.startswith("consistent")
+    assert ok.value("time_since_last_check_s") == "2" and ok.value("tracker_move_m") == "1.5"
+    assert ok.value("check_poses") == "10" and ok.value("tracker_turn_rad") == "n/a"
+    drifted = verification_status(**checked | {"p_value": 1e-4}, consistent=False, summary="drifted by about 0.1 mm")
+    assert drifted.level == DiagnosticLevel.WARN and drifted.value("verdict") == "drifted"
+    refused = verification_status(**base, last_check_ns=NOW, consistent=None, error="check campaign too small")
+    assert refused.level == DiagnosticLevel.ERROR and refused.message == "verify refused: check campaign too small"
 
 
 def test_bad_thresholds_raise() -> None:
