@@ -10,6 +10,7 @@ error in the robot base frame, and the session's registration with its uncertain
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -329,6 +330,21 @@ FIELD_MAX_POSES = 200
 _FIELD_LENGTH_BOUNDS = (0.02, 20.0)
 
 
+def _hessian(fun: Callable[[Array], float], x0: Array, free: list[int], step: float = 1e-3) -> Array:
+    """Central-difference Hessian of `fun` at `x0` over the coordinates `free`."""
+    hess = np.empty((len(free), len(free)))
+    for a, i in enumerate(free):
+        for b, j in enumerate(free):
+            values = []
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                x = x0.copy()
+                x[i] += si * step
+                x[j] += sj * step
+                values.append(fun(x))
+            hess[a, b] = (values[0] - values[1] - values[2] + values[3]) / (4 * step * step)
+    return hess
+
+
 def _contrasts(calibration: IdentificationResult, q: Array) -> Array:
     """Orthonormal basis of the residual space the fit leaves (orthogonal to its Jacobian), (3 n, m)."""
     layout = calibration.model.layout
@@ -435,20 +451,7 @@ def estimate_model_error_field(
     # Degrees of freedom of s: 2 / var(log s), var from the curvature of the likelihood in the
     # free hyperparameters (log s, and c and log l where c is inside (0, 1)).
     free = [0] if c <= 1e-6 else ([0, 1, 2] if c < 1.0 - 1e-6 else [0, 2])
-    x0 = np.array([log_s, c, log_l])
-    steps = np.array([1e-3, 1e-3, 1e-3])
-    hess = np.empty((len(free), len(free)))
-    for a, i in enumerate(free):
-        for b, j in enumerate(free):
-            def f(di: float, dj: float) -> float:
-                x = x0.copy()
-                x[i] += di
-                x[j] += dj
-                x[1] = min(max(x[1], 0.0), 1.0)
-                return nll(*x)
-
-            hi_, hj = steps[i], steps[j]
-            hess[a, b] = (f(hi_, hj) - f(hi_, -hj) - f(-hi_, hj) + f(-hi_, -hj)) / (4 * hi_ * hj)
+    hess = _hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
     hyper = np.zeros((3, 3))
     try:
         inv = np.linalg.inv(hess)
