@@ -244,6 +244,9 @@ class Verification:
     effective_dof : ndarray, shape (n, 3) or None
         Welch-Satterthwaite degrees of freedom of each residual component's standard
         deviation (inf where every part is taken as exact); see :meth:`coverage_factors`.
+    model_error_length_scale : float [rad] or None
+        Correlation length of the model-error field the check assumed (None: independent
+        from pose to pose).
     """
 
     consistent: bool
@@ -274,6 +277,7 @@ class Verification:
     effects: Array | None = None
     effects_covariance: Array | None = None
     effective_dof: Array | None = None
+    model_error_length_scale: float | None = None
 
     def coverage_factors(self, coverage: float = 0.95) -> Array:
         """Per component: the t-quantile for `coverage` with its Welch-Satterthwaite dof, shape (n, 3).
@@ -827,6 +831,7 @@ def verify_session(
         effects=effect_values,
         effects_covariance=effect_cov,
         effective_dof=effective_dof,
+        model_error_length_scale=None if me_field is None else float(me_field.length_scale),
     )
 
 

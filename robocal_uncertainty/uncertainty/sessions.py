@@ -345,15 +345,15 @@ def _hessian(fun: Callable[[Array], float], x0: Array, free: list[int], step: fl
     return hess
 
 
-def _contrasts(calibration: IdentificationResult, q: Array) -> Array:
-    """Orthonormal basis of the residual space the fit leaves (orthogonal to its Jacobian), (3 n, m)."""
+def _fit_space(calibration: IdentificationResult, q: Array) -> Array:
+    """Orthonormal basis of the space the fit spans (its Jacobian's columns), shape (3 n, rank)."""
     layout = calibration.model.layout
     est = np.flatnonzero(calibration.estimated)
     _, jac = forward_points_and_jacobian(layout, calibration.estimate, q)
     a_mat = jac.reshape(3 * q.shape[0], layout.size)[:, est] / calibration.column_scale[est]
-    u, s, _ = np.linalg.svd(a_mat, full_matrices=True)
+    u, s, _ = np.linalg.svd(a_mat, full_matrices=False)
     rank = int(np.sum(s > 1e-10 * s[0]))
-    return np.asarray(u[:, rank:], dtype=np.float64)
+    return np.asarray(u[:, :rank], dtype=np.float64)
 
 
 def estimate_model_error_field(
@@ -370,7 +370,8 @@ def estimate_model_error_field(
     The calibration residuals are, to first order, the part of ``e + eps`` (model error plus
     stated noise) the fit leaves: their projection ``z = Q^T r`` on the ``m = 3 n - rank``
     directions orthogonal to the Jacobian depends on neither the parameters nor their
-    estimate, and is normal with covariance ``Q^T (N + V(s, c, l)) Q`` (``N`` the stated noise,
+    estimate, and is normal with covariance ``Q^T (N + V(s, c, l)) Q`` (evaluated without
+    forming ``Q``, by Harville's identity) (``N`` the stated noise,
     ``V = [c rho(d / l) + (1 - c) I] (x) s S``, see
     :mod:`~robocal_uncertainty.core.model_error_field`). ``s``, ``c``, ``l`` maximise that
     (restricted) likelihood; with ``c = 0`` it is the independent model error.
@@ -404,37 +405,42 @@ def estimate_model_error_field(
     if n_all > max_poses:
         idx = np.sort(np.random.default_rng(seed).choice(n_all, size=max_poses, replace=False))
     q = q_all[idx]
-    q_basis = _contrasts(calibration, q)
-    z = q_basis.T @ np.asarray(calibration.residuals, dtype=np.float64)[idx].reshape(-1)
-    m = z.size
+    fit = _fit_space(calibration, q)
+    r = np.asarray(calibration.residuals, dtype=np.float64)[idx].reshape(-1)
+    m = r.size - fit.shape[1]
     layout = calibration.model.layout
     b0 = layout.base_index
     r_wb = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6])
     shape = np.asarray(shape_base, dtype=np.float64)
     shape = 3.0 * shape / np.trace(shape) if np.trace(shape) > 0 else np.eye(3)
     s_meas = r_wb @ shape @ r_wb.T
-    n_q = q_basis.T @ linalg.block_diag(*noise[idx]) @ q_basis
-    w_white = q_basis.T @ np.kron(np.eye(q.shape[0]), s_meas) @ q_basis
+    n_all_cov = linalg.block_diag(*noise[idx])
+    w_white = np.kron(np.eye(q.shape[0]), s_meas)
     distance = chordal_distance(q, q)
-    noise_level = float(np.trace(n_q)) / m
-
-    def projected_kernel(length: float) -> Array:
-        return np.asarray(q_basis.T @ np.kron(kernel_correlation(distance, length), s_meas) @ q_basis)
+    noise_level = float(np.trace(n_all_cov)) / r.size
+    mean_square = float(r @ r) / m
 
     def nll(log_s: float, c: float, log_l: float) -> float:
+        # -log of the likelihood of the contrasts Q^T r (Q orthonormal, orthogonal to the fit
+        # space U), by Harville's identity: log|Q^T V Q| = log|V| + log|U^T V^-1 U| and
+        # r^T Q (Q^T V Q)^-1 Q^T r = r^T (V^-1 - V^-1 U (U^T V^-1 U)^-1 U^T V^-1) r.
         s = float(np.exp(log_s))
-        cov = n_q + s * (1.0 - c) * w_white
+        cov = n_all_cov + s * (1.0 - c) * w_white
         if c > 0.0:
-            cov = cov + s * c * projected_kernel(float(np.exp(log_l)))
+            cov = cov + s * c * np.kron(kernel_correlation(distance, float(np.exp(log_l))), s_meas)
         try:
-            chol = np.linalg.cholesky(cov)
-        except np.linalg.LinAlgError:
+            chol = linalg.cholesky(cov, lower=True)
+            vi_u = linalg.cho_solve((chol, True), fit)
+            vi_r = linalg.cho_solve((chol, True), r)
+            chol_u = linalg.cholesky(fit.T @ vi_u, lower=True)
+        except linalg.LinAlgError:
             return float("inf")
-        w = linalg.solve_triangular(chol, z, lower=True)
-        return float(np.sum(np.log(np.diag(chol))) + 0.5 * w @ w)
+        w = linalg.solve_triangular(chol_u, fit.T @ vi_r, lower=True)
+        quad = float(r @ vi_r - w @ w)
+        return float(np.sum(np.log(np.diag(chol))) + np.sum(np.log(np.diag(chol_u))) + 0.5 * quad)
 
-    s0 = max(float(z @ z) / m - noise_level, 1e-3 * noise_level)
-    lo_s, hi_s = np.log(1e-6 * noise_level), np.log(1e4 * max(float(z @ z) / m, noise_level))
+    s0 = max(mean_square - noise_level, 1e-3 * noise_level)
+    lo_s, hi_s = np.log(1e-6 * noise_level), np.log(1e4 * max(mean_square, noise_level))
     lo_l, hi_l = np.log(_FIELD_LENGTH_BOUNDS[0]), np.log(_FIELD_LENGTH_BOUNDS[1])
     independent = optimize.minimize_scalar(lambda a: nll(a, 0.0, 0.0), bounds=(lo_s, hi_s), method="bounded")
     best = (float(independent.fun), float(independent.x), 0.0, float(np.log(0.5)))

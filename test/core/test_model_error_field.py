@@ -12,9 +12,11 @@ import pytest
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise, identify, load_robot_model
 from robocal_uncertainty.core.calibration_file import read_calibration, read_session_state, write_calibration
 from robocal_uncertainty.core.model_error_field import ModelErrorField, chordal_distance
+from robocal_uncertainty.core.session import verify_session
 from robocal_uncertainty.core.simulation import SessionSimulationSettings, simulate_sessions
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.importers import read_tracker_csv
+from robocal_uncertainty.report.verification_report import verification_lines
 from robocal_uncertainty.uncertainty.model_adequacy import pose_noise_covariances
 from robocal_uncertainty.uncertainty.sessions import campaign_distances, estimate_model_error_field, session_state
 
@@ -92,7 +94,7 @@ def test_simulated_campaigns_have_no_correlated_model_error() -> None:
 
 
 def test_ur10_model_error_is_correlated_and_recorded(ur10_series, tmp_path: Path) -> None:
-    model, _, train, cal, state, adequacy = ur10_series
+    model, campaign, train, cal, state, adequacy = ur10_series
     fld = state.model_error_field
     assert not adequacy.adequate and fld is not None
     # The likelihood prefers the correlated field by far; length about a quarter to 2 rad.
@@ -133,6 +135,14 @@ def test_ur10_model_error_is_correlated_and_recorded(ur10_series, tmp_path: Path
     del v2["model_error"]["field"]
     old = read_session_state(v2)
     assert old is not None and old.model_error_field is None
+    # A check of 10 other poses uses the field (consistent: p = 0.83) and the report says so.
+    model_cal = cal.model
+    check = campaign.subset(np.random.default_rng(7).permutation(632)[53:63])
+    with_field = verify_session(model_cal, state, check, null_trials=2000)
+    without = verify_session(model_cal, alone, check, null_trials=2000)
+    assert with_field.model_error_length_scale == fld.length_scale and without.model_error_length_scale is None
+    assert with_field.consistent
+    assert any("correlated between the poses" in line for line in verification_lines(with_field, scope="x"))
     broken = json.loads(path.read_text())
     broken["model_error"]["field"]["gain"]["matrix"] = [[1.0]]
     with pytest.raises(ConfigError, match=r"model_error\.field must hold"):
