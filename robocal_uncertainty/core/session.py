@@ -18,7 +18,13 @@ under "nothing changed":
 
 (calibration parameter uncertainty, correlated across poses; tracker and encoder noise;
 the calibration's model error ``Sigma_m``, stated in the robot base frame and turned into the
-new tracker frame by the re-registered rotation ``R``), the GLS estimate ``theta_hat``
+new tracker frame by the re-registered rotation ``R``). When the calibration states its model
+error as a field correlated over the configurations
+(:class:`~robocal_uncertainty.core.model_error_field.ModelErrorField`), the block-diagonal
+``R Sigma_m R^T`` is replaced by the field over the check poses less what the calibration's
+parameters absorbed of it (``K_cc - J_k G K_tc - (J_k G K_tc)^T``; ``Sigma_k`` then holds
+``G K_tt G^T``), and the null draws it as one normal over the poses whose scale is widened by
+the estimate's degrees of freedom. The GLS estimate ``theta_hat``
 minimises ``r^T C^-1 r`` and the statistic ``chi2 = r^T C^-1 r`` at the minimum follows a
 chi-square with ``3 n - k`` degrees of freedom (``k`` = rank of the re-registration
 Jacobian: the degrees of freedom the re-registration used are taken off). The check is

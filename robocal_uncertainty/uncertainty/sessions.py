@@ -5,6 +5,13 @@
 covariance of the estimated parameters (stated tracker and encoder noise plus the model error
 of :func:`~robocal_uncertainty.uncertainty.model_adequacy.assess_model_adequacy`), the model
 error in the robot base frame, and the session's registration with its uncertainty.
+
+When the model is inadequate the model error is, by default, a field correlated over the joint
+configurations (:func:`estimate_model_error_field`: restricted maximum likelihood on the
+calibration's residuals; :mod:`~robocal_uncertainty.core.model_error_field`): a real robot's
+error is smooth, and one independent from pose to pose makes a check of a few poses too narrow
+(UR10 series, 10-pose checks against 53-pose calibrations: 91.3 % consistent at the 5 % level
+with the independent model error, 96.1 % of 1 600 with the field).
 """
 
 from __future__ import annotations
