@@ -37,7 +37,7 @@ def test_simulated_sessions_carry_their_truth(sessions: Path) -> None:
     assert truth["change"]["temperature_delta_K"] == 0.0
     assert len(truth["change"]["tool_offset_m"]) == 3 and len(truth["true_joint_positions_rad"]) == 10
     cal = json.loads((sessions / "cal.json").read_text())
-    assert cal["format"] == "robocal_uncertainty/calibration/2" and cal["scope"] == "session"
+    assert cal["format"] == "robocal_uncertainty/calibration/3" and cal["scope"] == "session"
     assert cal["session"]["frame"] == "tracker" and len(cal["session"]["registration"]["covariance"]) == 6
 
 

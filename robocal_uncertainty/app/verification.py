@@ -66,6 +66,7 @@ def calibrate_session(
     cross_validation_folds: int = 5,
     later_sessions: Sequence[Campaign] = (),
     retool: bool = True,
+    correlated_model_error: bool = True,
 ) -> SessionCalibration:
     """Identify `campaign` and record the session for verification and later sessions.
 
@@ -83,15 +84,21 @@ def calibrate_session(
     campaign_name : str, optional
         Recorded in the file.
     cross_validation_folds : int
-        When the model is inadequate, take the model error from this many folds of held-out
-        poses (:func:`~robocal_uncertainty.uncertainty.sessions.cross_validated_model_error`);
-        0 keeps the one from the calibration's own residuals.
+        With `correlated_model_error` off and an inadequate model, take the model error from
+        this many folds of held-out poses
+        (:func:`~robocal_uncertainty.uncertainty.sessions.cross_validated_model_error`); 0 keeps
+        the one from the calibration's own residuals.
     later_sessions : sequence of Campaign
         Campaigns of the same robot from other sessions (their own tracker set-ups): the
         between-session component is estimated from them and the statement then holds for a
         future session (:mod:`~robocal_uncertainty.uncertainty.between_sessions`).
     retool : bool
         The probe was remounted between sessions (re-register the tool point on each).
+    correlated_model_error : bool
+        When the model is inadequate, state the model error as a field correlated over the
+        joint configurations, estimated from the calibration's residuals by restricted maximum
+        likelihood (:func:`~robocal_uncertainty.uncertainty.sessions.estimate_model_error_field`;
+        default). Off: independent from pose to pose (held-out folds as above).
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     if result.measurement.dimension != 3 or result.measurement.weights is not None:
@@ -106,11 +113,19 @@ def calibrate_session(
         "lambda_method": result.lambda_method,
         "cross_validation_folds": cross_validation_folds,
         "retool": retool,
+        "correlated_model_error": correlated_model_error,
     }
     state, adequacy = session_state(
-        result, campaign, tracker_noise, encoder_noise, sources=sources, campaign_name=campaign_name, settings=settings
+        result,
+        campaign,
+        tracker_noise,
+        encoder_noise,
+        sources=sources,
+        campaign_name=campaign_name,
+        settings=settings,
+        correlated=correlated_model_error,
     )
-    if cross_validation_folds and not adequacy.adequate and "residual" in sources:
+    if not correlated_model_error and cross_validation_folds and not adequacy.adequate and "residual" in sources:
         try:
             cv = cross_validated_model_error(
                 model, campaign, tracker_noise, encoder_noise, folds=cross_validation_folds, lambda_=lambda_
@@ -128,6 +143,7 @@ def calibrate_session(
                 campaign_name=campaign_name,
                 settings=settings,
                 cross_validated=cv,
+                correlated=False,
             )
     if later_sessions:
         between = estimate_between_sessions(result.model, state, list(later_sessions), retool=retool)

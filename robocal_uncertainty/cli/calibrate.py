@@ -44,8 +44,14 @@ def register(sub: Any) -> None:
         "--cross-validation-folds",
         type=int,
         default=5,
-        help="model error from this many folds of held-out poses when the model is inadequate; 0: from the "
-        "calibration's own residuals (default %(default)s)",
+        help="with --independent-model-error: model error from this many folds of held-out poses when the model "
+        "is inadequate; 0: from the calibration's own residuals (default %(default)s)",
+    )
+    p.add_argument(
+        "--independent-model-error",
+        action="store_true",
+        help="state the model error as independent from pose to pose (default: a field correlated over the joint "
+        "configurations, estimated from the residuals)",
     )
     p.set_defaults(func=run)
 
@@ -57,6 +63,12 @@ def session_lines(state: Any) -> list[str]:
     me = np.sqrt(np.clip(np.diag(state.model_error_covariance), 0.0, None)) * 1e6
     adequacy = state.extra.get("model_adequacy", {})
     origin = "held-out poses" if adequacy.get("cross_validated") else "calibration residuals"
+    me_field = state.model_error_field
+    if me_field is not None:
+        origin += (
+            f"; correlated over the joint configurations: {100 * me_field.correlated_fraction:.0f} % of it, "
+            f"length {me_field.length_scale:.2f} rad, {me_field.dof:.0f} degrees of freedom"
+        )
     lines = [
         f"session record: {state.n_poses} poses in the {state.frame} frame ({state.frame_id}), "
         f"{len(state.covariance_names)} parameters with covariance, model error u = "
@@ -108,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
         accept_unconverged=args.accept_unconverged,
         campaign_name=str(args.campaign),
         cross_validation_folds=args.cross_validation_folds,
+        correlated_model_error=not args.independent_model_error,
         later_sessions=later,
         retool=not args.same_tool,
     )

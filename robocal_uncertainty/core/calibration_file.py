@@ -1,7 +1,7 @@
 """A calibration result as JSON: what ``calibrate --json`` writes, ``fk --calibration`` and ``verify`` read.
 
-Format ``robocal_uncertainty/calibration/2`` (SI units: m, rad; written since sessions
-existed), a JSON object with
+Format ``robocal_uncertainty/calibration/3`` (SI units: m, rad; version 3 adds the
+model-error field), a JSON object with
 
 ``format``, ``units``, ``robot``, ``model_name``, ``joint_names``
     What the file is and which robot it belongs to.
@@ -34,7 +34,16 @@ existed), a JSON object with
     robot base frame; ``draws_base_m``: the residuals it is resampled from (whitened to it,
     base frame) and ``dof_estimate`` (its effective degrees of freedom); ``adequate``,
     ``chi2``, ``dof``, ``p_value`` of the adequacy test, ``included`` (whether the statement
-    carries it) and ``cross_validated`` (when the model error came from held-out poses).
+    carries it) and ``cross_validated`` (when the model error came from held-out poses);
+    ``field`` (version 3; ``null`` when the model error is independent from pose to pose): the
+    model error correlated over the joint configurations
+    (:mod:`robocal_uncertainty.core.model_error_field`): ``kernel``, ``metric``,
+    ``correlated_fraction``, ``length_scale_rad``, ``dof`` (of its variance estimate),
+    ``hyper_covariance`` (of log scale, correlated fraction, log length), the restricted
+    ``log_likelihood`` and ``independent_log_likelihood``, ``joint_positions_rad`` (the
+    calibration poses, model joint order) and ``gain`` (``names``, ``matrix``: the estimates'
+    change per base-frame point error at those poses, pose-major x y z); ``covariance_base_m2``
+    is then the field's per-pose covariance.
 ``sources``
     Uncertainty sources of the statement.
 ``between_session``
@@ -48,8 +57,9 @@ existed), a JSON object with
 ``settings``
     Free-form settings that produced the file (seed, weighting, ...).
 
-Version 1 files (``robocal_uncertainty/calibration/1``: the identification only) are still
-read; :func:`read_session_state` returns None for them.
+Version 2 files (the same without ``model_error.field``) are read with an independent model
+error. Version 1 files (``robocal_uncertainty/calibration/1``: the identification only) are
+still read; :func:`read_session_state` returns None for them.
 """
 
 from __future__ import annotations
@@ -63,6 +73,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.model_error_field import FIELD_KERNEL, FIELD_METRIC, ModelErrorField
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, SessionState
 from robocal_uncertainty.core.simulation import LINEAR_ENCODER_HALF_WIDTH, EncoderNoise, TrackerNoise
@@ -79,9 +90,10 @@ __all__ = [
     "write_calibration",
 ]
 
-CALIBRATION_FORMAT = "robocal_uncertainty/calibration/2"
+CALIBRATION_FORMAT = "robocal_uncertainty/calibration/3"
 """The format written."""
-CALIBRATION_FORMATS: tuple[str, ...] = ("robocal_uncertainty/calibration/1", CALIBRATION_FORMAT)
+_SESSION_FORMATS = ("robocal_uncertainty/calibration/2", CALIBRATION_FORMAT)
+CALIBRATION_FORMATS: tuple[str, ...] = ("robocal_uncertainty/calibration/1", *_SESSION_FORMATS)
 """Formats read."""
 
 
@@ -134,6 +146,7 @@ def session_state_to_dict(state: SessionState) -> dict[str, Any]:
             "covariance_base_m2": _matrix(state.model_error_covariance),
             "draws_base_m": None if state.model_error_draws is None else _matrix(state.model_error_draws),
             "dof_estimate": state.model_error_dof,
+            "field": None if state.model_error_field is None else state.model_error_field.to_dict(),
             **dict(state.extra.get("model_adequacy", {})),  # type: ignore[call-overload]
         },
         "sources": list(state.sources),
@@ -259,7 +272,7 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         A session record that is incomplete or malformed (one line naming the field).
     """
     session = data.get("session")
-    if data.get("format") != CALIBRATION_FORMAT or session is None:
+    if data.get("format") not in _SESSION_FORMATS or session is None:
         return None
     try:
         cov = data["parameter_covariance"]
@@ -289,7 +302,9 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         "settings": data.get("settings") or {},
         "tool_point_m": (session.get("tool") or {}).get("point_m"),
         "model_adequacy": {
-            k: v for k, v in model_error.items() if k not in ("covariance_base_m2", "draws_base_m", "dof_estimate")
+            k: v
+            for k, v in model_error.items()
+            if k not in ("covariance_base_m2", "draws_base_m", "dof_estimate", "field")
         },
     }
     if between is not None:
@@ -308,6 +323,7 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         if draws_array.ndim != 2 or draws_array.shape[1] != 3 or not np.isfinite(draws_array).all():
             msg = f"{where}: model_error.draws_base_m must be n rows of 3 finite values [m]"
             raise ConfigError(msg)
+    me_field = _read_field(model_error.get("field"), where)
     return SessionState(
         frame=frame,
         frame_id=str(session.get("frame_id", "")),
@@ -329,6 +345,54 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         model_error_dof=None if model_error.get("dof_estimate") is None else float(model_error["dof_estimate"]),
         scope=str(data.get("scope", "session")),
         extra=extra,
+        model_error_field=me_field,
+    )
+
+
+def _read_field(value: object, where: str) -> ModelErrorField | None:
+    """``model_error.field`` of a version 3 file (None when absent or null)."""
+    if value is None:
+        return None
+    try:
+        assert isinstance(value, dict)
+        if value.get("kernel") != FIELD_KERNEL or value.get("metric") != FIELD_METRIC:
+            msg = (
+                f"{where}: model_error.field has kernel {value.get('kernel')!r} and metric {value.get('metric')!r}; "
+                f"this version reads {FIELD_KERNEL!r} over {FIELD_METRIC!r}"
+            )
+            raise ConfigError(msg)
+        q = np.asarray(value["joint_positions_rad"], dtype=np.float64)
+        gain = value["gain"]
+        names = tuple(str(n) for n in gain["names"])
+        matrix = np.asarray(gain["matrix"], dtype=np.float64)
+        fraction = float(value["correlated_fraction"])
+        length = float(value["length_scale_rad"])
+        dof = float(value["dof"]) if value.get("dof") is not None else float("inf")
+        hyper = _square(where, "model_error.field.hyper_covariance", value.get("hyper_covariance", np.zeros((3, 3))), 3)
+    except (AssertionError, KeyError, TypeError, ValueError) as err:
+        msg = f"{where}: incomplete model_error.field ({err.__class__.__name__}: {err})"
+        raise ConfigError(msg) from err
+    if (
+        q.ndim != 2
+        or matrix.shape != (len(names), 3 * q.shape[0])
+        or not (np.isfinite(q).all() and np.isfinite(matrix).all())
+        or not (0.0 <= fraction <= 1.0 and length > 0.0)
+    ):
+        msg = (
+            f"{where}: model_error.field must hold n x n_joints joint positions, a k x 3n gain, "
+            "a correlated fraction in [0, 1] and a positive length scale"
+        )
+        raise ConfigError(msg)
+    return ModelErrorField(
+        correlated_fraction=fraction,
+        length_scale=length,
+        joint_positions=q,
+        gain_names=names,
+        gain=matrix,
+        dof=dof,
+        log_likelihood=float(value.get("log_likelihood", float("nan")) or float("nan")),
+        independent_log_likelihood=float(value.get("independent_log_likelihood", float("nan")) or float("nan")),
+        hyper_covariance=hyper,
     )
 
 

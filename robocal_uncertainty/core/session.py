@@ -18,7 +18,13 @@ under "nothing changed":
 
 (calibration parameter uncertainty, correlated across poses; tracker and encoder noise;
 the calibration's model error ``Sigma_m``, stated in the robot base frame and turned into the
-new tracker frame by the re-registered rotation ``R``), the GLS estimate ``theta_hat``
+new tracker frame by the re-registered rotation ``R``). When the calibration states its model
+error as a field correlated over the configurations
+(:class:`~robocal_uncertainty.core.model_error_field.ModelErrorField`), the block-diagonal
+``R Sigma_m R^T`` is replaced by the field over the check poses less what the calibration's
+parameters absorbed of it (``K_cc - J_k G K_tc - (J_k G K_tc)^T``; ``Sigma_k`` then holds
+``G K_tt G^T``), and the null draws it as one normal over the poses whose scale is widened by
+the estimate's degrees of freedom. The GLS estimate ``theta_hat``
 minimises ``r^T C^-1 r`` and the statistic ``chi2 = r^T C^-1 r`` at the minimum follows a
 chi-square with ``3 n - k`` degrees of freedom (``k`` = rank of the re-registration
 Jacobian: the degrees of freedom the re-registration used are taken off). The check is
@@ -39,6 +45,7 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, fit_rigid_base
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.measurement import joint_columns
+from robocal_uncertainty.core.model_error_field import ModelErrorField
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
@@ -55,6 +62,7 @@ __all__ = [
     "Verification",
     "effect_jacobian",
     "parameter_covariance",
+    "parameter_gain",
     "tracker_move",
     "verify_session",
 ]
@@ -124,6 +132,10 @@ class SessionState:
         Session effects of `between_session_covariance` (see :data:`SESSION_EFFECTS`).
     between_session_dof : float or None
         Degrees of freedom of that estimate (the null scales it as the model error's).
+    model_error_field : ModelErrorField or None
+        The model error correlated over the configurations (``model_error_covariance`` is then
+        its per-pose covariance): a check adds it as one correlated normal over its poses,
+        less what the calibration's parameters absorbed of it. None: independent per pose.
     """
 
     frame: Literal["base", "tracker"]
@@ -144,6 +156,7 @@ class SessionState:
     model_error_dof: float | None = None
     between_session_names: tuple[str, ...] = ()
     between_session_dof: float | None = None
+    model_error_field: ModelErrorField | None = None
 
     def covariance_of(self, names: tuple[str, ...] | list[str]) -> Array:
         """Sub-block of the parameter covariance for `names` (zero rows for names not estimated)."""
@@ -237,6 +250,9 @@ class Verification:
     effective_dof : ndarray, shape (n, 3) or None
         Welch-Satterthwaite degrees of freedom of each residual component's standard
         deviation (inf where every part is taken as exact); see :meth:`coverage_factors`.
+    model_error_length_scale : float [rad] or None
+        Correlation length of the model-error field the check assumed (None: independent
+        from pose to pose).
     """
 
     consistent: bool
@@ -267,6 +283,7 @@ class Verification:
     effects: Array | None = None
     effects_covariance: Array | None = None
     effective_dof: Array | None = None
+    model_error_length_scale: float | None = None
 
     def coverage_factors(self, coverage: float = 0.95) -> Array:
         """Per component: the t-quantile for `coverage` with its Welch-Satterthwaite dof, shape (n, 3).
@@ -477,11 +494,16 @@ def _null_statistics(
     between_factor: Array | None = None,
     between_dof: float | None = None,
     prismatic: tuple[bool, ...] = (),
+    correlated_factor: Array | None = None,
+    correlated_dof: float | None = None,
 ) -> Array:
     """The check statistic for `trials` draws of the errors "nothing changed" allows, shape (trials,).
 
     Blocks of :data:`_NULL_BLOCK` draws, each from its own ``SeedSequence(seed).spawn`` child:
-    the draws do not depend on anything but the seed and the count.
+    the draws do not depend on anything but the seed and the count. `correlated_factor`
+    (``F F^T`` = covariance over all the poses of a correlated model error and the parameter
+    errors, shape (3 n, r)) is drawn normal and scaled by ``sqrt(nu / chi2_nu)`` per draw with
+    ``nu`` = `correlated_dof`.
     """
     if isinstance(trials, bool) or not isinstance(trials, int) or trials < 100:
         msg = f"null_trials must be an integer >= 100, got {trials!r}"
@@ -523,6 +545,11 @@ def _null_statistics(
             flat = flat + shift
         if k_sqrt is not None:
             flat = flat + rng.standard_normal((m, k_sqrt.shape[1])) @ k_sqrt.T
+        if correlated_factor is not None:
+            shift = rng.standard_normal((m, correlated_factor.shape[1])) @ correlated_factor.T
+            if correlated_dof is not None and np.isfinite(correlated_dof):
+                shift = shift * np.sqrt(correlated_dof / rng.chisquare(correlated_dof, size=m))[:, None]
+            flat = flat + shift
         w = linalg.solve_triangular(chol, flat.T, lower=True)
         w = w - q_mat @ (q_mat.T @ w)
         out[b * _NULL_BLOCK : b * _NULL_BLOCK + m] = np.sum(w * w, axis=0)
@@ -609,24 +636,36 @@ def verify_session(
         free_names += list(TOOL_NAMES)
     free = np.array([names.index(nm) for nm in free_names], dtype=np.intp)
     kin_names = tuple(nm for nm in state.covariance_names if nm not in free_names and not nm.startswith("base."))
-    kin = np.array([names.index(nm) for nm in kin_names if nm in names], dtype=np.intp)
-    sigma_k = state.covariance_of(tuple(nm for nm in kin_names if nm in names))
+    kin_names = tuple(nm for nm in kin_names if nm in names)
+    kin = np.array([names.index(nm) for nm in kin_names], dtype=np.intp)
+    sigma_k = state.covariance_of(kin_names)
+    me_field = state.model_error_field
+    if me_field is not None and me_field.joint_positions.shape[1] != q.shape[1]:
+        msg = f"the model-error field has {me_field.joint_positions.shape[1]} joints, the check {q.shape[1]}"
+        raise InputError(msg)
     theta_cols = joint_columns(layout)
     distances = np.linalg.norm(y, axis=1) if campaign.frame == "tracker" else np.full(n, 2.0)
     scale = np.ones(free.size)
     between = state.between_session_covariance if state.between_session_names else None
 
     def covariance(jac: Array, params: Array) -> Array:
-        r_wb = rpy_to_matrix(params[b0 + 3 : b0 + 6])
-        blocks = _pose_noise(jac, theta_cols, distances, tracker, encoder, model.prismatic)
-        blocks = blocks + r_wb @ state.model_error_covariance @ r_wb.T
-        cov = linalg.block_diag(*blocks)
-        if kin.size:
-            jk = jac[:, :, kin].reshape(3 * n, kin.size)
-            cov = cov + jk @ sigma_k @ jk.T
+        cov = linalg.block_diag(*_pose_noise(jac, theta_cols, distances, tracker, encoder, model.prismatic))
+        cov = cov + correlated(jac, params)
         if between is not None:
             g = effect_jacobian(layout, params, q, state.between_session_names).reshape(3 * n, -1)
             cov = cov + g @ between @ g.T
+        return np.asarray(cov, dtype=np.float64)
+
+    def correlated(jac: Array, params: Array) -> Array:
+        """Model error and calibration parameter errors over the poses, shape (3 n, 3 n) [m^2]."""
+        r_wb = rpy_to_matrix(params[b0 + 3 : b0 + 6])
+        jk = jac[:, :, kin].reshape(3 * n, kin.size)
+        if me_field is None:
+            cov = linalg.block_diag(*([r_wb @ state.model_error_covariance @ r_wb.T] * n))
+        else:
+            cov = me_field.prediction_covariance(q, state.model_error_covariance, r_wb, jk, kin_names)
+        if kin.size:
+            cov = cov + jk @ sigma_k @ jk.T
         return np.asarray(cov, dtype=np.float64)
 
     pred, jac = forward_points_and_jacobian(layout, p, q)
@@ -670,26 +709,53 @@ def verify_session(
     chi2 = _gls_chi2(r, chol, a_mat)
     p_chi2 = float(stats.chi2.sf(chi2, dof))
     r_new = rpy_to_matrix(p[b0 + 3 : b0 + 6])
-    null = _null_statistics(
-        null_trials,
-        seed,
-        chol,
-        a_mat,
-        distances,
-        tracker,
-        encoder,
-        jac[:, :, theta_cols],
-        r_new @ state.model_error_covariance @ r_new.T,
-        jac[:, :, kin].reshape(3 * n, kin.size) if kin.size else np.zeros((3 * n, 0)),
-        sigma_k,
-        None if state.model_error_draws is None else state.model_error_draws @ r_new.T,
-        state.model_error_dof,
+    between_factor = (
         None
         if between is None
-        else effect_jacobian(layout, p, q, state.between_session_names).reshape(3 * n, -1) @ _sqrt_psd(between),
-        state.between_session_dof,
-        model.prismatic,
+        else effect_jacobian(layout, p, q, state.between_session_names).reshape(3 * n, -1) @ _sqrt_psd(between)
     )
+    if me_field is None:
+        null = _null_statistics(
+            null_trials,
+            seed,
+            chol,
+            a_mat,
+            distances,
+            tracker,
+            encoder,
+            jac[:, :, theta_cols],
+            r_new @ state.model_error_covariance @ r_new.T,
+            jac[:, :, kin].reshape(3 * n, kin.size) if kin.size else np.zeros((3 * n, 0)),
+            sigma_k,
+            None if state.model_error_draws is None else state.model_error_draws @ r_new.T,
+            state.model_error_dof,
+            between_factor,
+            state.between_session_dof,
+            prismatic=model.prismatic,
+        )
+    else:
+        # The correlated model error and the parameter errors it drives: one normal over all
+        # the poses, its estimated scale widened by the estimate's degrees of freedom.
+        null = _null_statistics(
+            null_trials,
+            seed,
+            chol,
+            a_mat,
+            distances,
+            tracker,
+            encoder,
+            jac[:, :, theta_cols],
+            np.zeros((3, 3)),
+            np.zeros((3 * n, 0)),
+            np.zeros((0, 0)),
+            None,
+            None,
+            between_factor,
+            state.between_session_dof,
+            prismatic=model.prismatic,
+            correlated_factor=_sqrt_psd(correlated(jac, p)),
+            correlated_dof=state.model_error_dof,
+        )
     p_value = float((1 + np.count_nonzero(null >= chi2)) / (1 + null.size))
     res_cov = c_mat - a_mat @ reg_cov @ a_mat.T
     res_std = np.sqrt(np.clip(np.diag(res_cov), 1e-30, None)).reshape(n, 3)
@@ -778,6 +844,7 @@ def verify_session(
         effects=effect_values,
         effects_covariance=effect_cov,
         effective_dof=effective_dof,
+        model_error_length_scale=None if me_field is None else float(me_field.length_scale),
     )
 
 
@@ -796,8 +863,9 @@ def parameter_covariance(
     calibration : IdentificationResult
         A point calibration (unweighted, 3 equations per pose).
     joint_positions : ndarray, shape (n_poses, n_joints) [rad]
-    pose_covariances : ndarray, shape (n_poses, 3, 3) [m^2]
-        Covariance of each measured point in the measurement frame.
+    pose_covariances : ndarray, shape (n_poses, 3, 3) or (3 n_poses, 3 n_poses) [m^2]
+        Covariance of each measured point in the measurement frame, or of all of them
+        (pose-major) when their errors are correlated (a model-error field).
 
     Returns
     -------
@@ -815,7 +883,7 @@ def parameter_covariance(
     a_mat = jac.reshape(3 * n, layout.size)[:, est] / scale
     penalty = calibration.lambda_**2 * np.diag(calibration.penalized[est].astype(np.float64))
     gain = np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T)
-    c_mat = linalg.block_diag(*pose_covariances)
+    c_mat = pose_covariances if pose_covariances.ndim == 2 else linalg.block_diag(*pose_covariances)
     cov_x = gain @ c_mat @ gain.T
     if include_bias and calibration.lambda_ > 0.0:
         # First-order Tikhonov shrinkage -(A^T A + P)^-1 P x, evaluated at x_hat: a systematic
@@ -825,3 +893,20 @@ def parameter_covariance(
         cov_x = cov_x + np.outer(bias, bias)
     cov = cov_x / np.outer(scale, scale)
     return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)
+
+
+def parameter_gain(calibration: IdentificationResult, joint_positions: Array) -> Array:
+    """First-order change of the estimated parameters per measured point error, shape (k, 3 n).
+
+    ``G = D^-1 (A^T A + lambda^2 P)^-1 A^T`` (column scale ``D``), pose-major columns in the
+    measurement frame, rows over the estimated parameters (``parameter_names`` order) [m/m, rad/m].
+    """
+    layout = calibration.model.layout
+    est = np.flatnonzero(calibration.estimated)
+    n = joint_positions.shape[0]
+    _, jac = forward_points_and_jacobian(layout, calibration.estimate, joint_positions)
+    scale = calibration.column_scale[est]
+    a_mat = jac.reshape(3 * n, layout.size)[:, est] / scale
+    penalty = calibration.lambda_**2 * np.diag(calibration.penalized[est].astype(np.float64))
+    gain = np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T)
+    return np.asarray(gain / scale[:, None], dtype=np.float64)

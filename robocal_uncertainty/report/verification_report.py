@@ -98,8 +98,13 @@ def verification_lines(result: Verification, *, scope: str = "session") -> list[
     )
     me = result.model_error_std * 1e6
     lines.append(
-        f"stated per pose: model error u = ({me[0]:.1f}, {me[1]:.1f}, {me[2]:.1f}) um (base frame) "
-        f"plus tracker, encoder and calibration uncertainty; statement valid for: {scope}"
+        f"stated per pose: model error u = ({me[0]:.1f}, {me[1]:.1f}, {me[2]:.1f}) um (base frame"
+        + (
+            ""
+            if result.model_error_length_scale is None
+            else f"; correlated between the poses, length {result.model_error_length_scale:.2f} rad"
+        )
+        + f") plus tracker, encoder and calibration uncertainty; statement valid for: {scope}"
     )
     worst = np.argsort(-result.pose_chi2)[: min(3, result.n_poses)]
     parts = []
@@ -168,6 +173,7 @@ def verification_to_dict(
             "pose_chi2": _list(result.pose_chi2),
         },
         "model_error_std_m": _list(result.model_error_std),
+        "model_error_length_scale_rad": result.model_error_length_scale,
         "session_effects": None
         if result.effects is None
         else {

@@ -5,11 +5,19 @@
 covariance of the estimated parameters (stated tracker and encoder noise plus the model error
 of :func:`~robocal_uncertainty.uncertainty.model_adequacy.assess_model_adequacy`), the model
 error in the robot base frame, and the session's registration with its uncertainty.
+
+When the model is inadequate the model error is, by default, a field correlated over the joint
+configurations (:func:`estimate_model_error_field`: restricted maximum likelihood on the
+calibration's residuals; :mod:`~robocal_uncertainty.core.model_error_field`): a real robot's
+error is smooth, and one independent from pose to pose makes a check of a few poses too narrow
+(UR10 series, 10-pose checks against 53-pose calibrations: 91.3 % consistent at the 5 % level
+with the independent model error, 96.1 % of 1 600 with the field).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,12 +26,20 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
+from robocal_uncertainty.core.model_error_field import ModelErrorField, chordal_distance, kernel_correlation
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
-from robocal_uncertainty.core.session import BASE_NAMES, SessionState, parameter_covariance
+from robocal_uncertainty.core.session import BASE_NAMES, SessionState, parameter_covariance, parameter_gain
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy, pose_noise_covariances
 
-__all__ = ["CrossValidatedModelError", "campaign_distances", "cross_validated_model_error", "session_state"]
+__all__ = [
+    "FIELD_MAX_POSES",
+    "CrossValidatedModelError",
+    "campaign_distances",
+    "cross_validated_model_error",
+    "estimate_model_error_field",
+    "session_state",
+]
 
 Array = NDArray[np.float64]
 
@@ -94,6 +110,7 @@ def session_state(
     campaign_name: str | None = None,
     settings: dict[str, object] | None = None,
     cross_validated: CrossValidatedModelError | None = None,
+    correlated: bool = True,
 ) -> tuple[SessionState, ModelAdequacy]:
     """What a point calibration leaves for verification and for the next session.
 
@@ -116,6 +133,11 @@ def session_state(
     cross_validated : CrossValidatedModelError, optional
         The model error from held-out poses (:func:`cross_validated_model_error`): used in
         place of the one from the calibration's own residuals when the model is inadequate.
+    correlated : bool
+        When the model is inadequate (and no `cross_validated` is given), estimate the model
+        error as a field correlated over the configurations (:func:`estimate_model_error_field`,
+        shape from the residuals' moments): the per-pose covariance, the parameter covariance
+        (``G (N + V) G^T`` with the correlated ``V``) and what a check needs to use it.
     """
     campaign = campaign.reorder_joints(calibration.model.joint_names)
     q = campaign.joint_positions
@@ -132,7 +154,26 @@ def session_state(
     if use_residual and cross_validated is not None:
         model_error = r_wb @ cross_validated.covariance @ r_wb.T
         draws = cross_validated.draws
-    cov = parameter_covariance(calibration, q, noise + model_error)
+    me_field = None
+    field_dof = None
+    if use_residual and cross_validated is None and correlated:
+        shape = r_wb.T @ adequacy.inadequacy_covariance @ r_wb
+        me_field, scale = estimate_model_error_field(calibration, q, noise, shape)
+        shape = 3.0 * shape / np.trace(shape) if np.trace(shape) > 0 else np.eye(3)
+        model_error = r_wb @ (scale * shape) @ r_wb.T
+        from scipy import linalg
+
+        total = linalg.block_diag(*noise) + me_field.covariance(q, model_error)
+        cov = parameter_covariance(calibration, q, total)
+        rotate = np.kron(np.eye(q.shape[0]), r_wb)
+        me_field = dataclasses.replace(
+            me_field,
+            gain_names=tuple(n for n, e in zip(calibration.parameter_names, calibration.estimated) if e),
+            gain=parameter_gain(calibration, q) @ rotate,
+        )
+        field_dof = me_field.dof
+    else:
+        cov = parameter_covariance(calibration, q, noise + model_error)
     if use_residual and cross_validated is not None:
         cov = cov * cross_validated.parameter_factor
     names = tuple(n for n, e in zip(calibration.parameter_names, calibration.estimated) if e)
@@ -145,7 +186,10 @@ def session_state(
         parameter_covariance=cov,
         model_error_covariance=r_wb.T @ model_error @ r_wb,
         model_error_draws=draws,
-        model_error_dof=None if draws is None else model_error_dof(draws, model_error_cov_base),
+        model_error_dof=field_dof
+        if me_field is not None
+        else (None if draws is None else model_error_dof(draws, model_error_cov_base)),
+        model_error_field=me_field,
         tracker_noise=tracker_noise,
         encoder_noise=encoder_noise,
         registration=calibration.estimate[b0 : b0 + 6].copy() if campaign.frame == "tracker" else np.zeros(6),
@@ -241,7 +285,7 @@ def cross_validated_model_error(
     for part in np.array_split(order, folds):
         train = np.setdiff1d(order, part)
         cal = identify(model, campaign.subset(train), lambda_=lambda_, accept_unconverged=True)
-        state, adequacy = session_state(cal, campaign.subset(train), tracker_noise, encoder_noise)
+        state, adequacy = session_state(cal, campaign.subset(train), tracker_noise, encoder_noise, correlated=False)
         test = campaign.subset(np.sort(part))
         q = test.joint_positions
         layout = cal.model.layout
@@ -286,3 +330,161 @@ def cross_validated_model_error(
         fitted_covariance=np.mean(fitted, axis=0),
         folds=folds,
     )
+
+
+FIELD_MAX_POSES = 200
+"""Most poses the field's hyperparameters are estimated from (a seeded subset of larger campaigns)."""
+_FIELD_LENGTH_BOUNDS = (0.02, 20.0)
+
+
+def _hessian(fun: Callable[[Array], float], x0: Array, free: list[int], step: float = 1e-3) -> Array:
+    """Central-difference Hessian of `fun` at `x0` over the coordinates `free`."""
+    hess = np.empty((len(free), len(free)))
+    for a, i in enumerate(free):
+        for b, j in enumerate(free):
+            values = []
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                x = x0.copy()
+                x[i] += si * step
+                x[j] += sj * step
+                values.append(fun(x))
+            hess[a, b] = (values[0] - values[1] - values[2] + values[3]) / (4 * step * step)
+    return hess
+
+
+def _fit_space(calibration: IdentificationResult, q: Array) -> Array:
+    """Orthonormal basis of the space the fit spans (its Jacobian's columns), shape (3 n, rank)."""
+    layout = calibration.model.layout
+    est = np.flatnonzero(calibration.estimated)
+    _, jac = forward_points_and_jacobian(layout, calibration.estimate, q)
+    a_mat = jac.reshape(3 * q.shape[0], layout.size)[:, est] / calibration.column_scale[est]
+    u, s, _ = np.linalg.svd(a_mat, full_matrices=False)
+    rank = int(np.sum(s > 1e-10 * s[0]))
+    return np.asarray(u[:, :rank], dtype=np.float64)
+
+
+def estimate_model_error_field(
+    calibration: IdentificationResult,
+    joint_positions: Array,
+    noise: Array,
+    shape_base: Array,
+    *,
+    max_poses: int = FIELD_MAX_POSES,
+    seed: int = 0,
+) -> tuple[ModelErrorField, float]:
+    """The correlated model error of a point calibration by restricted maximum likelihood.
+
+    The calibration residuals are, to first order, the part of ``e + eps`` (model error plus
+    stated noise) the fit leaves: their projection ``z = Q^T r`` on the ``m = 3 n - rank``
+    directions orthogonal to the Jacobian depends on neither the parameters nor their
+    estimate, and is normal with covariance ``Q^T (N + V(s, c, l)) Q`` (evaluated without
+    forming ``Q``, by Harville's identity) (``N`` the stated noise,
+    ``V = [c rho(d / l) + (1 - c) I] (x) s S``, see
+    :mod:`~robocal_uncertainty.core.model_error_field`). ``s``, ``c``, ``l`` maximise that
+    (restricted) likelihood; with ``c = 0`` it is the independent model error.
+
+    Parameters
+    ----------
+    calibration : IdentificationResult
+        A point calibration (unweighted).
+    joint_positions : ndarray, shape (n, n_joints) [rad]
+    noise : ndarray, shape (n, 3, 3) [m^2]
+        Stated noise covariance per pose, measurement frame.
+    shape_base : ndarray, shape (3, 3)
+        Shape ``S`` of the per-pose model-error covariance, robot base frame (its trace is
+        normalised to 3; the identity when the residuals gave none).
+    max_poses : int
+        Campaigns with more poses estimate the hyperparameters on a seeded subset of this many.
+    seed : int
+        Seed of that subset.
+
+    Returns
+    -------
+    (ModelErrorField, float)
+        The field (without its gain: :func:`session_state` adds it) and ``s`` [m^2]: the
+        per-pose model-error covariance is ``s S``.
+    """
+    from scipy import linalg, optimize
+
+    q_all = np.asarray(joint_positions, dtype=np.float64)
+    n_all = q_all.shape[0]
+    idx = np.arange(n_all)
+    if n_all > max_poses:
+        idx = np.sort(np.random.default_rng(seed).choice(n_all, size=max_poses, replace=False))
+    q = q_all[idx]
+    fit = _fit_space(calibration, q)
+    r = np.asarray(calibration.residuals, dtype=np.float64)[idx].reshape(-1)
+    m = r.size - fit.shape[1]
+    layout = calibration.model.layout
+    b0 = layout.base_index
+    r_wb = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6])
+    shape = np.asarray(shape_base, dtype=np.float64)
+    shape = 3.0 * shape / np.trace(shape) if np.trace(shape) > 0 else np.eye(3)
+    s_meas = r_wb @ shape @ r_wb.T
+    n_all_cov = linalg.block_diag(*noise[idx])
+    w_white = np.kron(np.eye(q.shape[0]), s_meas)
+    distance = chordal_distance(q, q)
+    noise_level = float(np.trace(n_all_cov)) / r.size
+    mean_square = float(r @ r) / m
+
+    def nll(log_s: float, c: float, log_l: float) -> float:
+        # -log of the likelihood of the contrasts Q^T r (Q orthonormal, orthogonal to the fit
+        # space U), by Harville's identity: log|Q^T V Q| = log|V| + log|U^T V^-1 U| and
+        # r^T Q (Q^T V Q)^-1 Q^T r = r^T (V^-1 - V^-1 U (U^T V^-1 U)^-1 U^T V^-1) r.
+        s = float(np.exp(log_s))
+        cov = n_all_cov + s * (1.0 - c) * w_white
+        if c > 0.0:
+            cov = cov + s * c * np.kron(kernel_correlation(distance, float(np.exp(log_l))), s_meas)
+        try:
+            chol = linalg.cholesky(cov, lower=True)
+            vi_u = linalg.cho_solve((chol, True), fit)
+            vi_r = linalg.cho_solve((chol, True), r)
+            chol_u = linalg.cholesky(fit.T @ vi_u, lower=True)
+        except linalg.LinAlgError:
+            return float("inf")
+        w = linalg.solve_triangular(chol_u, fit.T @ vi_r, lower=True)
+        quad = float(r @ vi_r - w @ w)
+        return float(np.sum(np.log(np.diag(chol))) + np.sum(np.log(np.diag(chol_u))) + 0.5 * quad)
+
+    s0 = max(mean_square - noise_level, 1e-3 * noise_level)
+    lo_s, hi_s = np.log(1e-6 * noise_level), np.log(1e4 * max(mean_square, noise_level))
+    lo_l, hi_l = np.log(_FIELD_LENGTH_BOUNDS[0]), np.log(_FIELD_LENGTH_BOUNDS[1])
+    independent = optimize.minimize_scalar(lambda a: nll(a, 0.0, 0.0), bounds=(lo_s, hi_s), method="bounded")
+    best = (float(independent.fun), float(independent.x), 0.0, float(np.log(0.5)))
+    for length in (0.1, 0.5, 2.0):
+        res = optimize.minimize(
+            lambda t: nll(t[0], t[1], t[2]),
+            x0=np.array([np.log(s0), 0.5, np.log(length)]),
+            method="L-BFGS-B",
+            bounds=[(lo_s, hi_s), (0.0, 1.0), (lo_l, hi_l)],
+        )
+        if res.fun < best[0]:
+            best = (float(res.fun), float(res.x[0]), float(res.x[1]), float(res.x[2]))
+    fun, log_s, c, log_l = best
+    # Degrees of freedom of s: 2 / var(log s), var from the curvature of the likelihood in the
+    # free hyperparameters (log s, and c and log l where c is inside (0, 1)).
+    free = [0] if c <= 1e-6 else ([0, 1, 2] if c < 1.0 - 1e-6 else [0, 2])
+    hess = _hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
+    hyper = np.zeros((3, 3))
+    try:
+        inv = np.linalg.inv(hess)
+    except np.linalg.LinAlgError:
+        inv = np.full_like(hess, np.nan)
+    var_log_s = float(inv[0, 0])
+    if np.all(np.isfinite(inv)) and np.all(np.linalg.eigvalsh(0.5 * (inv + inv.T)) > 0):
+        hyper[np.ix_(free, free)] = 0.5 * (inv + inv.T)
+    dof = 2.0 / var_log_s if np.isfinite(var_log_s) and var_log_s > 0 else float(m)
+    dof = float(min(max(dof, 1.0), m))
+    field = ModelErrorField(
+        correlated_fraction=c,
+        length_scale=float(np.exp(log_l)),
+        joint_positions=q_all.copy(),
+        gain_names=(),
+        gain=np.zeros((0, 3 * n_all)),
+        dof=dof,
+        log_likelihood=-fun - 0.5 * m * np.log(2 * np.pi),
+        independent_log_likelihood=-float(independent.fun) - 0.5 * m * np.log(2 * np.pi),
+        hyper_covariance=hyper,
+        extra={"poses_used": int(q.shape[0]), "contrasts": int(m)},
+    )
+    return field, float(np.exp(log_s))

@@ -216,7 +216,7 @@ def test_calibration_file_carries_the_session_and_reads_version_1(ur10, still, t
     path = tmp_path / "cal.json"
     write_calibration(path, cal, robot="ur10", session=state)
     data = read_calibration(path)
-    assert data["format"] == CALIBRATION_FORMAT == "robocal_uncertainty/calibration/2"
+    assert data["format"] == CALIBRATION_FORMAT == "robocal_uncertainty/calibration/3"
     assert data["scope"] == "session" and data["between_session"] is None
     assert data["determined"] == [n for n, e in zip(cal.parameter_names, cal.estimated) if e]
     back = read_session_state(data)
