@@ -334,7 +334,6 @@ class CalibrationTrials:
     x_hat: Array
     joint_positions: Array
     points: Array
-    fitted: Array
     test_joints: Array
     drop_base: bool
     output_rotation: Array
@@ -389,14 +388,7 @@ class CalibrationTrials:
             q = self.joint_positions[None] + batch.joints if batch.joints is not None else self.joint_positions
             lambdas = batch.lambdas if batch.lambdas is not None else np.full(t, self.lambda_star)
             if self.solver is not None:
-                x, _ = self.solver.solve(
-                    q,
-                    pts,
-                    batch.weights,
-                    lambdas,
-                    self.x_hat,
-                    initial_prediction=self.fitted if batch.joints is None else None,
-                )
+                x, _ = self.solver.solve(q, pts, batch.weights, lambdas, self.x_hat)
             else:
                 x, _ = reidentify_batch(
                     self.problem,
@@ -897,7 +889,6 @@ def _prepare(
         x_hat=x_hat,
         joint_positions=campaign.joint_positions,
         points=campaign.points,
-        fitted=measurement.perturb(campaign.points, -calibration.residuals),
         test_joints=test_q,
         drop_base=drop_base,
         output_rotation=output_rotation,
