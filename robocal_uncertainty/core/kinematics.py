@@ -359,7 +359,7 @@ class NearbyPoints:
         """
         p, shape, point, _ = self._walk(params, joint_positions, rotation=False)
         out = np.empty((p.shape[0], shape[-1], 3))
-        _to_world(p, self.layout, point, out, 0, 1, translate=True)
+        _to_world(p, self.layout, [point], out, [range(3)])
         return out.reshape(*shape, 3)
 
     def poses(self, params: Array, joint_positions: Array) -> Array:
@@ -370,9 +370,8 @@ class NearbyPoints:
         (x0, x1, x2), (z0, z1, z2) = axes
         cols = ((x0, x1, x2), (z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0), (z0, z1, z2))
         out = np.empty((p.shape[0], shape[-1], 12))
-        _to_world(p, self.layout, point, out, 0, 1, translate=True)
-        for c, col in enumerate(cols):
-            _to_world(p, self.layout, col, out, 3 + c, 3, translate=False)
+        # Stored values: the point, then world_R_tool row by row (column c of row i at 3 + 3 i + c).
+        _to_world(p, self.layout, [point, *cols], out, [range(3), range(3, 12, 3), range(4, 12, 3), range(5, 12, 3)])
         return out.reshape(*shape, 12)
 
     def _tiles(self, n_batch: int) -> tuple[Array, Array]:
@@ -424,10 +423,17 @@ class NearbyPoints:
         # Readings as (n_batch, n_poses, n_joints), or (1, n_poses, n_joints) when shared.
         qf = q[None] if q.ndim == 2 else np.broadcast_to(q, (*shape, n_joints)).reshape(*full, n_joints)
         slices = layout.joint_slices()
-        dq = qf - self.joints
+        # Their changes joint by joint, each (n_batch or 1, n_poses) contiguous.
+        dq = np.subtract(np.moveaxis(qf, -1, 0), self.joints.T[:, None, :])
         dtheta = pf[:, :, [idx["theta"] for idx in slices]] - self.theta  # (n_batch, 1, n_joints)
-        largest = float(np.max(np.abs(dq), initial=0.0)) + float(np.max(np.abs(dtheta), initial=0.0))
+        largest = max(float(np.max(dq, initial=0.0)), -float(np.min(dq, initial=0.0)))
+        largest += float(np.max(np.abs(dtheta), initial=0.0))
         direct = not largest <= _TAYLOR_LIMIT  # also for NaN
+        # The fixed angles of every joint at once (a call per joint costs more than the values).
+        alphas = pf[:, :, [idx["alpha"] for idx in slices]]
+        cos_alpha, sin_alpha = np.cos(alphas), np.sin(alphas)
+        betas = pf[:, :, [idx.get("beta", idx["alpha"]) for idx in slices]]
+        cos_beta, sin_beta = np.cos(betas), np.sin(betas)
 
         def column(k: int) -> Array:
             return pf[:, :, k]  # (n_batch, 1)
@@ -457,7 +463,7 @@ class NearbyPoints:
                 np.cos(b, out=c)
                 np.sin(b, out=s)
             else:
-                np.add(dq[..., j], dtheta[..., j], out=b)  # the angle's change from the reference
+                np.add(dq[j], dtheta[..., j], out=b)  # the angle's change from the reference
                 np.multiply(b, b, out=b2)
                 cb = _horner_into(cos_series, b2, cos_b)
                 np.multiply(b, _horner_into(sin_series, b2, sin_b), out=sin_b)
@@ -470,10 +476,10 @@ class NearbyPoints:
                 np.add(s, tmp, out=s)
             beta = "beta" in idx
             if beta:
-                np.copyto(cos_b, np.cos(column(idx["beta"])))
-                np.copyto(sin_b, np.sin(column(idx["beta"])))
-            np.copyto(cos_x, np.cos(column(idx["alpha"])))
-            np.copyto(sin_x, np.sin(column(idx["alpha"])))
+                np.copyto(cos_b, cos_beta[..., j])
+                np.copyto(sin_b, sin_beta[..., j])
+            np.copyto(cos_x, cos_alpha[..., j])
+            np.copyto(sin_x, sin_alpha[..., j])
             for v in vectors:
                 # x, y = c x - s y, s x + c y
                 spare = _turn_into(v, 0, 1, c, s, tmp, spare)
@@ -513,30 +519,30 @@ def _turn_into(v: list[Array], i: int, k: int, c: Array, s: Array, tmp: Array, s
 
 
 def _to_world(
-    p: Array,
-    layout: ParameterLayout,
-    v: tuple[Array, Array, Array],
-    out: Array,
-    first: int,
-    step: int,
-    *,
-    translate: bool,
+    p: Array, layout: ParameterLayout, vectors: list[tuple[Array, Array, Array]], out: Array, columns: list[range]
 ) -> None:
-    """``out[..., first + step * i] = (world_R_base v)_i (+ world_t_base_i)`` for i = 0, 1, 2.
+    """``out[..., columns[m][i]] = (world_R_base v_m)_i``, plus ``world_t_base_i`` for the first vector.
 
-    `p` (n_batch, 1, n_params), `v` components (n_batch, n_poses), `out` (n_batch, n_poses, m).
+    `p` (n_batch, 1, n_params); each vector's components (n_batch, n_poses); `out`
+    (n_batch, n_poses, m). Sums run into contiguous arrays, each written to its (strided)
+    column of `out` once; the rotation entries are spread to full arrays once.
     """
     base_cols, translation, _ = _base(p, layout)
-    tmp = np.empty(v[0].shape)
-    for i in range(3):
-        target = out[..., first + step * i]
-        np.multiply(base_cols[0][i], v[0], out=target)
-        np.multiply(base_cols[1][i], v[1], out=tmp)
-        np.add(target, tmp, out=target)
-        np.multiply(base_cols[2][i], v[2], out=tmp)
-        np.add(target, tmp, out=target)
-        if translate:
-            np.add(target, translation[i], out=target)
+    full = vectors[0][0].shape
+    entries = [[np.array(np.broadcast_to(base_cols[k][i], full)) for k in range(3)] for i in range(3)]
+    acc, tmp = np.empty(full), np.empty(full)
+    for m, v in enumerate(vectors):
+        for i in range(3):
+            row = entries[i]
+            np.multiply(row[0], v[0], out=acc)
+            np.multiply(row[1], v[1], out=tmp)
+            np.add(acc, tmp, out=acc)
+            np.multiply(row[2], v[2], out=tmp)
+            if m == 0:
+                np.add(acc, tmp, out=acc)
+                np.add(acc, translation[i], out=out[..., columns[m][i]])
+            else:
+                np.add(acc, tmp, out=out[..., columns[m][i]])
 
 
 def forward_points_and_jacobian(

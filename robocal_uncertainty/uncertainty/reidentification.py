@@ -359,7 +359,7 @@ class ChordSolver:
         x += step
         first = np.maximum(np.linalg.norm(step, axis=1), np.finfo(float).tiny)
         # Exact steps, each for the trials whose last step was not yet small enough.
-        active = np.arange(n_trials)
+        active: slice | NDArray[np.intp] = slice(None)  # all trials, without copying their data
         done = 1
         for done in range(2, max_iterations + 1):
             xa = x[active]
@@ -373,7 +373,7 @@ class ChordSolver:
             more = np.linalg.norm(step, axis=1) > relative_tolerance * first[active]
             if not more.any():
                 break
-            active = active[more]
+            active = np.arange(n_trials)[active][more]
         return x, done
 
     def _predict(self, x: Array, joint_positions: Array) -> Array:
