@@ -77,7 +77,8 @@ _SERIES_THETA2 = 1e-6
 
 def _components(values: Array) -> Array:
     """The last axis first, contiguous: shape (m, ...) from (..., m)."""
-    return np.ascontiguousarray(np.moveaxis(values, -1, 0))
+    out: Array = np.ascontiguousarray(np.moveaxis(values, -1, 0), dtype=np.float64)
+    return out
 
 
 def split_pose_values(values: Array) -> tuple[Array, Array]:
@@ -201,7 +202,8 @@ class PoseMeasurement(MeasurementType):
         rp = _components(p[..., 3:])
 
         def entry(i: int, j: int) -> Array:  # (R_m R_p^T)_ij
-            return rm[3 * i] * rp[3 * j] + rm[3 * i + 1] * rp[3 * j + 1] + rm[3 * i + 2] * rp[3 * j + 2]
+            value: Array = rm[3 * i] * rp[3 * j] + rm[3 * i + 1] * rp[3 * j + 1] + rm[3 * i + 2] * rp[3 * j + 2]
+            return value
 
         w = (entry(2, 1) - entry(1, 2), entry(0, 2) - entry(2, 0), entry(1, 0) - entry(0, 1))
         c = 0.5 * (entry(0, 0) + entry(1, 1) + entry(2, 2) - 1.0)  # cos(theta)
