@@ -714,7 +714,9 @@ def undetermined_rotations(prep: _Prepared) -> list[Array]:
     norms = np.linalg.norm(a_mat, axis=0)
     scale = np.where(norms > 1e-9 * norms.max(), norms, 1.0)
     a_mat = np.where(norms > 1e-9 * norms.max(), a_mat / scale, 0.0)
-    _, sv, vt = np.linalg.svd(a_mat, full_matrices=True)
+    # With more rows than columns (always: 200 probe poses) the reduced SVD's V is the full
+    # one, without the 600 x 600 left factor (ten times the work).
+    _, sv, vt = np.linalg.svd(a_mat, full_matrices=a_mat.shape[0] < a_mat.shape[1])
     rank = int(np.sum(sv > _NULL_RTOL * sv[0]))
     null = vt[rank:].T  # (n_cand, n_null), normalised parameter coordinates
     p_out = calibration.nominal.copy()
