@@ -40,6 +40,7 @@ from scipy import stats
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.kinematics import (
+    NearbyPoints,
     forward_points,
     forward_points_and_jacobian,
     forward_poses,
@@ -342,6 +343,7 @@ class CalibrationTrials:
     gauss_newton_iterations: int
     solver: ChordSolver | None = None
     reference_rotations: Array | None = None
+    test_predictor: NearbyPoints | None = None
 
     @property
     def orientation(self) -> bool:
@@ -421,9 +423,16 @@ class CalibrationTrials:
             t = sl.stop - sl.start
             qt = self.test_joints[None] + qt_dev[sl] if qt_dev is not None else self.test_joints
             if self.reference_rotations is None:
-                pos = forward_points(self.problem.layout, params[sl], qt)
+                if self.test_predictor is not None:
+                    pos = self.test_predictor(params[sl], qt)
+                else:
+                    pos = forward_points(self.problem.layout, params[sl], qt)
             else:
-                pos, rot = forward_poses(self.problem.layout, params[sl], qt)
+                if self.test_predictor is not None:
+                    values = self.test_predictor.poses(params[sl], qt)
+                    pos, rot = values[..., :dim], values[..., dim:].reshape(*values.shape[:-1], dim, dim)
+                else:
+                    pos, rot = forward_poses(self.problem.layout, params[sl], qt)
                 # Deviation about the fixed axes of the output frame: exp([d]x) = R R_ref^T.
                 dev = rotation_log(rot @ np.swapaxes(self.reference_rotations, -1, -2))
                 if pred is not None and pred.shape[-1] == 2 * dim:
@@ -666,6 +675,25 @@ def _gum_poses(
     return out
 
 
+_NEARBY_TEST_CONFIGURATIONS = 64
+"""Test configurations up to which the trials evaluate them by the nearby-point walk: it holds
+about 20 arrays of a slice's size (bounded by ``_TEST_ELEMENTS`` up to this many), where
+:func:`forward_points` holds fewer; a workspace map's thousands keep the smaller footprint."""
+
+
+def _test_predictor(calibration: IdentificationResult, test_q: Array, *, drop_base: bool) -> NearbyPoints | None:
+    """The tool at the test configurations near the calibration (series instead of a sine and a
+    cosine per joint, to a few ulps of :func:`forward_points`), or None where the walk does not
+    apply (prismatic joints, a mount) or the set is large (see ``_NEARBY_TEST_CONFIGURATIONS``)."""
+    layout = calibration.model.layout
+    if not NearbyPoints.supports(layout) or test_q.shape[0] > _NEARBY_TEST_CONFIGURATIONS:
+        return None
+    p_out = calibration.estimate.copy()
+    if drop_base:
+        p_out[layout.base_index : layout.base_index + 6] = 0.0
+    return NearbyPoints.at(layout, p_out, test_q)
+
+
 def _calibrated_rotations(calibration: IdentificationResult, test_q: Array, *, drop_base: bool) -> Array:
     """Tool rotations of the calibrated model at the test configurations, shape (n_test, 3, 3)."""
     layout = calibration.model.layout
@@ -901,6 +929,7 @@ def _prepare(
         if settings.jacobian == "exact"
         else ChordSolver.at(problem, calibration.estimate, campaign.joint_positions),
         reference_rotations=_calibrated_rotations(calibration, test_q, drop_base=drop_base) if orientation else None,
+        test_predictor=_test_predictor(calibration, test_q, drop_base=drop_base),
     )
     return _Prepared(
         trials=trials,
