@@ -276,6 +276,9 @@ def forward_points(model_or_layout: RobotModel | ParameterLayout, params: Array,
 
 _TAYLOR_LIMIT = 0.25
 """Largest angle change [rad] from the reference that :class:`NearbyPoints` expands in series."""
+_TILED_ELEMENTS = 2**16
+"""Trials x poses up to which :class:`NearbyPoints` keeps its reference cosines and sines
+repeated per trial (12 such arrays for 6 joints: 6 MiB at most)."""
 _TAYLOR_TOLERANCE = 2.0**-57
 """Truncation error allowed in the series of ``cos`` and ``sin`` (below half an ulp of 1)."""
 
@@ -377,17 +380,22 @@ class NearbyPoints:
     def _tiles(self, n_batch: int) -> tuple[Array, Array]:
         """``cos_ref`` and ``sin_ref`` repeated for `n_batch` trials, shape (n_joints, n_batch, n_poses).
 
-        Kept for the last batch size: numpy multiplies two arrays of one shape about 2.5x
-        faster than an array by a broadcast row.
+        numpy multiplies two arrays of one shape about 2.5x faster than an array by a broadcast
+        row, so up to ``_TILED_ELEMENTS`` per joint the rows are copied (and kept for the last
+        two batch sizes: a block's full sub-batches and its remainder); beyond, they are
+        broadcast views (no memory).
         """
+        shape = (self.cos_ref.shape[0], n_batch, self.cos_ref.shape[1])
+        if n_batch * self.cos_ref.shape[1] > _TILED_ELEMENTS:
+            return np.broadcast_to(self.cos_ref[:, None, :], shape), np.broadcast_to(self.sin_ref[:, None, :], shape)
         tiles = self._cache.get(n_batch)
         if tiles is None:
-            shape = (self.cos_ref.shape[0], n_batch, self.cos_ref.shape[1])
             tiles = (
                 np.ascontiguousarray(np.broadcast_to(self.cos_ref[:, None, :], shape)),
                 np.ascontiguousarray(np.broadcast_to(self.sin_ref[:, None, :], shape)),
             )
-            self._cache.clear()
+            while len(self._cache) >= 2:
+                del self._cache[next(iter(self._cache))]
             self._cache[n_batch] = tiles
         return tiles
 
