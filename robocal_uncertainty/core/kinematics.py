@@ -440,7 +440,8 @@ class NearbyPoints:
         # The fixed angles of every joint at once (a call per joint costs more than the values).
         alphas = pf[:, :, [idx["alpha"] for idx in slices]]
         cos_alpha, sin_alpha = np.cos(alphas), np.sin(alphas)
-        betas = pf[:, :, [idx.get("beta", idx["alpha"]) for idx in slices]]
+        with_beta = [j for j, idx in enumerate(slices) if "beta" in idx]
+        betas = pf[:, :, [slices[j]["beta"] for j in with_beta]]
         cos_beta, sin_beta = np.cos(betas), np.sin(betas)
 
         def column(k: int) -> Array:
@@ -484,8 +485,8 @@ class NearbyPoints:
                 np.add(s, tmp, out=s)
             beta = "beta" in idx
             if beta:
-                np.copyto(cos_b, cos_beta[..., j])
-                np.copyto(sin_b, sin_beta[..., j])
+                np.copyto(cos_b, cos_beta[..., with_beta.index(j)])
+                np.copyto(sin_b, sin_beta[..., with_beta.index(j)])
             np.copyto(cos_x, cos_alpha[..., j])
             np.copyto(sin_x, sin_alpha[..., j])
             for v in vectors:
