@@ -317,3 +317,35 @@ def test_linear_start_converges_as_far_as_two_exact_steps(orientation: bool, sub
     assert steps == exact_steps == 2
     assert error(linear) < 1e-7
     assert error(exact) < 1e-7
+
+
+def test_chord_trials_stop_by_their_own_steps(paper) -> None:
+    """A trial's result is the one it gets solved alone, however many steps the others take."""
+    model, sim = paper
+    cal = identify(model, sim.campaign)
+    problem = BatchProblem.from_calibration(cal)
+    x_hat = problem.scaled_deviation(cal.estimate)
+    solver = ChordSolver.at(problem, cal.estimate, sim.campaign.joint_positions)
+    rng = np.random.default_rng(8)
+    n = 24
+    q = sim.campaign.joint_positions + rng.uniform(-1e-4, 1e-4, (n, *sim.campaign.joint_positions.shape))
+    pts = sim.campaign.points + rng.uniform(-5e-6, 5e-6, (n, *sim.campaign.points.shape))
+    lambdas = np.full(n, cal.lambda_)
+
+    # A tolerance between the trials' second-step ratios (~1e-4): some stop after 2 steps, some after 3.
+    def alone(t: int, **options: object) -> tuple[np.ndarray, int]:
+        return solver.solve(q[t : t + 1], pts[t : t + 1], None, lambdas[:1], x_hat, **options)  # type: ignore[arg-type]
+
+    ratios = []
+    for t in range(n):
+        one, _ = alone(t, max_iterations=1)
+        two, _ = alone(t, max_iterations=2, relative_tolerance=0.0)
+        ratios.append(np.linalg.norm(two - one) / np.linalg.norm(one - x_hat))
+    tolerance = float(np.median(ratios))
+    batch, steps = solver.solve(q, pts, None, lambdas, x_hat, relative_tolerance=tolerance)
+    solos = [alone(t, relative_tolerance=tolerance) for t in range(n)]
+    assert steps == 3
+    assert {s for _, s in solos} == {2, 3}
+    solo = np.concatenate([x for x, _ in solos])
+    scale = np.linalg.norm(solo - x_hat, axis=1)
+    np.testing.assert_array_less(np.linalg.norm(batch - solo, axis=1), 1e-12 * scale)
