@@ -11,7 +11,9 @@ the same sources (tracker and encoder noise):
 - random draws alone: the sources drawing their values for the same trials (the part a
   faster solver cannot remove without changing the random streams);
 - 6-DOF: the same campaign measured as poses (orientation noise 0.01 deg), sources tracker,
-  encoder and tracker_orientation, trial blocks alone, against the point trials.
+  encoder and tracker_orientation, trial blocks alone, against the point trials;
+- the chain walk alone: one kinematics pass of the re-identification (the nearby-point walk
+  over the 53 poses, point or pose) for a sub-batch of 256 trials, per trial; a trial takes one.
 The ratios are printed; nothing here is a pass/fail test. With one worker every timing is in
 CPU seconds of this process (on a shared machine the wall clock mostly measures the wait for a
 core); with more workers, in wall-clock seconds.
@@ -113,6 +115,21 @@ def draw_rate(trials, n_trials: int, seed: int, block: int = 10_000) -> float:
     return n_trials / (clock() - start)
 
 
+def walk_time(trials, seed: int, n: int = 256, repeats: int = 20) -> float:
+    """CPU seconds per trial of one kinematics pass of the re-identification (best of `repeats`)."""
+    rng = np.random.default_rng(seed)
+    solver = trials.solver
+    q = trials.joint_positions + rng.uniform(-1e-4, 1e-4, (n, *trials.joint_positions.shape))
+    params = trials.problem.parameters(np.repeat(trials.x_hat[None], n, axis=0))
+    solver.predictor(params, q)
+    best = np.inf
+    for _ in range(repeats):
+        start = clock()
+        solver.predictor(params, q)
+        best = min(best, clock() - start)
+    return best / n
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=20_000)
@@ -139,6 +156,7 @@ def main() -> int:
     steady = steady_rate(points, args.trials, 0, args.workers)
     steady_6 = steady_rate(poses, args.trials, 0, args.workers)
     draws = draw_rate(points, args.trials, 0)
+    walk, walk_6 = walk_time(points, 0), walk_time(poses, 0)
     u = np.sqrt(np.diag(result.poses[0].covariance)) * 1e6
     print(f"campaign: 53 poses, {int(calibration.estimated.sum())} parameters, sources tracker+encoder")
     print(f"baseline (scipy least_squares per trial): {base:10.1f} trials/s  ({args.baseline_trials} trials)")
@@ -154,6 +172,7 @@ def main() -> int:
     )
     print(f"6-DOF trials (tracker+encoder+orientation), start-up excluded: {steady_6:10.1f} trials/s")
     print(f"6-DOF / point cost per trial: {steady / steady_6:.2f}x")
+    print(f"chain walk alone (one per trial, best of 20): {walk * 1e6:.1f} us point, {walk_6 * 1e6:.1f} us pose")
     print(f"u(x, y, z) at the seed's test joints: {u[0]:.2f}, {u[1]:.2f}, {u[2]:.2f} um")
     if args.million:
         rate_m, _ = engine_rate(model, campaign, calibration, settings, 1_000_000, 0, args.workers)

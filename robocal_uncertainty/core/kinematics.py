@@ -15,7 +15,7 @@ by its axis, all expressed in the measurement frame.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -276,6 +276,9 @@ def forward_points(model_or_layout: RobotModel | ParameterLayout, params: Array,
 
 _TAYLOR_LIMIT = 0.25
 """Largest angle change [rad] from the reference that :class:`NearbyPoints` expands in series."""
+_TILED_ELEMENTS = 2**16
+"""Trials x poses up to which :class:`NearbyPoints` keeps its reference cosines and sines
+repeated per trial (12 such arrays for 6 joints: 6 MiB at most)."""
 _TAYLOR_TOLERANCE = 2.0**-57
 """Truncation error allowed in the series of ``cos`` and ``sin`` (below half an ulp of 1)."""
 
@@ -293,28 +296,6 @@ def _series(largest: float, odd: bool) -> tuple[float, ...]:
             return tuple(coefficients)
         coefficients.append((-1) ** k / math.factorial(order))
         k += 1
-
-
-def _horner(coefficients: tuple[float, ...], b2: Array) -> Array | float:
-    """``sum_k coefficients[k] * b2**k``."""
-    if len(coefficients) == 1:
-        return coefficients[0]
-    acc = b2 * coefficients[-1] + coefficients[-2]
-    for c in coefficients[-3::-1]:
-        acc = acc * b2 + c
-    return acc
-
-
-def _turn(
-    v: tuple[Array, Array, Array], c: Array, s: Array, beta: tuple[Array, Array] | None, ca: Array, sa: Array
-) -> tuple[Array, Array, Array]:
-    """``Rx(alpha) Ry(beta) Rz(theta) v`` from the cosines and sines (no beta: None)."""
-    x, y, z = v
-    x, y = c * x - s * y, s * x + c * y
-    if beta is not None:
-        cb, sb = beta
-        x, z = cb * x + sb * z, cb * z - sb * x
-    return x, ca * y - sa * z, sa * y + ca * z
 
 
 @dataclass(frozen=True, eq=False)
@@ -348,6 +329,7 @@ class NearbyPoints:
     joints: Array
     cos_ref: Array
     sin_ref: Array
+    _cache: dict[int, tuple[Array, Array]] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @staticmethod
     def supports(layout: ParameterLayout) -> bool:
@@ -378,81 +360,198 @@ class NearbyPoints:
 
         `joint_positions` must have the reference's poses: shape (..., n_poses, n_joints).
         """
-        p, shape, (vx, vy, vz), _ = self._walk(params, joint_positions, rotation=False)
-        base_cols, translation, _ = _base(p, self.layout)
-        out = np.empty((*shape, 3))
-        for i in range(3):
-            out[..., i] = base_cols[0][i] * vx + base_cols[1][i] * vy + base_cols[2][i] * vz + translation[i]
-        return out
+        p, shape, point, _ = self._walk(params, joint_positions, rotation=False)
+        out = np.empty((p.shape[0], shape[-1], 3))
+        _to_world(p, self.layout, [point], out, [range(3)])
+        return out.reshape(*shape, 3)
 
     def poses(self, params: Array, joint_positions: Array) -> Array:
         """Tool poses as stored 6-DOF values (..., n_poses, 12): the point [m], then
         ``world_R_tool`` row by row, as ``pose_values(*forward_poses(...))`` gives them (to a
         few ulps). The x and z axes of the tool are walked with the point, y is ``z x x``."""
-        p, shape, (vx, vy, vz), axes = self._walk(params, joint_positions, rotation=True)
+        p, shape, point, axes = self._walk(params, joint_positions, rotation=True)
         (x0, x1, x2), (z0, z1, z2) = axes
         cols = ((x0, x1, x2), (z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0), (z0, z1, z2))
-        base_cols, translation, _ = _base(p, self.layout)
-        out = np.empty((*shape, 12))
-        for i in range(3):
-            out[..., i] = base_cols[0][i] * vx + base_cols[1][i] * vy + base_cols[2][i] * vz + translation[i]
-            for c, col in enumerate(cols):
-                out[..., 3 + 3 * i + c] = base_cols[0][i] * col[0] + base_cols[1][i] * col[1] + base_cols[2][i] * col[2]
-        return out
+        out = np.empty((p.shape[0], shape[-1], 12))
+        # Stored values: the point, then world_R_tool row by row (column c of row i at 3 + 3 i + c).
+        _to_world(p, self.layout, [point, *cols], out, [range(3), range(3, 12, 3), range(4, 12, 3), range(5, 12, 3)])
+        return out.reshape(*shape, 12)
+
+    def _tiles(self, n_batch: int) -> tuple[Array, Array]:
+        """``cos_ref`` and ``sin_ref`` repeated for `n_batch` trials, shape (n_joints, n_batch, n_poses).
+
+        numpy multiplies two arrays of one shape about 2.5x faster than an array by a broadcast
+        row, so up to ``_TILED_ELEMENTS`` per joint the rows are copied (and kept for the last
+        two batch sizes: a block's full sub-batches and its remainder); beyond, they are
+        broadcast views (no memory).
+        """
+        shape = (self.cos_ref.shape[0], n_batch, self.cos_ref.shape[1])
+        if n_batch * self.cos_ref.shape[1] > _TILED_ELEMENTS:
+            return np.broadcast_to(self.cos_ref[:, None, :], shape), np.broadcast_to(self.sin_ref[:, None, :], shape)
+        tiles = self._cache.get(n_batch)
+        if tiles is None:
+            tiles = (
+                np.ascontiguousarray(np.broadcast_to(self.cos_ref[:, None, :], shape)),
+                np.ascontiguousarray(np.broadcast_to(self.sin_ref[:, None, :], shape)),
+            )
+            while len(self._cache) >= 2:
+                del self._cache[next(iter(self._cache))]
+            self._cache[n_batch] = tiles
+        return tiles
+
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled without the tiles (a worker builds its own)."""
+        state = dict(self.__dict__)
+        state["_cache"] = {}
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        for name, value in state.items():
+            object.__setattr__(self, name, value)
 
     def _walk(
         self, params: Array, joint_positions: Array, *, rotation: bool
     ) -> tuple[Array, tuple[int, ...], tuple[Array, Array, Array], list[tuple[Array, Array, Array]]]:
-        """The tool point and (with `rotation`) the tool's x and z axes in the base frame."""
+        """The tool point and (with `rotation`) the tool's x and z axes in the base frame.
+
+        Returns the parameters as (n_batch, 1, n_params), the output shape (..., n_poses) and
+        the vectors' components, each (n_batch, n_poses). Every operation writes into an array
+        allocated once per call, in the order of the formulas in the comments, so the values
+        do not depend on how the trials are batched.
+        """
         layout = self.layout
         p, q, shape = _prepare(layout, params, joint_positions)
         if q.shape[-2:] != self.joints.shape:
             msg = f"joint_positions must have shape (..., {self.joints.shape[0]}, {layout.n_joints}), got {q.shape}"
             raise ValueError(msg)
+        n_poses, n_joints = self.joints.shape
+        n_batch = math.prod(shape[:-1])
+        full = (n_batch, n_poses)
+        pf = np.broadcast_to(p, (*shape[:-1], 1, layout.size)).reshape(n_batch, 1, layout.size)
+        # Readings as (n_batch, n_poses, n_joints), or (1, n_poses, n_joints) when shared.
+        qf = q[None] if q.ndim == 2 else np.broadcast_to(q, (*shape, n_joints)).reshape(*full, n_joints)
         slices = layout.joint_slices()
-        theta_idx = [idx["theta"] for idx in slices]
-        dq = q - self.joints
-        dtheta = p[..., theta_idx] - self.theta  # (..., 1, n_joints)
-        largest = float(np.max(np.abs(dq), initial=0.0)) + float(np.max(np.abs(dtheta), initial=0.0))
+        # Their changes joint by joint, each (n_batch or 1, n_poses) contiguous.
+        dq = np.subtract(np.moveaxis(qf, -1, 0), self.joints.T[:, None, :])
+        dtheta = pf[:, :, [idx["theta"] for idx in slices]] - self.theta  # (n_batch, 1, n_joints)
+        largest = max(float(np.max(dq, initial=0.0)), -float(np.min(dq, initial=0.0)))
+        largest += float(np.max(np.abs(dtheta), initial=0.0))
         direct = not largest <= _TAYLOR_LIMIT  # also for NaN
-        cos_series = () if direct else _series(largest, odd=False)
-        sin_series = () if direct else _series(largest, odd=True)
+        # The fixed angles of every joint at once (a call per joint costs more than the values).
+        alphas = pf[:, :, [idx["alpha"] for idx in slices]]
+        cos_alpha, sin_alpha = np.cos(alphas), np.sin(alphas)
+        with_beta = [j for j, idx in enumerate(slices) if "beta" in idx]
+        betas = pf[:, :, [slices[j]["beta"] for j in with_beta]]
+        cos_beta, sin_beta = np.cos(betas), np.sin(betas)
+
+        def column(k: int) -> Array:
+            return pf[:, :, k]  # (n_batch, 1)
+
         t0 = layout.tool_index
-        vx, vy, vz = p[..., t0], p[..., t0 + 1], p[..., t0 + 2]
-        # The tool's x and z axes in the flange frame (the tool rotation's columns, if any).
-        axes: list[tuple[Array, Array, Array]] = []
+        starts = [(column(t0), column(t0 + 1), column(t0 + 2))]
         if rotation:
-            tool = _tool_rotation(layout, p)
+            tool = _tool_rotation(layout, pf[:, 0, :])
             if tool is None:
-                one, zero = np.ones(p.shape[:-1]), np.zeros(p.shape[:-1])
-                axes = [(one, zero, zero), (zero, zero, one)]
+                one, zero = np.ones((n_batch, 1)), np.zeros((n_batch, 1))
+                starts += [(one, zero, zero), (zero, zero, one)]
             else:
-                r = tool[0]
-                axes = [(r[..., 0, 0], r[..., 1, 0], r[..., 2, 0]), (r[..., 0, 2], r[..., 1, 2], r[..., 2, 2])]
-        for j in range(layout.n_joints - 1, -1, -1):
+                r = tool[0][:, None]
+                starts += [(r[..., 0, 0], r[..., 1, 0], r[..., 2, 0]), (r[..., 0, 2], r[..., 1, 2], r[..., 2, 2])]
+        # Full-size copies of the starting vectors: every later operation runs in place.
+        vectors = [[np.array(np.broadcast_to(u, full)) for u in v] for v in starts]
+        b, b2, cos_b, sin_b, c, s, cos_x, sin_x, tmp, spare = (np.empty(full) for _ in range(10))
+        if not direct:
+            cos_series, sin_series = _series(largest, odd=False), _series(largest, odd=True)
+            cos_tiles, sin_tiles = self._tiles(n_batch)
+        for j in range(n_joints - 1, -1, -1):
             idx = slices[j]
-            vz = vz + p[..., idx["d"]]
+            point = vectors[0]
+            np.add(point[2], column(idx["d"]), out=point[2])  # z + d
             if direct:
-                angle = q[..., j] + p[..., idx["theta"]]
-                c, s = np.cos(angle), np.sin(angle)
+                np.add(qf[..., j], column(idx["theta"]), out=b)  # q + theta
+                np.cos(b, out=c)
+                np.sin(b, out=s)
             else:
-                b = dq[..., j] + dtheta[..., j]
-                b2 = b * b
-                cb = _horner(cos_series, b2)
-                sb = b * _horner(sin_series, b2)
-                c = self.cos_ref[j] * cb - self.sin_ref[j] * sb
-                s = self.sin_ref[j] * cb + self.cos_ref[j] * sb
-            beta = None
-            if "beta" in idx:
-                beta = p[..., idx["beta"]]
-                cbeta, sbeta = np.cos(beta), np.sin(beta)
-            alpha = p[..., idx["alpha"]]
-            ca, sa = np.cos(alpha), np.sin(alpha)
-            turn = (c, s, None if beta is None else (cbeta, sbeta), ca, sa)
-            vx, vy, vz = _turn((vx, vy, vz), *turn)
-            axes = [_turn(axis, *turn) for axis in axes]
-            vx = vx + p[..., idx["a"]]
-        return p, shape, (vx, vy, vz), axes
+                np.add(dq[j], dtheta[..., j], out=b)  # the angle's change from the reference
+                np.multiply(b, b, out=b2)
+                cb = _horner_into(cos_series, b2, cos_b)
+                np.multiply(b, _horner_into(sin_series, b2, sin_b), out=sin_b)
+                # c = cos_ref cos b - sin_ref sin b; s = sin_ref cos b + cos_ref sin b
+                np.multiply(cos_tiles[j], cb, out=c)
+                np.multiply(sin_tiles[j], sin_b, out=tmp)
+                np.subtract(c, tmp, out=c)
+                np.multiply(sin_tiles[j], cb, out=s)
+                np.multiply(cos_tiles[j], sin_b, out=tmp)
+                np.add(s, tmp, out=s)
+            beta = "beta" in idx
+            if beta:
+                np.copyto(cos_b, cos_beta[..., with_beta.index(j)])
+                np.copyto(sin_b, sin_beta[..., with_beta.index(j)])
+            np.copyto(cos_x, cos_alpha[..., j])
+            np.copyto(sin_x, sin_alpha[..., j])
+            for v in vectors:
+                # x, y = c x - s y, s x + c y
+                spare = _turn_into(v, 0, 1, c, s, tmp, spare)
+                if beta:
+                    # x, z = cb x + sb z, cb z - sb x
+                    spare = _turn_into(v, 2, 0, cos_b, sin_b, tmp, spare)
+                # y, z = ca y - sa z, sa y + ca z
+                spare = _turn_into(v, 1, 2, cos_x, sin_x, tmp, spare)
+            np.add(point[0], column(idx["a"]), out=point[0])  # x + a
+        point = vectors[0]
+        axes = [(v[0], v[1], v[2]) for v in vectors[1:]]
+        return pf, shape, (point[0], point[1], point[2]), axes
+
+
+def _horner_into(coefficients: tuple[float, ...], b2: Array, out: Array) -> Array | float:
+    """``sum_k coefficients[k] * b2**k`` by Horner's rule, written into `out` (a float when constant)."""
+    if len(coefficients) == 1:
+        return coefficients[0]
+    np.multiply(b2, coefficients[-1], out=out)
+    np.add(out, coefficients[-2], out=out)
+    for c in coefficients[-3::-1]:
+        np.multiply(out, b2, out=out)
+        np.add(out, c, out=out)
+    return out
+
+
+def _turn_into(v: list[Array], i: int, k: int, c: Array, s: Array, tmp: Array, spare: Array) -> Array:
+    """``v[i], v[k] = c v[i] - s v[k], s v[i] + c v[k]`` in place; returns the array left spare."""
+    np.multiply(c, v[i], out=spare)
+    np.multiply(s, v[k], out=tmp)
+    np.subtract(spare, tmp, out=spare)
+    np.multiply(s, v[i], out=tmp)
+    np.multiply(c, v[k], out=v[k])
+    np.add(tmp, v[k], out=v[k])
+    old, v[i] = v[i], spare
+    return old
+
+
+def _to_world(
+    p: Array, layout: ParameterLayout, vectors: list[tuple[Array, Array, Array]], out: Array, columns: list[range]
+) -> None:
+    """``out[..., columns[m][i]] = (world_R_base v_m)_i``, plus ``world_t_base_i`` for the first vector.
+
+    `p` (n_batch, 1, n_params); each vector's components (n_batch, n_poses); `out`
+    (n_batch, n_poses, m). Sums run into contiguous arrays, each written to its (strided)
+    column of `out` once; the rotation entries are spread to full arrays once.
+    """
+    base_cols, translation, _ = _base(p, layout)
+    full = vectors[0][0].shape
+    entries = [[np.array(np.broadcast_to(base_cols[k][i], full)) for k in range(3)] for i in range(3)]
+    acc, tmp = np.empty(full), np.empty(full)
+    for m, v in enumerate(vectors):
+        for i in range(3):
+            row = entries[i]
+            np.multiply(row[0], v[0], out=acc)
+            np.multiply(row[1], v[1], out=tmp)
+            np.add(acc, tmp, out=acc)
+            np.multiply(row[2], v[2], out=tmp)
+            if m == 0:
+                np.add(acc, tmp, out=acc)
+                np.add(acc, translation[i], out=out[..., columns[m][i]])
+            else:
+                np.add(acc, tmp, out=out[..., columns[m][i]])
 
 
 def forward_points_and_jacobian(

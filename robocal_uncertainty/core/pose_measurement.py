@@ -70,6 +70,17 @@ def pose_values(positions: Array, rotations: Array) -> Array:
     return np.concatenate((np.broadcast_to(pos, (*shape, 3)), np.broadcast_to(flat, (*shape, 9))), axis=-1)
 
 
+_SERIES_THETA2 = 1e-6
+"""Squared angle [rad^2] below which :meth:`PoseMeasurement.perturb` uses the series of
+``sin(t) / t`` and ``(1 - cos t) / t^2`` to the t^4 term (the t^6 term is below 2e-22)."""
+
+
+def _components(values: Array) -> Array:
+    """The last axis first, contiguous: shape (m, ...) from (..., m)."""
+    out: Array = np.ascontiguousarray(np.moveaxis(values, -1, 0), dtype=np.float64)
+    return out
+
+
 def split_pose_values(values: Array) -> tuple[Array, Array]:
     """Positions (..., 3) [m] and rotation matrices (..., 3, 3) of stored pose values (..., 12)."""
     v = np.asarray(values, dtype=np.float64)
@@ -185,11 +196,14 @@ class PoseMeasurement(MeasurementType):
         p = np.asarray(predicted, dtype=np.float64)
         out = np.empty((*np.broadcast_shapes(m.shape, p.shape)[:-1], 6))
         out[..., :3] = m[..., :3] - p[..., :3]
-        rm = [m[..., 3 + i] for i in range(9)]
-        rp = [p[..., 3 + i] for i in range(9)]
+        # Each rotation entry as one contiguous array: numpy runs the products below several
+        # times faster than on the strided views of the stored values.
+        rm = _components(m[..., 3:])
+        rp = _components(p[..., 3:])
 
         def entry(i: int, j: int) -> Array:  # (R_m R_p^T)_ij
-            return rm[3 * i] * rp[3 * j] + rm[3 * i + 1] * rp[3 * j + 1] + rm[3 * i + 2] * rp[3 * j + 2]
+            value: Array = rm[3 * i] * rp[3 * j] + rm[3 * i + 1] * rp[3 * j + 1] + rm[3 * i + 2] * rp[3 * j + 2]
+            return value
 
         w = (entry(2, 1) - entry(1, 2), entry(0, 2) - entry(2, 0), entry(1, 0) - entry(0, 1))
         c = 0.5 * (entry(0, 0) + entry(1, 1) + entry(2, 2) - 1.0)  # cos(theta)
@@ -216,12 +230,18 @@ class PoseMeasurement(MeasurementType):
         e = np.asarray(errors, dtype=np.float64)
         out = np.empty((*np.broadcast_shapes(v.shape[:-1], e.shape[:-1]), 12))
         out[..., :3] = v[..., :3] + e[..., :3]
-        e0, e1, e2 = e[..., 3], e[..., 4], e[..., 5]
+        e0, e1, e2 = _components(e[..., 3:])
         theta2 = e0 * e0 + e1 * e1 + e2 * e2
-        small = theta2 < 1e-8
-        safe = np.where(small, 1.0, np.sqrt(theta2))
-        a = np.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, np.sin(safe) / safe)
-        b = np.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - np.cos(safe)) / safe**2)
+        if theta2.size and float(np.max(theta2)) < _SERIES_THETA2:
+            # Every angle below 1e-3 rad (a Monte Carlo's noise): the series alone, whose first
+            # term left out is below 2e-22 relative, and no sine or cosine.
+            a = 1.0 - theta2 / 6.0 + theta2**2 / 120.0
+            b = 0.5 - theta2 / 24.0 + theta2**2 / 720.0
+        else:
+            small = theta2 < 1e-8
+            safe = np.where(small, 1.0, np.sqrt(theta2))
+            a = np.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, np.sin(safe) / safe)
+            b = np.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - np.cos(safe)) / safe**2)
         diagonal = 1.0 - b * theta2
         be0, be1, be2 = b * e0, b * e1, b * e2
         ae0, ae1, ae2 = a * e0, a * e1, a * e2
@@ -230,7 +250,7 @@ class PoseMeasurement(MeasurementType):
             (be1 * e0 + ae2, diagonal + be1 * e1, be1 * e2 - ae0),
             (be2 * e0 - ae1, be2 * e1 + ae0, diagonal + be2 * e2),
         )
-        r = [v[..., 3 + k] for k in range(9)]
+        r = _components(v[..., 3:])
         for i, (x, y, z) in enumerate(rows):
             for j in range(3):
                 out[..., 3 + 3 * i + j] = x * r[j] + y * r[3 + j] + z * r[6 + j]

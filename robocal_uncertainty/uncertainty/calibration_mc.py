@@ -40,6 +40,7 @@ from scipy import stats
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.kinematics import (
+    NearbyPoints,
     forward_points,
     forward_points_and_jacobian,
     forward_poses,
@@ -334,7 +335,6 @@ class CalibrationTrials:
     x_hat: Array
     joint_positions: Array
     points: Array
-    fitted: Array
     test_joints: Array
     drop_base: bool
     output_rotation: Array
@@ -343,6 +343,7 @@ class CalibrationTrials:
     gauss_newton_iterations: int
     solver: ChordSolver | None = None
     reference_rotations: Array | None = None
+    test_predictor: NearbyPoints | None = None
 
     @property
     def orientation(self) -> bool:
@@ -389,14 +390,7 @@ class CalibrationTrials:
             q = self.joint_positions[None] + batch.joints if batch.joints is not None else self.joint_positions
             lambdas = batch.lambdas if batch.lambdas is not None else np.full(t, self.lambda_star)
             if self.solver is not None:
-                x, _ = self.solver.solve(
-                    q,
-                    pts,
-                    batch.weights,
-                    lambdas,
-                    self.x_hat,
-                    initial_prediction=self.fitted if batch.joints is None else None,
-                )
+                x, _ = self.solver.solve(q, pts, batch.weights, lambdas, self.x_hat)
             else:
                 x, _ = reidentify_batch(
                     self.problem,
@@ -429,9 +423,16 @@ class CalibrationTrials:
             t = sl.stop - sl.start
             qt = self.test_joints[None] + qt_dev[sl] if qt_dev is not None else self.test_joints
             if self.reference_rotations is None:
-                pos = forward_points(self.problem.layout, params[sl], qt)
+                if self.test_predictor is not None:
+                    pos = self.test_predictor(params[sl], qt)
+                else:
+                    pos = forward_points(self.problem.layout, params[sl], qt)
             else:
-                pos, rot = forward_poses(self.problem.layout, params[sl], qt)
+                if self.test_predictor is not None:
+                    values = self.test_predictor.poses(params[sl], qt)
+                    pos, rot = values[..., :dim], values[..., dim:].reshape(*values.shape[:-1], dim, dim)
+                else:
+                    pos, rot = forward_poses(self.problem.layout, params[sl], qt)
                 # Deviation about the fixed axes of the output frame: exp([d]x) = R R_ref^T.
                 dev = rotation_log(rot @ np.swapaxes(self.reference_rotations, -1, -2))
                 if pred is not None and pred.shape[-1] == 2 * dim:
@@ -674,6 +675,25 @@ def _gum_poses(
     return out
 
 
+_NEARBY_TEST_CONFIGURATIONS = 64
+"""Test configurations up to which the trials evaluate them by the nearby-point walk: it holds
+about 20 arrays of a slice's size (bounded by ``_TEST_ELEMENTS`` up to this many), where
+:func:`forward_points` holds fewer; a workspace map's thousands keep the smaller footprint."""
+
+
+def _test_predictor(calibration: IdentificationResult, test_q: Array, *, drop_base: bool) -> NearbyPoints | None:
+    """The tool at the test configurations near the calibration (series instead of a sine and a
+    cosine per joint, to a few ulps of :func:`forward_points`), or None where the walk does not
+    apply (prismatic joints, a mount) or the set is large (see ``_NEARBY_TEST_CONFIGURATIONS``)."""
+    layout = calibration.model.layout
+    if not NearbyPoints.supports(layout) or test_q.shape[0] > _NEARBY_TEST_CONFIGURATIONS:
+        return None
+    p_out = calibration.estimate.copy()
+    if drop_base:
+        p_out[layout.base_index : layout.base_index + 6] = 0.0
+    return NearbyPoints.at(layout, p_out, test_q)
+
+
 def _calibrated_rotations(calibration: IdentificationResult, test_q: Array, *, drop_base: bool) -> Array:
     """Tool rotations of the calibrated model at the test configurations, shape (n_test, 3, 3)."""
     layout = calibration.model.layout
@@ -722,7 +742,9 @@ def undetermined_rotations(prep: _Prepared) -> list[Array]:
     norms = np.linalg.norm(a_mat, axis=0)
     scale = np.where(norms > 1e-9 * norms.max(), norms, 1.0)
     a_mat = np.where(norms > 1e-9 * norms.max(), a_mat / scale, 0.0)
-    _, sv, vt = np.linalg.svd(a_mat, full_matrices=True)
+    # With more rows than columns (always: 200 probe poses) the reduced SVD's V is the full
+    # one, without the 600 x 600 left factor (ten times the work).
+    _, sv, vt = np.linalg.svd(a_mat, full_matrices=a_mat.shape[0] < a_mat.shape[1])
     rank = int(np.sum(sv > _NULL_RTOL * sv[0]))
     null = vt[rank:].T  # (n_cand, n_null), normalised parameter coordinates
     p_out = calibration.nominal.copy()
@@ -898,7 +920,6 @@ def _prepare(
         x_hat=x_hat,
         joint_positions=campaign.joint_positions,
         points=campaign.points,
-        fitted=measurement.perturb(campaign.points, -calibration.residuals),
         test_joints=test_q,
         drop_base=drop_base,
         output_rotation=output_rotation,
@@ -909,6 +930,7 @@ def _prepare(
         if settings.jacobian == "exact"
         else ChordSolver.at(problem, calibration.estimate, campaign.joint_positions),
         reference_rotations=_calibrated_rotations(calibration, test_q, drop_base=drop_base) if orientation else None,
+        test_predictor=_test_predictor(calibration, test_q, drop_base=drop_base),
     )
     return _Prepared(
         trials=trials,

@@ -82,11 +82,14 @@ def compute() -> dict[str, np.ndarray]:
         lambdas = res.lambda_ * rng.uniform(0.5, 2.0, size=N_TRIALS)
         solver = ChordSolver.at(problem, res.estimate, campaign.joint_positions)
         out[f"{key}_chord_normal"] = solver.normal
-        out[f"{key}_chord_q"], _ = solver.solve(q, pts, None, lambdas, x_hat)
-        out[f"{key}_chord_qw"], _ = solver.solve(q, pts, weights, lambdas, x_hat)
+        # The chord method as it was then: the first step from the exact prediction (the
+        # first-order start of today's default is checked against converged solutions in
+        # test/uncertainty/test_calibration_mc.py).
+        out[f"{key}_chord_q"], _ = solver.solve(q, pts, None, lambdas, x_hat, linear_start=False)
+        out[f"{key}_chord_qw"], _ = solver.solve(q, pts, weights, lambdas, x_hat, linear_start=False)
         fitted = campaign.points - res.residuals
         out[f"{key}_chord_fixed_q"], _ = solver.solve(
-            campaign.joint_positions, pts, None, lambdas, x_hat, initial_prediction=fitted
+            campaign.joint_positions, pts, None, lambdas, x_hat, initial_prediction=fitted, linear_start=False
         )
         out[f"{key}_gn"], _ = reidentify_batch(problem, q, pts, weights, lambdas, x_hat, iterations=4)
     return out

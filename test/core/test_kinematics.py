@@ -161,6 +161,21 @@ def test_nearby_points_match_plain_matrix_product(spread: float) -> None:
         np.testing.assert_allclose(near(params, q_ref), forward_points(ref.layout, params, q_ref), rtol=0, atol=5e-15)
 
 
+def test_nearby_points_do_not_depend_on_the_batching() -> None:
+    # The walk runs elementwise into preallocated arrays, with the reference cosines repeated
+    # per trial up to a size and broadcast beyond: any split of the trials gives the same bits.
+    rng = np.random.default_rng(14)
+    ref = perturbed(load_robot_model(PAPER_YAML), rng, beta=True)
+    q_ref = rng.uniform(-np.pi, np.pi, (53, ref.n_joints))
+    near = NearbyPoints.at(ref.layout, ref.parameter_vector(), q_ref)
+    params = ref.parameter_vector() + rng.uniform(-1e-5, 1e-5, (1500, ref.layout.size))
+    q = q_ref + rng.uniform(-1e-4, 1e-4, (1500, *q_ref.shape))
+    whole = near.poses(params, q)  # 1500 x 53 trial-poses: broadcast rows
+    parts = [near.poses(params[i : i + 256], q[i : i + 256]) for i in range(0, 1500, 256)]  # repeated rows
+    assert np.array_equal(whole, np.concatenate(parts))
+    assert np.array_equal(near(params[:7], q[:7]), whole[:7, :, :3])
+
+
 @pytest.mark.parametrize("spread", [1e-5, 0.1, 1.0], ids=["urad", "0.1rad", "direct"])
 @pytest.mark.parametrize("tool_rotation", [False, True], ids=["flange", "tool_rotation"])
 def test_nearby_poses_match_forward_poses(spread: float, tool_rotation: bool) -> None:

@@ -267,3 +267,85 @@ def test_positions_default_to_the_measurement_frame_and_carry_the_base_uncertain
     # generalised variance is larger there (rotation-invariant comparison).
     assert np.linalg.det(meas.poses[0].covariance) > np.linalg.det(base.poses[0].covariance)
     np.testing.assert_array_equal(meas.samples[:, 3:], base.samples[:, 3:])
+
+
+@pytest.mark.parametrize("orientation", [False, True], ids=["points", "poses"])
+@pytest.mark.parametrize("subsets", [False, True], ids=["all_poses", "subsets"])
+def test_linear_start_converges_as_far_as_two_exact_steps(orientation: bool, subsets: bool) -> None:
+    """The chord solver's first step from ``reference + J_q dQ`` (no kinematics) and one exact
+    step leave each trial as close to the chord fixed point as two exact steps did.
+
+    Reference: the fixed point itself, 12 exact steps from the exact start. Perturbations as in
+    the Monte Carlo: tracker +-5 um, encoder +-0.005 deg, orientation 0.01 deg, lambda varied.
+    """
+    model = load_robot_model(ROOT / "config/paper_arm.yaml")
+    rotation_std = float(np.radians(0.01))
+    sim_settings = SimulationSettings(orientation_std=rotation_std) if orientation else SimulationSettings()
+    campaign = simulate_campaign(model, sim_settings, seed=11).campaign
+    cal = identify(model, campaign)
+    measurement = cal.measurement
+    problem = BatchProblem.from_calibration(cal)
+    x_hat = problem.scaled_deviation(cal.estimate)
+    solver = ChordSolver.at(problem, cal.estimate, campaign.joint_positions)
+    rng = np.random.default_rng(4)
+    n, n_poses = 48, campaign.n_poses
+    q = campaign.joint_positions + rng.uniform(-1.0, 1.0, (n, *campaign.joint_positions.shape)) * np.radians(0.005)
+    errors = np.zeros((n, n_poses, measurement.dimension))
+    errors[..., :3] = rng.uniform(-5e-6, 5e-6, (n, n_poses, 3))
+    if orientation:
+        errors[..., 3:] = rng.normal(0.0, rotation_std, (n, n_poses, 3))
+    measured = measurement.perturb(campaign.points[None], errors)
+    weights = (rng.random((n, n_poses)) < 0.8).astype(np.float64) if subsets else None
+    lambdas = cal.lambda_ * rng.uniform(0.5, 2.0, n)
+
+    def solve(**options: object) -> tuple[np.ndarray, int]:
+        return solver.solve(q, measured, weights, lambdas, x_hat, **options)  # type: ignore[arg-type]
+
+    fixed_point, _ = solve(max_iterations=12, relative_tolerance=1e-15, linear_start=False)
+    deviation = np.linalg.norm(fixed_point - x_hat, axis=1)
+    assert np.all(deviation > 0)
+
+    def error(x: np.ndarray) -> float:
+        return float(np.max(np.linalg.norm(x - fixed_point, axis=1) / deviation))
+
+    linear, steps = solve()
+    exact, exact_steps = solve(linear_start=False)
+    # The first-order prediction alone is already within ~2e-4 of the solution (an exact first
+    # step: ~1.4e-4); a wrong J_q or sign would leave it at order 1.
+    assert error(solve(max_iterations=1)[0]) < 1e-3
+    # One exact step later both are at ~3e-8 (measured 2.9e-8 and 3.2e-8 on points).
+    assert steps == exact_steps == 2
+    assert error(linear) < 1e-7
+    assert error(exact) < 1e-7
+
+
+def test_chord_trials_stop_by_their_own_steps(paper) -> None:
+    """A trial's result is the one it gets solved alone, however many steps the others take."""
+    model, sim = paper
+    cal = identify(model, sim.campaign)
+    problem = BatchProblem.from_calibration(cal)
+    x_hat = problem.scaled_deviation(cal.estimate)
+    solver = ChordSolver.at(problem, cal.estimate, sim.campaign.joint_positions)
+    rng = np.random.default_rng(8)
+    n = 24
+    q = sim.campaign.joint_positions + rng.uniform(-1e-4, 1e-4, (n, *sim.campaign.joint_positions.shape))
+    pts = sim.campaign.points + rng.uniform(-5e-6, 5e-6, (n, *sim.campaign.points.shape))
+    lambdas = np.full(n, cal.lambda_)
+
+    # A tolerance between the trials' second-step ratios (~1e-4): some stop after 2 steps, some after 3.
+    def alone(t: int, **options: object) -> tuple[np.ndarray, int]:
+        return solver.solve(q[t : t + 1], pts[t : t + 1], None, lambdas[:1], x_hat, **options)  # type: ignore[arg-type]
+
+    ratios = []
+    for t in range(n):
+        one, _ = alone(t, max_iterations=1)
+        two, _ = alone(t, max_iterations=2, relative_tolerance=0.0)
+        ratios.append(np.linalg.norm(two - one) / np.linalg.norm(one - x_hat))
+    tolerance = float(np.median(ratios))
+    batch, steps = solver.solve(q, pts, None, lambdas, x_hat, relative_tolerance=tolerance)
+    solos = [alone(t, relative_tolerance=tolerance) for t in range(n)]
+    assert steps == 3
+    assert {s for _, s in solos} == {2, 3}
+    solo = np.concatenate([x for x, _ in solos])
+    scale = np.linalg.norm(solo - x_hat, axis=1)
+    np.testing.assert_array_less(np.linalg.norm(batch - solo, axis=1), 1e-12 * scale)
