@@ -94,3 +94,26 @@ def test_evaluate_adds_the_between_session_component(sessions: Path, capsys: pyt
     # A file of one session has no component to add: one-line refusal.
     assert main([*base, "--between-session", str(sessions / "cal.json"), "--out", str(sessions / "ev2")]) == 1
     assert "has no between-session component: calibrate it with --sessions" in capsys.readouterr().err
+
+
+def test_verify_of_a_urdf_calibration_equals_that_of_the_dh_model(
+    sessions: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The shipped ur10.urdf from UR's base to tool0 is the DH model's kinematics (to 4e-16 m):
+    # calibrated and verified through the URDF chain, the check gives the DH model's test.
+    urdf = str(Path(__file__).resolve().parents[1] / "robocal_uncertainty" / "data" / "ur10.urdf")
+    chain = ["--base-link", "base", "--tip-link", "tool0"]
+    cal = sessions / "cal_urdf.json"
+    assert main(["calibrate", str(sessions / "ur10.session1.mcap"), "--robot", urdf, *chain, "--json", str(cal)]) == 0
+    capsys.readouterr()
+    verdicts = []
+    for robot, calibration, extra in ((urdf, cal, chain), ("ur10", sessions / "cal.json", [])):
+        args = ["verify", str(calibration), str(sessions / "ur10.session3.mcap"), "--robot", robot, *extra]
+        status = main([*args, "--retool", "--null-trials", "2000", "--out", str(sessions / f"v_{robot[-4:]}")])
+        out = capsys.readouterr().out
+        verdicts.append((status, json.loads((sessions / f"v_{robot[-4:]}" / "verify.json").read_text())))
+        assert status == 0, out
+    (_, via_urdf), (_, via_dh) = verdicts
+    assert via_urdf["test"]["dof"] == via_dh["test"]["dof"] == 21
+    assert via_urdf["test"]["chi2"] == pytest.approx(via_dh["test"]["chi2"], rel=2e-3)
+    assert via_urdf["test"]["p_value"] == pytest.approx(via_dh["test"]["p_value"], abs=0.02)

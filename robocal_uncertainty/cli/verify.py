@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from robocal_uncertainty.cli._common import check_campaign_joints, load_robot, read_campaign_checked
-from robocal_uncertainty.cli._options import add_force_arg
+from robocal_uncertainty.cli._options import add_force_arg, add_urdf_chain_args
 
 DRIFTED_EXIT_STATUS = 3
 """Exit status of a check that says drifted."""
@@ -29,6 +29,7 @@ def register(sub: Any) -> None:
     p.add_argument("calibration", help="calibration JSON written by calibrate --json")
     p.add_argument("check_campaign", help="check campaign (.mcap or rosbag2 directory) of the new session")
     p.add_argument("--robot", required=True, help="robot YAML file or shipped model name (paper_arm, ur10)")
+    add_urdf_chain_args(p)
     p.add_argument("--retool", action="store_true", help="the probe was remounted: re-register the tool point too")
     p.add_argument(
         "--significance",
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(msg)
     if args.out:
         check_report_directory(args.out, force=args.force, option="--out")
-    model = load_robot(args.robot)
+    model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link, tool_point=args.tool_point)
     _, state, _ = load_session_calibration(model, args.calibration)  # a bad file is named before the campaign
     check = read_campaign_checked(args, args.check_campaign)
     check_campaign_joints(model, check, args.check_campaign)
