@@ -377,9 +377,9 @@ def test_coverage_over_200_simulated_scans() -> None:
 def test_coverage_over_scenario_families() -> None:
     """Issue 23: 10 scans of each scenario family (smooth forms of 2-13 waves; bumps and dents of
     1-10 µm over 1-20 mm on the sides and at the edges; edge erosion), truth from the noise-free
-    part, method ``denoised`` with 2 000 trials and the residual check; about 2 minutes on two
-    cores. The study the report quotes (``FAMILY_STUDY``) is 50 scans per family of the same
-    seeds (``benchmarks/bench_section_coverage.py --scans 50``); with 10 scans per family one
+    part, method ``denoised`` with 2 000 trials and the residual check; 40 s on two
+    cores. The study the report quotes (``FAMILY_STUDY``) is 200 scans per family of the same
+    seeds (``benchmarks/bench_section_coverage.py --scans 200``); with 10 scans per family one
     miss is 10 % and the binomial standard uncertainty at 95 % is 7 %.
     """
     workers = min(2, os.cpu_count() or 1)
@@ -394,7 +394,7 @@ def test_coverage_over_scenario_families() -> None:
     inside = np.array([o.inside for o in smooth if not o.flagged])
     assert (inside.mean(axis=0) >= 0.8).all(), inside.mean(axis=0)
     local = [o for f in ("side", "edge", "erosion") for o in by_family[f]]
-    # The check fires on local features (10 of 30 here, 35 of 150 in the 50-scan study).
+    # The check fires on local features (140 of 600 in the 200-scan study).
     assert sum(o.flagged for o in local) >= 4
     kept = np.array([o.inside for o in local if not o.flagged])
     coverage = kept.mean(axis=0)
