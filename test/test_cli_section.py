@@ -75,7 +75,8 @@ def test_seed_method_is_flagged(cloud_file: Path, tmp_path: Path, capsys: pytest
     assert "NOT coverage-verified" in text
     data = json.loads((out / "section.json").read_text())
     assert data["method"] == "seed"
-    assert [row["coverage_verified"] for row in data["parameters"]] == [False] * 2 + [True] * 3 + [False] * 4
+    # Verified: the offsets (the twist covers 91.8 % in the smooth family, significantly below 95 %).
+    assert [row["coverage_verified"] for row in data["parameters"]] == [False] * 2 + [True] * 2 + [False] * 5
 
 
 def test_section_from_a_point_cloud2_bag(scan: PointCloud, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

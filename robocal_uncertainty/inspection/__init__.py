@@ -35,6 +35,7 @@ if TYPE_CHECKING:
         read_rotor37_section,
     )
     from robocal_uncertainty.inspection.registration import Registration, register_to_nominal
+    from robocal_uncertainty.inspection.resolution import ResolutionEnvelope, resolution_envelope
     from robocal_uncertainty.inspection.section import (
         PARAMETER_NAMES,
         PARAMETER_UNITS,
@@ -72,6 +73,7 @@ __all__ = [
     "PointCloud",
     "Registration",
     "ResidualCheck",
+    "ResolutionEnvelope",
     "SectionEvaluation",
     "SectionOptions",
     "SectionParameters",
@@ -93,6 +95,7 @@ __all__ = [
     "read_point_cloud",
     "read_rotor37_section",
     "register_to_nominal",
+    "resolution_envelope",
     "section_uncertainty",
     "seed_instrument",
     "segment_section",

@@ -21,7 +21,9 @@ extreme points out, for the bias at the true cloud; over simulated scans it stil
 ``method="denoised"`` samples the error around a denoised cloud instead; its Monte Carlo
 distribution is already that of the measurand, so for such a result this module only reads
 the bias (``f(y)`` minus the Monte Carlo mean), the estimate (the mean) and the interval (the
-Monte Carlo interval), clipped at zero for the max/min parameters. The slow coverage test
+Monte Carlo interval; for the profiles its union with the intervals at the smoothest and the
+roughest form the scan supports, :mod:`.resolution`), clipped at zero for the max/min
+parameters. The slow coverage test
 measures all of them over simulated scans with a known truth.
 """
 
@@ -59,7 +61,8 @@ class BiasCorrection:
     interval : CoverageInterval
         Method ``seed``: the probabilistically symmetric Monte Carlo interval reflected about
         ``measured`` (kind ``probabilistically_symmetric`` of the reflected distribution);
-        method ``denoised``: the probabilistically symmetric Monte Carlo interval itself
+        method ``denoised``: the probabilistically symmetric Monte Carlo interval itself, for the
+        profiles widened to the roughness envelope (:mod:`.resolution`, when the result has one)
         [m or rad]; limits clipped at 0 for :data:`MAX_MIN_PARAMETERS`.
     recommended : bool
         True for :data:`MAX_MIN_PARAMETERS` (state this interval), False for the linear
@@ -91,6 +94,8 @@ def bias_corrections(result: SectionUncertainty) -> tuple[BiasCorrection, ...]:
         if denoised:  # the Monte Carlo values are f(y) - Δ already
             bias = float(y - output.estimate)
             low, high, estimate = float(mc.low), float(mc.high), float(output.estimate)
+            if result.envelope is not None:  # profiles: widened to the roughness limits
+                low, high = result.envelope.widen(name, low, high)
         else:
             bias = float(output.estimate - y)
             low, high, estimate = float(2 * y - mc.high), float(2 * y - mc.low), float(y - bias)

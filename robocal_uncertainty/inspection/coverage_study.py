@@ -26,7 +26,8 @@ Families (:data:`FAMILIES`; every draw from the scan's own seeded stream):
     leading- or trailing-edge extreme point.
 
 :func:`study_scan` gives, per scan, whether each parameter's stated 95 % interval (method
-``denoised``, clipped at 0 for the max/min parameters as the report states it) holds the truth,
+``denoised``, the profiles widened to the roughness envelope of :mod:`.resolution`, clipped at 0
+for the max/min parameters, as the report states it) holds the truth,
 and whether the per-scan residual check (:class:`~.denoise.ResidualCheck`) flagged the scan.
 """
 
@@ -248,9 +249,12 @@ def study_scan(family: str, index: int, *, trials: int = 2000, root_seed: int = 
     seed = int(mc_seq.generate_state(1)[0])
     samples = run_trials(setup.trials(), seed=seed, n_trials=trials, block_size=trials).samples
     outputs = summarize(samples, 0.95, bins=10).outputs
+    envelope = setup.envelope(seed, 0.95)
     inside = np.empty(len(PARAMETER_NAMES), dtype=bool)
     for j, (name, out) in enumerate(zip(PARAMETER_NAMES, outputs)):
         low, high = out.probabilistically_symmetric.low, out.probabilistically_symmetric.high
+        if envelope is not None:  # the profiles' roughness envelope, as the report states it
+            low, high = envelope.widen(name, low, high)
         if name in MAX_MIN_PARAMETERS:  # the report clips the non-negative lengths at 0
             low, high = max(low, 0.0), max(high, 0.0)
         inside[j] = low <= truth[j] <= high

@@ -113,6 +113,9 @@ class DenoisedCloud:
         Window half-width used at each point (at most ``half_width``).
     check : ResidualCheck
         Whether the residuals left after denoising look like the instrument noise alone.
+    smooth_deviation : ndarray, shape (n,) [m]
+        Fit of the one window ``half_width`` at every point, without local narrowing or twicing:
+        the smoothest form the data support (:mod:`.resolution`).
     """
 
     points: NDArray[np.float64]
@@ -123,6 +126,7 @@ class DenoisedCloud:
     noise_std: NDArray[np.float64]
     local_half_width: NDArray[np.float64]
     check: ResidualCheck
+    smooth_deviation: NDArray[np.float64]
 
 
 def smooth_normal_deviation(
@@ -515,6 +519,7 @@ def denoise_section(
         chosen[alive] = k
         rows.append((weights, source))
     fit = fits[chosen, everywhere]
+    smooth = fits[len(tried) - 1].copy()
     hat = _hat_matrix(rows, chosen, n)
     # Twicing (Tukey): smooth the residuals once more and add them back, r̂ = (2S - S²) r. A local
     # quadratic flattens a peak narrower than its window, and a flattened peak gives the Monte
@@ -539,6 +544,7 @@ def denoise_section(
         noise_std=np.sqrt(variance),
         local_half_width=local,
         check=check,
+        smooth_deviation=smooth,
     )
 
 

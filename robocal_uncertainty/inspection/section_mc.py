@@ -60,6 +60,7 @@ from robocal_uncertainty.inspection.cmm_model import (
 from robocal_uncertainty.inspection.denoise import DenoisedCloud, ResidualCheck, denoise_section
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud
+from robocal_uncertainty.inspection.resolution import ResolutionEnvelope, resolution_envelope
 from robocal_uncertainty.inspection.section import (
     PARAMETER_NAMES,
     SectionEvaluation,
@@ -761,6 +762,8 @@ class TrialSetup:
         Evaluation settings.
     check : ResidualCheck
         The residual check of the measured cloud (:func:`~.denoise.denoise_section`), either method.
+    measured_sources : tuple of ErrorSource
+        Enabled sources at ``measured``'s points (for :meth:`envelope`).
     """
 
     measured: SectionEvaluation
@@ -771,6 +774,15 @@ class TrialSetup:
     denoised: DenoisedCloud | None
     options: SectionOptions
     check: ResidualCheck
+    measured_sources: tuple[ErrorSource, ...] = ()
+
+    def envelope(self, seed: int, coverage: float = 0.95) -> ResolutionEnvelope | None:
+        """The profiles' roughness envelope (:mod:`.resolution`) for method ``denoised``, else None."""
+        if self.denoised is None:
+            return None
+        return resolution_envelope(
+            self.measured, self.measured_sources, self.denoised.smooth_deviation, seed=seed, coverage=coverage
+        )
 
     def trials(self, batch: int = 1000, *, resegment_edges: bool = True) -> SectionTrials:
         """The batched trial block (model at ``centre``, see :func:`build_frozen_model`)."""
@@ -811,15 +823,22 @@ def prepare_trials(
     # check, whichever sources the Monte Carlo enables: it is the noise in the measured points.
     denoised = denoise_section(evaluation, every, curve.period, half_width=denoise_half_width)
     if method == "seed":
-        return TrialSetup(
-            evaluation, evaluation, tuple(every[k] for k in indices), indices, None, None, options, denoised.check
-        )
+        enabled = tuple(every[k] for k in indices)
+        return TrialSetup(evaluation, evaluation, enabled, indices, None, None, options, denoised.check, enabled)
     centre = evaluate_section(denoised.points, curve, options)
     ordered_probe = None if probe is None else np.asarray(probe, dtype=np.float64)[evaluation.order]
     at_centre = section_sources(centre, instrument, probe_vectors=ordered_probe, reference=reference)
     reflect = evaluation.parameters.as_array() + centre.parameters.as_array()
     return TrialSetup(
-        evaluation, centre, tuple(at_centre[k] for k in indices), indices, reflect, denoised, options, denoised.check
+        evaluation,
+        centre,
+        tuple(at_centre[k] for k in indices),
+        indices,
+        reflect,
+        denoised,
+        options,
+        denoised.check,
+        tuple(every[k] for k in indices),
     )
 
 
@@ -942,6 +961,10 @@ class SectionUncertainty:
     check : ResidualCheck or None
         The measured cloud's residual check (:class:`~.denoise.ResidualCheck`, either method): when
         it flags the cloud, the intervals are not verified for it.
+    envelope : ResolutionEnvelope or None
+        Method ``denoised``: the profiles' error quantiles at the smoothest and the roughest form
+        the scan supports (:mod:`.resolution`); the stated profile intervals
+        (:func:`~.bias_correction.bias_corrections`) are widened to them. None for ``seed``.
     """
 
     parameters: SectionParameters
@@ -958,6 +981,7 @@ class SectionUncertainty:
     reference_parameters: NDArray[np.float64] | None = None
     denoised: DenoisedCloud | None = None
     check: ResidualCheck | None = None
+    envelope: ResolutionEnvelope | None = None
 
 
 def section_uncertainty(
@@ -1120,6 +1144,7 @@ def section_uncertainty(
         reference_parameters=model.base.copy(),
         denoised=prepared.denoised,
         check=prepared.check,
+        envelope=prepared.envelope(seed, p),
     )
 
 

@@ -4,8 +4,9 @@ Values are SI inside and in the JSON (``units`` says which); the table, Markdown
 lengths in mm (estimates) and µm (uncertainties, profiles), angles in degrees. Every report
 states, per parameter, the measured coverage of the interval it recommends and whether that
 coverage is verified *for this cloud*: the cloud passed the residual check of its denoising
-(:class:`~robocal_uncertainty.inspection.denoise.ResidualCheck`), and the interval covered 95 %
-within :data:`COVERAGE_TOLERANCE` over 200 simulated scans of the demo scenario
+(:class:`~robocal_uncertainty.inspection.denoise.ResidualCheck`), and the interval's coverage was
+verified (:func:`coverage_verified`: at least 92 %, not significantly below 95 %, enough scans)
+over 200 simulated scans of the demo scenario
 (:data:`COVERAGE_STUDY`, slow test ``test_coverage_over_200_simulated_scans``) and over the
 scenario families of :mod:`~robocal_uncertainty.inspection.coverage_study` (:data:`FAMILY_STUDY`,
 ``benchmarks/bench_section_coverage.py``). A cloud the check flags is never stated verified.
@@ -30,23 +31,28 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import binom
 
 from robocal_uncertainty.inspection.bias_correction import BiasCorrection
 from robocal_uncertainty.inspection.denoise import ResidualCheck
+from robocal_uncertainty.inspection.resolution import ENVELOPE_STREAM, PROFILE_PARAMETERS
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, PARAMETER_UNITS
 from robocal_uncertainty.inspection.section_mc import SectionUncertainty
 
 __all__ = [
     "COVERAGE_STUDY",
     "COVERAGE_TOLERANCE",
+    "DEMO_SCANS",
     "FAMILY_STUDY",
     "FAMILY_STUDY_COMMAND",
+    "MIN_STUDY_SCANS",
     "SECTION_REPORT_FILES",
     "SECTION_REPORT_FORMAT",
     "Coverage",
     "FamilyCoverage",
     "SectionReportFiles",
     "coverage_summary",
+    "coverage_verified",
     "family_coverage",
     "format_repeatability_budget",
     "format_section_table",
@@ -80,10 +86,10 @@ COVERAGE_STUDY: dict[str, Coverage] = {
     "axial_offset": Coverage(0.935, 0.935, 0.935),
     "circumferential_offset": Coverage(0.945, 0.945, 0.945),
     "twist_angle": Coverage(0.945, 0.935, 0.935),
-    "profile_leading_edge": Coverage(0.0, 0.73, 0.925),
-    "profile_trailing_edge": Coverage(0.0, 0.585, 0.935),
-    "profile_pressure_side": Coverage(0.0, 0.075, 0.935),
-    "profile_suction_side": Coverage(0.0, 0.13, 0.92),
+    "profile_leading_edge": Coverage(0.0, 0.73, 0.965),
+    "profile_trailing_edge": Coverage(0.0, 0.585, 0.97),
+    "profile_pressure_side": Coverage(0.0, 0.075, 0.97),
+    "profile_suction_side": Coverage(0.0, 0.13, 0.96),
 }
 """Measured coverage of the 95 % intervals over 200 simulated 1 836-point scans of the demo
 section with a known truth (one instrument-noise draw per scan; slow test
@@ -91,9 +97,36 @@ section with a known truth (one instrument-noise draw per scan; slow test
 One scan in 200 is 0.5 %; the binomial standard error at 95 % is 1.5 %."""
 
 COVERAGE_TOLERANCE = (0.92, 0.98)
-"""An interval kind is coverage-verified for a parameter when its measured coverage lies in
-this range (95 ± 3 %, issue 9); for a family study of N scans, when it lies within
-``max(3 %, 2 u)`` of 95 %, u = sqrt(0.95·0.05/N) the binomial standard uncertainty."""
+"""95 ± 3 % (issue 9). A measured coverage below the lower limit is never verified; one above the
+upper limit is conservative (the interval is wider than it needs to be) and is said so."""
+
+MIN_STUDY_SCANS = 53
+"""Fewest scans (unflagged, for a family) a study needs before it can verify a coverage: the
+binomial standard uncertainty at 95 %, sqrt(0.95·0.05/N), is then at most 3 %, the tolerance."""
+
+BINOMIAL_LEVEL = 0.05
+"""Level of the exact one-sided binomial test of "coverage >= 95 %"."""
+
+
+def coverage_verified(inside: int, scans: int) -> bool:
+    """Whether a study in which `inside` of `scans` intervals held the truth verifies 95 % coverage.
+
+    Verified when the study has at least :data:`MIN_STUDY_SCANS` scans, the measured coverage is at
+    least the lower limit of :data:`COVERAGE_TOLERANCE` (92 %), and the exact one-sided binomial
+    test does not reject a coverage of at least 95 %: ``P(X <= inside | scans, 0.95) >
+    BINOMIAL_LEVEL``. The scan count keeps a small study (38 scans: one miss is 2.6 %) from
+    verifying anything; the test keeps a large one from verifying a coverage that is 92.5 %
+    but significantly below 95 %.
+    """
+    if scans < MIN_STUDY_SCANS:
+        return False
+    if inside / scans < COVERAGE_TOLERANCE[0]:
+        return False
+    return float(binom.cdf(inside, scans, 0.95)) > BINOMIAL_LEVEL
+
+
+DEMO_SCANS = 200
+"""Scans of the demo scenario's study (:data:`COVERAGE_STUDY`)."""
 
 
 class FamilyCoverage(NamedTuple):
@@ -122,21 +155,19 @@ class FamilyCoverage(NamedTuple):
 
     @property
     def consistent(self) -> bool:
-        """Coverage within ``max(3 %, 2 u)`` of 95 % (or every scan flagged)."""
-        if self.scans == self.flagged:
-            return True
-        return abs(self.coverage - 0.95) <= max(0.03, 2.0 * self.u)
+        """:func:`coverage_verified` over the unflagged scans."""
+        return coverage_verified(self.inside, self.scans - self.flagged)
 
 
-FAMILY_STUDY_COMMAND = "python benchmarks/bench_section_coverage.py --scans 50 --workers 2"
+FAMILY_STUDY_COMMAND = "python benchmarks/bench_section_coverage.py --scans 200 --workers 2"
 """The command whose output :data:`FAMILY_STUDY` holds."""
 
 _FAMILY_COUNTS: dict[str, tuple[int, int, tuple[int, ...], tuple[int, ...]]] = {
     # family: (scans, flagged, inside per parameter among the unflagged, inside among all)
-    "smooth": (50, 1, (48, 46, 46, 48, 45, 45, 45, 47, 46), (48, 47, 47, 49, 46, 46, 46, 48, 47)),
-    "side": (50, 10, (39, 38, 38, 39, 37, 36, 39, 35, 35), (47, 48, 48, 49, 47, 44, 49, 44, 43)),
-    "edge": (50, 12, (35, 34, 35, 35, 36, 36, 35, 33, 32), (45, 45, 47, 47, 48, 47, 45, 44, 42)),
-    "erosion": (50, 13, (37, 35, 35, 36, 33, 35, 34, 33, 30), (50, 48, 48, 49, 46, 48, 44, 46, 42)),
+    "smooth": (200, 6, (186, 187, 184, 186, 178, 190, 188, 185, 186), (190, 193, 190, 192, 184, 196, 191, 191, 192)),
+    "side": (200, 33, (151, 156, 164, 163, 158, 161, 163, 157, 159), (179, 188, 196, 195, 191, 192, 196, 188, 188)),
+    "edge": (200, 37, (151, 151, 154, 153, 157, 161, 159, 153, 156), (184, 185, 190, 188, 191, 196, 196, 188, 192)),
+    "erosion": (200, 70, (121, 120, 124, 126, 122, 130, 126, 121, 119), (186, 189, 191, 192, 191, 198, 194, 187, 183)),
 }
 
 FAMILY_STUDY: dict[str, dict[str, FamilyCoverage]] = {
@@ -170,8 +201,8 @@ def stated_coverage(name: str, method: str, check: ResidualCheck | None = None) 
         ``reflected`` (method ``seed``, the max/min parameters) or ``denoised``; coverage the
         lowest of the demo scenario's study and (``jcgm101``, ``denoised``: the offsets and twist
         are linear in the errors, so both methods state the same interval) the scenario families'
-        unflagged scans; verified only when `check` is given and did not flag the cloud, the demo
-        study lies in :data:`COVERAGE_TOLERANCE` and every family is consistent with 95 %.
+        unflagged scans; verified only when `check` is given and did not flag the cloud, and the
+        demo study and every family verify the coverage (:func:`coverage_verified`).
     """
     study = COVERAGE_STUDY[name]
     if method == "denoised":
@@ -182,7 +213,7 @@ def stated_coverage(name: str, method: str, check: ResidualCheck | None = None) 
         msg = f"unknown method {method!r}"
         raise ValueError(msg)
     value = float(getattr(study, kind))
-    verified = COVERAGE_TOLERANCE[0] <= value <= COVERAGE_TOLERANCE[1]
+    verified = coverage_verified(round(value * DEMO_SCANS), DEMO_SCANS)
     if kind != "reflected":
         lowest, consistent = family_coverage(name)
         value = min(value, lowest) if math.isfinite(lowest) else value
@@ -326,6 +357,7 @@ def section_report_dict(
         "candidate_counts": list(result.candidate_counts),
         "parameters": rows,
         "residual_check": None if result.check is None else _check_dict(result.check),
+        "roughness_envelope": _envelope_dict(result),
         "coverage_note": coverage_summary(result),
         "gum_with_repeatability": repeatability_budget(result),
         **(extra or {}),
@@ -413,6 +445,26 @@ def format_repeatability_budget(result: SectionUncertainty, name: str = "chord_l
     return "\n".join(lines)
 
 
+def _envelope_dict(result: SectionUncertainty) -> dict[str, Any] | None:
+    """The profiles' roughness envelope (SI): the interval limits at the smooth and rough limits."""
+    envelope = result.envelope
+    if envelope is None:
+        return None
+    return {
+        "n_draws": envelope.n_draws,
+        "seed": envelope.seed,
+        "spawn_key": [ENVELOPE_STREAM],
+        "coverage_probability": envelope.coverage_probability,
+        "profiles": {
+            name: {
+                "low_at_smooth_limit_m": float(envelope.measured[k] - envelope.smooth_high[k]),
+                "high_at_rough_limit_m": float(envelope.measured[k] - envelope.rough_low[k]),
+            }
+            for k, name in enumerate(PROFILE_PARAMETERS)
+        },
+    }
+
+
 def _check_dict(check: ResidualCheck) -> dict[str, Any]:
     return {
         "flagged": check.flagged,
@@ -452,7 +504,12 @@ def coverage_summary(result: SectionUncertainty) -> str:
     """What the residual check of this cloud and the measured coverage say about its intervals (one paragraph)."""
     method = result.method
     check = result.check
-    lo, hi = COVERAGE_TOLERANCE
+    lo = COVERAGE_TOLERANCE[0]
+    rule = (
+        f"at least {lo:.0%} and not significantly below 95 % (exact one-sided binomial test at "
+        f"{BINOMIAL_LEVEL:.0%}, at least {MIN_STUDY_SCANS} scans) over {_DEMO_SCENARIO_TEXT} and over the unflagged "
+        "scans of every scenario family"
+    )
     study = ", ".join(f"{_LABELS[n]} {v.denoised:.1%}" for n, v in COVERAGE_STUDY.items())
     seed = ", ".join(f"{_LABELS[n]} {v.jcgm101:.1%}" for n, v in COVERAGE_STUDY.items())
     reflected = ", ".join(f"{_LABELS[n]} {v.reflected:.1%}" for n, v in COVERAGE_STUDY.items())
@@ -466,15 +523,9 @@ def coverage_summary(result: SectionUncertainty) -> str:
             "intervals of a part with a feature it does not follow can miss the truth."
         )
     elif not failing:
-        cloud = (
-            f"This cloud: {check.describe()}. Every stated interval is coverage-verified for it "
-            f"({lo:.0%}-{hi:.0%} over {_DEMO_SCENARIO_TEXT}, and consistent with 95 % in every scenario family)."
-        )
+        cloud = f"This cloud: {check.describe()}. Every stated interval is coverage-verified for it (coverage {rule})."
     else:
-        cloud = (
-            f"This cloud: {check.describe()}. NOT coverage-verified ({lo:.0%}-{hi:.0%} over "
-            f"{_DEMO_SCENARIO_TEXT}, or consistent with 95 % in every scenario family): " + ", ".join(failing) + "."
-        )
+        cloud = f"This cloud: {check.describe()}. NOT coverage-verified (coverage {rule}): " + ", ".join(failing) + "."
     families = (
         f" Scenario families (method 'denoised', {FAMILY_STUDY_COMMAND}; smooth forms of 2-13 waves, bumps and "
         f"dents of 1-10 um over 1-20 mm on the sides and at the edges, edge erosion): {_family_text()}."
@@ -492,7 +543,11 @@ def coverage_summary(result: SectionUncertainty) -> str:
             "Mallows' Cp with the instrument's noise variance and narrowed per point where narrower windows "
             "disagree, intersection of confidence intervals) and the interval for the true value is "
             "[f(y) - q97.5, f(y) - q2.5] of that error; the estimate is the measured value f(y), the bias the "
-            f"mean error. Over {_DEMO_SCENARIO_TEXT} its 95 % intervals cover the truth in: {study}."
+            "mean error. A profile interval is widened to the union with the same interval at the smoothest "
+            "form the scan supports (one Cp window) and at the roughest (the measured deviations): a local "
+            "feature the noise hides from the residual check can make the true form anywhere between, and "
+            "its noise bias with it (asymmetric, wider than the Monte Carlo interval; it over-covers a "
+            f"smooth part). Over {_DEMO_SCENARIO_TEXT} its 95 % intervals cover the truth in: {study}."
             + families
             + background
         )
@@ -510,7 +565,10 @@ def _coverage_cell(name: str, result: SectionUncertainty) -> str:
     _, value, verified = stated_coverage(name, result.method, result.check)
     if result.check is None or result.check.flagged:
         return "not verified for this cloud"
-    return f"{value:.1%} verified" if verified else f"{value:.1%} NOT VERIFIED"
+    if not verified:
+        return f"{value:.1%} NOT VERIFIED"
+    # value is the lowest of the studies: above 98 % every study over-covers.
+    return f"{value:.1%} verified" + (" (over-covers)" if value > COVERAGE_TOLERANCE[1] else "")
 
 
 GUM_CHECK_LEGEND = (

@@ -313,11 +313,17 @@ def _coverage_of_scan(k: int) -> NDArray[np.bool_]:
     summary = summarize(run_trials(block, seed=k, n_trials=2000, block_size=2000).samples, 0.95, bins=10)
     intervals = [out.probabilistically_symmetric for out in summary.outputs]
     denoised = summarize(run_trials(setup.trials(), seed=k, n_trials=2000, block_size=2000).samples, 0.95, bins=10)
+    envelope = setup.envelope(k)
+    assert envelope is not None
+    stated = [
+        envelope.widen(name, out.probabilistically_symmetric.low, out.probabilistically_symmetric.high)
+        for name, out in zip(PARAMETER_NAMES, denoised.outputs)
+    ]
     return np.array(
         [
             [iv.contains(t) for iv, t in zip(intervals, truth)],
             [2 * y[j] - iv.high <= truth[j] <= 2 * y[j] - iv.low for j, iv in enumerate(intervals)],
-            [out.probabilistically_symmetric.contains(t) for out, t in zip(denoised.outputs, truth)],
+            [low <= t <= high for (low, high), t in zip(stated, truth)],
         ]
     )
 
@@ -332,11 +338,12 @@ def test_coverage_over_200_simulated_scans() -> None:
     twist, profiles LE/TE/PS/SS):
 
     - method ``denoised`` (the error sampled around the denoised cloud, widest window by Cp,
-      narrowed per point, twicing): 94.5, 93.5, 93.5, 94.5, 93.5, 92.5, 93.5, 93.5, 92 %: every
-      parameter within 92-98 %, the suction-side profile on the lower limit (the offsets, linear
-      in the errors and exact in either method, cover 93.5-94.5 % on the same scans: the
-      binomial standard error is 1.5 %); with one global Cp window (before issue 23) it was
-      94.5, 93.5, 93.5, 94.5, 93.5, 92.5, 92.5, 94, 92 %;
+      narrowed per point, twicing; the profiles widened to the roughness envelope of
+      ``inspection.resolution``): 94.5, 93.5, 93.5, 94.5, 93.5, 96.5, 97, 97, 96 %: every
+      parameter within 92-98 % (the offsets, linear in the errors and exact in either method,
+      cover 93.5-94.5 % on the same scans: the binomial standard error is 1.5 %); the profiles
+      without the envelope covered 92.5, 93.5, 93.5, 92 %, and with one global Cp window
+      (before issue 23) 92.5, 92.5, 94, 92 %;
     - method ``seed`` (the measured cloud perturbed), JCGM 101 interval:
       72, 89.5, 93.5, 94.5, 94.5, 0, 0, 0, 0 % (the noise bias of the max/min parameters counted
       twice); reflected about the measured value (bias-corrected): 89, 90.5, 93.5, 94.5, 93.5,
@@ -370,9 +377,9 @@ def test_coverage_over_200_simulated_scans() -> None:
 def test_coverage_over_scenario_families() -> None:
     """Issue 23: 10 scans of each scenario family (smooth forms of 2-13 waves; bumps and dents of
     1-10 µm over 1-20 mm on the sides and at the edges; edge erosion), truth from the noise-free
-    part, method ``denoised`` with 2 000 trials and the residual check; about 2 minutes on two
-    cores. The study the report quotes (``FAMILY_STUDY``) is 50 scans per family of the same
-    seeds (``benchmarks/bench_section_coverage.py --scans 50``); with 10 scans per family one
+    part, method ``denoised`` with 2 000 trials and the residual check; 40 s on two
+    cores. The study the report quotes (``FAMILY_STUDY``) is 200 scans per family of the same
+    seeds (``benchmarks/bench_section_coverage.py --scans 200``); with 10 scans per family one
     miss is 10 % and the binomial standard uncertainty at 95 % is 7 %.
     """
     workers = min(2, os.cpu_count() or 1)
@@ -387,12 +394,11 @@ def test_coverage_over_scenario_families() -> None:
     inside = np.array([o.inside for o in smooth if not o.flagged])
     assert (inside.mean(axis=0) >= 0.8).all(), inside.mean(axis=0)
     local = [o for f in ("side", "edge", "erosion") for o in by_family[f]]
-    # The check fires on local features (10 of 30 here, 35 of 150 in the 50-scan study).
+    # The check fires on local features (140 of 600 in the 200-scan study).
     assert sum(o.flagged for o in local) >= 4
     kept = np.array([o.inside for o in local if not o.flagged])
     coverage = kept.mean(axis=0)
-    # Offsets, twist, thickness, chord and edge profiles hold with local features (89-100 % per
-    # family in the 50-scan study); the side profiles under-cover on unflagged scans (81-88 % in
-    # the 50-scan study), which is why the report never states them verified.
-    assert (coverage[:7] >= 0.85).all(), coverage
-    assert (coverage[7:] >= 0.7).all(), coverage
+    # Every parameter holds with local features, the side profiles too now that their intervals
+    # reach the roughest form the scan supports (inspection.resolution; before it they covered
+    # 81-88 % of the unflagged scans in the 50-scan study and 0.7 was all this test could ask).
+    assert (coverage >= 0.85).all(), coverage
