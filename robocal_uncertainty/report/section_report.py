@@ -35,7 +35,7 @@ from scipy.stats import binom
 
 from robocal_uncertainty.inspection.bias_correction import BiasCorrection
 from robocal_uncertainty.inspection.denoise import ResidualCheck
-from robocal_uncertainty.inspection.resolution import ENVELOPE_STREAM, PROFILE_PARAMETERS
+from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS, ENVELOPE_STREAM
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, PARAMETER_UNITS
 from robocal_uncertainty.inspection.section_mc import SectionUncertainty
 
@@ -446,7 +446,7 @@ def format_repeatability_budget(result: SectionUncertainty, name: str = "chord_l
 
 
 def _envelope_dict(result: SectionUncertainty) -> dict[str, Any] | None:
-    """The profiles' roughness envelope (SI): the interval limits at the smooth and rough limits."""
+    """The max/min parameters' roughness envelope (SI): the interval limits at the smooth and rough limits."""
     envelope = result.envelope
     if envelope is None:
         return None
@@ -455,12 +455,12 @@ def _envelope_dict(result: SectionUncertainty) -> dict[str, Any] | None:
         "seed": envelope.seed,
         "spawn_key": [ENVELOPE_STREAM],
         "coverage_probability": envelope.coverage_probability,
-        "profiles": {
+        "parameters": {
             name: {
                 "low_at_smooth_limit_m": float(envelope.measured[k] - envelope.smooth_high[k]),
                 "high_at_rough_limit_m": float(envelope.measured[k] - envelope.rough_low[k]),
             }
-            for k, name in enumerate(PROFILE_PARAMETERS)
+            for k, name in enumerate(ENVELOPE_PARAMETERS)
         },
     }
 
