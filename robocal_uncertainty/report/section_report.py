@@ -81,8 +81,8 @@ class Coverage(NamedTuple):
 
 
 COVERAGE_STUDY: dict[str, Coverage] = {
-    "max_thickness": Coverage(0.72, 0.89, 0.945),
-    "chord_length": Coverage(0.895, 0.905, 0.935),
+    "max_thickness": Coverage(0.72, 0.89, 0.96),
+    "chord_length": Coverage(0.895, 0.905, 0.94),
     "axial_offset": Coverage(0.935, 0.935, 0.935),
     "circumferential_offset": Coverage(0.945, 0.945, 0.945),
     "twist_angle": Coverage(0.945, 0.935, 0.935),
