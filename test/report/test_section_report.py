@@ -107,7 +107,8 @@ def test_report_files_and_content(demo: SectionInspection, tmp_path: Path) -> No
     markdown = files.markdown.read_text()
     assert "## Coverage of the intervals: this cloud's check and the simulated studies" in markdown
     assert "| profile, suction side | 95.9% ± 1.6% | 95.2% ± 1.7% | 95.7% ± 1.7% | 91.5% ± 1.9% |" in markdown
-    # This report's column: the lowest of the demo study and the families (side 92.8 %, smooth 97.4 %).
+    # This report's column: the lowest of the demo study and the families (thickness: side 92.8 %;
+    # pressure-side profile: erosion 93.1 %).
     assert "| maximum thickness | 72.0% | 89.0% | 96.0% | denoised 92.8% verified |" in markdown
     assert "| profile, pressure side | 0.0% | 7.5% | 97.0% | denoised 93.1% verified |" in markdown
     assert "## GUM budget per source" in markdown
