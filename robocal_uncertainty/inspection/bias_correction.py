@@ -62,7 +62,7 @@ class BiasCorrection:
         Method ``seed``: the probabilistically symmetric Monte Carlo interval reflected about
         ``measured`` (kind ``probabilistically_symmetric`` of the reflected distribution);
         method ``denoised``: the probabilistically symmetric Monte Carlo interval itself, for the
-        profiles widened to the roughness envelope (:mod:`.resolution`, when the result has one)
+        max/min parameters widened to the roughness envelope (:mod:`.resolution`, when the result has one)
         [m or rad]; limits clipped at 0 for :data:`MAX_MIN_PARAMETERS`.
     recommended : bool
         True for :data:`MAX_MIN_PARAMETERS` (state this interval), False for the linear
@@ -94,7 +94,7 @@ def bias_corrections(result: SectionUncertainty) -> tuple[BiasCorrection, ...]:
         if denoised:  # the Monte Carlo values are f(y) - Δ already
             bias = float(y - output.estimate)
             low, high, estimate = float(mc.low), float(mc.high), float(output.estimate)
-            if result.envelope is not None:  # profiles: widened to the roughness limits
+            if result.envelope is not None:  # max/min parameters: widened to the roughness limits
                 low, high = result.envelope.widen(name, low, high)
         else:
             bias = float(output.estimate - y)

@@ -26,7 +26,7 @@ Families (:data:`FAMILIES`; every draw from the scan's own seeded stream):
     leading- or trailing-edge extreme point.
 
 :func:`study_scan` gives, per scan, whether each parameter's stated 95 % interval (method
-``denoised``, the profiles widened to the roughness envelope of :mod:`.resolution`, clipped at 0
+``denoised``, the max/min parameters widened to the roughness envelope of :mod:`.resolution`, clipped at 0
 for the max/min parameters, as the report states it) holds the truth,
 and whether the per-scan residual check (:class:`~.denoise.ResidualCheck`) flagged the scan.
 """
@@ -253,7 +253,7 @@ def study_scan(family: str, index: int, *, trials: int = 2000, root_seed: int = 
     inside = np.empty(len(PARAMETER_NAMES), dtype=bool)
     for j, (name, out) in enumerate(zip(PARAMETER_NAMES, outputs)):
         low, high = out.probabilistically_symmetric.low, out.probabilistically_symmetric.high
-        if envelope is not None:  # the profiles' roughness envelope, as the report states it
+        if envelope is not None:  # the max/min parameters' roughness envelope, as the report states it
             low, high = envelope.widen(name, low, high)
         if name in MAX_MIN_PARAMETERS:  # the report clips the non-negative lengths at 0
             low, high = max(low, 0.0), max(high, 0.0)

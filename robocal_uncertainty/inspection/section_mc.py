@@ -777,7 +777,7 @@ class TrialSetup:
     measured_sources: tuple[ErrorSource, ...] = ()
 
     def envelope(self, seed: int, coverage: float = 0.95) -> ResolutionEnvelope | None:
-        """The profiles' roughness envelope (:mod:`.resolution`) for method ``denoised``, else None."""
+        """The max/min parameters' roughness envelope (:mod:`.resolution`) for method ``denoised``, else None."""
         if self.denoised is None:
             return None
         return resolution_envelope(
@@ -962,8 +962,8 @@ class SectionUncertainty:
         The measured cloud's residual check (:class:`~.denoise.ResidualCheck`, either method): when
         it flags the cloud, the intervals are not verified for it.
     envelope : ResolutionEnvelope or None
-        Method ``denoised``: the profiles' error quantiles at the smoothest and the roughest form
-        the scan supports (:mod:`.resolution`); the stated profile intervals
+        Method ``denoised``: the max/min parameters' error quantiles at the smoothest and the
+        roughest form the scan supports (:mod:`.resolution`); their stated intervals
         (:func:`~.bias_correction.bias_corrections`) are widened to them. None for ``seed``.
     """
 

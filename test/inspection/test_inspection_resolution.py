@@ -1,4 +1,5 @@
-"""Roughness envelope of the profile intervals (issue 23): its quantiles against analytic cases."""
+"""Roughness envelope of the max/min intervals (issue 23): its quantiles against analytic cases and
+the full thickness and chord algorithm."""
 
 from __future__ import annotations
 
@@ -11,13 +12,14 @@ from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument
 from robocal_uncertainty.inspection.denoise import normal_noise_variance
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
-from robocal_uncertainty.inspection.resolution import PROFILE_PARAMETERS, resolution_envelope
-from robocal_uncertainty.inspection.section import SectionEvaluation, evaluate_section
+from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS, ENVELOPE_STREAM, resolution_envelope
+from robocal_uncertainty.inspection.section import SectionEvaluation, chord_length, evaluate_section, max_thickness
 from robocal_uncertainty.inspection.section_mc import section_sources
+from robocal_uncertainty.inspection.segmentation import PRESSURE_SIDE, SUCTION_SIDE
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 
-PS = PROFILE_PARAMETERS.index("profile_pressure_side")
-SS = PROFILE_PARAMETERS.index("profile_suction_side")
+PS = ENVELOPE_PARAMETERS.index("profile_pressure_side")
+SS = ENVELOPE_PARAMETERS.index("profile_suction_side")
 
 
 @pytest.fixture(scope="module")
@@ -51,12 +53,48 @@ def test_widen_never_narrows_and_leaves_other_parameters(clean: SectionEvaluatio
     envelope = resolution_envelope(clean, sources, clean.registration.residual, seed=1)
     again = resolution_envelope(clean, sources, clean.registration.residual, seed=1)
     np.testing.assert_array_equal(envelope.rough_low, again.rough_low)  # seeded
-    assert envelope.widen("chord_length", 1.0, 2.0) == (1.0, 2.0)
+    assert envelope.widen("twist_angle", 1.0, 2.0) == (1.0, 2.0)
     y = float(envelope.measured[SS])
     # A Monte Carlo interval already wider than the envelope stays as it is.
     assert envelope.widen("profile_suction_side", -1.0, 1.0) == (-1.0, 1.0)
     low, high = envelope.widen("profile_suction_side", math.inf, -math.inf)
     assert low == pytest.approx(y - envelope.smooth_high[SS]) and high == pytest.approx(y - envelope.rough_low[SS])
+
+
+def test_thickness_and_chord_errors_equal_the_full_algorithm(clean: SectionEvaluation) -> None:
+    """At the rough limit (the measured points themselves) the thickness and chord errors are
+    those of :func:`max_thickness` and :func:`chord_length` run on every perturbed cloud, the same
+    draws (per-point sources first, then the common ones, from the envelope's stream): the
+    envelope's quantiles equal the full algorithm's to round-off."""
+    sources = section_sources(clean, CmmInstrument())
+    n = 120
+    envelope = resolution_envelope(clean, sources, clean.registration.residual, seed=3, n_draws=n)
+    rng = np.random.default_rng(np.random.SeedSequence(3, spawn_key=(ENVELOPE_STREAM,)))
+    ordered = [s for s in sources if s.kind != "common"] + [s for s in sources if s.kind == "common"]
+    index = np.arange(clean.points.shape[0])
+    shift = np.zeros((n, index.size, 2))
+    for source in ordered:
+        shift += source.displacement(source.draw(rng, n), index)
+    seg = clean.segmentation
+    pressure, suction = seg.indices(PRESSURE_SIDE), seg.indices(SUCTION_SIDE)
+    moved = clean.points + shift
+    thickness = np.array([max_thickness(m[pressure], m[suction]).value for m in moved])
+    chord = np.array([chord_length(m)[0] for m in moved])
+    y = clean.parameters.as_array()[:2]
+    full = np.column_stack([thickness, chord]) - y
+    np.testing.assert_allclose(envelope.rough_low[:2], np.quantile(full, 0.025, axis=0), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(envelope.measured[:2], y, rtol=0, atol=0)
+    # A smooth limit 5 um of three waves away: its points moved along the normals, then the same.
+    residual = clean.registration.residual
+    smooth = residual + 5e-6 * np.sin(np.linspace(0.0, 6.0 * np.pi, residual.size))
+    other = resolution_envelope(clean, sources, smooth, seed=3, n_draws=n)
+    base = clean.points + (smooth - residual)[:, np.newaxis] * clean.registration.normal
+    at_base = np.array([max_thickness(base[pressure], base[suction]).value, chord_length(base)[0]])
+    moved = base + shift
+    thickness = np.array([max_thickness(m[pressure], m[suction]).value for m in moved])
+    chord = np.array([chord_length(m)[0] for m in moved])
+    full = np.column_stack([thickness, chord]) - at_base
+    np.testing.assert_allclose(other.smooth_high[:2], np.quantile(full, 0.975, axis=0), rtol=0, atol=1e-12)
 
 
 def test_bad_settings_are_refused(clean: SectionEvaluation) -> None:

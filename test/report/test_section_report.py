@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.app.section_inspection import SectionInspection, section_demo
-from robocal_uncertainty.inspection.resolution import PROFILE_PARAMETERS
+from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES
 from robocal_uncertainty.report.section_report import (
     COVERAGE_STUDY,
@@ -32,10 +32,11 @@ from robocal_uncertainty.report.section_report import (
     write_section_report,
 )
 
-# Not verified (coverage_verified over the families' unflagged scans, 200 scans per family): maximum
-# thickness (side family 90.4 %, significantly below 95 %), twist (smooth family 91.8 %, likewise)
-# and the suction-side profile (erosion family 91.5 %, below 92 %).
-VERIFIED_DENOISED = [False, True, True, True, False, True, True, True, False]
+# Not verified (coverage_verified over the families' unflagged scans, 200 scans per family): twist
+# (smooth family 91.8 %, significantly below 95 %) and the suction-side profile (erosion family
+# 91.5 %, below 92 %). Maximum thickness is verified since the envelope widens it (side family
+# 92.8 %; 90.4 % before).
+VERIFIED_DENOISED = [True, True, True, True, False, True, True, True, False]
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +55,7 @@ def test_demo_knows_its_truth_and_offsets_are_covered(demo: SectionInspection) -
     assert 1e-6 < outputs[0].standard_uncertainty < 2e-6
     assert 3e-6 < demo.result.gum.outputs[1].expanded_uncertainty < 6e-6
     # Method denoised (the default): the Monte Carlo values are f(y) - Δ, so the stated interval
-    # is the Monte Carlo interval (the profiles' widened to the roughness envelope, clipped at 0
+    # is the Monte Carlo interval (the max/min parameters' widened to the roughness envelope, clipped at 0
     # for the max/min lengths) and the bias of the max/min parameters is positive.
     assert demo.result.method == "denoised"
     envelope = demo.result.envelope
@@ -62,13 +63,13 @@ def test_demo_knows_its_truth_and_offsets_are_covered(demo: SectionInspection) -
     for fix, out in zip(demo.corrections, outputs):
         mc = out.probabilistically_symmetric
         low, high = mc.low, mc.high
-        if fix.name.startswith("profile"):
-            k = PROFILE_PARAMETERS.index(fix.name)
+        if fix.name in ENVELOPE_PARAMETERS:
+            k = ENVELOPE_PARAMETERS.index(fix.name)
             assert envelope.measured[k] == pytest.approx(fix.measured, abs=1e-15)
             low = min(low, float(envelope.measured[k] - envelope.smooth_high[k]))
             high = max(high, float(envelope.measured[k] - envelope.rough_low[k]))
-            # The roughest form has the smallest noise bias: the upper limit rises.
-            assert high > mc.high, fix.name
+            # The roughest form has the smallest noise bias: a profile's upper limit rises.
+            assert high > mc.high or not fix.name.startswith("profile"), fix.name
         low, high = (max(low, 0.0), max(high, 0.0)) if fix.recommended else (low, high)
         assert (fix.interval.low, fix.interval.high) == (low, high)
         assert fix.bias == pytest.approx(fix.measured - out.estimate, abs=1e-15)
@@ -106,8 +107,9 @@ def test_report_files_and_content(demo: SectionInspection, tmp_path: Path) -> No
     markdown = files.markdown.read_text()
     assert "## Coverage of the intervals: this cloud's check and the simulated studies" in markdown
     assert "| profile, suction side | 95.9% ± 1.6% | 95.2% ± 1.7% | 95.7% ± 1.7% | 91.5% ± 1.9% |" in markdown
-    # This report's column: the lowest of the demo study and the families (side 90.4 %, erosion 93.1 %).
-    assert "| maximum thickness | 72.0% | 89.0% | 94.5% | denoised 90.4% NOT VERIFIED |" in markdown
+    # This report's column: the lowest of the demo study and the families (thickness: side 92.8 %;
+    # pressure-side profile: erosion 93.1 %).
+    assert "| maximum thickness | 72.0% | 89.0% | 96.0% | denoised 92.8% verified |" in markdown
     assert "| profile, pressure side | 0.0% | 7.5% | 97.0% | denoised 93.1% verified |" in markdown
     assert "## GUM budget per source" in markdown
     with files.csv.open() as stream:
