@@ -35,6 +35,15 @@ def add_installed_msg_module() -> None:
             return
 
 
+def installed_share() -> Path:
+    """The package's share directory in the colcon install (config, msg files as installed)."""
+    for prefix in os.environ["AMENT_PREFIX_PATH"].split(os.pathsep):
+        share = Path(prefix) / "share" / "robocal_uncertainty"
+        if (share / "package.xml").is_file():
+            return share
+    raise AssertionError("robocal_uncertainty is not in AMENT_PREFIX_PATH")
+
+
 class Proc:
     """A command in a process group of its own, output to a log file; stop() ends the group."""
 

@@ -3,31 +3,21 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import REPO, run
+from live_support import REPO, installed_share, run
 
 INTERFACES = ["msg/CalibrationSample", "msg/CalibrationResult", "msg/PoseUncertainty", "srv/SuggestPoses"]
-
-
-def _share() -> Path:
-    for prefix in os.environ["AMENT_PREFIX_PATH"].split(os.pathsep):
-        share = Path(prefix) / "share" / "robocal_uncertainty"
-        if (share / "package.xml").is_file():
-            return share
-    raise AssertionError("robocal_uncertainty is not in AMENT_PREFIX_PATH")
 
 
 @pytest.mark.parametrize("name", INTERFACES)
 def test_interface_show_prints_the_definition_file(ros_env, name) -> None:
     source = (REPO / f"{name}.{name.split('/')[0]}").read_text(encoding="utf-8")
-    installed = _share() / f"{name}.{name.split('/')[0]}"
+    installed = installed_share() / f"{name}.{name.split('/')[0]}"
     assert installed.is_file() and not installed.is_symlink(), f"{installed} is missing or a link"
     assert installed.read_text(encoding="utf-8") == source
     shown = run(["ros2", "interface", "show", f"robocal_uncertainty/{name}"], ros_env, timeout_s=60)

@@ -7,7 +7,6 @@ publishes the markers of the poses' positions, stays OK on /diagnostics and answ
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,20 +14,10 @@ import yaml
 
 rclpy = pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import SEED_TEST_JOINTS_DEG, add_installed_msg_module, call, run, spin_until, started
+from live_support import SEED_TEST_JOINTS_DEG, add_installed_msg_module, call, installed_share, run, spin_until, started
 
 N_POSES = 12
 TRIALS = 2000
-
-
-def _share() -> Path:
-    import os
-
-    for prefix in os.environ["AMENT_PREFIX_PATH"].split(os.pathsep):
-        share = Path(prefix) / "share" / "robocal_uncertainty"
-        if (share / "package.xml").is_file():
-            return share
-    raise AssertionError("robocal_uncertainty is not in AMENT_PREFIX_PATH")
 
 
 def test_six_dof_campaign_live(ros_env, tmp_path) -> None:
@@ -54,7 +43,7 @@ def test_six_dof_campaign_live(ros_env, tmp_path) -> None:
     write_raw_bag(
         bag, simulated, RawBagSettings(joint_rate_hz=125.0, tracker_rate_hz=250.0, dwell_s=0.3, move_s=0.15), seed=21
     )
-    config = yaml.safe_load((_share() / "config" / "robocal.yaml").read_text())
+    config = yaml.safe_load((installed_share() / "config" / "robocal.yaml").read_text())
     config["uncertainty_node"]["ros__parameters"]["trials"] = TRIALS
     config_file = tmp_path / "robocal.yaml"
     config_file.write_text(yaml.safe_dump(config))

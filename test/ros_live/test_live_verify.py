@@ -8,27 +8,16 @@ collector wrote; the verdict is on /diagnostics and on the latched ``robocal/ver
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 import yaml
 
 rclpy = pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import add_installed_msg_module, call, run, spin_until, started
+from live_support import add_installed_msg_module, call, installed_share, run, spin_until, started
 
 N_CHECK = 10
 NULL_TRIALS = 4000
-
-
-def _share() -> Path:
-    import os
-
-    for prefix in os.environ["AMENT_PREFIX_PATH"].split(os.pathsep):
-        share = Path(prefix) / "share" / "robocal_uncertainty"
-        if (share / "package.xml").is_file():
-            return share
-    raise AssertionError("robocal_uncertainty is not in AMENT_PREFIX_PATH")
 
 
 def test_verify_service_live_equals_the_command_line(ros_env, tmp_path) -> None:
@@ -58,7 +47,7 @@ def test_verify_service_live_equals_the_command_line(ros_env, tmp_path) -> None:
     bag = tmp_path / "check_raw.mcap"
     raw = RawBagSettings(joint_rate_hz=125.0, tracker_rate_hz=250.0, dwell_s=0.3, move_s=0.15)
     write_raw_bag(bag, check, raw, seed=22)
-    config = yaml.safe_load((_share() / "config" / "robocal.yaml").read_text())
+    config = yaml.safe_load((installed_share() / "config" / "robocal.yaml").read_text())
     params = config["calibration_node"]["ros__parameters"]
     params["min_samples"] = 1000  # a check session is verified, not calibrated from
     params["verify_null_trials"] = NULL_TRIALS
