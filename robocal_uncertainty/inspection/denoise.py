@@ -116,6 +116,9 @@ class DenoisedCloud:
     smooth_deviation : ndarray, shape (n,) [m]
         Fit of the one window ``half_width`` at every point, without local narrowing or twicing:
         the smoothest form the data support (:mod:`.resolution`).
+    smooth_std : ndarray, shape (n,) [m]
+        Standard deviation of ``smooth_deviation``'s noise at each point (its window's weights
+        and the per-point noise variance): how far its extremes may stand out by noise alone.
     """
 
     points: NDArray[np.float64]
@@ -127,6 +130,7 @@ class DenoisedCloud:
     local_half_width: NDArray[np.float64]
     check: ResidualCheck
     smooth_deviation: NDArray[np.float64]
+    smooth_std: NDArray[np.float64]
 
 
 def smooth_normal_deviation(
@@ -509,6 +513,7 @@ def denoise_section(
     chosen = np.zeros(n, dtype=np.intp)
     rows: list[tuple[NDArray[np.float64], NDArray[np.intp]]] = []
     fits = np.empty((len(tried), n))
+    sd = np.zeros(n)
     for k, h in enumerate(tried):
         weights, source, _ = _smoother_rows(reg.parameter, reg.normal, period, h, everywhere)
         fits[k] = np.einsum("iw,iw->i", weights, r[source])
@@ -545,6 +550,7 @@ def denoise_section(
         local_half_width=local,
         check=check,
         smooth_deviation=smooth,
+        smooth_std=sd,
     )
 
 

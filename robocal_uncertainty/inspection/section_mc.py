@@ -781,7 +781,12 @@ class TrialSetup:
         if self.denoised is None:
             return None
         return resolution_envelope(
-            self.measured, self.measured_sources, self.denoised.smooth_deviation, seed=seed, coverage=coverage
+            self.measured,
+            self.measured_sources,
+            self.denoised.smooth_deviation,
+            seed=seed,
+            coverage=coverage,
+            smooth_std=self.denoised.smooth_std,
         )
 
     def trials(self, batch: int = 1000, *, resegment_edges: bool = True) -> SectionTrials:

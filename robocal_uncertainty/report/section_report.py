@@ -455,6 +455,7 @@ def _envelope_dict(result: SectionUncertainty) -> dict[str, Any] | None:
         "seed": envelope.seed,
         "spawn_key": [ENVELOPE_STREAM],
         "coverage_probability": envelope.coverage_probability,
+        "profile_plateau_factor": envelope.plateau_factor,
         "parameters": {
             name: {
                 "low_at_smooth_limit_m": float(envelope.measured[k] - envelope.smooth_high[k]),

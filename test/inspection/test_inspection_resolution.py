@@ -106,3 +106,47 @@ def test_bad_settings_are_refused(clean: SectionEvaluation) -> None:
         resolution_envelope(clean, sources, r, seed=0, n_draws=10)
     with pytest.raises(ConfigError, match="shape"):
         resolution_envelope(clean, sources, r[:-1], seed=0)
+
+
+def test_plateau_extremes_flattens_what_the_fit_cannot_tell_from_the_extreme() -> None:
+    """Hand-computed: region 0 = [0, 3.5, 4, 1, -2] with sd 1 -> the points within 1 of the
+    maximum 4 (3.5) go to 4, those within 1 of the minimum -2 (none besides it) stay; region 1 is
+    flat to within its band: each point goes to the nearer extreme, max and min stay."""
+    from robocal_uncertainty.inspection.resolution import plateau_extremes
+
+    d = np.array([0.0, 3.5, 4.0, 1.0, -2.0, 0.1, 0.0, 0.05, 0.2])
+    labels = np.array([0, 0, 0, 0, 0, 1, 1, 1, 1])
+    out = plateau_extremes(d, np.ones(9), labels, 1.0)
+    np.testing.assert_array_equal(out, [0.0, 4.0, 4.0, 1.0, -2.0, 0.2, 0.0, 0.0, 0.2])
+    np.testing.assert_array_equal(plateau_extremes(d, np.ones(9), labels, 0.0), d)
+    np.testing.assert_array_equal(plateau_extremes(d, np.zeros(9), labels, 1.0), d)
+
+
+def test_a_flattened_plateau_has_the_larger_noise_bias(clean: SectionEvaluation) -> None:
+    """A smooth limit with a 200-point suction-side plateau rippled by its fit's noise (0-3 um
+    below its top point, sd 3 um): flattened, its profile errors equal those of the same limit
+    with the plateau set flat by hand (the lengths keep the unflattened limit), and the 97.5 %
+    quantile rises (200 points at the maximum instead of a few: a larger noise bias)."""
+    sources = section_sources(clean, CmmInstrument())
+    side = np.flatnonzero(clean.segmentation.labels == 3)
+    smooth = np.zeros(clean.points.shape[0])
+    smooth[side] = np.linspace(-20e-6, 0.0, side.size)
+    plateau = side[side.size // 2 : side.size // 2 + 200]
+    smooth[plateau] = 30e-6 - np.random.default_rng(0).uniform(0.0, 3e-6, plateau.size)
+    smooth[plateau[100]] = 30e-6
+    std = np.full(smooth.shape, 3e-6)
+    plain = resolution_envelope(clean, sources, smooth, seed=4, n_draws=4000)
+    flat = resolution_envelope(clean, sources, smooth, seed=4, n_draws=4000, smooth_std=std)
+    by_hand = smooth.copy()
+    by_hand[plateau] = 30e-6
+    # The minimum band: the side's first 3 um of the ramp (points within 3 um of -20 um).
+    by_hand[side[smooth[side] <= -17e-6]] = -20e-6
+    reference = resolution_envelope(clean, sources, by_hand, seed=4, n_draws=4000)
+    assert flat.plateau_factor == 1.0 and plain.plateau_factor == 0.0
+    assert flat.smooth_high[SS] == pytest.approx(reference.smooth_high[SS], rel=0, abs=1e-15)
+    sd = math.sqrt(float(normal_noise_variance(sources, clean.registration.normal)[side].mean()))
+    assert flat.smooth_high[SS] > plain.smooth_high[SS] + 0.3 * sd
+    np.testing.assert_array_equal(flat.smooth_high[:2], plain.smooth_high[:2])
+    np.testing.assert_array_equal(flat.rough_low, plain.rough_low)
+    with pytest.raises(ConfigError, match="smooth_std"):
+        resolution_envelope(clean, sources, smooth, seed=0, smooth_std=-std)
