@@ -74,6 +74,7 @@ __all__ = [
     "PLATEAU_FACTOR",
     "PROFILE_PARAMETERS",
     "ResolutionEnvelope",
+    "plateau_extremes",
     "resolution_envelope",
 ]
 
@@ -174,8 +175,10 @@ def plateau_extremes(
         x, b = d[at], band[at]
         # Where the bands of a nearly flat region overlap, a point goes to the nearer extreme:
         # the maximum and the minimum themselves stay where they are.
-        up = (x >= top - b) & ((x <= bottom + b) <= (top - x <= x - bottom))
-        down = (x <= bottom + b) & ~up
+        in_top, in_bottom = x >= top - b, x <= bottom + b
+        nearer_top = top - x <= x - bottom
+        up = in_top & (~in_bottom | nearer_top)
+        down = in_bottom & ~up
         out[np.flatnonzero(at)[up]] = top
         out[np.flatnonzero(at)[down]] = bottom
     return out
