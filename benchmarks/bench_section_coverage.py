@@ -7,7 +7,7 @@ within ±10 mm of the leading or trailing edge), ``erosion`` (an edge flattened 
 package's parameter extraction (the truth), one draw of the seed's CMM errors, method
 ``denoised`` with ``--trials`` Monte Carlo trials, and the residual check.
 
-Run: ``python benchmarks/bench_section_coverage.py [--scans 60] [--workers 2] [--families ...] [--seed 23]``.
+Run: ``python benchmarks/bench_section_coverage.py [--scans 60] [--workers 2] [--families ...] [--seed 23] [--first 0]``.
 Prints per family and parameter the coverage over all scans and over the scans the check did
 not flag (± the binomial standard uncertainty at 95 %), the flagged count, the time, and the
 counts in the form of ``report.section_report._FAMILY_COUNTS``.
@@ -32,16 +32,21 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=2000, help="Monte Carlo trials per scan")
     parser.add_argument("--families", nargs="+", default=list(FAMILIES), choices=FAMILIES)
     parser.add_argument("--seed", type=int, default=23, help="root seed of the study (the stored study: 23)")
+    parser.add_argument(
+        "--first", type=int, default=0, help="first scan index (scans first .. first + scans - 1 of every family)"
+    )
     parser.add_argument("--misses", action="store_true", help="list every scan with a miss")
     args = parser.parse_args()
 
     start = time.perf_counter()
-    outcomes = run_study(args.families, args.scans, trials=args.trials, workers=args.workers, root_seed=args.seed)
+    outcomes = run_study(
+        args.families, args.scans, trials=args.trials, workers=args.workers, root_seed=args.seed, first=args.first
+    )
     elapsed = time.perf_counter() - start
     rows = summarize_study(outcomes)
     print(
         f"{len(outcomes)} scans ({args.scans} per family), {args.trials} trials each, {args.workers} workers: "
-        f"root seed {args.seed}: {elapsed:.0f} s"
+        f"root seed {args.seed}, scans {args.first}-{args.first + args.scans - 1}: {elapsed:.0f} s"
     )
     print("coverage of the 95 % intervals: unflagged scans (± binomial u) / all scans")
     print(f"{'parameter':24s} " + " ".join(f"{f:>26s}" for f in args.families))
