@@ -7,7 +7,8 @@ within ±10 mm of the leading or trailing edge), ``erosion`` (an edge flattened 
 package's parameter extraction (the truth), one draw of the seed's CMM errors, method
 ``denoised`` with ``--trials`` Monte Carlo trials, and the residual check.
 
-Run: ``python benchmarks/bench_section_coverage.py [--scans 60] [--workers 2] [--families ...] [--seed 23] [--first 0]``.
+Run: ``python benchmarks/bench_section_coverage.py [--scans 60] [--workers 2] [--families ...] [--seed 23]
+[--first 0]``.
 Prints per family and parameter the coverage over all scans and over the scans the check did
 not flag (± the binomial standard uncertainty at 95 %), the flagged count, the time, and the
 counts in the form of ``report.section_report._FAMILY_COUNTS``.

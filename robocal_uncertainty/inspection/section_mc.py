@@ -970,6 +970,10 @@ class SectionUncertainty:
         Method ``denoised``: the max/min parameters' error quantiles at the smoothest and the
         roughest form the scan supports (:mod:`.resolution`); their stated intervals
         (:func:`~.bias_correction.bias_corrections`) are widened to them. None for ``seed``.
+    n_points : int
+        Points of the measured cloud (0 when not recorded).
+    nominal_length : float
+        Contour length of the nominal section [m] (nan when not recorded).
     """
 
     parameters: SectionParameters
@@ -987,6 +991,8 @@ class SectionUncertainty:
     denoised: DenoisedCloud | None = None
     check: ResidualCheck | None = None
     envelope: ResolutionEnvelope | None = None
+    n_points: int = 0
+    nominal_length: float = float("nan")
 
 
 def section_uncertainty(
@@ -1150,6 +1156,8 @@ def section_uncertainty(
         denoised=prepared.denoised,
         check=prepared.check,
         envelope=prepared.envelope(seed, p),
+        n_points=int(evaluation.points.shape[0]),
+        nominal_length=float(curve.period),
     )
 
 

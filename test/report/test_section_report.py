@@ -23,20 +23,22 @@ from robocal_uncertainty.report.section_report import (
     GUM_CHECK_LEGEND,
     SECTION_REPORT_FILES,
     SECTION_REPORT_FORMAT,
+    binomial_tail,
     coverage_verified,
     family_coverage,
     format_repeatability_budget,
     format_section_table,
+    holm_adjusted,
+    outside_study_scope,
     section_report_dict,
     stated_coverage,
     write_section_report,
 )
 
-# Not verified (coverage_verified over the families' unflagged scans, 200 scans per family): twist
-# (smooth family 91.8 %, significantly below 95 %) and the suction-side profile (erosion family
-# 91.5 %, below 92 %). Maximum thickness is verified since the envelope widens it (side family
-# 92.8 %; 90.4 % before).
-VERIFIED_DENOISED = [True, True, True, True, False, True, True, True, True]
+# Every parameter verified over the families' unflagged scans (600 scans per family; the lowest
+# cell, the twist in the smooth family, 93.7 % of 570, p = 0.09 before Holm's adjustment). With
+# the first 200 scans alone the twist covered 91.8 % there, below the 92 % floor.
+VERIFIED_DENOISED = [True] * 9
 
 
 @pytest.fixture(scope="module")
@@ -101,17 +103,17 @@ def test_report_files_and_content(demo: SectionInspection, tmp_path: Path) -> No
     assert [row["coverage_verified"] for row in data["parameters"]] == VERIFIED_DENOISED
     note = data["coverage_note"]
     assert note.startswith("This cloud: residual check passed (p = ")
-    # Twist alone is not verified (smooth family 91.8 %).
-    assert "NOT coverage-verified" in note and "): twist angle." in note
+    assert "Every stated interval is coverage-verified for it" in note and "NOT coverage-verified" not in note
+    assert "Holm-adjusted over the study's 36 cells" in note
     assert "the demo scenario (Rotor 37 at the seed's size" in note and "Scenario families" in note
     assert "under-cover" in note and "72.0%" in note
     markdown = files.markdown.read_text()
     assert "## Coverage of the intervals: this cloud's check and the simulated studies" in markdown
-    assert "| profile, suction side | 96.4% ± 1.6% | 97.0% ± 1.7% | 96.9% ± 1.7% | 96.9% ± 1.9% |" in markdown
-    # This report's column: the lowest of the demo study and the families (thickness: side 92.8 %;
-    # pressure-side profile: erosion 93.8 %).
-    assert "| maximum thickness | 72.0% | 89.0% | 96.0% | denoised 92.8% verified |" in markdown
-    assert "| profile, pressure side | 0.0% | 7.5% | 97.5% | denoised 93.8% verified |" in markdown
+    assert "| profile, suction side | 97.2% ± 0.9% | 97.2% ± 1.0% | 96.7% ± 1.0% | 95.7% ± 1.1% |" in markdown
+    # This report's column: the lowest of the demo study and the families (thickness: side 94.9 %;
+    # pressure-side profile: erosion 95.7 %).
+    assert "| maximum thickness | 72.0% | 89.0% | 96.0% | denoised 94.9% verified |" in markdown
+    assert "| profile, pressure side | 0.0% | 7.5% | 97.5% | denoised 95.7% verified |" in markdown
     assert "## GUM budget per source" in markdown
     with files.csv.open() as stream:
         rows = list(csv.DictReader(stream))
@@ -125,14 +127,14 @@ def test_seed_method_flags_the_intervals_known_to_under_cover() -> None:
     data = section_report_dict(run.result, run.corrections)
     assert data["method"] == "seed" and data["denoise_half_width_m"] is None
     verified = {row["name"]: row["coverage_verified"] for row in data["parameters"]}
-    assert verified == {name: name in ("axial_offset", "circumferential_offset") for name in verified}
+    assert verified == {name: name in ("axial_offset", "circumferential_offset", "twist_angle") for name in verified}
     kinds = [row["stated_interval_kind"] for row in data["parameters"]]
     assert kinds == ["reflected", "reflected", "jcgm101", "jcgm101", "jcgm101", *["reflected"] * 4]
     note = data["coverage_note"]
     assert note.startswith("This cloud: residual check passed") and "NOT coverage-verified" in note
     table = format_section_table(run.result, run.corrections).splitlines()
     assert "bias-corrected interval" in table[0] and "GUM=MC(§8)" in table[0]
-    # Offsets: the lowest of the demo study (93.5 %) and the families (edge 94.5 %).
+    # Axial offset: the lowest of the demo study (93.5 %) and the families (erosion 94.0 %).
     assert table[2].endswith("89.0% NOT VERIFIED") and table[4].endswith("93.5% verified")
 
 
@@ -255,3 +257,70 @@ def test_coverage_verified_is_the_exact_binomial_rule(inside: int, scans: int, v
     assert coverage_verified(inside, scans) is verified
     if scans >= 53 and inside / scans >= 0.92:
         assert verified == (_binomial_lower_tail(inside, scans) > 0.05)
+
+
+def test_holm_adjusted_p_values_match_the_step_down_procedure() -> None:
+    # Holm (1979) by hand: sorted 0.005, 0.01, 0.03, 0.04 -> 4·0.005, 3·0.01, 2·0.03, max(1·0.04, 0.06).
+    assert holm_adjusted([0.01, 0.04, 0.03, 0.005]) == pytest.approx((0.03, 0.06, 0.06, 0.02), abs=1e-15)
+    assert math.isnan(holm_adjusted([0.2, math.nan])[1]) and holm_adjusted([0.2, math.nan])[0] == 0.2
+    # The step-down rule itself (reject p_(k) while p_(k) <= level / (m - k + 1), stop at the first
+    # that is not): the hypotheses it rejects are those whose adjusted p-value is <= level.
+    rng = np.random.default_rng(23)
+    for _ in range(200):
+        p = rng.uniform(0, 0.1, size=int(rng.integers(1, 40))) ** 2
+        level = float(rng.uniform(0.001, 0.1))
+        rejected = np.zeros(p.size, dtype=bool)
+        for rank, j in enumerate(np.argsort(p)):
+            if p[j] > level / (p.size - rank):
+                break
+            rejected[j] = True
+        assert np.array_equal(np.array(holm_adjusted(p.tolist())) <= level, rejected)
+
+
+def test_family_rule_rarely_fails_a_study_whose_intervals_all_cover_95_percent() -> None:
+    """The reason for Holm: with the study's cells drawn at exactly 95 % coverage, the per-cell 5 %
+    test fails some cell in most studies; the family-wise rule (with the 92 % floor) seldom does,
+    and it still fails cells that cover 90 %."""
+    kept = np.repeat([c.scans - c.flagged for c in (study["twist_angle"] for study in FAMILY_STUDY.values())], 9)
+    rng = np.random.default_rng(7)
+    per_cell_any = holm_any = holm_bad = 0
+    studies = 400
+    for _ in range(studies):
+        inside = rng.binomial(kept, 0.95)
+        tails = [binomial_tail(int(k), int(n)) for k, n in zip(inside, kept)]
+        per_cell_any += not all(coverage_verified(int(k), int(n)) for k, n in zip(inside, kept))
+        adjusted = holm_adjusted(tails)
+        holm_any += not all(coverage_verified(int(k), int(n), p_value=p) for k, n, p in zip(inside, kept, adjusted))
+        low = rng.binomial(kept[0], 0.90)
+        holm_bad += coverage_verified(int(low), int(kept[0]), p_value=1.0)
+    assert per_cell_any / studies > 0.5
+    assert holm_any / studies < 0.5 * per_cell_any / studies
+    # A cell that covers 90 % is not verified by the floor alone in most studies, whatever Holm says.
+    assert holm_bad / studies < 0.25
+
+
+def test_clouds_outside_the_studies_scope_are_never_stated_verified(demo: SectionInspection) -> None:
+    """The studies simulate 1 836-point scans of Rotor 37 at the seed's size on the seed's CMM;
+    their coverage is not carried to another point density, blade or instrument."""
+    from robocal_uncertainty.inspection.cmm_model import CmmInstrument
+
+    assert outside_study_scope(demo.result) is None
+    assert demo.result.n_points == 1836 and demo.result.nominal_length == pytest.approx(0.80977, abs=1e-5)
+    others = {
+        "1400 points, the studies 1836": dataclasses.replace(demo.result, n_points=1400),
+        "a nominal contour of 100.0 mm": dataclasses.replace(demo.result, nominal_length=0.1),
+        "an instrument other than the seed's CMM": dataclasses.replace(
+            demo.result, instrument=CmmInstrument(probing_half_width=1e-6)
+        ),
+        "points, the studies": dataclasses.replace(demo.result, n_points=0),  # not recorded
+    }
+    assert outside_study_scope(dataclasses.replace(demo.result, n_points=1900)) is None  # within 10 %
+    for reason, result in others.items():
+        assert reason in (outside_study_scope(result) or ""), reason
+        data = section_report_dict(result, demo.corrections)
+        assert not any(row["coverage_verified"] for row in data["parameters"])
+        assert "outside the scope of the coverage studies" in data["coverage_note"]
+        assert "Every stated interval" not in data["coverage_note"]
+        assert data["coverage_study_scope"]["outside_because"] == outside_study_scope(result)
+        table = format_section_table(result, demo.corrections)
+        assert "verified" not in table.replace("not verified for this cloud", "").replace("NOT verified", "")
