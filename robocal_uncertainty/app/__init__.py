@@ -19,6 +19,7 @@ from robocal_uncertainty._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from robocal_uncertainty.app.bag_replay import ReplayEvaluation, replay
+    from robocal_uncertainty.app.compensation import Compensation, compensate
     from robocal_uncertainty.app.evaluation import Evaluation, evaluate
     from robocal_uncertainty.app.forward_kinematics import ToolPoints, tool_points
     from robocal_uncertainty.app.pose_suggestion import PoseSuggestion, Suggestions, suggest_poses
@@ -28,6 +29,7 @@ if TYPE_CHECKING:
     from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
 __all__ = [
+    "Compensation",
     "Evaluation",
     "EvaluationOptions",
     "PoseSuggestion",
@@ -36,6 +38,7 @@ __all__ = [
     "SimulationFiles",
     "Suggestions",
     "ToolPoints",
+    "compensate",
     "evaluate",
     "inspect_section",
     "replay",

@@ -28,6 +28,7 @@ VERB_MODULES = (
     "suggest",
     "section",
     "export",
+    "compensate",
 )
 """The commands, in the order ``--help`` lists them: one module of this package each, with
 ``register(subparsers)`` (its options) and ``run(args) -> int`` (its work and printing). A new

@@ -1,0 +1,474 @@
+"""The compensation service: joints that reach Cartesian targets under the calibrated model,
+with the stated uncertainty of where the robot then goes.
+
+A controller moving to a Cartesian target computes its joints with its own (factory)
+kinematics, so a calibration changes nothing there unless the joints are computed for it:
+:func:`compensate` gives, per target, the joints that put the calibrated model's measured
+point (and tool frame, when an orientation is given) on the target, as a small correction of
+seed joints on the same IK branch (:mod:`robocal_uncertainty.core.inverse_kinematics`), and
+refuses per target, one line each, what it cannot state: an unreachable target, a solution
+beyond the joint limits, a near-singular target, a correction larger than the limit or one
+that changed the branch.
+
+Seeds: the joints the controller would use (``seeds``, e.g. its own IK solution); without
+them the nominal model's solution, found by the same iteration from the calibration
+campaign's pose nearest to the target (the robot was there, on the branch its program uses).
+
+The uncertainty of the reached position is the validated statement of ``evaluate``: the
+same :func:`~robocal_uncertainty.app.evaluation.evaluate` Monte Carlo (the calibration
+campaign re-identified per trial, with the model error), with all accepted compensated
+joints as its test configurations in one batched run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.calibration_file import apply_calibration
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.inverse_kinematics import (
+    UR_JOINT_NAMES,
+    IkSettings,
+    IkSolution,
+    model_reach,
+    solve_near,
+)
+from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.importers.targets import Targets
+from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.options import EvaluationOptions
+
+__all__ = [
+    "COMPENSATION_FORMAT",
+    "REPRODUCTION_TOLERANCE_M",
+    "Compensation",
+    "compensate",
+    "targets_frame",
+]
+
+Array = NDArray[np.float64]
+
+COMPENSATION_FORMAT = "robocal_uncertainty/compensation/1"
+REPRODUCTION_TOLERANCE_M = 1e-6
+"""Largest difference [m], at the compensated joints, between the calibration file's model and
+the re-identification of its campaign that the uncertainty run makes: above it the campaign is
+not the calibration's (or another lambda) and its statement would be about another model."""
+PLAUSIBLE_REACH_FACTOR = 3.0
+"""A target farther than this many reaches from the robot base is refused as a unit error
+(a file of millimetres labelled metres puts targets hundreds of reaches away)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Compensation:
+    """Compensated joint targets.
+
+    Attributes
+    ----------
+    robot : str
+    joint_names : tuple of str
+    frame : {"measurement", "base"}
+    frame_id : str
+        Frame of the targets and of the stated positions.
+    targets : Targets
+    seed_source : str
+        ``"given"`` or ``"nominal IK from the nearest campaign pose"``.
+    nominal_joints : ndarray, shape (n, n_joints)
+        The joints the correction starts from (the seeds, or the nominal model's solution).
+    joints : ndarray, shape (n, n_joints) [rad; m]
+        The compensated joints (the last iterate for refused targets).
+    accepted : ndarray of bool, shape (n,)
+    status : tuple of str
+        ``"ok"`` or why the target is refused (one line).
+    solution : IkSolution
+        Diagnostics of the calibrated solve.
+    settings : IkSettings
+    uncertainty : CalibrationUncertainty or None
+        The Monte Carlo statement at the accepted joints (their order); None when not asked.
+    reproduction_m : float or None
+        Largest difference between the calibration file's model and the re-identification
+        (see :data:`REPRODUCTION_TOLERANCE_M`).
+    prismatic : tuple of bool
+        The robot's prismatic joints (their values in m).
+    tool_frame : str
+        What an orientation target orients: the calibrated tool frame, or the flange frame
+        when the calibration carries no tool rotation (point data).
+    """
+
+    robot: str
+    joint_names: tuple[str, ...]
+    frame: str
+    frame_id: str
+    targets: Targets
+    seed_source: str
+    nominal_joints: Array
+    joints: Array
+    accepted: NDArray[np.bool_]
+    status: tuple[str, ...]
+    solution: IkSolution
+    settings: IkSettings
+    uncertainty: CalibrationUncertainty | None = None
+    reproduction_m: float | None = None
+    prismatic: tuple[bool, ...] = ()
+    tool_frame: str = "tool"
+
+    def csv_text(self) -> str:
+        """Joint targets, one row per accepted target (index 1-based), units in the header."""
+        prismatic = self.prismatic or (False,) * len(self.joint_names)
+        units = ["m" if p else "rad" for p in prismatic]
+        head = ["target"] + [f"{n}_{u}" for n, u in zip(self.joint_names, units)]
+        lines = [",".join(head)]
+        for i in np.flatnonzero(self.accepted):
+            lines.append(",".join([str(i + 1)] + [repr(float(v)) for v in self.joints[i]]))
+        return "\n".join(lines) + "\n"
+
+    def urscript_text(self, *, acceleration: float = 1.4, velocity: float = 1.05) -> str:
+        """A URScript program moving through the accepted targets (``movej``, rad, rad/s^2, rad/s).
+
+        Raises
+        ------
+        ConfigError
+            The robot is not a UR arm (joints ``shoulder_pan_joint`` ... ``wrist_3_joint``).
+        """
+        if tuple(self.joint_names) != UR_JOINT_NAMES:
+            msg = f"--urscript is for Universal Robots arms; robot {self.robot!r} has joints {list(self.joint_names)}"
+            raise ConfigError(msg)
+        lines = [
+            "def compensated_targets():",
+            f"  # {int(self.accepted.sum())} of {self.targets.n} targets of {self.targets.source}, compensated by "
+            f"robocal-uncertainty under the calibrated {self.robot} model (frame {self.frame_id});",
+            "  # refused targets are left out (see the JSON). Joints in rad, a in rad/s^2, v in rad/s.",
+        ]
+        for i in np.flatnonzero(self.accepted):
+            q = ", ".join(f"{float(v):.9f}" for v in self.joints[i])
+            lines.append(f"  movej([{q}], a={acceleration:g}, v={velocity:g})  # target {i + 1}")
+        lines.append("end")
+        return "\n".join(lines) + "\n"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: settings, per target the joints, errors, status and uncertainty (SI)."""
+        sol = self.solution
+        result: dict[str, Any] = {
+            "format": COMPENSATION_FORMAT,
+            "units": {"length": "m", "angle": "rad"},
+            "robot": self.robot,
+            "joint_names": list(self.joint_names),
+            "frame": self.frame,
+            "frame_id": self.frame_id,
+            "targets_file": self.targets.source,
+            "targets_units": {"length": self.targets.length_unit, "angle": self.targets.angle_unit or None},
+            "orientation": self.targets.orientation,
+            "oriented_frame": self.tool_frame if self.targets.rotations is not None else None,
+            "seed_source": self.seed_source,
+            "settings": {
+                "tolerance_m": self.settings.tolerance_m,
+                "tolerance_rad": self.settings.tolerance_rad,
+                "max_joint_change_rad": self.settings.max_joint_change_rad,
+                "condition_limit": self.settings.condition_limit,
+                "max_iterations": self.settings.max_iterations,
+            },
+            "branch_signs": list(sol.branch_names),
+            "n_targets": self.targets.n,
+            "n_accepted": int(self.accepted.sum()),
+            "reproduction_m": self.reproduction_m,
+        }
+        unc = self.uncertainty
+        if unc is not None:
+            result["uncertainty"] = {
+                "method": "Monte Carlo (JCGM 101) of evaluate: the calibration campaign re-identified per trial",
+                "sources": list(unc.settings.sources),
+                "trials": unc.n_trials,
+                "seed": unc.seed,
+                "coverage_probability": unc.coverage_probability,
+                "frame_id": unc.frame_id,
+                "trustworthy": bool(unc.model_adequacy.trustworthy),
+                "warnings": list(unc.warnings),
+            }
+        rows = []
+        k = 0
+        for i in range(self.targets.n):
+            row: dict[str, Any] = {
+                "target": i + 1,
+                "status": self.status[i],
+                "position_m": self.targets.points[i].tolist(),
+                "nominal_joints": self.nominal_joints[i].tolist(),
+                "joints": self.joints[i].tolist(),
+                "position_error_m": float(sol.position_error_m[i]),
+                "rotation_error_rad": float(sol.rotation_error_rad[i]) if self.targets.rotations is not None else None,
+                "joint_change": float(sol.joint_change[i]),
+                "condition": float(sol.condition[i]),
+                "branch_seed": sol.branch_seed[i].tolist(),
+                "branch": sol.branch[i].tolist(),
+            }
+            if self.accepted[i] and unc is not None:
+                pose = unc.poses[k]
+                k += 1
+                row["reached"] = {
+                    "mean_m": pose.mean.tolist(),
+                    "mean_minus_target_m": (pose.mean - self.targets.points[i]).tolist(),
+                    "standard_uncertainty_m": [a.standard_uncertainty for a in pose.axes],
+                    "expanded_uncertainty_m": [a.expanded_uncertainty for a in pose.axes],
+                    "interval_m": [[a.interval.low, a.interval.high] for a in pose.axes],
+                    "region_coverage_factor": None if pose.region is None else pose.region.coverage_factor,
+                    "covariance_m2": pose.covariance.tolist(),
+                }
+            rows.append(row)
+        result["targets"] = rows
+        return result
+
+
+def targets_frame(model: RobotModel, calibrated: RobotModel, frame: str | None) -> tuple[str, str]:
+    """The frame the targets are in (``measurement`` or ``base``) and its frame id.
+
+    Default: the measurement frame when the calibration identified the base (or the config
+    places it), else the base frame (as ``fk``)."""
+    p = calibrated.parameter_vector()
+    b0 = calibrated.layout.base_index
+    has_world = not np.allclose(p[b0 : b0 + 6], 0.0)
+    chosen = frame or ("measurement" if has_world else "base")
+    if chosen not in ("measurement", "base"):
+        msg = f"--frame must be measurement or base, got {chosen!r}"
+        raise ConfigError(msg)
+    if chosen == "measurement" and not has_world and not model.base_known:
+        msg = (
+            f"the {model.name} model's base is unknown in the measurement frame {model.measurement_frame_id} and the "
+            "calibration identified none: give the targets in the base frame (--frame base)"
+        )
+        raise ConfigError(msg)
+    return chosen, (calibrated.measurement_frame_id if chosen == "measurement" else calibrated.base_frame_id)
+
+
+def _frame_params(model: RobotModel, frame: str) -> Array:
+    p = model.parameter_vector()
+    if frame == "base":
+        b0 = model.layout.base_index
+        p[b0 : b0 + 6] = 0.0
+    return p
+
+
+def _check_plausible(targets: Targets, calibrated: RobotModel, params: Array) -> None:
+    """Refuse a file whose lengths are off by a unit factor, before any solve."""
+    b0 = calibrated.layout.base_index
+    origin = params[b0 : b0 + 3]
+    reach = model_reach(calibrated)
+    distance = np.linalg.norm(targets.points - origin, axis=1)
+    far = int(np.argmax(distance))
+    if distance[far] > PLAUSIBLE_REACH_FACTOR * reach:
+        hint = ""
+        if targets.length_unit == "m" and distance[far] * 1e-3 <= PLAUSIBLE_REACH_FACTOR * reach:
+            hint = ": millimetres labelled as metres?"
+        msg = (
+            f"targets {targets.source}: target {far + 1} is {distance[far]:.4g} m from the robot base, more than "
+            f"{PLAUSIBLE_REACH_FACTOR:g} x the robot's reach ({reach:.3g} m){hint} (header unit {targets.length_unit})"
+        )
+        raise InputError(msg)
+    if targets.n >= 3 and np.all(distance < 1e-2 * reach):
+        msg = (
+            f"targets {targets.source}: every target lies within {np.max(distance) * 1e3:.3g} mm of the robot base "
+            f"(reach {reach:.3g} m): metres labelled as {targets.length_unit}?"
+        )
+        raise InputError(msg)
+
+
+def _nearest_campaign_seeds(
+    nominal: RobotModel, nominal_params: Array, campaign_joints: Array, targets: Targets
+) -> Array:
+    points = forward_points(nominal.layout, nominal_params, campaign_joints)
+    gaps = np.linalg.norm(targets.points[:, None, :] - points[None, :, :], axis=2)
+    return np.asarray(campaign_joints[np.argmin(gaps, axis=1)], dtype=np.float64)
+
+
+def _status(model: RobotModel, solution: IkSolution, targets: Targets, settings: IkSettings) -> tuple[str, ...]:
+    out = []
+    lo, hi = model.joint_limits[:, 0] - 1e-9, model.joint_limits[:, 1] + 1e-9
+    for i in range(targets.n):
+        q = solution.joints[i]
+        pos, rot = solution.position_error_m[i], solution.rotation_error_rad[i]
+        cond = solution.condition[i]
+        if not np.isfinite(q).all():
+            out.append("refused: no solution (non-finite joints)")
+        elif pos > settings.tolerance_m or rot > settings.tolerance_rad:
+            what = f"{pos * 1e3:.4g} mm" + (f", {rot * 1e3:.4g} mrad" if targets.rotations is not None else "")
+            out.append(f"refused: unreachable from the seed (remaining error {what}; condition {cond:.3g} there)")
+        elif cond > settings.condition_limit:
+            out.append(
+                f"refused: near-singular (condition {cond:.3g} > {settings.condition_limit:g}): a target change of "
+                "the stated uncertainty would move the joints far; not a small correction"
+            )
+        elif solution.joint_change[i] > settings.max_joint_change_rad:
+            j = int(np.argmax(np.abs(q - solution.seeds[i])))
+            out.append(
+                f"refused: the correction moves {model.joint_names[j]} by {solution.joint_change[i]:.4g} rad "
+                f"(limit {settings.max_joint_change_rad:g})"
+            )
+        elif solution.branch.shape[1] and np.any(solution.branch[i] != solution.branch_seed[i]):
+            changed = [
+                f"{n} {int(a):+d} -> {int(b):+d}"
+                for n, a, b in zip(solution.branch_names, solution.branch_seed[i], solution.branch[i])
+                if a != b
+            ]
+            out.append(f"refused: branch changed ({', '.join(changed)})")
+        elif np.any((q < lo) | (q > hi)):
+            j = int(np.argmax((q < lo) | (q > hi)))
+            low, high = np.degrees(model.joint_limits[j])
+            out.append(
+                f"refused: beyond the joint limits ({model.joint_names[j]} = {math.degrees(q[j]):.6g} deg, "
+                f"limits [{low:.6g}, {high:.6g}] deg)"
+            )
+        else:
+            out.append("ok")
+    return tuple(out)
+
+
+def compensate(
+    model: RobotModel,
+    calibration: dict[str, Any],
+    targets: Targets,
+    *,
+    frame: str | None = None,
+    seeds: Array | None = None,
+    campaign: Campaign | None = None,
+    options: EvaluationOptions | None = None,
+    settings: IkSettings | None = None,
+    where: str = "calibration",
+    workers: int = 1,
+) -> Compensation:
+    """Joints reaching `targets` under the calibrated model and the uncertainty of the reached position.
+
+    Parameters
+    ----------
+    model : RobotModel
+        The nominal model the calibration was identified on.
+    calibration : dict
+        A calibration file's content (``read_calibration``).
+    targets : Targets
+        In the frame `frame`.
+    frame : {"measurement", "base"}, optional
+        See :func:`targets_frame`.
+    seeds : ndarray, shape (n_targets, n_joints) or (1, n_joints), optional
+        Joints the correction starts from and whose branch it keeps (e.g. the controller's
+        solution for each target). Default: the nominal model's solution from the campaign
+        pose nearest to each target (needs `campaign`).
+    campaign : Campaign, optional
+        The calibration's campaign: the seeds' start, and the Monte Carlo of the statement.
+    options : EvaluationOptions, optional
+        Monte Carlo settings (sources, trials, seed, coverage); ``test_joints``, ``lambda_``
+        and ``output_frame`` are set here. None: no uncertainty (joints only).
+    settings : IkSettings, optional
+    where : str
+        Names the calibration in messages.
+    workers : int
+        Monte Carlo worker processes; never changes the result.
+
+    Raises
+    ------
+    InputError
+        Targets implausible for the robot (unit error), seeds of the wrong shape or outside
+        the joint limits.
+    ConfigError
+        No seeds and no campaign; an uncertainty asked for without a campaign; a campaign that
+        does not reproduce the calibration.
+    """
+    from robocal_uncertainty.app.evaluation import evaluate
+    from robocal_uncertainty.core.joint_limits import check_joint_limits
+
+    settings = settings or IkSettings()
+    calibrated = apply_calibration(model, calibration, where=where)
+    nominal = model.with_tool_rotation() if calibrated.tool_rotation else model
+    chosen, frame_id = targets_frame(model, calibrated, frame)
+    cal_params = _frame_params(calibrated, chosen)
+    # The nominal model placed as the calibration found its base: nominal IK in the targets' frame.
+    nom_params = nominal.parameter_vector()
+    b0 = nominal.layout.base_index
+    nom_params[b0 : b0 + 6] = cal_params[b0 : b0 + 6]
+    _check_plausible(targets, calibrated, cal_params)
+    # Without a calibrated tool rotation (point data) an orientation is the flange's: said in the output.
+    tool_frame = (
+        "the calibrated tool frame (tool.rx, tool.ry, tool.rz)"
+        if calibrated.tool_rotation
+        else "the flange frame (the calibration has no tool rotation)"
+    )
+    n = targets.n
+    if seeds is not None:
+        q0 = np.atleast_2d(np.asarray(seeds, dtype=np.float64))
+        if q0.shape[1] != model.n_joints or q0.shape[0] not in (1, n):
+            msg = (
+                f"seed joints: {q0.shape[0]} configurations of {q0.shape[1]} joints for {n} targets of a "
+                f"{model.n_joints}-joint robot: give one, or one per target"
+            )
+            raise InputError(msg)
+        check_joint_limits(model, q0, what="seed configuration")
+        nominal_q = np.repeat(q0, n, axis=0) if q0.shape[0] == 1 else q0
+        seed_source = "given"
+    else:
+        if campaign is None:
+            msg = (
+                "no seed joints: give --seed-joints (e.g. the controller's joints for each target) "
+                "or the calibration's campaign"
+            )
+            raise ConfigError(msg)
+        start = _nearest_campaign_seeds(
+            nominal, nom_params, campaign.reorder_joints(model.joint_names).joint_positions, targets
+        )
+        nominal_solution = solve_near(
+            nominal, nom_params, start, targets.points, targets.rotations, replace(settings, max_iterations=300)
+        )
+        nominal_q = nominal_solution.joints
+        seed_source = "nominal IK from the nearest campaign pose"
+    solution = solve_near(calibrated, cal_params, nominal_q, targets.points, targets.rotations, settings)
+    status = _status(calibrated, solution, targets, settings)
+    accepted = np.array([s == "ok" for s in status])
+    uncertainty = None
+    reproduction = None
+    if options is not None and accepted.any():
+        if campaign is None:
+            msg = (
+                "the uncertainty of the reached positions needs the calibration's campaign: give --campaign "
+                "(or --no-uncertainty)"
+            )
+            raise ConfigError(msg)
+        lam = calibration.get("lambda")
+        if not isinstance(lam, (int, float)) or isinstance(lam, bool):
+            msg = f"{where} has no numeric 'lambda': cannot re-identify its campaign for the uncertainty"
+            raise ConfigError(msg)
+        q_ok = solution.joints[accepted]
+        run = replace(options, test_joints=q_ok, lambda_=float(lam), output_frame=chosen)
+        evaluation = evaluate(model, campaign, run, workers=workers)
+        again = model.with_tool_rotation() if evaluation.calibration.model.tool_rotation else model
+        reidentified = _frame_params(again.with_parameters(evaluation.calibration.estimate), chosen)
+        gap = forward_points(calibrated.layout, reidentified, q_ok) - forward_points(
+            calibrated.layout, cal_params, q_ok
+        )
+        reproduction = float(np.max(np.linalg.norm(gap, axis=1)))
+        if reproduction > REPRODUCTION_TOLERANCE_M:
+            msg = (
+                f"the campaign does not reproduce {where}: its re-identification (lambda {lam:g}) places the "
+                f"compensated points up to {reproduction * 1e3:.4g} mm away: give the campaign the calibration "
+                "was made from"
+            )
+            raise ConfigError(msg)
+        uncertainty = evaluation.uncertainty
+    return Compensation(
+        robot=model.name,
+        joint_names=tuple(model.joint_names),
+        frame=chosen,
+        frame_id=frame_id,
+        targets=targets,
+        seed_source=seed_source,
+        nominal_joints=nominal_q,
+        joints=solution.joints,
+        accepted=accepted,
+        status=status,
+        solution=solution,
+        settings=settings,
+        uncertainty=uncertainty,
+        reproduction_m=reproduction,
+        prismatic=tuple(model.prismatic),
+        tool_frame=tool_frame,
+    )
