@@ -293,14 +293,23 @@ def _status(model: RobotModel, solution: IkSolution, targets: Targets, settings:
         cond = solution.condition[i]
         if not np.isfinite(q).all():
             out.append("refused: no solution (non-finite joints)")
-        elif pos > settings.tolerance_m or rot > settings.tolerance_rad:
-            what = f"{pos * 1e3:.4g} mm" + (f", {rot * 1e3:.4g} mrad" if targets.rotations is not None else "")
-            out.append(f"refused: unreachable from the seed (remaining error {what}; condition {cond:.3g} there)")
-        elif cond > settings.condition_limit:
+        elif solution.branch_seed.shape[1] and np.any(solution.branch_seed[i] == 0):
+            zero = [n for n, v in zip(solution.branch_names, solution.branch_seed[i]) if v == 0]
             out.append(
-                f"refused: near-singular (condition {cond:.3g} > {settings.condition_limit:g}): a target change of "
-                "the stated uncertainty would move the joints far; not a small correction"
+                f"refused: the seed lies on a singularity ({', '.join(zero)} sign 0): it has no branch to keep; "
+                "give a seed off it"
             )
+        elif cond > settings.condition_limit or pos > settings.tolerance_m or rot > settings.tolerance_rad:
+            missed = pos > settings.tolerance_m or rot > settings.tolerance_rad
+            what = f"{pos * 1e3:.4g} mm" + (f", {rot * 1e3:.4g} mrad" if targets.rotations is not None else "")
+            if cond > settings.condition_limit:
+                out.append(
+                    f"refused: near-singular (condition {cond:.3g} > {settings.condition_limit:g}"
+                    + (f", remaining error {what}" if missed else "")
+                    + "): a target change of the stated uncertainty would move the joints far"
+                )
+            else:
+                out.append(f"refused: unreachable from the seed (remaining error {what}; condition {cond:.3g} there)")
         elif solution.joint_change[i] > settings.max_joint_change_rad:
             j = int(np.argmax(np.abs(q - solution.seeds[i])))
             out.append(
