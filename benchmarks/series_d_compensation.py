@@ -160,8 +160,9 @@ def main(argv: list[str] | None = None) -> int:
         f"joint corrections median {np.degrees(np.median(sol.joint_change[ok])) * 1e3:.1f} mdeg, "
         f"max {np.degrees(sol.joint_change[ok].max()) * 1e3:.1f} mdeg; reproduction {result.reproduction_m:.2g} m"
     )
-    for status in sorted({s for s in result.status if s != "ok"}):
-        print(f"  {sum(s == status for s in result.status)} x {status}")
+    for i in np.flatnonzero(~ok):
+        seed = " ".join(f"{v:.4f}" for v in q[held][i])
+        print(f"  target {i + 1}: {result.status[i]}; seed joints {seed} rad")
     unc = result.uncertainty
     assert unc is not None
     u = np.array([[a.standard_uncertainty for a in p.axes] for p in unc.poses])

@@ -322,7 +322,11 @@ def _status(model: RobotModel, solution: IkSolution, targets: Targets, settings:
                 for n, a, b in zip(solution.branch_names, solution.branch_seed[i], solution.branch[i])
                 if a != b
             ]
-            out.append(f"refused: branch changed ({', '.join(changed)})")
+            near = " (the seed lies next to a singularity)" if solution.joint_change[i] < 0.01 else ""
+            out.append(
+                f"refused: branch changed ({', '.join(changed)}) by a correction of "
+                f"{math.degrees(solution.joint_change[i]):.3g} deg{near}"
+            )
         elif np.any((q < lo) | (q > hi)):
             j = int(np.argmax((q < lo) | (q > hi)))
             low, high = np.degrees(model.joint_limits[j])
