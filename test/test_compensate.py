@@ -247,6 +247,7 @@ def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str,
         ("x_m,y_m,z_m,rx_deg,ry_deg,rz_deg\n0.5,0.2,0.3,180,0,0\n", [], "give --orientation-convention"),
         ("x_m,y_m,z_m\n0.5,0.2\n", [], "line 2: 2 cells, the header has 3"),
         ("x_m,y_m,z_m\n0.5,0.2,0.3\n", ["--seed-joints", "1", "2"], "--seed-joints must have 6 values"),
+        ("x_m,y_m,z_m\n0.5,0.2,0.3\n", ["--branch", "elbow=up"], "expected NAME=+1 or NAME=-1"),
         (
             "x_m,y_m,z_m\n0.5,0.2,0.3\n",
             ["--seed-joints", "0", "-150", "60", "20", "30", "10"],
@@ -321,3 +322,49 @@ def test_cli_writes_csv_json_and_urscript(tmp_path: Path, capsys: pytest.Capture
     assert script.count("movej([") == 2 and "a=1.4, v=1.05" in script
     # Read back as a target file, the YAML gives the same points.
     assert np.allclose(read_targets(targets).points, pts * 1e-3, atol=1e-15)
+
+
+def test_ur_analytic_ik_reproduces_the_pose_and_finds_the_original_joints() -> None:
+    from robocal_uncertainty.core.inverse_kinematics import ur_analytic_ik, ur_dh_parameters
+
+    model = load_robot_source("ur10").model
+    params = base_params(model)
+    params[model.layout.tool_index : model.layout.tool_index + 3] = 0.0  # the flange
+    q = np.random.default_rng(0).uniform(-np.pi, np.pi, (1000, 6))
+    points, rotations = forward_poses(model, params, q)
+    flange = np.tile(np.eye(4), (1000, 1, 1))
+    flange[:, :3, :3], flange[:, :3, 3] = rotations, points
+    solutions = ur_analytic_ik(model, flange)
+    assert solutions is not None and solutions.shape == (1000, 8, 6)
+    flat = solutions.reshape(-1, 6)
+    finite = np.isfinite(flat).all(axis=1)
+    got, got_rot = forward_poses(model, params, flat[finite])
+    # Measured: 4.9e-13 m and 2.7e-12 at most.
+    assert np.abs(got - np.repeat(points, 8, axis=0)[finite]).max() < 1e-9
+    assert np.abs(got_rot - np.repeat(rotations, 8, axis=0)[finite]).max() < 1e-9
+    gap = np.linalg.norm(np.angle(np.exp(1j * (solutions - q[:, None, :]))), axis=2)
+    assert np.nanmin(gap, axis=1).max() < 1e-9  # measured 3.2e-12 rad
+    assert ur_dh_parameters(load_robot_source("paper_arm").model) is None
+
+
+@pytest.mark.parametrize("branch", [(1, 1, 1), (-1, -1, 1), (1, -1, -1)])
+def test_pose_targets_without_seeds_on_a_requested_ur_branch(branch: tuple[int, int, int]) -> None:
+    from robocal_uncertainty.core.inverse_kinematics import branch_signs
+
+    model = load_robot_source("ur10").model
+    data = calibration_of(model, seed=3)
+    calibrated = apply_calibration(model, data)
+    q = np.random.default_rng(2).uniform(-np.pi, np.pi, (500, 6))
+    points, rotations = forward_poses(model, base_params(model), q)
+    wanted = dict(zip(("shoulder", "elbow", "wrist"), branch))
+    result = compensate(model, data, Targets(points, rotations, "t", "m", "rad"), frame="base", branch=wanted)
+    ok = result.accepted
+    assert result.seed_source.startswith("nominal analytic UR IK, branch shoulder")
+    # Measured: 86-88 % accepted; the rest near-singular, corrections above 0.05 rad, or no
+    # nominal solution on that branch (out of reach of the elbow).
+    assert ok.mean() > 0.8
+    signs, _ = branch_signs(model, base_params(calibrated), result.joints[ok])
+    assert np.all(signs == np.array(branch))
+    reached, reached_rot = forward_poses(calibrated, base_params(calibrated), result.joints[ok])
+    assert np.abs(reached - points[ok]).max() < 1e-9 and np.abs(reached_rot - rotations[ok]).max() < 1e-9
+    assert any(s.startswith("refused: the nominal model has no solution on the branch") for s in result.status)

@@ -35,11 +35,14 @@ from robocal_uncertainty.core.inverse_kinematics import (
     UR_JOINT_NAMES,
     IkSettings,
     IkSolution,
+    branch_signs,
     model_reach,
     solve_near,
+    ur_analytic_ik,
+    ur_dh_parameters,
 )
 from robocal_uncertainty.core.kinematics import forward_points
-from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.importers.targets import Targets
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
@@ -284,6 +287,96 @@ def _nearest_campaign_seeds(
     return np.asarray(campaign_joints[np.argmin(gaps, axis=1)], dtype=np.float64)
 
 
+def _nominal_seeds(
+    model: RobotModel,
+    nominal: RobotModel,
+    nom_params: Array,
+    targets: Targets,
+    campaign: Campaign | None,
+    branch: dict[str, int] | None,
+    settings: IkSettings,
+) -> tuple[Array, str, list[str]]:
+    """Seeds without given ones: the nominal model's solution; returns the seeds, their source and,
+    per target, why there is none ("" where there is one).
+
+    Pose targets of a UR arm: the analytic solution on `branch` (default: the branch of the
+    campaign pose nearest to the target), each joint turned by 2 pi to lie nearest to that pose.
+    Otherwise (points, other arms): the damped iteration on the nominal model from that pose.
+    """
+    n = targets.n
+    analytic = targets.rotations is not None and ur_dh_parameters(model) is not None
+    if campaign is None and not (analytic and branch is not None):
+        msg = (
+            "no seed joints: give --seed-joints (e.g. the controller's joints for each target) or the calibration's "
+            "campaign" + (" (or --branch for pose targets of a UR arm)" if analytic else "")
+        )
+        raise ConfigError(msg)
+    start = None
+    if campaign is not None:
+        joints = campaign.reorder_joints(model.joint_names).joint_positions
+        start = _nearest_campaign_seeds(nominal, nom_params, joints, targets)
+    if not analytic:
+        assert start is not None
+        found = solve_near(
+            nominal, nom_params, start, targets.points, targets.rotations, replace(settings, max_iterations=300)
+        )
+        return found.joints, "nominal IK from the nearest campaign pose", [""] * n
+    assert targets.rotations is not None
+    # Target tool frames -> flange poses in the robot base frame (the nominal chain's frame).
+    layout = nominal.layout
+    b0, t0, r0 = layout.base_index, layout.tool_index, layout.tool_rotation_index
+    world_t_base = np.eye(4)
+    world_t_base[:3, :3] = rpy_to_matrix(nom_params[b0 + 3 : b0 + 6])
+    world_t_base[:3, 3] = nom_params[b0 : b0 + 3]
+    flange_t_tool = np.eye(4)
+    if r0 is not None:
+        flange_t_tool[:3, :3] = rpy_to_matrix(nom_params[r0 : r0 + 3])
+    flange_t_tool[:3, 3] = nom_params[t0 : t0 + 3]
+    tool = np.tile(np.eye(4), (n, 1, 1))
+    tool[:, :3, :3] = targets.rotations
+    tool[:, :3, 3] = targets.points
+    flange = np.linalg.inv(world_t_base) @ tool @ np.linalg.inv(flange_t_tool)
+    solutions = ur_analytic_ik(model, flange)
+    assert solutions is not None
+    base_only = nom_params.copy()
+    base_only[b0 : b0 + 6] = 0.0
+    flat = solutions.reshape(-1, 6)
+    finite = np.isfinite(flat).all(axis=1)
+    flat_signs = np.zeros((flat.shape[0], 3), dtype=np.int64)
+    flat_signs[finite], names = branch_signs(nominal, base_only, flat[finite])
+    signs = flat_signs.reshape(n, 8, 3)
+    if branch is not None:
+        unknown = sorted(set(branch) - set(names))
+        if unknown:
+            msg = f"--branch names {', '.join(unknown)}; a UR branch is {', '.join(names)} (each +1 or -1)"
+            raise ConfigError(msg)
+        wanted = np.tile([branch.get(k, 0) for k in names], (n, 1))
+        source = "nominal analytic UR IK, branch " + ", ".join(f"{k} {branch[k]:+d}" for k in names if k in branch)
+    else:
+        assert start is not None
+        wanted, _ = branch_signs(nominal, base_only, start)
+        source = "nominal analytic UR IK, on the branch of the nearest campaign pose"
+    match = np.all((signs == wanted[:, None, :]) | (wanted[:, None, :] == 0), axis=2) & np.isfinite(solutions).all(
+        axis=2
+    )
+    reference = start if start is not None else np.zeros((n, 6))
+    seeds = reference.copy()
+    missing = [""] * n
+    lo, hi = model.joint_limits[:, 0], model.joint_limits[:, 1]
+    for i in range(n):
+        options = solutions[i][match[i]]
+        if options.shape[0] == 0:
+            wish = ", ".join(f"{k} {int(v):+d}" for k, v in zip(names, wanted[i]) if v)
+            missing[i] = f"refused: the nominal model has no solution on the branch ({wish})"
+            continue
+        # Each joint turned by whole turns to lie nearest to the reference, within the limits.
+        turns = np.round((reference[i] - options) / (2 * np.pi))
+        shifted = options + 2 * np.pi * turns
+        shifted = np.where(shifted > hi, shifted - 2 * np.pi, np.where(shifted < lo, shifted + 2 * np.pi, shifted))
+        seeds[i] = shifted[np.argmin(np.linalg.norm(shifted - reference[i], axis=1))]
+    return seeds, source, missing
+
+
 def _status(model: RobotModel, solution: IkSolution, targets: Targets, settings: IkSettings) -> tuple[str, ...]:
     out = []
     lo, hi = model.joint_limits[:, 0] - 1e-9, model.joint_limits[:, 1] + 1e-9
@@ -349,6 +442,7 @@ def compensate(
     campaign: Campaign | None = None,
     options: EvaluationOptions | None = None,
     settings: IkSettings | None = None,
+    branch: dict[str, int] | None = None,
     where: str = "calibration",
     workers: int = 1,
 ) -> Compensation:
@@ -374,6 +468,11 @@ def compensate(
         Monte Carlo settings (sources, trials, seed, coverage); ``test_joints``, ``lambda_``
         and ``output_frame`` are set here. None: no uncertainty (joints only).
     settings : IkSettings, optional
+    branch : dict of str to int, optional
+        Without `seeds`, for pose targets of a UR arm: the analytic nominal solution's branch
+        (``{"shoulder": 1, "elbow": -1, "wrist": 1}``, see
+        :func:`~robocal_uncertainty.core.inverse_kinematics.branch_signs`); default the branch
+        of the campaign pose nearest to the target.
     where : str
         Names the calibration in messages.
     workers : int
@@ -396,10 +495,16 @@ def compensate(
     nominal = model.with_tool_rotation() if calibrated.tool_rotation else model
     chosen, frame_id = targets_frame(model, calibrated, frame)
     cal_params = _frame_params(calibrated, chosen)
-    # The nominal model placed as the calibration found its base: nominal IK in the targets' frame.
+    # The nominal kinematics with the calibration's base placement and tool: the seed differs from
+    # the calibrated solution by the kinematic correction alone (a probe mounted turned by 90 deg
+    # is not a correction).
     nom_params = nominal.parameter_vector()
-    b0 = nominal.layout.base_index
+    b0, t0 = nominal.layout.base_index, nominal.layout.tool_index
     nom_params[b0 : b0 + 6] = cal_params[b0 : b0 + 6]
+    nom_params[t0 : t0 + 3] = cal_params[t0 : t0 + 3]
+    r0 = nominal.layout.tool_rotation_index
+    if r0 is not None:
+        nom_params[r0 : r0 + 3] = cal_params[r0 : r0 + 3]
     _check_plausible(targets, calibrated, cal_params)
     # Without a calibrated tool rotation (point data) an orientation is the flange's: said in the output.
     tool_frame = (
@@ -420,22 +525,13 @@ def compensate(
         nominal_q = np.repeat(q0, n, axis=0) if q0.shape[0] == 1 else q0
         seed_source = "given"
     else:
-        if campaign is None:
-            msg = (
-                "no seed joints: give --seed-joints (e.g. the controller's joints for each target) "
-                "or the calibration's campaign"
-            )
-            raise ConfigError(msg)
-        start = _nearest_campaign_seeds(
-            nominal, nom_params, campaign.reorder_joints(model.joint_names).joint_positions, targets
+        nominal_q, seed_source, no_seed = _nominal_seeds(
+            model, nominal, nom_params, targets, campaign, branch, settings
         )
-        nominal_solution = solve_near(
-            nominal, nom_params, start, targets.points, targets.rotations, replace(settings, max_iterations=300)
-        )
-        nominal_q = nominal_solution.joints
-        seed_source = "nominal IK from the nearest campaign pose"
     solution = solve_near(calibrated, cal_params, nominal_q, targets.points, targets.rotations, settings)
     status = _status(calibrated, solution, targets, settings)
+    if seeds is None:
+        status = tuple(no_seed[i] or s for i, s in enumerate(status))
     accepted = np.array([s == "ok" for s in status])
     uncertainty = None
     reproduction = None

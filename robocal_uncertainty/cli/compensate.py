@@ -41,6 +41,12 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--degrees", action="store_true", help="seed joint values are in degrees (default radians)")
     p.add_argument(
+        "--branch",
+        help="UR arms, pose targets, no seeds: the branch of the analytic nominal solution, e.g. "
+        "shoulder=+1,elbow=+1,wrist=-1 (signs of the shoulder term, sin(elbow_joint), sin(wrist_2_joint); "
+        "default: the branch of the campaign pose nearest to each target)",
+    )
+    p.add_argument(
         "--campaign",
         help="the calibration's campaign (default: the one its session record names, if present): the Monte Carlo "
         "of the reached positions' uncertainty, and the seeds' start without --seed-joints",
@@ -71,6 +77,19 @@ def register(sub: Any) -> None:
     p.add_argument("--velocity", type=float, default=1.05, help="URScript movej v, rad/s (default %(default)g)")
     add_force_arg(p, "the --csv, --json and --urscript files")
     p.set_defaults(func=run)
+
+
+def _parse_branch(text: str) -> dict[str, int]:
+    from robocal_uncertainty.errors import ConfigError
+
+    out: dict[str, int] = {}
+    for item in text.split(","):
+        name, _, sign = item.partition("=")
+        if sign.strip() not in ("+1", "1", "-1"):
+            msg = f"--branch {text!r}: expected NAME=+1 or NAME=-1 items (shoulder, elbow, wrist), got {item!r}"
+            raise ConfigError(msg)
+        out[name.strip()] = -1 if sign.strip() == "-1" else 1
+    return out
 
 
 def _campaign_path(args: argparse.Namespace, data: dict[str, Any]) -> str | None:
@@ -154,6 +173,9 @@ def run(args: argparse.Namespace) -> int:
             coverage=args.coverage,
         )
     settings = IkSettings(max_joint_change_rad=args.max_joint_change, condition_limit=args.condition_limit)
+    branch = _parse_branch(args.branch) if args.branch else None
+    if branch is not None and seeds is not None:
+        raise ConfigError("--branch chooses the nominal solution without seeds: give it or --seed-joints, not both")
     result = compensate(
         model,
         data,
@@ -163,6 +185,7 @@ def run(args: argparse.Namespace) -> int:
         campaign=campaign,
         options=options,
         settings=settings,
+        branch=branch,
         where=f"calibration {args.calibration}",
         workers=args.workers,
     )

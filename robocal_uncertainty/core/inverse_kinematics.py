@@ -39,6 +39,8 @@ __all__ = [
     "joint_jacobian",
     "model_reach",
     "solve_near",
+    "ur_analytic_ik",
+    "ur_dh_parameters",
 ]
 
 Array = NDArray[np.float64]
@@ -293,3 +295,104 @@ def solve_near(
         branch_names=names,
         iterations=iterations,
     )
+
+
+def ur_dh_parameters(model: RobotModel) -> tuple[float, float, float, float, float, float] | None:
+    """Standard-DH ``d1, a2, a3, d4, d5, d6`` of a nominal model with the UR structure, else None.
+
+    The UR structure in the modified-DH form the package uses: twists ``0, pi/2, 0, 0, pi/2,
+    -pi/2``, lengths only in rows 3 and 4, offsets only in rows 1, 4, 5, 6, no joint offset,
+    Hayati angle or mount. A calibrated model breaks this; the analytic solution is for the
+    nominal model, the seed of the calibrated solve.
+    """
+    if model.n_joints != 6 or any(model.prismatic) or model.mounted:
+        return None
+    alpha = np.array([0.0, np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2])
+    a_zero = np.abs(model.a[[0, 1, 4, 5]]).max()
+    d_zero = np.abs(model.d[[1, 2]]).max()
+    if (
+        np.abs(model.alpha - alpha).max() > 1e-12
+        or a_zero > 0
+        or d_zero > 0
+        or np.abs(model.theta).max() > 0
+        or np.abs(model.beta).max() > 0
+    ):
+        return None
+    return (
+        float(model.d[0]),
+        float(model.a[2]),
+        float(model.a[3]),
+        float(model.d[3]),
+        float(model.d[4]),
+        float(model.d[5]),
+    )
+
+
+def _dh(theta: Array, d: float, a: float, alpha: float) -> Array:
+    """Standard DH transforms ``RotZ(theta) TransZ(d) TransX(a) RotX(alpha)``, shape (n, 4, 4)."""
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    out = np.zeros((theta.shape[0], 4, 4))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2], out[:, 0, 3] = ct, -st * ca, st * sa, a * ct
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2], out[:, 1, 3] = st, ct * ca, -ct * sa, a * st
+    out[:, 2, 1], out[:, 2, 2], out[:, 2, 3] = sa, ca, d
+    out[:, 3, 3] = 1.0
+    return out
+
+
+def ur_analytic_ik(model: RobotModel, flange: Array) -> Array | None:
+    """The eight analytic inverse kinematics solutions of a nominal UR arm.
+
+    Parameters
+    ----------
+    model : RobotModel
+        A nominal model with the UR structure (see :func:`ur_dh_parameters`); None is returned otherwise.
+    flange : ndarray, shape (n, 4, 4)
+        Flange poses (the last DH frame) in the robot base frame [m].
+
+    Returns
+    -------
+    ndarray, shape (n, 8, 6) [rad], or None
+        Solutions ordered by (shoulder, wrist, elbow) choice; NaN where a choice has no solution
+        (out of reach, or the wrist singular). Angles wrapped to (-pi, pi].
+    """
+    dh = ur_dh_parameters(model)
+    if dh is None:
+        return None
+    d1, a2, a3, d4, d5, d6 = dh
+    t = np.asarray(flange, dtype=np.float64)
+    n = t.shape[0]
+    out = np.full((n, 8, 6), np.nan)
+    p6 = t[:, :3, 3]
+    p5 = p6 - d6 * t[:, :3, 2]
+    r = np.hypot(p5[:, 0], p5[:, 1])
+    inv = np.linalg.inv(t)
+    k = 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for s1 in (1.0, -1.0):
+            q1 = np.arctan2(p5[:, 1], p5[:, 0]) + s1 * np.arccos(np.clip(d4 / r, -2.0, 2.0)) + np.pi / 2
+            q1 = np.where(np.abs(d4 / r) <= 1.0, q1, np.nan)
+            c1, s1v = np.cos(q1), np.sin(q1)
+            c5 = (p6[:, 0] * s1v - p6[:, 1] * c1 - d4) / d6
+            for s5 in (1.0, -1.0):
+                q5 = np.where(np.abs(c5) <= 1.0 + 1e-12, s5 * np.arccos(np.clip(c5, -1.0, 1.0)), np.nan)
+                sin5 = np.sin(q5)
+                x, y = inv[:, :3, 0], inv[:, :3, 1]
+                q6 = np.arctan2((-x[:, 1] * s1v + y[:, 1] * c1) / sin5, (x[:, 0] * s1v - y[:, 0] * c1) / sin5)
+                t01 = _dh(q1, d1, 0.0, np.pi / 2)
+                t45 = _dh(q5, d5, 0.0, -np.pi / 2)
+                t56 = _dh(q6, d6, 0.0, 0.0)
+                t14 = np.linalg.inv(t01) @ t @ np.linalg.inv(t45 @ t56)
+                p13 = t14[:, :3, 3] - d4 * t14[:, :3, 1]
+                norm = np.linalg.norm(p13, axis=1)
+                c3 = (norm**2 - a2**2 - a3**2) / (2.0 * a2 * a3)
+                for s3 in (1.0, -1.0):
+                    q3 = np.where(np.abs(c3) <= 1.0 + 1e-12, s3 * np.arccos(np.clip(c3, -1.0, 1.0)), np.nan)
+                    q2 = -np.arctan2(p13[:, 1], -p13[:, 0]) + np.arcsin(np.clip(a3 * np.sin(q3) / norm, -1.0, 1.0))
+                    t13 = _dh(q2, 0.0, a2, 0.0) @ _dh(q3, 0.0, a3, 0.0)
+                    t34 = np.linalg.inv(t13) @ t14
+                    q4 = np.arctan2(t34[:, 1, 0], t34[:, 0, 0])
+                    q = np.stack((q1, q2, q3, q4, q5, q6), axis=1)
+                    out[:, k] = np.angle(np.exp(1j * q))
+                    k += 1
+    return out
