@@ -368,3 +368,37 @@ def test_pose_targets_without_seeds_on_a_requested_ur_branch(branch: tuple[int, 
     reached, reached_rot = forward_poses(calibrated, base_params(calibrated), result.joints[ok])
     assert np.abs(reached - points[ok]).max() < 1e-9 and np.abs(reached_rot - rotations[ok]).max() < 1e-9
     assert any(s.startswith("refused: the nominal model has no solution on the branch") for s in result.status)
+
+
+def test_service_request_and_response_match_the_srv() -> None:
+    from rosbags.typesys import get_types_from_msg
+
+    from robocal_uncertainty.app.compensation import service_response, service_targets
+    from robocal_uncertainty.errors import InputError
+
+    text = (ROOT / "srv" / "CompensateTargets.srv").read_text(encoding="utf-8")
+    request_text, response_text = text.split("\n---\n")
+    (_, (_, response_fields)), *_ = get_types_from_msg(response_text, "robocal_uncertainty/srv/Res").items()
+    model = load_robot_source("ur10").model
+    data = calibration_of(model, seed=6)
+    calibrated = apply_calibration(model, data)
+    q = np.array([[0.3, -1.2, 1.4, -1.7, -1.5, 0.2], [0.3, -1.2, 0.0, -0.3, 1.0, 0.2]])
+    points = forward_points(model, base_params(model), q)
+    quats = np.tile([0.0, 0.0, 0.0, 1.0], (2, 1))
+    kwargs = {"model": model, "calibrated": calibrated, "quaternions": quats, "use_orientation": False}
+    targets, frame, seeds = service_targets(
+        positions=points, frame_id="base", seed_joints=q.reshape(-1).tolist(), **kwargs
+    )
+    assert frame == "base" and seeds is not None and np.array_equal(seeds, q) and targets.rotations is None
+    result = compensate(model, data, targets, frame=frame, seeds=seeds)
+    fields = service_response(result)
+    assert set(fields) == {name for name, _ in response_fields}
+    assert fields["status"][0] == "ok" and fields["status"][1].startswith("refused: the seed lies on a singularity")
+    assert np.isnan(fields["joint_positions"][6:]).all() and np.isfinite(fields["joint_positions"][:6]).all()
+    assert len(fields["standard_uncertainty"]) == 6 and fields["trials"] == 0
+    assert "1 of 2 targets compensated in base, 1 refused" in fields["message"]
+    with pytest.raises(InputError, match="give them in the measurement frame 'laser_tracker' or the robot base frame"):
+        service_targets(positions=points, frame_id="world", seed_joints=[], **kwargs)
+    with pytest.raises(InputError, match="seed_joints: 7 values"):
+        service_targets(positions=points, frame_id="base", seed_joints=[0.0] * 7, **kwargs)
+    assert "geometry_msgs/PoseArray targets" in request_text

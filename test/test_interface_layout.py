@@ -64,7 +64,23 @@ SRV_FIELDS_USED = {
             "monte_carlo_u",
             "frame_id",
         },
-    )
+    ),
+    "CompensateTargets": (
+        {"targets", "use_orientation", "seed_joints", "trials", "seed"},
+        {
+            "success",
+            "message",
+            "joint_names",
+            "joint_positions",
+            "status",
+            "position_error",
+            "standard_uncertainty",
+            "expanded_uncertainty",
+            "coverage_probability",
+            "trials",
+            "frame_id",
+        },
+    ),
 }
 
 

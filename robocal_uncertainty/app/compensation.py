@@ -53,6 +53,8 @@ __all__ = [
     "REPRODUCTION_TOLERANCE_M",
     "Compensation",
     "compensate",
+    "service_response",
+    "service_targets",
     "targets_frame",
 ]
 
@@ -581,3 +583,103 @@ def compensate(
         prismatic=tuple(model.prismatic),
         tool_frame=tool_frame,
     )
+
+
+def service_targets(
+    *,
+    positions: Array,
+    quaternions: Array,
+    use_orientation: bool,
+    frame_id: str,
+    model: RobotModel,
+    calibrated: RobotModel,
+    seed_joints: list[float],
+) -> tuple[Targets, str, Array | None]:
+    """The ``~/compensate_targets`` request (``srv/CompensateTargets``) as :func:`compensate`'s arguments.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (n, 3) [m]
+    quaternions : ndarray, shape (n, 4)
+        ``x, y, z, w``; used only with `use_orientation`.
+    use_orientation : bool
+    frame_id : str
+        The PoseArray's ``header.frame_id``: the calibration's measurement or base frame.
+    model, calibrated : RobotModel
+        The nominal model and the calibrated one (its frame ids and base).
+    seed_joints : list of float
+        Flattened seeds [rad]; empty: none.
+
+    Returns
+    -------
+    targets, frame, seeds
+
+    Raises
+    ------
+    InputError
+        No targets, NaN, a frame that is neither of the calibration's, seeds of the wrong size.
+    """
+    from robocal_uncertainty.core.rotation import quaternion_to_matrix
+
+    points = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if points.shape[0] == 0:
+        raise InputError("the PoseArray has no pose")
+    if not np.isfinite(points).all():
+        raise InputError("a target position is NaN or inf")
+    frames = {calibrated.measurement_frame_id: "measurement", calibrated.base_frame_id: "base"}
+    if frame_id not in frames:
+        msg = (
+            f"targets in frame {frame_id!r}: give them in the measurement frame {calibrated.measurement_frame_id!r} "
+            f"or the robot base frame {calibrated.base_frame_id!r}"
+        )
+        raise InputError(msg)
+    rotations = None
+    if use_orientation:
+        rotations = quaternion_to_matrix(
+            np.asarray(quaternions, dtype=np.float64).reshape(-1, 4), name="target orientation"
+        )
+    seeds = None
+    if seed_joints:
+        values = np.asarray(seed_joints, dtype=np.float64)
+        if values.size % model.n_joints or not np.isfinite(values).all():
+            msg = f"seed_joints: {values.size} values, not finite multiples of the robot's {model.n_joints} joints"
+            raise InputError(msg)
+        seeds = values.reshape(-1, model.n_joints)
+    targets = Targets(
+        points,
+        rotations,
+        f"PoseArray in {frame_id}",
+        "m",
+        "rad" if use_orientation else "",
+        "quaternion" if use_orientation else "none",
+    )
+    return targets, frames[frame_id], seeds
+
+
+def service_response(result: Compensation) -> dict[str, Any]:
+    """The ``srv/CompensateTargets`` response fields of a :class:`Compensation` (SI units)."""
+    n = result.joints.shape[0]
+    joints = np.where(result.accepted[:, None], result.joints, np.nan)
+    u = np.full((n, 3), np.nan)
+    big_u = np.full((n, 3), np.nan)
+    unc = result.uncertainty
+    if unc is not None:
+        for k, i in enumerate(np.flatnonzero(result.accepted)):
+            u[i] = [a.standard_uncertainty for a in unc.poses[k].axes]
+            big_u[i] = [a.expanded_uncertainty for a in unc.poses[k].axes]
+    refused = n - int(result.accepted.sum())
+    return {
+        "success": True,
+        "message": f"{int(result.accepted.sum())} of {n} targets compensated in {result.frame_id}"
+        + (f", {refused} refused (see status)" if refused else "")
+        + f"; seeds: {result.seed_source}",
+        "joint_names": list(result.joint_names),
+        "joint_positions": joints.reshape(-1).tolist(),
+        "status": list(result.status),
+        "position_error": result.solution.position_error_m.tolist(),
+        "standard_uncertainty": u.reshape(-1).tolist(),
+        "expanded_uncertainty": big_u.reshape(-1).tolist(),
+        "coverage_probability": float("nan") if unc is None else unc.coverage_probability,
+        "trials": 0 if unc is None else int(unc.n_trials),
+        "frame_id": result.frame_id,
+    }

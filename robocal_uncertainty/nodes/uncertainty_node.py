@@ -43,6 +43,12 @@ late joiner gets the latest full set):
 
 Service ``~/suggest_poses`` (``robocal_uncertainty/srv/SuggestPoses``): next-best calibration
 poses for the latest evaluated campaign (:func:`robocal_uncertainty.app.suggest_poses`).
+
+Service ``~/compensate_targets`` (``robocal_uncertainty/srv/CompensateTargets``): joints that reach
+a ``geometry_msgs/PoseArray`` of targets under the latest evaluated calibration, and the stated
+uncertainty of the reached positions with this node's Monte Carlo settings
+(:func:`robocal_uncertainty.app.compensate`). It lives here, not in the calibration node, because
+this node holds the evaluated campaign, its calibration and the statement's settings.
 """
 
 from __future__ import annotations
@@ -105,7 +111,7 @@ from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_q
 from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus, uncertainty_status
 from robocal_uncertainty.pipeline.markers import uncertainty_markers
 from robocal_uncertainty.pipeline.sample_store import SampleStore
-from robocal_uncertainty.srv import SuggestPoses
+from robocal_uncertainty.srv import CompensateTargets, SuggestPoses
 from robocal_uncertainty.uncertainty import (
     CalibrationUncertainty,
     EvaluationOptions,
@@ -390,6 +396,7 @@ class UncertaintyNode(Node):
         self._pool = WorkerPool(int(p["workers"]), preload=("robocal_uncertainty.uncertainty.calibration_mc",))
         self._evaluated: tuple[Campaign, IdentificationResult, EvaluationOptions] | None = None
         self.create_service(SuggestPoses, "~/suggest_poses", self._suggest_poses)
+        self.create_service(CompensateTargets, "~/compensate_targets", self._compensate_targets)
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
         self.create_subscription(CalibrationResultMsg, "robocal/calibration", self._on_calibration, latched_qos())
 
@@ -719,6 +726,49 @@ class UncertaintyNode(Node):
         for name, value in service_response(result).items():
             setattr(response, name, value)
         self.get_logger().info(f"suggest_poses: {response.message}")
+        return response
+
+    def _compensate_targets(
+        self, request: CompensateTargets.Request, response: CompensateTargets.Response
+    ) -> CompensateTargets.Response:
+        """Compensated joint targets for the latest evaluated calibration (blocks this node's
+        callbacks while its Monte Carlo runs)."""
+        from dataclasses import replace
+
+        from robocal_uncertainty.app.compensation import compensate, service_response, service_targets
+        from robocal_uncertainty.core.calibration_file import apply_calibration, calibration_to_dict
+
+        evaluated = self._evaluated
+        if evaluated is None:
+            response.success = False
+            response.message = "no evaluated calibration yet"
+            return response
+        campaign, calibration, options = evaluated
+        try:
+            data = calibration_to_dict(calibration, robot=self.model.name)
+            poses = request.targets.poses
+            targets, frame, seeds = service_targets(
+                positions=np.array([[p.position.x, p.position.y, p.position.z] for p in poses]),
+                quaternions=np.array(
+                    [[p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w] for p in poses]
+                ),
+                use_orientation=bool(request.use_orientation),
+                frame_id=str(request.targets.header.frame_id),
+                model=self.model,
+                calibrated=apply_calibration(self.model, data),
+                seed_joints=list(request.seed_joints),
+            )
+            run = replace(options, seed=int(request.seed), trials=int(request.trials) or options.trials)
+            result = compensate(
+                self.model, data, targets, frame=frame, seeds=seeds, campaign=campaign, options=run, where="calibration"
+            )
+        except CalibError as err:
+            response.success = False
+            response.message = str(err)
+            return response
+        for name, value in service_response(result).items():
+            setattr(response, name, value)
+        self.get_logger().info(f"compensate_targets: {response.message}")
         return response
 
     def destroy_node(self) -> None:
