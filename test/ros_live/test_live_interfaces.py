@@ -11,7 +11,13 @@ pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (RO
 
 from live_support import REPO, installed_share, run
 
-INTERFACES = ["msg/CalibrationSample", "msg/CalibrationResult", "msg/PoseUncertainty", "srv/SuggestPoses"]
+INTERFACES = [
+    "msg/CalibrationSample",
+    "msg/CalibrationResult",
+    "msg/PoseUncertainty",
+    "srv/SuggestPoses",
+    "srv/CompensateTargets",
+]
 
 
 @pytest.mark.parametrize("name", INTERFACES)
@@ -29,7 +35,7 @@ def test_interface_show_prints_the_definition_file(ros_env, name) -> None:
 
 def test_command_line_after_colcon_is_the_pip_one(ros_env, tmp_path) -> None:
     installed = run(["ros2", "run", "robocal_uncertainty", "robocal-uncertainty", "--help"], ros_env, timeout_s=60)
-    for verb in ("evaluate", "replay", "validate", "suggest"):
+    for verb in ("evaluate", "replay", "validate", "suggest", "compensate"):
         assert verb in installed
     # A bad input: the one-line error of the CLI, status 1, no traceback.
     proc = subprocess.run(
