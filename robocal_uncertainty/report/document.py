@@ -185,7 +185,13 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
     if not ad.trustworthy:
         items.append(f"**{ad.trust_note}.**")
     cal = result.calibration
-    conv = "yes" if result.converged else "NO"
+    if not result.converged:
+        conv = "NO"
+    elif getattr(result, "convergence_tested", result.adaptive is not None):
+        conv = "yes"
+    else:
+        # A fixed number of trials runs no convergence test: say so instead of "yes".
+        conv = "not tested (fixed number of trials; --trials auto runs the JCGM 101 7.9 test)"
     items.append(
         f"Monte Carlo: {result.n_trials} trials"
         + (" (adaptive)" if result.adaptive is not None else "")

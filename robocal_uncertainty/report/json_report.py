@@ -510,6 +510,8 @@ def uncertainty_to_dict(
             "block_size": result.block_size,
             "coverage_probability": result.coverage_probability,
             "converged": result.converged,
+            "convergence_tested": result.adaptive is not None,
+            "not_converged": list(getattr(result, "not_converged", ())),
             "adaptive": None
             if result.adaptive is None
             else {
