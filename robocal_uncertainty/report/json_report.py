@@ -166,6 +166,7 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
         "min_residual_dof": ad.min_residual_dof,
         "trustworthy": ad.trustworthy,
         "trust_note": ad.trust_note,
+        "repeated_poses": getattr(ad, "repeated_poses", 0),
     }
 
 
