@@ -9,6 +9,7 @@ or states the result with a warning and a flag.
 from __future__ import annotations
 
 import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -170,7 +171,12 @@ def test_a_damaged_campaign_is_refused_unless_dropping_is_accepted(
     campaigns: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     data = bytearray((campaigns / "ur10.mcap").read_bytes())
-    middle = len(data) // 2
+    # 200 bytes flipped from the first top-level record starting past the middle: its length
+    # field is destroyed, so the record framing breaks there while the footer stays intact.
+    # (Bytes flipped inside a record body are caught by the chunk CRC, also in one line.)
+    middle = 8
+    while middle < len(data) // 2:
+        middle += 9 + struct.unpack_from("<Q", data, middle + 1)[0]
     data[middle : middle + 200] = bytes(b ^ 0xFF for b in data[middle : middle + 200])
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(data))
