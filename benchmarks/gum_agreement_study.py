@@ -18,7 +18,9 @@ chosen where no honest run reaches it:
 
     python benchmarks/gum_agreement_study.py --seeds 20 --trials 2000
 
-Prints the smallest and largest ratio per group.
+Prints the smallest and largest ratio per group over the runs the guard accepts, and each run it
+reports as not converged (with how many of its trials lie far from the others: diverged
+re-identifications).
 """
 
 from __future__ import annotations
@@ -67,15 +69,40 @@ def ratios(model, campaign: Campaign, test_q, sources, trials: int, seed: int) -
         gum = np.asarray(pose.gum.standard_uncertainty)
         ok = gum > 0
         out.extend((mc[ok] / gum[ok]).tolist())
+    if result.not_converged:
+        # Reported, and kept apart from the accepted runs' ratios.
+        s = result.samples[:, :3]
+        med = np.median(s, axis=0)
+        mad = 1.4826 * np.median(np.abs(s - med), axis=0)
+        wild = int((np.abs(s - med) > 20 * mad).any(axis=1).sum())
+        print(
+            f"    guard fired (seed {seed}): {result.not_converged[0]}; {wild} of {result.n_trials} trials "
+            "more than 20 robust standard deviations from the median",
+            flush=True,
+        )
+        REFUSED.append(max(out))
+        return np.zeros(0)
     return np.array(out)
 
 
+REFUSED: list[float] = []
+
+
 def report(name: str, values: list[np.ndarray]) -> None:
-    v = np.concatenate([x for x in values if x.size] or [np.zeros(0)])
+    """One line: the accepted runs' ratio range and how many runs the guard reported."""
+    accepted = [x for x in values if x.size]
+    v = np.concatenate(accepted or [np.zeros(0)])
+    refused = (
+        f"; guard fired on {len(values) - len(accepted)} of {len(values)} runs" if len(accepted) < len(values) else ""
+    )
     if v.size:
-        print(f"{name:<40} {v.size:5d} axes  ratio u_MC/u_GUM  min {v.min():.3g}  max {v.max():.3g}", flush=True)
+        print(
+            f"{name:<40} {len(accepted)} runs, {v.size:4d} axes  u_MC/u_GUM  min {v.min():.3g}  max {v.max():.3g}"
+            + refused,
+            flush=True,
+        )
     else:
-        print(f"{name:<40} no axis compared", flush=True)
+        print(f"{name:<40} no run accepted{refused}", flush=True)
 
 
 def random_joints(model, rng, n: int) -> np.ndarray:
