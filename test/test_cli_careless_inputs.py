@@ -114,6 +114,37 @@ def test_a_monte_carlo_far_from_its_own_gum_is_no_statement(
     assert "Standard uncertainty" not in captured.out and not (out / "report.json").exists()
 
 
+def test_a_ten_pose_subset_whose_trials_diverge_is_no_statement(
+    series: Campaign, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Real data, no bypass: 10 poses of the UR10 series with a 2.5 mm model error and 5 residual
+    # degrees of freedom; about one trial in eight re-identifies far away (u of 1e8 m).
+    poses = [24, 53, 59, 112, 113, 148, 366, 503, 505, 546]
+    write_campaign(tmp_path / "ten.mcap", series.subset(np.array(poses)))
+    out = tmp_path / "report"
+    status = main(
+        [
+            "evaluate",
+            str(tmp_path / "ten.mcap"),
+            "--robot",
+            "ur10",
+            *TEST_JOINTS,
+            "--trials",
+            "2000",
+            *QUICK,
+            "--out",
+            str(out),
+        ]
+    )
+    captured = capsys.readouterr()
+    assert status == 1
+    line = _error_line(captured.err)
+    assert "did not converge to a statement: test configuration 1: Monte Carlo u = " in line
+    ratio = float(line.split("(ratio ")[1].split(",")[0])
+    assert ratio > 1e6  # 3.3e10 here: diverged trials, not a nonlinearity
+    assert "Standard uncertainty" not in captured.out and not (out / "report.json").exists()
+
+
 def test_repeated_poses_count_once_so_copies_cannot_defeat_the_small_campaign_flag(
     campaigns: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

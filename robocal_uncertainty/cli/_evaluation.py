@@ -221,8 +221,8 @@ def refuse_unconverged_statement(result: Any) -> None:
     more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
     msg = (
         f"the Monte Carlo did not converge to a statement: {problems[0]}{more}; its trials do not re-identify the "
-        f"calibration's solution (an honest run stays within a factor {GUM_DISAGREEMENT_FACTOR:g}): check the "
-        "units of the points and the robot model; no statement printed, no report written"
+        f"calibration's solution (honest runs stay within a factor {GUM_DISAGREEMENT_FACTOR:g}; causes: a unit "
+        "slip, a wrong robot model, or too few poses for the model error); no statement printed, no report written"
     )
     raise ConvergenceError(msg)
 
