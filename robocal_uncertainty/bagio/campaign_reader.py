@@ -245,7 +245,7 @@ def _pair(
     topics: tuple[str, str, str],
     path: Path,
     *,
-    truncated: bool,
+    truncated: bool | str,
     notes: list[str],
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Pair points with joint states; warn about dropped points and truncation (the
@@ -274,7 +274,12 @@ def _pair(
             f"{path}: {unpaired.size} of {point_stamps.size} points on {point_topic} have no "
             f"{joint_topic} message within {tolerance} and were dropped ({first})"
         )
-    if truncated:
+    if truncated == "damaged":
+        notes.append(
+            f"{path} is damaged (its records break off before its intact footer); read "
+            f"{point_index.size} poses before the damage, the rest dropped (--accept-damaged)"
+        )
+    elif truncated:
         notes.append(
             f"{path} is truncated (writer stopped before the footer); recovered "
             f"{point_index.size} poses up to the last complete record"
@@ -292,6 +297,7 @@ def read_campaign(
     point_topic: str | None = None,
     point_std_topic: str | None = None,
     stamp_tolerance_ns: int = 0,
+    accept_damaged: bool = False,
 ) -> Campaign:
     """Read a campaign from an MCAP file or a rosbag2 directory.
 
@@ -308,6 +314,10 @@ def read_campaign(
     stamp_tolerance_ns : int
         Largest stamp difference [ns] accepted when a point has no joint state with the same
         stamp (default 0: exact match only).
+    accept_damaged : bool
+        Read the poses before the damage of a finished file whose records break off in the
+        middle (its footer intact: damaged, not truncated), dropping the rest with a warning.
+        Default: refuse such a file; dropping measurements needs the caller's consent.
 
     Returns
     -------
@@ -342,6 +352,14 @@ def read_campaign(
     )
     bag = open_bag(path, wanted, what="campaign")
     contents, source = bag.contents, bag.storage
+    damaged_at = getattr(contents, "damaged_at", None)
+    if damaged_at is not None and not accept_damaged:
+        msg = (
+            f"{path} is damaged: its records break off at byte {damaged_at} of {path.stat().st_size} although "
+            "the file ends with an intact footer (finished, then corrupted; not a writer stopped early); "
+            "refusing to drop the poses after the damage (--accept-damaged reads the poses before it)"
+        )
+        raise BagError(msg)
     record = contents.metadata.get(METADATA_NAME)
     header = None if record is None else parse_header(record, str(path))
     if header is not None:
@@ -356,7 +374,13 @@ def read_campaign(
     point_stamps = np.array([r.stamp_ns for r in points], dtype=np.int64)
     notes: list[str] = []
     point_index, joint_index = _pair(
-        joints, point_stamps, stamp_tolerance_ns, wanted, path, truncated=contents.truncated, notes=notes
+        joints,
+        point_stamps,
+        stamp_tolerance_ns,
+        wanted,
+        path,
+        truncated="damaged" if damaged_at is not None else contents.truncated,
+        notes=notes,
     )
     dropped = len(points) - point_index.size
     kept = [points[i] for i in point_index]

@@ -71,12 +71,17 @@ class McapContents:
     truncated : bool
         True when the file ended before its footer (writer killed); only complete records
         were read.
+    damaged_at : int or None
+        Byte offset where the record framing breaks although the file ends with an intact
+        footer and closing magic: the file was finished and then damaged (not truncated by a
+        killed writer); only the records before that offset were read. None otherwise.
     """
 
     messages: tuple[RawMessage, ...]
     metadata: dict[str, dict[str, str]]
     channels: tuple[ChannelInfo, ...]
     truncated: bool
+    damaged_at: int | None = None
 
 
 def is_mcap(path: Path) -> bool:
@@ -223,6 +228,21 @@ def _read_records(collector: _Collector, data: bytes, limit: int) -> None:
         offset = end
 
 
+_FOOTER_LENGTH = 20
+"""Body length of an MCAP footer record (summary start, summary offset start, summary CRC)."""
+
+
+def _footer_intact(stream: BinaryIO, size: int) -> bool:
+    """Whether the file ends with a footer record and the closing magic (it was finished)."""
+    tail = _RECORD_PREFIX.size + _FOOTER_LENGTH + len(MCAP_MAGIC)
+    if size < len(MCAP_MAGIC) + tail:
+        return False
+    stream.seek(size - tail)
+    data = stream.read(tail)
+    opcode, length = _RECORD_PREFIX.unpack_from(data, 0)
+    return bool(opcode == _FOOTER_OPCODE and length == _FOOTER_LENGTH and data.endswith(MCAP_MAGIC))
+
+
 def read_mcap_file(path: Path) -> McapContents:
     """Read all complete messages and metadata records of the MCAP file `path`.
 
@@ -238,6 +258,7 @@ def read_mcap_file(path: Path) -> McapContents:
             msg = f"not a campaign: {path} is not an MCAP file (bad magic bytes)"
             raise BagError(msg)
         limit, complete = _complete_length(stream, size)
+        damaged_at = limit if not complete and _footer_intact(stream, size) else None
         stream.seek(0)
         data = stream.read(limit)
     try:
@@ -252,4 +273,5 @@ def read_mcap_file(path: Path) -> McapContents:
         collector.metadata,
         tuple(collector.channels.values()),
         truncated=not complete,
+        damaged_at=damaged_at,
     )

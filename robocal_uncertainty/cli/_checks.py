@@ -78,6 +78,18 @@ def check_options(args: argparse.Namespace) -> None:
         raise ConfigError(msg)
     if getattr(args, "lambda_", None) is not None:
         parse_lambda(args.lambda_)
+    fixed = parse_trials(trials) if isinstance(trials, str) else trials
+    if isinstance(fixed, int) and coverage is not None and 0.0 < coverage < 1.0 and args.command != "section":
+        from robocal_uncertainty.uncertainty.statement_check import interval_trial_floor, recommended_trials
+
+        floor = interval_trial_floor(coverage)
+        if fixed < floor:
+            msg = (
+                f"--trials {fixed} cannot state a {coverage * 100:g} % coverage interval: below 2/(1-p) = {floor} "
+                f"trials not one trial lies beyond either end (JCGM 101 7.2); give --trials "
+                f"{recommended_trials(coverage)} or more, or --trials auto"
+            )
+            raise ConfigError(msg)
     lambda_range = getattr(args, "lambda_range", None)
     if lambda_range is not None:
         low, high = lambda_range

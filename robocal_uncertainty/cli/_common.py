@@ -149,10 +149,19 @@ def parse_lambda(text: str) -> str | float:
     if text in ("auto", "gcv", "lcurve"):
         return text
     try:
-        return float(text)
+        value = float(text)
     except ValueError as err:
         msg = f"--lambda must be 'auto', 'gcv' or a number, got {text!r}"
         raise ConfigError(msg) from err
+    from robocal_uncertainty.core.identification import MAX_LAMBDA
+
+    if not (np.isfinite(value) and 0.0 <= value <= MAX_LAMBDA):
+        msg = (
+            f"--lambda must be 'auto', 'gcv' or a number from 0 to {MAX_LAMBDA:g}, got {text!r} (any lambda far "
+            "above 10 already holds every regularised parameter at its nominal value)"
+        )
+        raise ConfigError(msg)
+    return value
 
 
 def parse_window(text: str) -> float | None:
@@ -314,7 +323,11 @@ def read_campaign_checked(args: argparse.Namespace, path: str) -> Any:
     tolerance_ms = getattr(args, "pairing_tolerance_ms", DEFAULT_PAIRING_TOLERANCE_MS)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        campaign = read_campaign(path, stamp_tolerance_ns=round(tolerance_ms * 1e6))
+        campaign = read_campaign(
+            path,
+            stamp_tolerance_ns=round(tolerance_ms * 1e6),
+            accept_damaged=bool(getattr(args, "accept_damaged", False)),
+        )
     refuse_raw_recording(path, campaign)
     notes = [str(w) for w in campaign.metadata.get("warnings") or ()]
     notes += [str(w.message) for w in caught if str(w.message) not in notes]

@@ -122,6 +122,12 @@ def print_adequacy(result: Any) -> None:
             f"Model adequacy: residuals exceed the stated noise (p = {ad.p_value:.3g}); model error "
             f"u = {u} per measurement-frame axis, {used}"
         )
+    repeated = getattr(ad, "repeated_poses", 0)
+    if repeated:
+        print(
+            f"note: {count(repeated, 'pose')} repeat an earlier pose's joint readings: each distinct configuration "
+            "counts once in the residual degrees of freedom"
+        )
     if not ad.trustworthy:
         print(f"warning: {ad.trust_note}")
 
@@ -203,6 +209,24 @@ def run_evaluation(
     return evaluation.uncertainty
 
 
+def refuse_unconverged_statement(result: Any) -> None:
+    """Stop with one line when the Monte Carlo ran but is no statement (its spread disagrees with
+    its own first-order GUM statement): its numbers are never printed or written."""
+    problems = getattr(result, "not_converged", ())
+    if not problems:
+        return
+    from robocal_uncertainty.errors import ConvergenceError
+    from robocal_uncertainty.uncertainty.statement_check import GUM_DISAGREEMENT_FACTOR
+
+    more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+    msg = (
+        f"the Monte Carlo did not converge to a statement: {problems[0]}{more}; its trials do not re-identify the "
+        f"calibration's solution (honest runs stay within a factor {GUM_DISAGREEMENT_FACTOR:g}; causes: a unit "
+        "slip, a wrong robot model, or too few poses for the model error); no statement printed, no report written"
+    )
+    raise ConvergenceError(msg)
+
+
 def print_evaluation(
     evaluation: Any, options: Any, model: Any, out_dir: Path, bars: Progress, args: argparse.Namespace
 ) -> None:
@@ -216,6 +240,7 @@ def print_evaluation(
     print_calibration(evaluation.calibration)
     print()
     print_adequacy(result)
+    refuse_unconverged_statement(result)
     print(f"Positions in frame {result.frame_id} ({result.frame} frame; --frame base|measurement)")
     print(format_table2(result))
     adaptive = result.adaptive

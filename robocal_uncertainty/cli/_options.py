@@ -35,6 +35,16 @@ def add_campaign_args(p: argparse.ArgumentParser) -> None:
         help="recordings without our campaign metadata: pair each tracker point with the joint reading nearest in "
         "stamp when it is at most this far, ms (default %(default)g)",
     )
+    add_accept_damaged_arg(p)
+
+
+def add_accept_damaged_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--accept-damaged",
+        action="store_true",
+        help="a campaign file damaged in the middle (intact footer): use the poses before the damage and drop "
+        "the rest (default: refuse)",
+    )
 
 
 def add_test_joint_args(p: argparse.ArgumentParser) -> None:

@@ -236,6 +236,10 @@ def fit_rigid_base(base_points: Array, measured: Array) -> tuple[Array, Array]:
     return cm - rot @ cb, rpy_from_matrix(rot)
 
 
+MAX_LAMBDA = 1e100
+"""Largest fixed lambda accepted: lambda**2 and its products must stay finite floats."""
+
+
 def _validate(model: RobotModel, campaign: Campaign, lambda_: object) -> tuple[Campaign, LambdaMethod, float]:
     if not isinstance(campaign, Campaign):
         msg = f"campaign must be a Campaign, got {type(campaign).__name__}"
@@ -258,6 +262,12 @@ def _validate(model: RobotModel, campaign: Campaign, lambda_: object) -> tuple[C
     value = float(lambda_)
     if not np.isfinite(value) or value < 0:
         msg = f"lambda must be a finite non-negative number, got {value}"
+        raise ConfigError(msg)
+    if value > MAX_LAMBDA:
+        msg = (
+            f"lambda must be at most {MAX_LAMBDA:g}, got {value:g} (its square overflows; in the column-scaled "
+            "units any lambda far above 10 already holds every regularised parameter at its nominal value)"
+        )
         raise ConfigError(msg)
     return campaign, "fixed", value
 
@@ -563,6 +573,7 @@ def _identify_weighted(
     q = campaign.joint_positions
     measured = campaign.points
     p0 = model.parameter_vector()
+    check_point_scale(model, campaign)
     b0 = layout.base_index
     candidates = np.ones(layout.size, dtype=bool)
     base_init: Literal["nominal", "rigid_fit", "identity"]
@@ -819,6 +830,62 @@ def _rigid_base(
         return None
     xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), positions)
     return np.concatenate((xyz, rpy))
+
+
+SCALE_TOLERANCE = 3.0
+"""Largest ratio (either way) of the measured points' spread to the nominal robot's at the same
+joints: a calibration changes a robot's size by parts per thousand, a unit slip by 10 (cm),
+25.4 (inch) or 1000 (m read as mm)."""
+
+
+def check_point_scale(model: RobotModel, campaign: Campaign) -> None:
+    """Refuse measured points whose spread does not fit the robot's size (a wrong unit).
+
+    The RMS distance of the measured positions from their centroid is compared with that of the
+    nominal model's tool positions at the same joint readings: it does not depend on the frame
+    (tracker or base) nor on where the tracker stands. The robot's reach (largest distance of
+    the nominal tool from the base over these readings) is named in the message.
+
+    Raises
+    ------
+    InputError
+        The ratio is beyond :data:`SCALE_TOLERANCE` either way.
+    """
+    measurement = campaign.measurement
+    positions = measurement.positions(campaign.points)
+    if positions is None or campaign.n_poses < 3:
+        return
+    q = campaign.reorder_joints(model.joint_names).joint_positions
+    p_kin = model.parameter_vector()
+    b0 = model.layout.base_index
+    p_kin[b0 : b0 + 6] = 0.0
+    nominal = forward_points(model.layout, p_kin, q)
+    spread_nominal = float(np.sqrt(np.mean(np.sum((nominal - nominal.mean(axis=0)) ** 2, axis=1))))
+    spread = float(np.sqrt(np.mean(np.sum((positions - positions.mean(axis=0)) ** 2, axis=1))))
+    if not (np.isfinite(spread) and spread_nominal > 0.0):
+        return
+    ratio = spread / spread_nominal
+    if 1.0 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
+        return
+    reach = float(np.max(np.linalg.norm(nominal, axis=1)))
+    hint = ""
+    for factor, words in (
+        (1e-3, "metres read as millimetres"),
+        (1e3, "millimetres read as metres"),
+        (0.1, "centimetres read as millimetres"),
+        (10.0, "millimetres read as centimetres"),
+        (1 / 25.4, "inches read as millimetres"),
+        (25.4, "millimetres read as inches"),
+    ):
+        if abs(np.log(ratio / factor)) < np.log(1.5):
+            hint = f" ({words}?)"
+            break
+    msg = (
+        f"the measured points spread {spread * 1e3:.4g} mm about their centroid, the robot {model.name!r} at the "
+        f"same joints {spread_nominal * 1e3:.4g} mm (reach {reach * 1e3:.4g} mm): the points are {ratio:.3g} "
+        f"times the robot's size{hint}; check the unit of the points and the robot model"
+    )
+    raise InputError(msg)
 
 
 BASE_NOTE_TRANSLATION = 10e-3

@@ -491,6 +491,10 @@ def read_tracker_csv(
     )
 
 
+MAX_COORDINATE_M = 1000.0
+"""Largest |coordinate| [m] accepted from a tracker CSV (laser trackers reach tens of metres)."""
+
+
 def _parse_row(row: list[str], header: list[str], columns: list[_Column], separator: str) -> dict[int, float]:
     """Return SI values by column index; ValueError names the bad column."""
     while len(row) > len(header) and not row[-1].strip():
@@ -513,6 +517,14 @@ def _parse_row(row: list[str], header: list[str], columns: list[_Column], separa
             raise ValueError(msg) from None
         if column.role in ("std", "angle_std") and value < 0:
             msg = f"column {column.name!r}: negative standard deviation {text!r}"
+            raise ValueError(msg)
+        if column.role == "point" and abs(value) > MAX_COORDINATE_M:
+            # No tracker measures that far; a number this size is a corrupt cell or a unit slip,
+            # and squared in the fit it overflows.
+            msg = (
+                f"column {column.name!r}: {text!r} is a coordinate of {value:.3g} m, farther than any tracker "
+                f"measures ({MAX_COORDINATE_M:g} m): a corrupt value or a wrong unit"
+            )
             raise ValueError(msg)
         values[column.index] = value
     return values

@@ -185,7 +185,13 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
     if not ad.trustworthy:
         items.append(f"**{ad.trust_note}.**")
     cal = result.calibration
-    conv = "yes" if result.converged else "NO"
+    if not result.converged:
+        conv = "NO"
+    elif getattr(result, "convergence_tested", result.adaptive is not None):
+        conv = "yes"
+    else:
+        # A fixed number of trials runs no convergence test: say so instead of "yes".
+        conv = "not tested (fixed number of trials; --trials auto runs the JCGM 101 7.9 test)"
     items.append(
         f"Monte Carlo: {result.n_trials} trials"
         + (" (adaptive)" if result.adaptive is not None else "")
@@ -796,7 +802,10 @@ def write_report(
                 f"Position error |p − p̄|, test configuration {i + 1} (cf. {ROBOT_PAPER} Fig. 11)",
             )
         )
-        if result.poses[i].orientation is not None:
+        orientation = result.poses[i].orientation
+        # No figure of three empty panels: with no rotation determined there is nothing to draw
+        # (the orientation section says which rotations are undetermined and why).
+        if orientation is not None and any(orientation.determined):
             name = f"rotation_histograms_{i + 1}.png"
             plot_rotation_histograms(result, out / name, pose=i)
             figures.append(
@@ -813,7 +822,8 @@ def write_report(
         figures.append(
             _Image(
                 "parameters.png",
-                f"Monte Carlo distributions of the identified parameter errors (cf. {ROBOT_PAPER} Fig. 5)",
+                f"Monte Carlo distributions of the identified parameter errors (cf. {ROBOT_PAPER} Fig. 5); "
+                "hatched panels marked 'held by regularisation': the Tikhonov term, not the data, fixes them",
             )
         )
     for sw in sweeps or ():

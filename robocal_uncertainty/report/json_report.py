@@ -166,6 +166,7 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
         "min_residual_dof": ad.min_residual_dof,
         "trustworthy": ad.trustworthy,
         "trust_note": ad.trust_note,
+        "repeated_poses": getattr(ad, "repeated_poses", 0),
     }
 
 
@@ -510,6 +511,8 @@ def uncertainty_to_dict(
             "block_size": result.block_size,
             "coverage_probability": result.coverage_probability,
             "converged": result.converged,
+            "convergence_tested": result.adaptive is not None,
+            "not_converged": list(getattr(result, "not_converged", ())),
             "adaptive": None
             if result.adaptive is None
             else {

@@ -393,6 +393,7 @@ def plot_parameter_distributions(
         raise InputError(msg)
     index = {n: i for i, n in enumerate(cal.parameter_names)}
     kinds = dict(zip(cal.model.layout.names, cal.model.layout.kinds))
+    held = np.asarray(getattr(cal, "held_by_regularisation", np.zeros(len(cal.parameter_names), dtype=bool)))
     n_test = len(result.poses)
     values = np.asarray(result.samples[:, 3 * n_test : 3 * n_test + k], dtype=np.float64)
     cols = max(1, min(columns, k))
@@ -408,7 +409,23 @@ def plot_parameter_distributions(
         ax: Axes = fig.add_subplot(rows, cols, j + 1)
         ax.hist(err, bins=bins, histtype="stepfilled", color="0.7", ec="0.4", lw=0.5)
         ax.axvline((cal.estimate[i] - cal.nominal[i]) * scale, color="tab:red", lw=1.0)
-        ax.set_title(name, fontsize=8)
+        if held[i]:
+            # Its spread is the Tikhonov term's, not a measurement's: marked, as the tables mark it.
+            ax.set_facecolor("0.93")
+            ax.text(
+                0.02,
+                0.97,
+                "held by\nregularisation",
+                ha="left",
+                va="top",
+                transform=ax.transAxes,
+                fontsize=6,
+                color="tab:red",
+                bbox={"facecolor": "white", "edgecolor": "none", "pad": 1.0},
+            )
+            for patch in ax.patches:
+                patch.set_hatch("///")
+        ax.set_title(name + (" (held)" if held[i] else ""), fontsize=8)
         ax.set_xlabel(f"δ / {unit}", fontsize=7)
         ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.tick_params(labelsize=6)

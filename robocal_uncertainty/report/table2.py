@@ -309,11 +309,22 @@ def budget_rows(budget: Mapping[str, CalibrationUncertainty], pose: int = 0) -> 
         rows.append(
             [
                 name,
-                *(format_significant(v) for v in u),
-                format_significant(float(np.linalg.norm(u))),
+                *(_budget_cell(v) for v in u),
+                _budget_cell(float(np.linalg.norm(u))),
             ]
         )
     return rows
+
+
+_BUDGET_FLOOR_UM = 1e-3
+"""Budget entries below 1 nm are rounding of a source that adds nothing (e.g. ``residual`` when
+the residuals are consistent with the noise): shown as ``< 0.001``, not as 0.0000000040."""
+
+
+def _budget_cell(value_um: float) -> str:
+    if math.isfinite(value_um) and 0.0 < value_um < _BUDGET_FLOOR_UM:
+        return f"< {_BUDGET_FLOOR_UM:g}"
+    return format_significant(value_um)
 
 
 def format_budget(budget: Mapping[str, CalibrationUncertainty]) -> str:

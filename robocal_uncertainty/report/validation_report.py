@@ -63,6 +63,7 @@ def validation_to_dict(validation: HoldoutValidation, *, extra: Mapping[str, Any
                 "residual_rms_after_m": f.rms_train_after,
                 "lambda": f.lambda_,
                 "model_adequate": f.model_adequate,
+                "trustworthy": f.trustworthy,
                 "model_error_standard_uncertainty_m": f.model_error_std.tolist(),
                 "n_trials": f.n_trials,
             }
@@ -119,7 +120,21 @@ def format_validation(validation: HoldoutValidation) -> str:
     if v.frame_comparison is not None:
         lines.append(f"validation campaign's frame: within the stated uncertainty; {v.frame_comparison.describe()}")
     lines.append("An honest statement has normalised RMS near 1 and observed near stated coverage.")
+    lines.extend(trust_warnings(v))
     return "\n".join(lines)
+
+
+def trust_warnings(validation: HoldoutValidation) -> list[str]:
+    """``warning: NOT TRUSTWORTHY`` lines when a fold's statement is flagged as ``evaluate`` flags it:
+    the coverage measured here is then of a statement its own campaign cannot back."""
+    flagged = [f for f in validation.folds if not f.trustworthy]
+    if not flagged:
+        return []
+    note = flagged[0].trust_note or "NOT TRUSTWORTHY: too few residual degrees of freedom"
+    which = (
+        "the statement under test" if len(validation.folds) == 1 else f"{len(flagged)} of {len(validation.folds)} folds"
+    )
+    return [f"warning: {which} ({flagged[0].n_train} training poses): {note}"]
 
 
 def _plot(validation: HoldoutValidation, path: Path) -> None:

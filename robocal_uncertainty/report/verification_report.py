@@ -60,23 +60,62 @@ def verification_summary(result: Verification) -> str:
         )
     parts = [f"{head}, chi2 = {result.chi2:.3g} on {result.dof} degrees of freedom, {result.n_poses} poses)"]
     move = result.move
-    if move is not None:
+    alike = inseparable(result)
+    if alike:
+        parts.append(f"tracker move and tool point cannot be separated by this check ({', '.join(alike)} act alike)")
+    elif move is not None:
         parts.append(
             f"tracker moved {move.distance * 1e3:.3f} ± {move.distance_std * 1e3:.3f} mm and turned "
             f"{move.angle * 1e3:.3f} ± {move.angle_std * 1e3:.3f} mrad"
         )
-    if result.tool_change is not None:
+    if result.tool_change is not None and not alike:
         parts.append(f"tool point moved {float(np.linalg.norm(result.tool_change)) * 1e3:.3f} mm")
     if not result.consistent:
         parts.append("re-calibrate")
     return "; ".join(parts)
 
 
+INSEPARABLE_VIF = 1000.0
+"""Variance inflation factor above which a re-registered parameter is reported as not separable
+from the others: its standard uncertainty is then more than 30 times what it would be if the
+check determined it alone (honest checks of the README's shop-floor example: at most 10; a
+probe on joint 6's axis checked by poses that barely turn it: about 10^6)."""
+
+
+def inseparable(result: Verification) -> tuple[str, ...]:
+    """Re-registered parameters the check cannot tell apart from the others (a combination of
+    them is determined, not each): variance inflation factor above :data:`INSEPARABLE_VIF`."""
+    cov = np.asarray(result.registration_covariance, dtype=np.float64)
+    if cov.size == 0:
+        return ()
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    if not np.isfinite(std).all() or (std == 0.0).any():
+        return tuple(result.reregistered)
+    vif = np.diag(np.linalg.pinv(cov / np.outer(std, std)))
+    return tuple(n for n, v in zip(result.reregistered, vif) if not v <= INSEPARABLE_VIF)
+
+
+def _inseparable_line(names: tuple[str, ...]) -> str:
+    return (
+        f"tracker move and tool point cannot be separated by this check: {', '.join(names)} act alike (e.g. the "
+        "probe length and the tracker distance along the probe axis), so no value is stated for them. "
+        "Turn the probe through more orientations in the check, or "
+        "verify without --retool"
+    )
+
+
 def verification_lines(result: Verification, *, scope: str = "session") -> list[str]:
     """What ``verify`` prints: the verdict, the re-registration, the test and the worst poses."""
     lines = [result.verdict]
     move = result.move
-    if move is not None:
+    alike = inseparable(result)
+    if alike:
+        lines.append(_inseparable_line(alike))
+        if move is not None and not {"base.x", "base.y", "base.z"} & set(alike):
+            lines.append(
+                f"tracker turned {move.angle * 1e3:.3f} ± {move.angle_std * 1e3:.3f} mrad since the calibration session"
+            )
+    elif move is not None:
         t, ts = move.translation * 1e3, move.translation_std * 1e3
         lines.append(
             f"tracker moved {move.distance * 1e3:.3f} ± {move.distance_std * 1e3:.3f} mm "
@@ -84,7 +123,7 @@ def verification_lines(result: Verification, *, scope: str = "session") -> list[
             "robot base frame) "
             f"and turned {move.angle * 1e3:.3f} ± {move.angle_std * 1e3:.3f} mrad since the calibration session"
         )
-    if result.tool_change is not None and result.tool_change_std is not None:
+    if result.tool_change is not None and result.tool_change_std is not None and not alike:
         d, s = result.tool_change * 1e3, result.tool_change_std * 1e3
         lines.append(
             f"tool point re-registered: changed by ({d[0]:+.3f} ± {s[0]:.3f}, {d[1]:+.3f} ± {s[1]:.3f}, "
@@ -150,6 +189,7 @@ def verification_to_dict(
         "n_poses": result.n_poses,
         "rms_error_m": result.rms_error,
         "reregistered": list(result.reregistered),
+        "inseparable": list(inseparable(result)),
         "registration": _list(result.registration),
         "registration_covariance": _list(result.registration_covariance),
         "tracker_move": None
@@ -198,7 +238,10 @@ def verification_markdown(result: Verification, *, calibration: str, check_campa
         "",
     ]
     move = result.move
-    if move is not None:
+    alike = inseparable(result)
+    if alike:
+        lines += [_inseparable_line(alike) + ".", ""]
+    elif move is not None:
         lines += [
             "| quantity | value | standard uncertainty |",
             "| --- | --- | --- |",

@@ -72,6 +72,7 @@ from robocal_uncertainty.uncertainty.sources import (
     source_rng,
     stream_id,
 )
+from robocal_uncertainty.uncertainty.statement_check import gum_disagreements, too_few_trials_note
 
 __all__ = [
     "OUTPUT_FRAMES",
@@ -295,6 +296,10 @@ class CalibrationUncertainty:
     model_adequacy : ModelAdequacy
         Residuals against the stated noise; the residual source draws what is left over.
     warnings : tuple of str
+    not_converged : tuple of str
+        Why the run is no statement although it ran (its spread disagrees with its own GUM
+        statement: :func:`~robocal_uncertainty.uncertainty.statement_check.gum_disagreements`);
+        empty for a statement.
     """
 
     poses: tuple[PoseUncertainty, ...]
@@ -315,11 +320,22 @@ class CalibrationUncertainty:
     model_adequacy: ModelAdequacy
     warnings: tuple[str, ...] = field(default=())
     rotation_samples: Array | None = None
+    not_converged: tuple[str, ...] = field(default=())
 
     @property
     def converged(self) -> bool:
-        """True for a fixed number of trials, the adaptive verdict otherwise."""
+        """False when a check failed (:attr:`not_converged`, or the adaptive procedure's); else True.
+
+        A fixed number of trials runs no convergence test: see :attr:`convergence_tested`.
+        """
+        if self.not_converged:
+            return False
         return True if self.adaptive is None else self.adaptive.converged
+
+    @property
+    def convergence_tested(self) -> bool:
+        """True when a convergence test ran (the adaptive JCGM 101 §7.9 procedure)."""
+        return self.adaptive is not None
 
 
 @dataclass(frozen=True, eq=False)
@@ -1168,6 +1184,9 @@ def _statement(prep: _Prepared, ev: EvaluationSettings, result: TrialsResult) ->
             )
         )
     warns += _bias_warnings(prep, poses)
+    few = None if result.adaptive is not None else too_few_trials_note(result.n_trials, ev.coverage)
+    if few is not None:
+        warns.append(few)
     if result.adaptive is not None and not result.adaptive.converged:
         warns.append(
             f"adaptive Monte Carlo stopped at max_trials={ev.max_trials} before reaching "
@@ -1192,6 +1211,7 @@ def _statement(prep: _Prepared, ev: EvaluationSettings, result: TrialsResult) ->
         model_adequacy=prep.adequacy,
         warnings=tuple(warns),
         rotation_samples=result.samples[:, dim * n_test + k :] if ev.orientation else None,
+        not_converged=gum_disagreements(poses),
     )
 
 

@@ -33,7 +33,7 @@ from robocal_uncertainty.core.measurement import POSITION_AXES
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.rotation import rotation_log
-from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.errors import ConfigError, ConvergenceError, InputError
 from robocal_uncertainty.uncertainty.calibration_mc import (
     CalibrationUncertainty,
     EvaluationSettings,
@@ -156,6 +156,7 @@ class FoldResult:
     model_error_std: Array
     n_trials: int
     trustworthy: bool = True
+    trust_note: str = ""
 
 
 @dataclass(frozen=True)
@@ -505,6 +506,10 @@ def validate_holdout(
                 rot_stds.append(stats[4][1])
                 rot_inside.append(stats[4][2])
         assert result is not None
+        if result.not_converged:
+            # The trials do not re-identify the calibration: no statement to validate.
+            msg = f"fold {f + 1}: the Monte Carlo did not converge to a statement: {result.not_converged[0]}"
+            raise ConvergenceError(msg)
         adequacy = result.model_adequacy
         fold_results.append(
             FoldResult(
@@ -516,6 +521,7 @@ def validate_holdout(
                 model_error_std=adequacy.standard_uncertainty,
                 n_trials=result.n_trials,
                 trustworthy=adequacy.trustworthy,
+                trust_note=adequacy.trust_note,
             )
         )
         if progress is not None:

@@ -83,7 +83,11 @@ class ModelAdequacy:
         Centred residuals whitened to `inadequacy_covariance`: the values the residual
         source resamples (all zero when adequate).
     residual_dof : float
-        ``d n - p_eff``: equations left after the (regularised) fit.
+        ``d n - p_eff``: equations left after the (regularised) fit, each distinct joint
+        configuration counted once (a copied or re-measured pose tells nothing new about the
+        model error, so copying rows cannot make a small campaign look large).
+    repeated_poses : int
+        Poses whose joint readings repeat an earlier pose's (within :data:`REPEAT_TOLERANCE`).
     """
 
     chi2: float
@@ -96,6 +100,7 @@ class ModelAdequacy:
     inadequacy_covariance: Array
     draws: Array
     residual_dof: float = float("inf")
+    repeated_poses: int = 0
 
     @property
     def min_residual_dof(self) -> float:
@@ -117,8 +122,13 @@ class ModelAdequacy:
         if self.trustworthy:
             return ""
         d = int(self.draws.shape[1])
+        repeated = (
+            f", {self.repeated_poses} repeated pose{'s' if self.repeated_poses != 1 else ''} counted once"
+            if self.repeated_poses
+            else ""
+        )
         return (
-            f"NOT TRUSTWORTHY: {self.residual_dof:.0f} residual degrees of freedom (d n - p_eff), "
+            f"NOT TRUSTWORTHY: {self.residual_dof:.0f} residual degrees of freedom (d n - p_eff{repeated}), "
             f"fewer than the {self.min_residual_dof:.0f} needed to estimate or exclude a model error; "
             f"measure more poses (about {math.ceil((self.min_residual_dof - self.residual_dof) / d)} more)"
         )
@@ -190,6 +200,7 @@ def assess_model_adequacy(
     measurement = calibration.measurement
     n, dim = residuals.shape
     n_eq = dim * n
+    repeated = repeated_pose_count(joint_positions)
     noise = pose_noise_covariances(calibration, joint_positions, tracker_noise, encoder_noise, distances)
     # Noise reaches the residuals through the fit, r = (I - H) e: with the encoders' strongly
     # anisotropic covariance the residual covariance is (I - H) Sigma (I - H)^T, not Sigma.
@@ -252,8 +263,23 @@ def assess_model_adequacy(
         noise_covariance=noise.mean(axis=0),
         inadequacy_covariance=inadequacy,
         draws=draws,
-        residual_dof=float(n_eq) - calibration.effective_parameters,
+        residual_dof=float(dim * (n - repeated)) - calibration.effective_parameters,
+        repeated_poses=repeated,
     )
+
+
+REPEAT_TOLERANCE = 1e-6
+"""Joint readings [rad, m] that agree within this on every joint are one pose (an encoder count
+of an industrial arm is 1e-5 to 1e-6 rad; distinct calibration poses differ by degrees)."""
+
+
+def repeated_pose_count(joint_positions: Array, tolerance: float = REPEAT_TOLERANCE) -> int:
+    """Number of poses whose joint readings repeat an earlier pose's (rounded to `tolerance`)."""
+    q = np.asarray(joint_positions, dtype=np.float64)
+    if q.shape[0] < 2:
+        return 0
+    keys = np.round(q / tolerance)
+    return int(q.shape[0] - np.unique(keys, axis=0).shape[0])
 
 
 def _leave_one_out_moments(a_mat: Array, gain: Array, residuals: Array, blocks: Array) -> tuple[Array, Array]:

@@ -40,9 +40,15 @@ def _evaluate(setup, n_test: int):
     )
 
 
-def _per_config_pngs(indices) -> set[str]:
-    kinds = ("histograms", "position_error", "rotation_histograms")
-    return {f"{kind}_{i + 1}.png" for i in indices for kind in kinds}
+def _per_config_pngs(indices, result) -> set[str]:
+    out = set()
+    for i in indices:
+        out |= {f"histograms_{i + 1}.png", f"position_error_{i + 1}.png"}
+        orientation = result.poses[i].orientation
+        # A rotation figure only where some rotation is determined (no panels that are all "undetermined").
+        if orientation is not None and any(orientation.determined):
+            out.add(f"rotation_histograms_{i + 1}.png")
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +68,7 @@ def test_many_configurations_report_is_small_and_summarised(many, many_report):
 
     worst = summarize_configurations(many).worst
     expected = {*range(DEFAULT_HISTOGRAMS), worst}
-    assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS | _per_config_pngs(expected)
+    assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS | _per_config_pngs(expected, many)
 
     md = (out / "report.md").read_text(encoding="utf-8")
     html = (out / "report.html").read_text(encoding="utf-8")
@@ -110,7 +116,7 @@ def test_histograms_argument_selects_figures(many, tmp_path):
     assert f"Source (over {N_MANY} configurations)" in budget_md
     assert budget_md.count("### Test configuration ") == 1
     out = write_report(tmp_path / "two", many, robot_name="arm", histograms=[3, 10], embed_images=False)
-    assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS | _per_config_pngs([3, 10])
+    assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS | _per_config_pngs([3, 10], many)
     html = (out / "report.html").read_text(encoding="utf-8")
     assert '<img src="histograms_11.png"' in html
 
@@ -118,7 +124,7 @@ def test_histograms_argument_selects_figures(many, tmp_path):
 def test_few_configurations_keep_every_detail(setup, tmp_path):
     result = _evaluate(setup, 3)
     out = write_report(tmp_path, result, robot_name="arm", embed_images=False)
-    assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS | _per_config_pngs(range(3))
+    assert {p.name for p in out.glob("*.png")} == SUMMARY_PNGS | ALWAYS_PNGS | _per_config_pngs(range(3), result)
     md = (out / "report.md").read_text(encoding="utf-8")
     for i in range(3):
         assert f"Test configuration {i + 1}: position (x, y, z)" in md  # per-configuration summary line
