@@ -13,6 +13,7 @@ whether the robot still agrees with its calibration within the stated uncertaint
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +32,7 @@ from robocal_uncertainty.uncertainty.between_sessions import (
     with_between_sessions,
 )
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
-from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state
+from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state, validated_level
 
 __all__ = [
     "SessionCalibration",
@@ -67,6 +68,7 @@ def calibrate_session(
     later_sessions: Sequence[Campaign] = (),
     retool: bool = True,
     correlated_model_error: bool = True,
+    validate_level: bool = True,
 ) -> SessionCalibration:
     """Identify `campaign` and record the session for verification and later sessions.
 
@@ -99,6 +101,10 @@ def calibrate_session(
         joint configurations, estimated from the calibration's residuals by restricted maximum
         likelihood (:func:`~robocal_uncertainty.uncertainty.sessions.estimate_model_error_field`;
         default). Off: independent from pose to pose (held-out folds as above).
+    validate_level : bool
+        Measure the calibration's error level on its own held-out poses, re-registered as a
+        check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level`, five folds):
+        ``verify`` tests a check against it and states the check's error ratio.
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     if result.measurement.dimension != 3 or result.measurement.weights is not None:
@@ -145,6 +151,23 @@ def calibrate_session(
                 cross_validated=cv,
                 correlated=False,
             )
+    if validate_level:
+        try:
+            level = validated_level(
+                model,
+                campaign,
+                tracker_noise,
+                encoder_noise,
+                lambda_=lambda_,
+                retool=retool,
+                sources=sources,
+                correlated=correlated_model_error,
+                reference=state,
+            )
+        except CalibError as err:
+            warnings.append(f"no validated error level (verify then tests against the statement alone): {err}")
+        else:
+            state = dataclasses.replace(state, validated_level=level)
     if later_sessions:
         between = estimate_between_sessions(result.model, state, list(later_sessions), retool=retool)
         state = with_between_sessions(state, between)

@@ -59,6 +59,9 @@ def verification_summary(result: Verification) -> str:
             f"(p = {result.p_value:.3g} < {result.significance:g}"
         )
     parts = [f"{head}, chi2 = {result.chi2:.3g} on {result.dof} degrees of freedom, {result.n_poses} poses)"]
+    if result.error_ratio is not None and result.error_ratio_interval is not None:
+        lo, hi = result.error_ratio_interval
+        parts.append(f"errors {result.error_ratio:.2f}x the calibration session's (95 % interval {lo:.2f}-{hi:.2f})")
     move = result.move
     if move is not None:
         parts.append(
@@ -137,7 +140,9 @@ def verification_to_dict(
         "consistent": result.consistent,
         "verdict": result.verdict,
         "test": {
-            "statistic": "generalised least-squares chi2 after re-registration",
+            "statistic": "generalised least-squares chi2 after re-registration"
+            if result.test == "chi-square"
+            else "error level against the calibration's validated level (F test; chi2 for reference)",
             "chi2": result.chi2,
             "dof": result.dof,
             "p_value": result.p_value,
@@ -147,6 +152,18 @@ def verification_to_dict(
             "seed": result.seed,
             "excess_std_m": result.excess_std,
         },
+        "error_level": {
+            "test": result.test,
+            "statement": "mean square error per component after re-registration, relative to the "
+            "calibration session's own held-out poses (F test)",
+            "level_m2": result.level,
+            "level_dof": result.level_dof,
+            "error_ratio": result.error_ratio,
+            "error_ratio_interval_95": None
+            if result.error_ratio_interval is None
+            else list(result.error_ratio_interval),
+        },
+        "duplicate_poses_dropped": result.duplicates,
         "n_poses": result.n_poses,
         "rms_error_m": result.rms_error,
         "reregistered": list(result.reregistered),
