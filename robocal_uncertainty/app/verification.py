@@ -169,7 +169,9 @@ def calibrate_session(
         else:
             state = dataclasses.replace(state, validated_level=level)
     if later_sessions:
-        between = estimate_between_sessions(result.model, state, list(later_sessions), retool=retool)
+        between = estimate_between_sessions(
+            result.model, state, list(later_sessions), retool=retool, reference_campaign=campaign
+        )
         state = with_between_sessions(state, between)
     return SessionCalibration(result=result, state=state, adequacy=adequacy, warnings=tuple(warnings))
 

@@ -871,6 +871,21 @@ def verify_session(
         nu_c, nu_r = max(level_dof * factor, 1e-3), max(reference.dof * factor, 1e-3)
         t_stat = level / reference.level
         p_value = float(stats.f.sf(t_stat, nu_c, nu_r))
+        between_level = state.extra.get("between_session")
+        between_dict: dict[str, object] = dict(between_level) if isinstance(between_level, dict) else {}
+        log_std = between_dict.get("level_log_std")
+        if isinstance(log_std, (int, float)) and float(log_std) > 0.0:
+            # A future session: its error level varies from session to session (log standard
+            # deviation tau over S - 1 degrees of freedom); a t test on the log level with
+            # Welch-Satterthwaite degrees of freedom.
+            test = "error level, future session"
+            parts = np.array([2.0 / nu_c, 2.0 / nu_r, float(log_std) ** 2])
+            between_dof_raw = between_dict.get("level_dof", 1.0)
+            dofs = np.array(
+                [nu_c, nu_r, max(float(between_dof_raw) if isinstance(between_dof_raw, (int, float)) else 1.0, 1.0)]
+            )
+            welch = float(np.sum(parts) ** 2 / np.sum(parts**2 / dofs))
+            p_value = float(stats.t.sf(np.log(t_stat) / np.sqrt(np.sum(parts)), welch))
         ratio = float(np.sqrt(t_stat))
         ratio_interval = (
             float(np.sqrt(t_stat / stats.f.ppf(0.975, nu_c, nu_r))),
@@ -911,8 +926,13 @@ def verify_session(
     if ratio is not None and ratio_interval is not None:
         size = (
             f"errors {ratio:.2f}x the calibration session's (95 % interval {ratio_interval[0]:.2f}-"
-            f"{ratio_interval[1]:.2f}; F test on {nu_c:.0f} and {nu_r:.0f} "
-            f"degrees of freedom, p = {p_value:.3g} {'>=' if consistent else '<'} {significance:g})"
+            f"{ratio_interval[1]:.2f}; "
+            + (
+                f"F test on {nu_c:.0f} and {nu_r:.0f} degrees of freedom"
+                if test == "error level"
+                else "t test on the log level with the between-session spread"
+            )
+            + f", p = {p_value:.3g} {'>=' if consistent else '<'} {significance:g})"
         )
         verdict = (
             f"consistent: the robot agrees with its calibration within the stated uncertainty: {size}"
