@@ -329,7 +329,12 @@ class Verification:
         from pose to pose).
     test : str
         ``"error level"`` (the check's level against the calibration's validated level, an F
-        test; `p_value` is its) or ``"chi-square"`` (against the statement alone).
+        test; `p_value` is its), ``"error level, future session"`` (a t test on the log level
+        with the between-session spread of the level) or ``"chi-square"`` (against the
+        statement alone, the Monte Carlo null; calibration files without a validated level).
+    p_value_statement : float
+        The chi-square statistic's Monte Carlo p-value against the statement alone (equal to
+        `p_value` for the ``"chi-square"`` test), reported beside the level test.
     level : float [m^2]
         The check's mean square error per kept equation (see :class:`ValidatedLevel`).
     level_dof : float
@@ -373,6 +378,7 @@ class Verification:
     effective_dof: Array | None = None
     model_error_length_scale: float | None = None
     test: str = "chi-square"
+    p_value_statement: float = float("nan")
     level: float = float("nan")
     level_dof: float = float("nan")
     error_ratio: float | None = None
@@ -858,6 +864,7 @@ def verify_session(
             correlated_dof=state.model_error_dof,
         )
     p_value = float((1 + np.count_nonzero(null >= chi2)) / (1 + null.size))
+    p_statement = p_value
     level, level_dof, level_z, level_trace = _level(r, a_mat, c_mat)
     reference = state.validated_level
     ratio = ratio_interval = None
@@ -999,6 +1006,7 @@ def verify_session(
         effective_dof=effective_dof,
         model_error_length_scale=None if me_field is None else float(me_field.length_scale),
         test=test,
+        p_value_statement=p_statement,
         level=level,
         level_dof=level_dof,
         error_ratio=ratio,

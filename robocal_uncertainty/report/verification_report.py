@@ -96,8 +96,13 @@ def verification_lines(result: Verification, *, scope: str = "session") -> list[
     lines.append(
         f"{result.n_poses} check poses, {3 * result.n_poses} equations, {len(result.reregistered)} re-registered "
         f"({result.dof} degrees of freedom left); RMS error after re-registration {result.rms_error * 1e3:.3f} mm; "
-        f"chi2 = {result.chi2:.2f}, p = {result.p_value:.3g} (Monte Carlo null, {result.null_trials} draws, "
-        f"seed {result.seed}; chi-square approximation p = {result.p_value_chi2:.3g})"
+        f"chi2 = {result.chi2:.2f}, p = {result.p_value_statement:.3g} against the statement alone (Monte Carlo "
+        f"null, {result.null_trials} draws, seed {result.seed}; chi-square approximation p = {result.p_value_chi2:.3g})"
+        + (
+            ""
+            if result.test == "chi-square"
+            else f"; the verdict is the {result.test} test's (p = {result.p_value:.3g})"
+        )
     )
     me = result.model_error_std * 1e6
     lines.append(
@@ -147,6 +152,8 @@ def verification_to_dict(
             "dof": result.dof,
             "p_value": result.p_value,
             "p_value_chi2_approximation": result.p_value_chi2,
+            "p_value_chi2_against_statement": result.p_value_statement,
+            "verdict_test": result.test,
             "significance": result.significance,
             "null_trials": result.null_trials,
             "seed": result.seed,
@@ -239,8 +246,9 @@ def verification_markdown(result: Verification, *, calibration: str, check_campa
         "",
         f"- poses: {result.n_poses}; re-registered parameters: {len(result.reregistered)}; "
         f"degrees of freedom: {result.dof}",
-        f"- chi2 = {result.chi2:.3f}; p = {result.p_value:.4g} (Monte Carlo null distribution, "
-        f"{result.null_trials} draws, seed {result.seed}); chi-square approximation p = {result.p_value_chi2:.4g}",
+        f"- chi2 = {result.chi2:.3f}; p = {result.p_value_statement:.4g} against the statement alone (Monte Carlo "
+        f"null distribution, {result.null_trials} draws, seed {result.seed}); chi-square approximation "
+        f"p = {result.p_value_chi2:.4g}; verdict from the {result.test} test, p = {result.p_value:.4g}",
         f"- significance level (false-alarm rate when nothing changed): {result.significance:g}",
         f"- extra error per axis needed to explain the check: {result.excess_std * 1e3:.4g} mm",
         f"- statement valid for: {scope}",
