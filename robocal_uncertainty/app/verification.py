@@ -19,9 +19,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+
 from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration, read_session_state
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, verify_session
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
@@ -107,13 +110,23 @@ def calibrate_session(
         ``verify`` tests a check against it and states the check's error ratio.
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
-    if result.measurement.dimension != 3 or result.measurement.weights is not None:
-        warning = (
-            "no session record: verify and between-session statements need a point calibration "
-            "(this one used orientation data)"
-        )
-        return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
     warnings: list[str] = []
+    full = result
+    if result.measurement.dimension != 3 or result.measurement.weights is not None:
+        # A 6-DOF (or weighted) calibration: verify checks tool points, so the session record is
+        # the point calibration of the same poses (positions only, the tool point's part); the
+        # file keeps the 6-DOF parameters.
+        positions = campaign.measurement.positions(campaign.points)
+        if positions is None:
+            warning = "no session record: verify and between-session statements need measured positions"
+            return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
+        campaign = dataclasses.replace(campaign, points=np.asarray(positions), measurement=POINT, point_std=None)
+        model = dataclasses.replace(model, tool_rotation=False)
+        result = identify(model, campaign, lambda_=lambda_, accept_unconverged=True)
+        warnings.append(
+            "session record from the positions of the same poses (a point calibration of them): verify checks "
+            "tool points against it with this calibration's parameters"
+        )
     settings: dict[str, object] = {
         "lambda": str(lambda_),
         "lambda_method": result.lambda_method,
@@ -173,7 +186,13 @@ def calibrate_session(
             result.model, state, list(later_sessions), retool=retool, reference_campaign=campaign
         )
         state = with_between_sessions(state, between)
-    return SessionCalibration(result=result, state=state, adequacy=adequacy, warnings=tuple(warnings))
+    if full is not result and state.frame == "tracker":
+        # Tracker move and tool change are reported against the parameters the file holds.
+        b0 = full.model.layout.base_index
+        extra = dict(state.extra)
+        extra["tool_point_m"] = [float(v) for v in full.model.tool_point]
+        state = dataclasses.replace(state, registration=full.estimate[b0 : b0 + 6].copy(), extra=extra)
+    return SessionCalibration(result=full, state=state, adequacy=adequacy, warnings=tuple(warnings))
 
 
 def load_session_calibration(model: RobotModel, path: str | Path) -> tuple[RobotModel, SessionState, dict[str, Any]]:
