@@ -115,15 +115,39 @@ def future_coverage(model: RobotModel, campaign: Campaign, check_idx: np.ndarray
     return float(np.mean(z <= stats.t.ppf(0.975, nu)))
 
 
+def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
+    """The README's campaigns: 53 random poses of each series and checks of the others (seeded)."""
+    from robocal_uncertainty.bagio import write_campaign
+
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    for name in ("B", "D"):
+        order = rng.permutation(series[name].n_poses)
+        parts = {f"{name.lower()}53": order[:N_CAL], f"{name.lower()}10": order[N_CAL : N_CAL + 10]}
+        parts[f"{name.lower()}200"] = order[N_CAL + 10 : N_CAL + 210]
+        for stem, idx in parts.items():
+            write_campaign(out / f"{stem}.mcap", series[name].subset(np.sort(idx)))
+            print(f"wrote {out / stem}.mcap ({idx.size} poses of series {name})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calibrations", type=int, default=4, help="random 53-pose calibrations per series")
     parser.add_argument("--checks", type=int, default=8, help="random check subsets per size")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--null-trials", type=int, default=500)
+    parser.add_argument(
+        "--write-example",
+        metavar="DIR",
+        help="only write the README's example campaigns to DIR (b53.mcap: 53 random poses of B; b10.mcap, "
+        "d10.mcap, d200.mcap: checks of B's other poses and of D; d53.mcap likewise) and stop",
+    )
     args = parser.parse_args()
     model = load_robot_model(ROOT / "robocal_uncertainty" / "data" / "ur10.yaml")
     series = {name: read_tracker_csv(DATA / path) for name, path in SERIES.items()}
+    if args.write_example:
+        write_example(series, Path(args.write_example), args.seed)
+        return
     print("series: " + ", ".join(f"{k} {v.n_poses} poses" for k, v in series.items()))
     print(
         f"seed {args.seed}, {args.calibrations} calibrations of {N_CAL} poses per series, {args.checks} checks per size"

@@ -311,8 +311,10 @@ class Verification:
     stated_std : ndarray, shape (n, 3) [m]
         Standard deviation of each residual component under "nothing changed".
     excess_std : float [m]
-        Smallest extra per-axis standard deviation that makes the statistic equal its degrees
-        of freedom (0 when chi2 <= dof): the size of the drift beyond the stated uncertainty.
+        Size of the drift: with a validated level, ``sqrt(max(level - validated level, 0))``
+        (extra standard deviation per component beyond the calibration's own held-out errors);
+        without, the smallest extra per-axis standard deviation that makes the chi-square
+        statistic equal its degrees of freedom (0 when chi2 <= dof).
     rms_error : float [m]
         RMS over the poses of the residual norm.
     model_error_std : ndarray, shape (3,) [m]
@@ -942,11 +944,15 @@ def verify_session(
             )
             + f", p = {p_value:.3g} {'>=' if consistent else '<'} {significance:g})"
         )
+        # The drift's size: the extra standard deviation per component beyond the calibration
+        # session's own validated level.
+        assert reference is not None
+        excess = float(np.sqrt(max(level - reference.level, 0.0)))
         verdict = (
             f"consistent: the robot agrees with its calibration within the stated uncertainty: {size}"
             if consistent
             else f"drifted: the robot deviates from its calibration by about {excess * 1e3:.3g} mm per axis "
-            f"beyond the stated uncertainty: {size}; re-calibrate"
+            f"beyond its validated error level: {size}; re-calibrate"
         )
     elif consistent:
         verdict = (

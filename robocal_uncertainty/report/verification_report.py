@@ -55,8 +55,9 @@ def verification_summary(result: Verification) -> str:
         head = f"consistent (p = {result.p_value:.3g} >= {result.significance:g}"
     else:
         head = (
-            f"drifted by about {result.excess_std * 1e3:.3g} mm per axis beyond the stated uncertainty "
-            f"(p = {result.p_value:.3g} < {result.significance:g}"
+            f"drifted by about {result.excess_std * 1e3:.3g} mm per axis beyond "
+            + ("the stated uncertainty " if result.test == "chi-square" else "the calibration's validated error level ")
+            + f"(p = {result.p_value:.3g} < {result.significance:g}"
         )
     parts = [f"{head}, chi2 = {result.chi2:.3g} on {result.dof} degrees of freedom, {result.n_poses} poses)"]
     if result.error_ratio is not None and result.error_ratio_interval is not None:
