@@ -868,7 +868,13 @@ def verify_session(
         )
     p_value = float((1 + np.count_nonzero(null >= chi2)) / (1 + null.size))
     p_statement = p_value
-    level, level_dof, level_z, level_trace = _level(r, a_mat)
+    # The level's shape: stated noise and calibration parameter errors, without the model-error
+    # field (whose correlation length one campaign hardly fixes).
+    jk_flat = jac[:, :, kin].reshape(3 * n, kin.size)
+    shape = linalg.block_diag(*_pose_noise(jac, theta_cols, distances, tracker, encoder, model.prismatic))
+    if kin.size:
+        shape = shape + jk_flat @ sigma_k @ jk_flat.T
+    level, level_dof, level_z, level_trace = _level(r, a_mat, np.asarray(shape, dtype=np.float64))
     reference = state.validated_level
     ratio = ratio_interval = None
     nu_c = nu_r = float("nan")
@@ -1034,11 +1040,14 @@ def _unique_poses(campaign: Campaign, y: Array) -> tuple[Campaign, Array, int]:
     return campaign.subset(keep), y[keep], int(campaign.n_poses - keep.size)
 
 
-def _level(r: Array, a_mat: Array) -> tuple[float, float, Array, float]:
+def _level(r: Array, a_mat: Array, shape: Array) -> tuple[float, float, Array, float]:
     """``r^T P r / m_kept`` [m^2], its degrees of freedom, the standardised ``P r`` and ``m_kept``.
 
     ``P`` projects off the re-registration (ordinary least squares: the level does not lean on
-    the stated covariance to weight the poses).
+    the stated covariance to weight the poses); ``m_kept = 3 n tr(P S P) / tr(S)`` with ``S``
+    the stated noise and calibration-parameter covariance: the share of the error a
+    re-registration of few poses absorbs (the parameter errors are smooth over the poses) is
+    taken off, so a fold of 10 poses and a check of 200 measure the same level.
     """
     m = r.size
     if a_mat.shape[1]:
@@ -1049,18 +1058,19 @@ def _level(r: Array, a_mat: Array) -> tuple[float, float, Array, float]:
     else:
         proj = np.eye(m)
     rp = proj @ r
-    # Equations the residual keeps after the re-registration: 3 n - k, and as many degrees of
-    # freedom (before the kurtosis factor). The stated field's own account (the share of a
-    # smooth error the projection takes, Satterthwaite's t1^2 / t2) leans on its correlation
-    # length, which one campaign hardly fixes (it ran to its bound on the UR10 series): it made
-    # the level unstable between calibrations of one series and the power of 200-pose checks
-    # lower than of 10-pose ones. What correlation the real errors have shows in the scatter of
-    # the calibration's fold levels, which bounds the reference's degrees of freedom.
-    kept = float(m - (np.linalg.matrix_rank(a_mat) if a_mat.shape[1] else 0))
+    # Degrees of freedom 3 n - k (before the kurtosis factor). The stated field's own account
+    # (the share of a smooth error the projection takes, Satterthwaite's t1^2 / t2) leans on
+    # its correlation length, which one campaign hardly fixes (it ran to its bound on the UR10
+    # series): it made the level unstable between calibrations of one series and the power of
+    # 200-pose checks lower than of 10-pose ones. What correlation the real errors have shows
+    # in the scatter of the calibration's fold levels, which bounds the reference's dof.
+    dof = float(m - (np.linalg.matrix_rank(a_mat) if a_mat.shape[1] else 0))
+    trace = float(np.trace(shape))
+    kept = m * float(np.trace(proj @ shape @ proj)) / trace if trace > 0.0 else dof
     level = float(rp @ rp) / kept
     # Standardised components (for the kurtosis): each over its own expected size.
     z = rp / np.sqrt(np.clip(np.diag(proj), 1e-12, None) * max(level, 1e-300))
-    return level, kept, np.asarray(z, dtype=np.float64), kept
+    return level, dof, np.asarray(z, dtype=np.float64), kept
 
 
 def check_level(verifications: list[Verification], *, seed: int = 0) -> ValidatedLevel:
