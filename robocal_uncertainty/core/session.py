@@ -349,6 +349,11 @@ class Verification:
         Its 95 % interval (from the F distribution of the two levels).
     duplicates : int
         Check poses dropped as exact repeats of another (same joints and measurement).
+    level_z : ndarray, shape (3 n,) or None
+        The re-registered residual components over their expected size at `level` (for the
+        kurtosis of a :class:`ValidatedLevel`).
+    level_trace : float
+        The equations `level` is taken over (``m_kept``; pooling weight of fold levels).
     """
 
     consistent: bool
