@@ -6,11 +6,11 @@ file (see :mod:`robocal_uncertainty.nodes.common`). Re-identifies the parameters
 request (``~/calibrate``, ``std_srvs/Trigger``). Each calibration is published as a
 ``robocal_uncertainty/CalibrationResult`` (reliable, transient local, depth 1: a late
 subscriber gets the latest) and written to ``calibration_file`` (YAML, SI units stated;
-default ``<campaign>.calibration.yaml`` next to the campaign), replacing it atomically, and
-with its session record (the ``calibrate --json`` file: parameter covariance, model error,
-registration, validated error level) to ``session_record_file`` (default
-``<campaign>.session.json``): a later session's ``~/verify`` names it in ``verify_calibration``,
-no command line needed.
+default ``<campaign>.calibration.yaml`` next to the campaign), replacing it atomically. A
+calibration requested through ``~/calibrate`` also writes its session record (the ``calibrate
+--json`` file: parameter covariance, model error, registration, validated error level) to
+``session_record_file`` (default ``<campaign>.session.json``): a later session's ``~/verify``
+names it in ``verify_calibration``, no command line needed.
 Its health (samples, condition number, residual RMS, lambda, convergence, time since the last
 calibration; OK/WARN/ERROR) goes to ``/diagnostics`` every ``diagnostics_period_s``.
 After each calibration the calibrated URDF goes to ``~/robot_description`` (``std_msgs/String``,
@@ -136,8 +136,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "session_record_file",
         "",
-        "JSON calibration with its session record (robocal-uncertainty calibrate --json format) written after each "
-        "calibration, for ~/verify of a later session (its verify_calibration); empty = <campaign>.session.json "
+        "JSON calibration with its session record (robocal-uncertainty calibrate --json format) written by each "
+        "~/calibrate, for ~/verify of a later session (its verify_calibration); empty = <campaign>.session.json "
         "next to the campaign",
         read_only=True,
     ),
@@ -366,7 +366,10 @@ class CalibrationNode(Node):
             self._write(result)
         except OSError as err:
             self.get_logger().error(f"cannot write {self.calibration_path}: {err}")
-        self._write_session_record(lambda_)
+        if min_samples is None:
+            # On request only: the record re-identifies and validates on five folds (seconds),
+            # too slow for the automatic calibration after every sample.
+            self._write_session_record(lambda_)
         return result
 
     def _write_session_record(self, lambda_: str | float) -> None:

@@ -226,7 +226,7 @@ def test_six_dof_calibrations_are_verified(ros_context, tmp_path, sessions) -> N
 
 
 def test_the_node_writes_a_session_record_its_later_verify_uses(ros_context, tmp_path, sessions) -> None:
-    """Session 1: the node calibrates from its samples and writes the session record. Session 2:
+    """Session 1: ~/calibrate calibrates from the samples and writes the session record. Session 2:
     a node given that record checks 10 poses, no command line between them; the verdict is the
     one of ``verify`` on the same record and check."""
     first = _node(ros_context, tmp_path / "s1", campaign_path=str(tmp_path / "s1" / "ur10.mcap"), min_samples=53)
@@ -235,6 +235,8 @@ def test_the_node_writes_a_session_record_its_later_verify_uses(ros_context, tmp
             first._on_sample(msg)
         assert first.latest is not None
         record = tmp_path / "s1" / "ur10.session.json"
+        assert not record.exists()  # automatic calibrations do not write it (seconds each)
+        assert first._calibrate_service(Trigger.Request(), Trigger.Response()).success
         assert record.is_file() and first.session_record_path == record
     finally:
         first.destroy_node()
