@@ -29,6 +29,15 @@ minimises ``r^T C^-1 r`` and the statistic ``chi2 = r^T C^-1 r`` at the minimum 
 chi-square with ``3 n - k`` degrees of freedom (``k`` = rank of the re-registration
 Jacobian: the degrees of freedom the re-registration used are taken off). The check is
 *consistent* when its p-value is at least the significance level (the false-alarm rate).
+
+When the calibration records a :class:`ValidatedLevel` (its own held-out error level, measured
+on folds of its campaign re-registered as a check), the verdict is the *level test* instead:
+the check's mean square error per component after an ordinary least-squares re-registration
+against that level, an F test, with the ratio ("errors 1.6x the calibration session's") and its
+interval. Why: on real sessions the statement's model-error field has a scale fixed by one to a
+few degrees of freedom (its correlation length runs to its bound), so the chi-square's null
+distribution above is so wide that a session with twice the errors reads consistent at every
+check size; the level is measured, not stated. The chi-square p-value is still reported.
 """
 
 from __future__ import annotations
