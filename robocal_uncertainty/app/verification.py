@@ -13,14 +13,18 @@ whether the robot still agrees with its calibration within the stated uncertaint
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+
 from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration, read_session_state
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, verify_session
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
@@ -31,7 +35,7 @@ from robocal_uncertainty.uncertainty.between_sessions import (
     with_between_sessions,
 )
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
-from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state
+from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state, validated_level
 
 __all__ = [
     "SessionCalibration",
@@ -67,6 +71,7 @@ def calibrate_session(
     later_sessions: Sequence[Campaign] = (),
     retool: bool = True,
     correlated_model_error: bool = True,
+    validate_level: bool = True,
 ) -> SessionCalibration:
     """Identify `campaign` and record the session for verification and later sessions.
 
@@ -99,15 +104,29 @@ def calibrate_session(
         joint configurations, estimated from the calibration's residuals by restricted maximum
         likelihood (:func:`~robocal_uncertainty.uncertainty.sessions.estimate_model_error_field`;
         default). Off: independent from pose to pose (held-out folds as above).
+    validate_level : bool
+        Measure the calibration's error level on its own held-out poses, re-registered as a
+        check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level`, five folds):
+        ``verify`` tests a check against it and states the check's error ratio.
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
-    if result.measurement.dimension != 3 or result.measurement.weights is not None:
-        warning = (
-            "no session record: verify and between-session statements need a point calibration "
-            "(this one used orientation data)"
-        )
-        return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
     warnings: list[str] = []
+    full = result
+    if result.measurement.dimension != 3 or result.measurement.weights is not None:
+        # A 6-DOF (or weighted) calibration: verify checks tool points, so the session record is
+        # the point calibration of the same poses (positions only, the tool point's part); the
+        # file keeps the 6-DOF parameters.
+        positions = campaign.measurement.positions(campaign.points)
+        if positions is None:
+            warning = "no session record: verify and between-session statements need measured positions"
+            return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
+        campaign = dataclasses.replace(campaign, points=np.asarray(positions), measurement=POINT, point_std=None)
+        model = dataclasses.replace(model, tool_rotation=False)
+        result = identify(model, campaign, lambda_=lambda_, accept_unconverged=True)
+        warnings.append(
+            "session record from the positions of the same poses (a point calibration of them): verify checks "
+            "tool points against it with this calibration's parameters"
+        )
     settings: dict[str, object] = {
         "lambda": str(lambda_),
         "lambda_method": result.lambda_method,
@@ -145,10 +164,35 @@ def calibrate_session(
                 cross_validated=cv,
                 correlated=False,
             )
+    if validate_level:
+        try:
+            level = validated_level(
+                model,
+                campaign,
+                tracker_noise,
+                encoder_noise,
+                lambda_=lambda_,
+                retool=retool,
+                sources=sources,
+                correlated=correlated_model_error,
+                reference=state,
+            )
+        except CalibError as err:
+            warnings.append(f"no validated error level (verify then tests against the statement alone): {err}")
+        else:
+            state = dataclasses.replace(state, validated_level=level)
     if later_sessions:
-        between = estimate_between_sessions(result.model, state, list(later_sessions), retool=retool)
+        between = estimate_between_sessions(
+            result.model, state, list(later_sessions), retool=retool, reference_campaign=campaign
+        )
         state = with_between_sessions(state, between)
-    return SessionCalibration(result=result, state=state, adequacy=adequacy, warnings=tuple(warnings))
+    if full is not result and state.frame == "tracker":
+        # Tracker move and tool change are reported against the parameters the file holds.
+        b0 = full.model.layout.base_index
+        extra = dict(state.extra)
+        extra["tool_point_m"] = [float(v) for v in full.model.tool_point]
+        state = dataclasses.replace(state, registration=full.estimate[b0 : b0 + 6].copy(), extra=extra)
+    return SessionCalibration(result=full, state=state, adequacy=adequacy, warnings=tuple(warnings))
 
 
 def load_session_calibration(model: RobotModel, path: str | Path) -> tuple[RobotModel, SessionState, dict[str, Any]]:

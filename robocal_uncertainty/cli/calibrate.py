@@ -91,6 +91,20 @@ def session_lines(state: Any) -> list[str]:
             f"statement scope: future sessions (between-session component from {between.get('n_sessions')} sessions, "
             f"{between.get('dof', state.between_session_dof):.0f}+ degrees of freedom: {', '.join(parts)} per session)"
         )
+        ratios = between.get("level_ratios") or []
+        if between.get("level_log_std") is not None and ratios:
+            p_values = between.get("level_p_values") or []
+            shown = ", ".join(f"{r:.2f}x (p = {p:.2g})" for r, p in zip(ratios, p_values))
+            lines.append(
+                f"error level of the later sessions against this calibration's validated level: {shown}; "
+                f"between-session spread of the level: log sd {between['level_log_std']:.2f} on "
+                f"{between.get('level_dof', 0):.0f} degree(s) of freedom"
+                + (
+                    " (too few sessions to fix it: verify's test of a future session is wide)"
+                    if len(ratios) < 3
+                    else ""
+                )
+            )
     return lines
 
 

@@ -75,7 +75,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.model_error_field import FIELD_KERNEL, FIELD_METRIC, ModelErrorField
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, SessionState
+from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, SessionState, ValidatedLevel
 from robocal_uncertainty.core.simulation import LINEAR_ENCODER_HALF_WIDTH, EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 
@@ -135,6 +135,7 @@ def session_state_to_dict(state: SessionState) -> dict[str, Any]:
                 "covariance": _matrix(state.covariance_of(TOOL_NAMES)) if t0 else None,
             },
             "campaign": state.extra.get("campaign"),
+            "validated_level": None if state.validated_level is None else state.validated_level.to_dict(),
         },
         "noise": {
             "tracker_noise_a_m": state.tracker_noise.a,
@@ -324,6 +325,13 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
             msg = f"{where}: model_error.draws_base_m must be n rows of 3 finite values [m]"
             raise ConfigError(msg)
     me_field = _read_field(model_error.get("field"), where)
+    level = None
+    if session.get("validated_level") is not None:
+        try:
+            level = ValidatedLevel.from_dict(dict(session["validated_level"]))
+        except (KeyError, TypeError, ValueError) as err:
+            msg = f"{where}: incomplete session.validated_level record ({err.__class__.__name__}: {err})"
+            raise ConfigError(msg) from err
     return SessionState(
         frame=frame,
         frame_id=str(session.get("frame_id", "")),
@@ -346,6 +354,7 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         scope=str(data.get("scope", "session")),
         extra=extra,
         model_error_field=me_field,
+        validated_level=level,
     )
 
 

@@ -6,7 +6,11 @@ file (see :mod:`robocal_uncertainty.nodes.common`). Re-identifies the parameters
 request (``~/calibrate``, ``std_srvs/Trigger``). Each calibration is published as a
 ``robocal_uncertainty/CalibrationResult`` (reliable, transient local, depth 1: a late
 subscriber gets the latest) and written to ``calibration_file`` (YAML, SI units stated;
-default ``<campaign>.calibration.yaml`` next to the campaign), replacing it atomically.
+default ``<campaign>.calibration.yaml`` next to the campaign), replacing it atomically. A
+calibration requested through ``~/calibrate`` also writes its session record (the ``calibrate
+--json`` file: parameter covariance, model error, registration, validated error level) to
+``session_record_file`` (default ``<campaign>.session.json``): a later session's ``~/verify``
+names it in ``verify_calibration``, no command line needed.
 Its health (samples, condition number, residual RMS, lambda, convergence, time since the last
 calibration; OK/WARN/ERROR) goes to ``/diagnostics`` every ``diagnostics_period_s``.
 After each calibration the calibrated URDF goes to ``~/robot_description`` (``std_msgs/String``,
@@ -59,11 +63,12 @@ from robocal_uncertainty.app.export import (
     load_robot_source,
     robot_source_from_description,
 )
-from robocal_uncertainty.app.verification import VerificationRun, verify
+from robocal_uncertainty.app.verification import VerificationRun, calibrate_session, verify
 from robocal_uncertainty.bagio.messages import calibration_to_msg, msg_to_sample
-from robocal_uncertainty.core.calibration_file import calibration_to_dict
+from robocal_uncertainty.core.calibration_file import calibration_to_dict, write_calibration
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE
+from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import CalibError, ConfigError, InputError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
@@ -126,6 +131,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "calibration_file",
         "",
         "YAML file the latest calibration is written to; empty = <campaign>.calibration.yaml next to the campaign",
+        read_only=True,
+    ),
+    ParamSpec(
+        "session_record_file",
+        "",
+        "JSON calibration with its session record (robocal-uncertainty calibrate --json format) written by each "
+        "~/calibrate, for ~/verify of a later session (its verify_calibration); empty = <campaign>.session.json "
+        "next to the campaign",
         read_only=True,
     ),
     ParamSpec(
@@ -246,6 +259,11 @@ class CalibrationNode(Node):
             if p["calibration_file"].strip()
             else self.campaign_path.with_name(self.campaign_path.stem + ".calibration.yaml")
         )
+        self.session_record_path = (
+            Path(p["session_record_file"]).expanduser()
+            if p["session_record_file"].strip()
+            else self.campaign_path.with_name(self.campaign_path.stem + ".session.json")
+        )
         self._causes = CauseLogger(self, 5.0)
         self.calibrated_count = 0
         self.latest: IdentificationResult | None = None
@@ -348,7 +366,40 @@ class CalibrationNode(Node):
             self._write(result)
         except OSError as err:
             self.get_logger().error(f"cannot write {self.calibration_path}: {err}")
+        if min_samples is None:
+            # On request only: the record re-identifies and validates on five folds (seconds),
+            # too slow for the automatic calibration after every sample.
+            self._write_session_record(lambda_)
         return result
+
+    def _write_session_record(self, lambda_: str | float) -> None:
+        """The calibration with its session record (``calibrate --json``), for ~/verify of a later session."""
+        campaign = self.store.pipeline().campaign
+        if campaign is None:
+            return
+        try:
+            record = calibrate_session(
+                self.model,
+                campaign,
+                tracker_noise=TrackerNoise(),
+                encoder_noise=EncoderNoise(),
+                lambda_=lambda_,
+                accept_unconverged=bool(self.get_parameter("accept_unconverged").value),
+                campaign_name=str(self.campaign_path),
+            )
+            if record.state is None:
+                raise ConfigError("; ".join(record.warnings))
+            self.session_record_path.parent.mkdir(parents=True, exist_ok=True)
+            temporary = self.session_record_path.with_name(self.session_record_path.name + ".tmp")
+            write_calibration(temporary, record.result, robot=self.robot_config, session=record.state)
+            os.replace(temporary, self.session_record_path)
+        except (CalibError, OSError) as err:
+            self.get_logger().error(f"no session record written to {self.session_record_path}: {err}")
+            return
+        self.get_logger().info(
+            f"session record written to {self.session_record_path}: a later session's ~/verify checks against it "
+            "(its parameter verify_calibration)"
+        )
 
     def diagnostic_status(self) -> DiagnosticStatus:
         """The calibration's health (rules in :mod:`robocal_uncertainty.pipeline.diagnostics`)."""

@@ -55,10 +55,14 @@ def verification_summary(result: Verification) -> str:
         head = f"consistent (p = {result.p_value:.3g} >= {result.significance:g}"
     else:
         head = (
-            f"drifted by about {result.excess_std * 1e3:.3g} mm per axis beyond the stated uncertainty "
-            f"(p = {result.p_value:.3g} < {result.significance:g}"
+            f"drifted by about {result.excess_std * 1e3:.3g} mm per axis beyond "
+            + ("the stated uncertainty " if result.test == "chi-square" else "the calibration's validated error level ")
+            + f"(p = {result.p_value:.3g} < {result.significance:g}"
         )
     parts = [f"{head}, chi2 = {result.chi2:.3g} on {result.dof} degrees of freedom, {result.n_poses} poses)"]
+    if result.error_ratio is not None and result.error_ratio_interval is not None:
+        lo, hi = result.error_ratio_interval
+        parts.append(f"errors {result.error_ratio:.2f}x the calibration session's (95 % interval {lo:.2f}-{hi:.2f})")
     move = result.move
     alike = inseparable(result)
     if alike:
@@ -132,8 +136,13 @@ def verification_lines(result: Verification, *, scope: str = "session") -> list[
     lines.append(
         f"{result.n_poses} check poses, {3 * result.n_poses} equations, {len(result.reregistered)} re-registered "
         f"({result.dof} degrees of freedom left); RMS error after re-registration {result.rms_error * 1e3:.3f} mm; "
-        f"chi2 = {result.chi2:.2f}, p = {result.p_value:.3g} (Monte Carlo null, {result.null_trials} draws, "
-        f"seed {result.seed}; chi-square approximation p = {result.p_value_chi2:.3g})"
+        f"chi2 = {result.chi2:.2f}, p = {result.p_value_statement:.3g} against the statement alone (Monte Carlo "
+        f"null, {result.null_trials} draws, seed {result.seed}; chi-square approximation p = {result.p_value_chi2:.3g})"
+        + (
+            ""
+            if result.test == "chi-square"
+            else f"; the verdict is the {result.test} test's (p = {result.p_value:.3g})"
+        )
     )
     me = result.model_error_std * 1e6
     lines.append(
@@ -176,16 +185,32 @@ def verification_to_dict(
         "consistent": result.consistent,
         "verdict": result.verdict,
         "test": {
-            "statistic": "generalised least-squares chi2 after re-registration",
+            "statistic": "generalised least-squares chi2 after re-registration"
+            if result.test == "chi-square"
+            else "error level against the calibration's validated level (F test; chi2 for reference)",
             "chi2": result.chi2,
             "dof": result.dof,
             "p_value": result.p_value,
             "p_value_chi2_approximation": result.p_value_chi2,
+            "p_value_chi2_against_statement": result.p_value_statement,
+            "verdict_test": result.test,
             "significance": result.significance,
             "null_trials": result.null_trials,
             "seed": result.seed,
             "excess_std_m": result.excess_std,
         },
+        "error_level": {
+            "test": result.test,
+            "statement": "mean square error per component after re-registration, relative to the "
+            "calibration session's own held-out poses (F test)",
+            "level_m2": result.level,
+            "level_dof": result.level_dof,
+            "error_ratio": result.error_ratio,
+            "error_ratio_interval_95": None
+            if result.error_ratio_interval is None
+            else list(result.error_ratio_interval),
+        },
+        "duplicate_poses_dropped": result.duplicates,
         "n_poses": result.n_poses,
         "rms_error_m": result.rms_error,
         "reregistered": list(result.reregistered),
@@ -265,8 +290,9 @@ def verification_markdown(result: Verification, *, calibration: str, check_campa
         "",
         f"- poses: {result.n_poses}; re-registered parameters: {len(result.reregistered)}; "
         f"degrees of freedom: {result.dof}",
-        f"- chi2 = {result.chi2:.3f}; p = {result.p_value:.4g} (Monte Carlo null distribution, "
-        f"{result.null_trials} draws, seed {result.seed}); chi-square approximation p = {result.p_value_chi2:.4g}",
+        f"- chi2 = {result.chi2:.3f}; p = {result.p_value_statement:.4g} against the statement alone (Monte Carlo "
+        f"null distribution, {result.null_trials} draws, seed {result.seed}); chi-square approximation "
+        f"p = {result.p_value_chi2:.4g}; verdict from the {result.test} test, p = {result.p_value:.4g}",
         f"- significance level (false-alarm rate when nothing changed): {result.significance:g}",
         f"- extra error per axis needed to explain the check: {result.excess_std * 1e3:.4g} mm",
         f"- statement valid for: {scope}",

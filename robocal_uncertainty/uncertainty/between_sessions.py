@@ -38,7 +38,13 @@ from robocal_uncertainty.core.calibration_file import read_calibration, read_ses
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.session import LENGTH_SCALE, SessionState, effect_jacobian, verify_session
+from robocal_uncertainty.core.session import (
+    LENGTH_SCALE,
+    SessionState,
+    Verification,
+    effect_jacobian,
+    verify_session,
+)
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import CorrelatedNormal, IndependentRectangular
 from robocal_uncertainty.uncertainty.sources import (
@@ -83,6 +89,19 @@ class BetweenSessions:
     session_effects : ndarray, shape (n_sessions - 1, k)
         Effects of every later session relative to the reference.
     session_effects_std : ndarray, shape (n_sessions - 1, k)
+    level_ratios : ndarray, shape (n_sessions - 1,)
+        Every later session's error level (mean square per component after re-registering
+        tracker and tool on all its poses, ordinary least squares) over the reference
+        calibration's validated level: what the parameter effects leave (empty without a
+        validated level).
+    level_p_values : ndarray, shape (n_sessions - 1,)
+        F test of each ratio (small: the session disagrees beyond the stated uncertainty).
+    level_log_std : float or None
+        Between-session standard deviation of the log error level: the sample standard
+        deviation of ``log`` of ``(1, ratios...)`` less its estimation noise (``2 / nu`` per
+        level), at least the spread that the F tests call significant. None: no validated level.
+    level_dof : float
+        Its degrees of freedom (``n_sessions - 1``).
     """
 
     names: tuple[str, ...]
@@ -93,6 +112,11 @@ class BetweenSessions:
     n_sessions: int
     session_effects: Array
     session_effects_std: Array
+    level_ratios: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
+    level_p_values: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
+    level_log_std: float | None = None
+    level_dof: float = 0.0
+    warnings: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary (the calibration file's ``between_session``)."""
@@ -104,6 +128,10 @@ class BetweenSessions:
             "dof": self.dof,
             "session_effects": self.session_effects.tolist(),
             "session_effects_std": self.session_effects_std.tolist(),
+            "level_ratios": self.level_ratios.tolist(),
+            "level_p_values": self.level_p_values.tolist(),
+            "level_log_std": self.level_log_std,
+            "level_dof": self.level_dof,
         }
 
 
@@ -164,6 +192,8 @@ def estimate_between_sessions(
     effects: Sequence[str] | None = None,
     retool: bool = True,
     null_trials: int = 200,
+    reference_campaign: Campaign | None = None,
+    significance: float = 0.05,
 ) -> BetweenSessions:
     """Estimate the between-session covariance from sessions after the reference.
 
@@ -182,28 +212,49 @@ def estimate_between_sessions(
         Re-register the tool point on every session (the probe was remounted).
     null_trials : int
         Draws of each session's check statistic (only its effects are used here).
+    reference_campaign : Campaign, optional
+        The reference calibration's campaign: a later session that repeats it is refused.
+    significance : float
+        Level of the per-session F tests of the error level.
 
     Raises
     ------
     ConfigError
-        No later session, or no identifiable effect.
+        No later session, no identifiable effect, or a session given twice (the same poses
+        and measurements, whatever its name): a session counts once.
+
+    Notes
+    -----
+    Two sessions that disagree beyond their stated uncertainty (an F test of the level says
+    so) never give a zero component: when the moments of the parameter effects come out
+    non-positive (the effects' stated covariance, a model-error field over the poses, holds
+    more than they scatter), the effects' raw mean square is used, and the error level's
+    between-session spread is at least the log of the significant ratios.
     """
     if len(sessions) < 1:
         raise ConfigError("a between-session component needs at least two sessions (the reference and one more)")
+    labels = [f"later session {k + 1}" for k in range(len(sessions))]
+    if reference_campaign is not None:
+        _refuse_repeats([reference_campaign, *sessions], ["the reference calibration's campaign", *labels])
+    else:
+        _refuse_repeats(list(sessions), labels)
     names = tuple(effects) if effects is not None else identifiable_effects(model, sessions[0], retool=retool)
     if not names:
         raise ConfigError("no session effect can be told apart from the re-registration on these sessions")
     values = []
     stds = []
     variances = []
+    checks = []
     for campaign in sessions:
         check = verify_session(model, state, campaign, retool=retool, effects=names, null_trials=null_trials)
+        checks.append(check)
         assert check.effects is not None and check.effects_covariance is not None
         values.append(check.effects)
         variances.append(np.diag(check.effects_covariance))
         stds.append(np.sqrt(np.clip(np.diag(check.effects_covariance), 0.0, None)))
     e = np.asarray(values)
     v = np.asarray(variances)
+    ratios, p_values, log_std, disagree = _level_spread(state, checks, significance)
     group_std: dict[str, float] = {}
     group_dof: dict[str, float] = {}
     diag = np.zeros(len(names))
@@ -211,6 +262,8 @@ def estimate_between_sessions(
         cols = [c for c, n in enumerate(names) if _group(n) == group]
         count = e.shape[0] * len(cols)
         two_tau2 = max(float(np.sum(e[:, cols] ** 2 - v[:, cols])) / count, 0.0)
+        if two_tau2 == 0.0 and disagree:
+            two_tau2 = float(np.sum(e[:, cols] ** 2)) / count
         group_std[group] = float(np.sqrt(two_tau2 / 2.0))
         group_dof[group] = float(count)
         diag[cols] = two_tau2
@@ -223,7 +276,61 @@ def estimate_between_sessions(
         n_sessions=len(sessions) + 1,
         session_effects=e,
         session_effects_std=np.asarray(stds),
+        level_ratios=ratios,
+        level_p_values=p_values,
+        level_log_std=log_std,
+        level_dof=float(len(sessions)),
     )
+
+
+def _fingerprint(campaign: Campaign) -> set[bytes]:
+    """One key per pose: its joint positions and measured point, rounded to 1 nm / 1 nrad."""
+    y = campaign.measurement.positions(campaign.points)
+    rows = campaign.joint_positions if y is None else np.concatenate((campaign.joint_positions, y), axis=1)
+    keys = np.round(np.asarray(rows, dtype=np.float64) * 1e9).astype(np.int64)
+    return {row.tobytes() for row in keys}
+
+
+def _refuse_repeats(campaigns: Sequence[Campaign], labels: Sequence[str]) -> None:
+    """A session given twice (half or more of its poses with the same joints and measurements,
+    under any name) is refused: it would count as a second session that agrees perfectly."""
+    prints = [_fingerprint(c) for c in campaigns]
+    for i in range(len(prints)):
+        for j in range(i):
+            shared = len(prints[i] & prints[j])
+            if shared and shared >= 0.5 * min(len(prints[i]), len(prints[j])):
+                msg = (
+                    f"{labels[i]} repeats {labels[j]} ({shared} poses with the same joints and measurements): "
+                    "a session counts once; give each measurement session one campaign"
+                )
+                raise ConfigError(msg)
+
+
+def _level_spread(
+    state: SessionState, checks: Sequence[Verification], significance: float
+) -> tuple[Array, Array, float | None, bool]:
+    """Error-level ratios of the later sessions against the reference's validated level."""
+    from scipy import stats
+
+    ref = state.validated_level
+    if ref is None:
+        return np.zeros(0), np.zeros(0), None, False
+    ratios, p_values, noise = [], [], [2.0 / (ref.dof * ref.dof_factor)]
+    for v in checks:
+        nu = v.level_dof * ref.dof_factor
+        t = v.level / ref.level
+        ratios.append(float(np.sqrt(t)))
+        p_values.append(float(stats.f.sf(t, nu, ref.dof * ref.dof_factor)))
+        noise.append(2.0 / nu)
+    logs = np.log(np.concatenate(([1.0], np.asarray(ratios) ** 2)))
+    sample_var = float(np.var(logs, ddof=1))
+    disagree = bool(np.any(np.asarray(p_values) < significance))
+    var = max(sample_var - float(np.mean(noise)), 0.0)
+    if disagree:
+        # Sessions the F test separates: the spread is at least what their significant ratios show.
+        significant = np.log(np.asarray(ratios)[np.asarray(p_values) < significance] ** 2)
+        var = max(var, float(np.mean(significant**2)) / 2.0)
+    return np.asarray(ratios), np.asarray(p_values), float(np.sqrt(var)), disagree
 
 
 def between_sessions_from_file(path: str | Path) -> BetweenSessions:

@@ -28,7 +28,15 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
 from robocal_uncertainty.core.model_error_field import ModelErrorField, chordal_distance, kernel_correlation
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
-from robocal_uncertainty.core.session import BASE_NAMES, SessionState, parameter_covariance, parameter_gain
+from robocal_uncertainty.core.session import (
+    BASE_NAMES,
+    SessionState,
+    ValidatedLevel,
+    check_level,
+    parameter_covariance,
+    parameter_gain,
+    verify_session,
+)
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy, pose_noise_covariances
 
@@ -39,6 +47,7 @@ __all__ = [
     "cross_validated_model_error",
     "estimate_model_error_field",
     "session_state",
+    "validated_level",
 ]
 
 Array = NDArray[np.float64]
@@ -111,6 +120,7 @@ def session_state(
     settings: dict[str, object] | None = None,
     cross_validated: CrossValidatedModelError | None = None,
     correlated: bool = True,
+    model_error_from: SessionState | None = None,
 ) -> tuple[SessionState, ModelAdequacy]:
     """What a point calibration leaves for verification and for the next session.
 
@@ -149,18 +159,28 @@ def session_state(
     b0 = layout.base_index
     r_wb = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6])
     use_residual = "residual" in sources and not adequacy.adequate
+    if model_error_from is not None:
+        use_residual = "residual" in sources and bool(np.any(model_error_from.model_error_covariance))
     model_error = adequacy.inadequacy_covariance if use_residual else np.zeros((3, 3))
     draws = adequacy.draws @ r_wb if use_residual else None
     if use_residual and cross_validated is not None:
         model_error = r_wb @ cross_validated.covariance @ r_wb.T
         draws = cross_validated.draws
+    if use_residual and model_error_from is not None and model_error_from.model_error_field is None:
+        model_error = r_wb @ model_error_from.model_error_covariance @ r_wb.T
+        draws = model_error_from.model_error_draws
     me_field = None
     field_dof = None
     if use_residual and cross_validated is None and correlated:
-        shape = r_wb.T @ adequacy.inadequacy_covariance @ r_wb
-        me_field, scale = estimate_model_error_field(calibration, q, noise, shape)
-        shape = 3.0 * shape / np.trace(shape) if np.trace(shape) > 0 else np.eye(3)
-        model_error = r_wb @ (scale * shape) @ r_wb.T
+        if model_error_from is not None and model_error_from.model_error_field is not None:
+            # Another calibration's model error (same session, other poses): its field as stated.
+            me_field = dataclasses.replace(model_error_from.model_error_field, joint_positions=q)
+            model_error = r_wb @ model_error_from.model_error_covariance @ r_wb.T
+        else:
+            shape = r_wb.T @ adequacy.inadequacy_covariance @ r_wb
+            me_field, scale = estimate_model_error_field(calibration, q, noise, shape)
+            shape = 3.0 * shape / np.trace(shape) if np.trace(shape) > 0 else np.eye(3)
+            model_error = r_wb @ (scale * shape) @ r_wb.T
         from scipy import linalg
 
         total = linalg.block_diag(*noise) + me_field.covariance(q, model_error)
@@ -488,3 +508,51 @@ def estimate_model_error_field(
         extra={"poses_used": int(q.shape[0]), "contrasts": int(m)},
     )
     return field, float(np.exp(log_s))
+
+
+LEVEL_FOLDS = 5
+"""Folds of the calibration campaign that validate its error level (:func:`validated_level`)."""
+
+
+def validated_level(
+    model: RobotModel,
+    campaign: Campaign,
+    tracker_noise: TrackerNoise,
+    encoder_noise: EncoderNoise,
+    *,
+    lambda_: str | float = "auto",
+    retool: bool = True,
+    folds: int = LEVEL_FOLDS,
+    seed: int = 0,
+    sources: tuple[str, ...] = ("tracker", "encoder", "residual"),
+    correlated: bool = True,
+    reference: SessionState | None = None,
+) -> ValidatedLevel:
+    """The calibration session's error level on its own held-out poses, re-registered as a check.
+
+    The campaign's poses are split at random (``seed``) into `folds` folds; each is predicted
+    by a calibration of the others with the statement of `reference` (the full calibration's
+    model error, so every fold is measured against the same statement; :func:`session_state`), re-registered
+    (tracker pose, and the tool point with `retool`) as ``verify`` re-registers a check, and its
+    observed squared error is set against the stated one
+    (:func:`~robocal_uncertainty.core.session.check_level`). A later check is tested against
+    this level: same-session checks then agree with it by construction of the split, whatever
+    scale the statement's model error has (a field whose scale the data hardly fix).
+
+    Raises
+    ------
+    IdentifiabilityError
+        Folds too small to re-register (fewer than about 4 poses each) or to calibrate without.
+    """
+    n = campaign.n_poses
+    order = np.random.default_rng(seed).permutation(n)
+    parts = np.array_split(order, folds)
+    checks = []
+    for part in parts:
+        train = campaign.subset(np.sort(np.setdiff1d(order, part)))
+        cal = identify(model, train, lambda_=lambda_, accept_unconverged=True)
+        state, _ = session_state(
+            cal, train, tracker_noise, encoder_noise, sources=sources, correlated=correlated, model_error_from=reference
+        )
+        checks.append(verify_session(cal.model, state, campaign.subset(np.sort(part)), retool=retool, null_trials=100))
+    return check_level(checks, seed=seed)

@@ -176,7 +176,7 @@ def test_too_small_and_degenerate_checks_are_refused(still) -> None:
     same = check.subset([0] * 8)
     with pytest.raises(IdentifiabilityError) as err:
         verify_session(cal.model, state, same)
-    assert str(err.value).startswith("degenerate check campaign")
+    assert str(err.value).startswith("7 check pose(s) repeat another exactly and count once: check campaign too small")
     with pytest.raises(ConfigError):
         verify_session(cal.model, state, check, significance=1.5)
 
@@ -244,3 +244,17 @@ def test_calibration_file_carries_the_session_and_reads_version_1(ur10, still, t
     with pytest.raises(ConfigError) as err:
         read_session_state(broken, where="calibration x.json")
     assert "parameter_covariance.matrix must be a finite 2x2 matrix" in str(err.value)
+
+
+def test_a_repeated_check_pose_counts_once(still) -> None:
+    """The same pose and measurement twice is one observation: the test is the one without it."""
+    sim, cal, state = still
+    check = sim.sessions[1].campaign.subset(list(range(10)))
+    doubled = sim.sessions[1].campaign.subset([*range(10), 3, 7])
+    once = verify_session(cal.model, state, check, null_trials=500)
+    twice = verify_session(cal.model, state, doubled, null_trials=500)
+    assert twice.duplicates == 2 and once.duplicates == 0
+    assert twice.n_poses == 10 and twice.dof == once.dof
+    assert twice.chi2 == pytest.approx(once.chi2, rel=1e-9)
+    assert twice.p_value == once.p_value
+    assert any("counted once" in w for w in twice.warnings)

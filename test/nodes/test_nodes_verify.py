@@ -185,7 +185,6 @@ def test_verify_refusals_answer_one_line_and_keep_the_node(ros_context, tmp_path
         reasons = {
             str(tmp_path / "missing.json"): "missing.json",
             str(garbage): "garbage.json",
-            str(tmp_path / "six_dof.json"): "has no session record",
         }
         for path, reason in reasons.items():
             assert node.set_parameters([Parameter("verify_calibration", value=path)])[0].successful
@@ -205,3 +204,52 @@ def test_verify_refusals_answer_one_line_and_keep_the_node(ros_context, tmp_path
         assert node.verification_diagnostic_status().level == DiagnosticLevel.OK
     finally:
         node.destroy_node()
+
+
+def test_six_dof_calibrations_are_verified(ros_context, tmp_path, sessions) -> None:
+    """A 6-DOF calibration's file has a session record (from the positions of its poses)."""
+    six_dof = tmp_path / "six_dof.mcap"
+    model = load_robot_model(robot_config_path("ur10"))
+    simulation = simulate_campaign(model, SimulationSettings(n_poses=30, orientation_std=1e-4), seed=3)
+    write_campaign(six_dof, simulation.campaign)
+    assert main(["calibrate", str(six_dof), "--robot", "ur10", "--json", str(tmp_path / "six_dof.json")]) == 0
+    node = _node(ros_context, tmp_path, verify_calibration=str(tmp_path / "six_dof.json"))
+    try:
+        for msg in _messages(read_campaign(sessions / "ur10.session2.mcap")):
+            node._on_sample(msg)
+        answer = _call(node)
+        # Another simulated robot than the one calibrated: it runs, and the verdict says how far.
+        assert answer.success, answer.message
+        assert answer.message.startswith(("consistent", "drifted")) and "the calibration session's" in answer.message
+    finally:
+        node.destroy_node()
+
+
+def test_the_node_writes_a_session_record_its_later_verify_uses(ros_context, tmp_path, sessions) -> None:
+    """Session 1: ~/calibrate calibrates from the samples and writes the session record. Session 2:
+    a node given that record checks 10 poses, no command line between them; the verdict is the
+    one of ``verify`` on the same record and check."""
+    first = _node(ros_context, tmp_path / "s1", campaign_path=str(tmp_path / "s1" / "ur10.mcap"), min_samples=53)
+    try:
+        for msg in _messages(read_campaign(sessions / "ur10.session1.mcap")):
+            first._on_sample(msg)
+        assert first.latest is not None
+        record = tmp_path / "s1" / "ur10.session.json"
+        assert not record.exists()  # automatic calibrations do not write it (seconds each)
+        assert first._calibrate_service(Trigger.Request(), Trigger.Response()).success
+        assert record.is_file() and first.session_record_path == record
+    finally:
+        first.destroy_node()
+    data = json.loads(record.read_text())
+    assert data["session"]["validated_level"]["folds"] == 5 and data["session"]["n_poses"] == 53
+    second = _node(ros_context, tmp_path, verify_calibration=str(record))
+    try:
+        for msg in _messages(read_campaign(sessions / "ur10.session2.mcap")):
+            second._on_sample(msg)
+        answer = _call(second)
+        assert answer.success and answer.message.startswith("consistent"), answer.message
+        assert "errors " in answer.message and "x the calibration session's" in answer.message
+    finally:
+        second.destroy_node()
+    args = ["verify", str(record), str(sessions / "ur10.session2.mcap"), "--robot", "ur10"]
+    assert main([*args, "--null-trials", str(NULL_TRIALS)]) == 0

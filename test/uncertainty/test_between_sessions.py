@@ -101,3 +101,59 @@ def test_between_session_source_adds_the_effect_covariance(sessions) -> None:
         frame="base",
     )
     assert np.all(np.abs(plain.poses[0].covariance) < 1e-24)
+
+
+UR10_CSV = Path(__file__).resolve().parents[2] / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
+
+
+@pytest.fixture(scope="module")
+def real_reference():
+    """A calibration of 53 poses of the real UR10 series with its validated error level."""
+    from robocal_uncertainty.app.verification import calibrate_session
+    from robocal_uncertainty.core import EncoderNoise, TrackerNoise
+    from robocal_uncertainty.importers import read_tracker_csv
+
+    model = load_robot_model(DATA / "ur10.yaml")
+    campaign = read_tracker_csv(UR10_CSV)
+    order = np.random.default_rng(5).permutation(campaign.n_poses)
+    train = campaign.subset(np.sort(order[:53]))
+    cal = calibrate_session(model, train, tracker_noise=TrackerNoise(), encoder_noise=EncoderNoise())
+    assert cal.state is not None and cal.state.validated_level is not None
+    return cal, train, campaign, order
+
+
+def _distorted(campaign, amplitude):
+    """The campaign with an extra error from pose to pose (seeded) that no session effect holds."""
+    extra = amplitude * np.random.default_rng(3).standard_normal(campaign.points.shape)
+    return dataclasses.replace(campaign, points=campaign.points + extra)
+
+
+def test_a_session_given_twice_counts_once(real_reference) -> None:
+    cal, train, campaign, order = real_reference
+    later = campaign.subset(np.sort(order[53:153]))
+    # The reference campaign again under another name, and one later session given twice.
+    with pytest.raises(ConfigError, match="repeats the reference calibration's campaign"):
+        estimate_between_sessions(cal.result.model, cal.state, [train], reference_campaign=train)
+    with pytest.raises(ConfigError, match="later session 2 repeats later session 1"):
+        estimate_between_sessions(cal.result.model, cal.state, [later, dataclasses.replace(later)])
+
+
+def test_two_disagreeing_sessions_never_give_a_zero_component(real_reference) -> None:
+    """A later session whose errors are larger than the calibration's validated level in a way
+    no joint offset or length scale holds: neither the level spread nor the effects' component
+    comes out zero."""
+    cal, train, campaign, order = real_reference
+    # The calibration's own poses measured again with 0.5 mm more error from pose to pose: the
+    # robot did not move (the effects are near zero), the session's errors are larger.
+    later = _distorted(train, 0.5e-3)
+    between = estimate_between_sessions(cal.result.model, cal.state, [later], reference_campaign=train)
+    assert between.level_p_values.size == 1 and between.level_p_values[0] < 0.05
+    assert between.level_ratios[0] > 1.5
+    assert between.level_log_std is not None and between.level_log_std > 0.3
+    assert between.group_std["joint_offsets"] > 0.0
+    assert np.all(np.diag(between.covariance) > 0.0)
+    # An undistorted later session of the same series agrees: no spread forced on it.
+    same = estimate_between_sessions(
+        cal.result.model, cal.state, [campaign.subset(np.sort(order[53:253]))], reference_campaign=train
+    )
+    assert same.level_p_values[0] >= 0.05 and same.level_ratios[0] < 1.3

@@ -1,0 +1,219 @@
+"""Calibrate once, verify next week, on two real sessions of one UR10 (Series B and D).
+
+For each direction (calibrate on B, check B and D; calibrate on D, check D and B) draw
+``--calibrations`` random 53-pose calibration sets (seeded), calibrate each as ``calibrate
+--json`` does (:func:`~robocal_uncertainty.app.verification.calibrate_session`: the session
+record with its validated error level), and run ``verify --retool`` checks of 10, 20, 50 and
+200 random poses (``--checks`` subsets each) of the calibration's own series (poses it was not
+calibrated on) and of the other series. Printed per calibration:
+
+- the prediction RMS over every pose of each series, tracker and probe re-registered by
+  ordinary least squares on all of them (the issue's "real RMS ratio");
+- the full series' own verdict: the error-level test on all its poses (what a check of
+  every pose would say);
+- per check size: how many checks say consistent, the median p-value and the median error
+  ratio ("errors 1.6x the calibration session's");
+- a statement for the rest of the series after re-registering on a 10-pose check: each
+  remaining point's components inside ``+-t_nu(0.975) u_i`` with ``u_i^2 = level_check (1 +
+  h_i)`` (the check's own error level, its degrees of freedom, the re-registration's leverage
+  at the point): the fraction inside over the ``--checks`` checks.
+
+Summary rows give the same-session consistent rate against check size (the false-alarm rate
+is its complement), the cross-session agreement of 10-pose verdicts with the full series'
+verdict, and the coverage of the future-session statement.
+
+    python benchmarks/study_sessions.py                      # 4 calibrations x 8 checks per size
+    python benchmarks/study_sessions.py --calibrations 8 --checks 16
+
+Run time: about 1 minute per calibration on two loaded cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from robocal_uncertainty.app.verification import calibrate_session
+from robocal_uncertainty.core import EncoderNoise, TrackerNoise, load_robot_model
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import fit_rigid_base
+from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, ValidatedLevel, verify_session
+from robocal_uncertainty.importers import read_tracker_csv
+
+DATA = Path("/work/shared/data/ur10_laser_tracker")
+SERIES = {
+    "D": "measurements_iso_cubes.csv",
+    "B": "series_b/measurements_joint_configurations.csv",
+}
+SIZES = (10, 20, 50, 200)
+N_CAL = 53
+
+
+def reregister(model: RobotModel, campaign: Campaign) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """OLS re-registration of tracker pose and tool point on `campaign`: residuals (n, 3) [m],
+    the Jacobian of the points by those 9 parameters (3 n, 9) and the parameter vector."""
+    layout = model.layout
+    campaign = campaign.reorder_joints(model.joint_names)
+    y = np.asarray(campaign.measurement.positions(campaign.points), dtype=np.float64)
+    q = campaign.joint_positions
+    p = model.parameter_vector()
+    b0 = layout.base_index
+    p_kin = p.copy()
+    p_kin[b0 : b0 + 6] = 0.0
+    xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), y)
+    p[b0 : b0 + 3], p[b0 + 3 : b0 + 6] = xyz, rpy
+    free = np.array([layout.names.index(n) for n in (*BASE_NAMES, *TOOL_NAMES)])
+    for _ in range(20):
+        pred, jac = forward_points_and_jacobian(layout, p, q)
+        a = jac[:, :, free].reshape(-1, free.size)
+        step = np.linalg.lstsq(a, (y - pred).reshape(-1), rcond=None)[0]
+        p[free] += step
+        if np.max(np.abs(step)) < 1e-12:
+            break
+    pred, jac = forward_points_and_jacobian(layout, p, q)
+    return y - pred, jac[:, :, free].reshape(-1, free.size), p
+
+
+def full_verdict(model: RobotModel, campaign: Campaign, ref: ValidatedLevel) -> tuple[float, float, bool]:
+    """RMS [m], error ratio and consistent (5 %) of the error-level test on every pose of `campaign`."""
+    r, a, _ = reregister(model, campaign)
+    m = r.size
+    level = float(np.sum(r**2)) / (m - a.shape[1])
+    f = ref.dof_factor
+    t = level / ref.level
+    p = float(stats.f.sf(t, 1e6, ref.dof * f))  # every pose: the check's own dof is not the limit
+    return float(np.sqrt(np.mean(np.sum(r**2, axis=1)))), float(np.sqrt(t)), p >= 0.05
+
+
+def future_coverage(model: RobotModel, campaign: Campaign, check_idx: np.ndarray, dof_factor: float) -> float:
+    """Fraction of the rest of `campaign`'s point components inside the statement made after a
+    re-registration on the poses `check_idx` (the check's error level, Student t, leverage)."""
+    check = campaign.subset(check_idx)
+    r, a, p = reregister(model, check)
+    m, k = a.shape
+    level = float(np.sum(r**2)) / (m - k)
+    nu = (m - k) * dof_factor
+    rest_idx = np.setdiff1d(np.arange(campaign.n_poses), check_idx)
+    rest = campaign.subset(rest_idx).reorder_joints(model.joint_names)
+    layout = model.layout
+    free = np.array([layout.names.index(n) for n in (*BASE_NAMES, *TOOL_NAMES)])
+    pred, jac = forward_points_and_jacobian(layout, p, rest.joint_positions)
+    y = np.asarray(rest.measurement.positions(rest.points), dtype=np.float64)
+    j_rest = jac[:, :, free].reshape(-1, free.size)
+    lev = np.einsum("ij,jk,ik->i", j_rest, np.linalg.pinv(a.T @ a), j_rest)
+    u = np.sqrt(level * (1.0 + lev))
+    z = np.abs((y - pred).reshape(-1)) / u
+    return float(np.mean(z <= stats.t.ppf(0.975, nu)))
+
+
+def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
+    """The README's campaigns: 53 random poses of each series and checks of the others (seeded)."""
+    from robocal_uncertainty.bagio import write_campaign
+
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    for name in ("B", "D"):
+        order = rng.permutation(series[name].n_poses)
+        parts = {f"{name.lower()}53": order[:N_CAL], f"{name.lower()}10": order[N_CAL : N_CAL + 10]}
+        parts[f"{name.lower()}200"] = order[N_CAL + 10 : N_CAL + 210]
+        for stem, idx in parts.items():
+            write_campaign(out / f"{stem}.mcap", series[name].subset(np.sort(idx)))
+            print(f"wrote {out / stem}.mcap ({idx.size} poses of series {name})")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--calibrations", type=int, default=4, help="random 53-pose calibrations per series")
+    parser.add_argument("--checks", type=int, default=8, help="random check subsets per size")
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--null-trials", type=int, default=500)
+    parser.add_argument(
+        "--write-example",
+        metavar="DIR",
+        help="only write the README's example campaigns to DIR (b53.mcap: 53 random poses of B; b10.mcap, "
+        "d10.mcap, d200.mcap: checks of B's other poses and of D; d53.mcap likewise) and stop",
+    )
+    args = parser.parse_args()
+    model = load_robot_model(ROOT / "robocal_uncertainty" / "data" / "ur10.yaml")
+    series = {name: read_tracker_csv(DATA / path) for name, path in SERIES.items()}
+    if args.write_example:
+        write_example(series, Path(args.write_example), args.seed)
+        return
+    print("series: " + ", ".join(f"{k} {v.n_poses} poses" for k, v in series.items()))
+    print(
+        f"seed {args.seed}, {args.calibrations} calibrations of {N_CAL} poses per series, {args.checks} checks per size"
+    )
+    summary: dict[str, list[float]] = {}
+    for home, away in (("B", "D"), ("D", "B")):
+        for c in range(args.calibrations):
+            rng = np.random.default_rng([args.seed, ord(home), c])
+            order = rng.permutation(series[home].n_poses)
+            train = series[home].subset(np.sort(order[:N_CAL]))
+            cal = calibrate_session(model, train, tracker_noise=TrackerNoise(), encoder_noise=EncoderNoise())
+            state = cal.state
+            assert state is not None and state.validated_level is not None
+            ref = state.validated_level
+            calibrated = cal.result.model
+            held = series[home].subset(np.sort(order[N_CAL:]))
+            rms_home, ratio_home, ok_home = full_verdict(calibrated, held, ref)
+            rms_away, ratio_away, ok_away = full_verdict(calibrated, series[away], ref)
+            print(
+                f"\n{home} 53 ({c + 1}): validated level {np.sqrt(ref.level) * 1e3:.3f} mm per component "
+                f"({ref.dof * ref.dof_factor:.0f} dof); all poses re-registered: {home} {rms_home * 1e3:.3f} mm RMS "
+                f"(ratio {ratio_home:.2f}, {'consistent' if ok_home else 'drifted'}), {away} {rms_away * 1e3:.3f} mm "
+                f"({rms_away / rms_home:.2f}x; ratio {ratio_away:.2f}, {'consistent' if ok_away else 'drifted'})"
+            )
+            for which, camp, pool, truth in (
+                ("same", series[home], order[N_CAL:], ok_home),
+                ("other", series[away], np.arange(series[away].n_poses), ok_away),
+            ):
+                cells = []
+                for n in SIZES:
+                    verdicts, ps, ratios = [], [], []
+                    for k in range(args.checks):
+                        pick = np.sort(
+                            np.random.default_rng([args.seed, ord(home), c, n, k, len(which)]).choice(
+                                pool, n, replace=False
+                            )
+                        )
+                        v = verify_session(
+                            calibrated, state, camp.subset(pick), retool=True, null_trials=args.null_trials, seed=k
+                        )
+                        verdicts.append(v.consistent)
+                        ps.append(v.p_value)
+                        ratios.append(v.error_ratio)
+                    rate = float(np.mean(verdicts))
+                    agree = float(np.mean(np.array(verdicts) == truth))
+                    summary.setdefault(f"{home}->{home if which == 'same' else away} {n} consistent", []).append(rate)
+                    summary.setdefault(f"{home}->{home if which == 'same' else away} {n} agree", []).append(agree)
+                    cells.append(
+                        f"{n}: {sum(verdicts)}/{len(verdicts)} (p {np.median(ps):.2g}, x{np.median(ratios):.2f})"
+                    )
+                print(f"  {which:5s} checks consistent: " + "; ".join(cells))
+            covs = []
+            for k in range(args.checks):
+                pick = np.random.default_rng([args.seed, ord(away), c, k]).choice(
+                    series[away].n_poses, 10, replace=False
+                )
+                covs.append(future_coverage(calibrated, series[away], np.sort(pick), ref.dof_factor))
+            summary.setdefault(f"{home}->{away} future coverage", []).append(float(np.mean(covs)))
+            print(
+                f"  statement for {away} after a 10-pose re-registration: "
+                f"{np.mean(covs) * 100:.1f} % of its other points' components inside 95 %"
+            )
+    print("\nsummary (mean over calibrations)")
+    for key, values in summary.items():
+        print(f"  {key}: {np.mean(values) * 100:.1f} % (calibrations: {', '.join(f'{v * 100:.0f}' for v in values)})")
+
+
+if __name__ == "__main__":
+    main()
