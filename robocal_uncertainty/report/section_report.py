@@ -27,17 +27,26 @@ import html
 import json
 import math
 import re
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import binom
 
 from robocal_uncertainty.inspection.bias_correction import BiasCorrection
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument
+from robocal_uncertainty.inspection.coverage_rule import (
+    BINOMIAL_LEVEL,
+    COVERAGE_TOLERANCE,
+    MIN_STUDY_SCANS,
+    FamilyCounts,
+    FamilyCoverage,
+    binomial_tail,
+    coverage_verified,
+    family_cells,
+    holm_adjusted,
+)
 from robocal_uncertainty.inspection.denoise import ResidualCheck
 from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS, ENVELOPE_STREAM
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, PARAMETER_UNITS
@@ -105,100 +114,14 @@ section with a known truth (one instrument-noise draw per scan; slow test
 ``test/inspection/test_inspection_section_mc.py::test_coverage_over_200_simulated_scans``).
 One scan in 200 is 0.5 %; the binomial standard error at 95 % is 1.5 %."""
 
-COVERAGE_TOLERANCE = (0.92, 0.98)
-"""95 ± 3 % (issue 9). A measured coverage below the lower limit is never verified; one above the
-upper limit is conservative (the interval is wider than it needs to be) and is said so."""
-
-MIN_STUDY_SCANS = 53
-"""Fewest scans (unflagged, for a family) a study needs before it can verify a coverage: the
-binomial standard uncertainty at 95 %, sqrt(0.95·0.05/N), is then at most 3 %, the tolerance."""
-
-BINOMIAL_LEVEL = 0.05
-"""Level of the exact one-sided binomial test of "coverage >= 95 %" (per cell in the demo study,
-family-wise over the cells of the scenario-family study: :func:`holm_adjusted`)."""
-
-
-def binomial_tail(inside: int, scans: int) -> float:
-    """P(X <= inside) for X ~ Binomial(scans, 0.95): the one-sided p-value of "coverage >= 95 %"."""
-    return float(binom.cdf(inside, scans, 0.95))
-
-
-def holm_adjusted(p_values: Sequence[float]) -> tuple[float, ...]:
-    """Holm's step-down adjusted p-values (nan stays nan and does not count as a test).
-
-    With m tests, sorted p_(1) <= ... <= p_(m): adjusted p_(i) = max over k <= i of
-    min(1, (m - k + 1) p_(k)). Rejecting where the adjusted p-value is at most a level keeps the
-    probability of rejecting any true hypothesis at most that level, whatever the dependence
-    between the tests (the nine parameters of a family share its scans).
-    """
-    values = [float(p) for p in p_values]
-    order = sorted((j for j, p in enumerate(values) if math.isfinite(p)), key=lambda j: values[j])
-    adjusted = [math.nan] * len(values)
-    running = 0.0
-    for rank, j in enumerate(order):
-        running = max(running, min(1.0, (len(order) - rank) * values[j]))
-        adjusted[j] = running
-    return tuple(adjusted)
-
-
-def coverage_verified(inside: int, scans: int, *, p_value: float | None = None) -> bool:
-    """Whether a study in which `inside` of `scans` intervals held the truth verifies 95 % coverage.
-
-    Verified when the study has at least :data:`MIN_STUDY_SCANS` scans, the measured coverage is at
-    least the lower limit of :data:`COVERAGE_TOLERANCE` (92 %), and the exact one-sided binomial
-    test does not reject a coverage of at least 95 %: ``p_value > BINOMIAL_LEVEL``, where
-    ``p_value`` is :func:`binomial_tail` of the cell unless given (the family study passes the
-    cell's :func:`holm_adjusted` one). The scan count keeps a small study (38 scans: one miss is
-    2.6 %) from verifying anything; the test keeps a large one from verifying a coverage that is
-    92.5 % but significantly below 95 %.
-    """
-    if scans < MIN_STUDY_SCANS:
-        return False
-    if inside / scans < COVERAGE_TOLERANCE[0]:
-        return False
-    return (binomial_tail(inside, scans) if p_value is None else p_value) > BINOMIAL_LEVEL
-
-
 DEMO_SCANS = 200
 """Scans of the demo scenario's study (:data:`COVERAGE_STUDY`)."""
-
-
-class FamilyCoverage(NamedTuple):
-    """Coverage of one parameter's 95 % interval (method ``denoised``) in one scenario family."""
-
-    scans: int
-    """Scans of the family."""
-    flagged: int
-    """Scans the residual check flagged."""
-    inside: int
-    """Unflagged scans whose interval held the truth."""
-    inside_all: int
-    """All scans whose interval held the truth (flagged ones included)."""
-    p_holm: float = math.nan
-    """Holm-adjusted p-value of "coverage >= 95 %" over the study's cells (:func:`holm_adjusted`)."""
-
-    @property
-    def coverage(self) -> float:
-        """Coverage over the unflagged scans (nan when all were flagged)."""
-        kept = self.scans - self.flagged
-        return self.inside / kept if kept else math.nan
-
-    @property
-    def u(self) -> float:
-        """Binomial standard uncertainty of :attr:`coverage` at 95 %."""
-        kept = self.scans - self.flagged
-        return math.sqrt(0.95 * 0.05 / kept) if kept else math.nan
-
-    @property
-    def consistent(self) -> bool:
-        """:func:`coverage_verified` over the unflagged scans, at the Holm-adjusted p-value."""
-        return coverage_verified(self.inside, self.scans - self.flagged, p_value=self.p_holm)
 
 
 FAMILY_STUDY_COMMAND = "python benchmarks/bench_section_coverage.py --scans 600 --workers 2"
 """The command whose output :data:`FAMILY_STUDY` holds."""
 
-_FAMILY_COUNTS: dict[str, tuple[int, int, tuple[int, ...], tuple[int, ...]]] = {
+_FAMILY_COUNTS: dict[str, FamilyCounts] = {
     # family: (scans, flagged, inside per parameter among the unflagged, inside among all)
     "smooth": (600, 30, (550, 544, 538, 540, 534, 561, 553, 561, 554), (578, 573, 567, 569, 563, 591, 582, 591, 581)),
     "side": (600, 93, (481, 474, 481, 482, 481, 496, 498, 487, 493), (568, 562, 570, 573, 571, 587, 591, 578, 581)),
@@ -207,24 +130,7 @@ _FAMILY_COUNTS: dict[str, tuple[int, int, tuple[int, ...], tuple[int, ...]]] = {
 }
 
 
-def _family_study() -> dict[str, dict[str, FamilyCoverage]]:
-    """:data:`_FAMILY_COUNTS` as cells, each with its Holm-adjusted p-value over the whole study."""
-    cells = [
-        (family, name, scans, flagged, kept[j], every[j])
-        for family, (scans, flagged, kept, every) in _FAMILY_COUNTS.items()
-        for j, name in enumerate(PARAMETER_NAMES)
-    ]
-    tails = [
-        binomial_tail(inside, scans - flagged) if scans > flagged else math.nan
-        for _, _, scans, flagged, inside, _ in cells
-    ]
-    study: dict[str, dict[str, FamilyCoverage]] = {family: {} for family in _FAMILY_COUNTS}
-    for (family, name, scans, flagged, inside, inside_all), p_holm in zip(cells, holm_adjusted(tails)):
-        study[family][name] = FamilyCoverage(scans, flagged, inside, inside_all, p_holm)
-    return study
-
-
-FAMILY_STUDY: dict[str, dict[str, FamilyCoverage]] = _family_study()
+FAMILY_STUDY: dict[str, dict[str, FamilyCoverage]] = family_cells(_FAMILY_COUNTS, PARAMETER_NAMES)
 """Coverage of method ``denoised`` per scenario family and parameter
 (:mod:`~robocal_uncertainty.inspection.coverage_study`: smooth forms of 2-13 waves; bumps and
 dents of 1-10 µm over 1-20 mm on the sides, at the edges; edge erosion), as printed by
