@@ -56,6 +56,7 @@ user's measured cloud, so that a study speaks for *that* part, layout and instru
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache, cached_property
@@ -68,6 +69,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
+from robocal_uncertainty.inspection.coverage_rule import FamilyCounts, FamilyCoverage, family_cells
 from robocal_uncertainty.inspection.denoise import denoise_section
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud, read_rotor37_section
@@ -84,12 +86,15 @@ __all__ = [
     "Feature",
     "Part",
     "ScanOutcome",
+    "ScenarioStudy",
     "StudyProgress",
     "StudyRow",
     "StudyScenario",
     "draw_part",
+    "family_counts",
     "feature_deviation",
     "rotor37_scenario",
+    "run_scenario_study",
     "run_study",
     "scenario_from_cloud",
     "study_scan",
@@ -461,18 +466,32 @@ def run_study(
     :func:`~robocal_uncertainty.montecarlo.executor.open_executor`) runs them on, and come back
     in family, then scan order.
     """
+    jobs = [(f, k) for f in families for k in range(first, first + scans)]
+    return _run_jobs(jobs, trials, root_seed, scenario, workers, executor, dask, progress)
+
+
+def _run_jobs(
+    jobs: Sequence[tuple[str, int]],
+    trials: int,
+    root_seed: int,
+    scenario: StudyScenario | None,
+    workers: int,
+    executor: object | None,
+    dask: str | None,
+    progress: StudyProgress | None,
+) -> list[ScanOutcome]:
+    """Run (family, scan) jobs in this process or on an executor; outcomes in job order."""
     from robocal_uncertainty.montecarlo.executor import open_executor
 
-    jobs = [(f, k, trials, root_seed, scenario) for f in families for k in range(first, first + scans)]
     out: list[ScanOutcome] = []
     with open_executor(workers=workers, executor=executor, dask=dask) as runner:
         if runner is None:
-            for job in jobs:
-                out.append(_scan_job(*job))
+            for family, index in jobs:
+                out.append(_scan_job(family, index, trials, root_seed, scenario))
                 if progress is not None:
                     progress(len(out), len(jobs))
             return out
-        futures = [runner.submit(_scan_job, *job) for job in jobs]
+        futures = [runner.submit(_scan_job, family, index, trials, root_seed, scenario) for family, index in jobs]
         for future in futures:
             out.append(future.result())
             if progress is not None:
@@ -531,3 +550,182 @@ def summarize_study(outcomes: Sequence[ScanOutcome]) -> list[StudyRow]:
                 )
             )
     return rows
+
+
+def family_counts(outcomes: Sequence[ScanOutcome]) -> dict[str, FamilyCounts]:
+    """Per family: (scans, flagged, inside per parameter among the unflagged, inside among all)."""
+    counts: dict[str, FamilyCounts] = {}
+    for family in dict.fromkeys(o.family for o in outcomes):
+        chosen = [o for o in outcomes if o.family == family]
+        inside = np.array([o.inside for o in chosen], dtype=bool).reshape(len(chosen), len(PARAMETER_NAMES))
+        flagged = np.array([o.flagged for o in chosen], dtype=bool)
+        counts[family] = (
+            len(chosen),
+            int(flagged.sum()),
+            tuple(int(v) for v in inside[~flagged].sum(axis=0)),
+            tuple(int(v) for v in inside.sum(axis=0)),
+        )
+    return counts
+
+
+@dataclass(frozen=True)
+class ScenarioStudy:
+    """A family study run for one scenario (a user's part, layout and instrument) and its verdict.
+
+    Attributes
+    ----------
+    label : str
+        The scenario in one line.
+    n_points : int
+        Points per simulated scan (the layout's).
+    nominal_length : float
+        Contour length of the nominal [m].
+    instrument : CmmInstrument
+        The instrument simulated and assumed.
+    form_scale : float
+        Factor on the families' amplitudes (>= 1).
+    form_rms : float
+        Root mean square of the measured cloud's denoised deviations [m] (nan: stored study).
+    probe_vectors : bool
+        Whether the layout carried the cloud's probe vectors.
+    root_seed : int
+        Root seed of the study's streams.
+    scans : int
+        Scans per family.
+    trials : int
+        Monte Carlo trials per scan.
+    families : tuple of str
+        Families run.
+    elapsed_s : float
+        Wall time of the study [s].
+    workers : int
+        Worker processes (never change the outcome).
+    counts : dict
+        Per family, :data:`~.coverage_rule.FamilyCounts`.
+    cells : dict
+        ``cells[family][parameter]`` with the Holm-adjusted verdict (:func:`~.coverage_rule.family_cells`).
+    """
+
+    label: str
+    n_points: int
+    nominal_length: float
+    instrument: CmmInstrument
+    form_scale: float
+    form_rms: float
+    probe_vectors: bool
+    root_seed: int
+    scans: int
+    trials: int
+    families: tuple[str, ...]
+    elapsed_s: float
+    workers: int
+    counts: dict[str, FamilyCounts]
+    cells: dict[str, dict[str, FamilyCoverage]]
+
+    def lowest(self, name: str) -> float:
+        """Lowest coverage of parameter `name` over the families' unflagged scans (nan if none)."""
+        values = [c[name].coverage for c in self.cells.values() if c[name].scans > c[name].flagged]
+        return min(values) if values else math.nan
+
+    def verified(self, name: str) -> bool:
+        """Whether every family's cell of `name` passes the rule (:attr:`~.coverage_rule.FamilyCoverage.consistent`)."""
+        return bool(self.cells) and all(c[name].consistent for c in self.cells.values())
+
+    @property
+    def verified_all(self) -> bool:
+        """Whether every parameter is verified."""
+        return all(self.verified(name) for name in PARAMETER_NAMES)
+
+    @property
+    def total_scans(self) -> int:
+        """Scans over all families."""
+        return self.scans * len(self.families)
+
+
+def run_scenario_study(
+    scenario: StudyScenario,
+    scans: int,
+    *,
+    families: Sequence[str] = FAMILIES,
+    trials: int = 2000,
+    root_seed: int = 23,
+    workers: int = 1,
+    executor: object | None = None,
+    dask: str | None = None,
+    progress: StudyProgress | None = None,
+    estimate: Callable[[float], None] | None = None,
+) -> ScenarioStudy:
+    """The family study of `scenario`: `scans` scans per family, then the verdict per cell.
+
+    Parameters
+    ----------
+    scenario : StudyScenario
+        What to simulate (:func:`scenario_from_cloud` for a user's cloud).
+    scans : int
+        Scans per family (>= 1; at least :data:`~.coverage_rule.MIN_STUDY_SCANS` unflagged ones
+        per family are needed before anything can be verified).
+    families : sequence of str
+        Families to run (default all four).
+    trials : int
+        Monte Carlo trials per scan (the stored study: 2 000).
+    root_seed : int
+        Root seed; the outcome depends only on it, `scans`, `trials` and the scenario.
+    workers, executor, dask
+        Where the scans run (:func:`~robocal_uncertainty.montecarlo.executor.open_executor`).
+    progress : callable, optional
+        ``progress(done, total)`` after each scan.
+    estimate : callable, optional
+        Called with the seconds the first scan took (run first, in this process) before the
+        others start: for an expected time.
+
+    Returns
+    -------
+    ScenarioStudy
+    """
+    if isinstance(scans, bool) or not isinstance(scans, int) or scans < 1:
+        msg = f"coverage study scans must be an integer >= 1, got {scans!r}"
+        raise InputError(msg)
+    if isinstance(root_seed, bool) or not isinstance(root_seed, int) or root_seed < 0:
+        msg = f"coverage study seed must be an integer >= 0, got {root_seed!r}"
+        raise InputError(msg)
+    chosen = tuple(families)
+    unknown = [f for f in chosen if f not in FAMILIES]
+    if unknown or not chosen:
+        msg = f"families must be a non-empty subset of {list(FAMILIES)}, got {list(chosen)}"
+        raise InputError(msg)
+    start = time.perf_counter()
+    first = study_scan(chosen[0], 0, trials=trials, root_seed=root_seed, scenario=scenario)
+    if estimate is not None:
+        estimate(time.perf_counter() - start)
+    total = scans * len(chosen)
+    if progress is not None:
+        progress(1, total)
+    rest: list[ScanOutcome] = []
+    jobs = [(f, k) for f in chosen for k in range(scans)][1:]
+    if jobs:
+
+        def shifted(done: int, _: int) -> None:
+            if progress is not None:
+                progress(done + 1, total)
+
+        # Every job is one (family, scan) of the same streams run_study would use.
+        rest = _run_jobs(jobs, trials, root_seed, scenario, workers, executor, dask, shifted)
+    outcomes = [first, *rest]
+    counts = family_counts(outcomes)
+    return ScenarioStudy(
+        label=scenario.label,
+        n_points=scenario.n_points,
+        nominal_length=float(scenario.curve.period),
+        instrument=scenario.instrument,
+        form_scale=scenario.form_scale,
+        form_rms=scenario.form_rms,
+        probe_vectors=scenario.probe_vectors is not None,
+        root_seed=root_seed,
+        scans=scans,
+        trials=trials,
+        families=chosen,
+        elapsed_s=time.perf_counter() - start,
+        workers=workers,
+        counts=counts,
+        cells=family_cells(counts, PARAMETER_NAMES),
+    )
