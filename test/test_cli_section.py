@@ -229,14 +229,14 @@ def test_repeat_scans_give_the_seeds_chord_budget(
     assert chord["U"] == pytest.approx(chord["k"] * math.sqrt(float((terms**2).sum())), rel=1e-9)
     # The printed budget: u1 MPE, u2 thermal, u3 repeatability, the other sources, u_c, k, U95 (um).
     block = text[text.index("GUM budget of the chord length with repeatability") :].splitlines()
-    assert "3 repeated scans" in block[0] and "in um" in block[0]
+    assert "3 repeated scans" in block[0] and "in µm" in block[0]
     assert [line.split()[:2] for line in block[1:4]] == [["u1", "MPE"], ["u2", "thermal"], ["u3", "repeatability"]]
     assert [line.split()[0] for line in block[4:9]] == ["probing", "algorithm", "u_c", "k", "U95"]
     assert float(block[3].split()[2]) == pytest.approx(u3 * 1e6, abs=6e-5)
     contributions = [float(line.split()[-2]) for line in block[1:6]]
-    assert all(line.split()[-1] == "um" for line in block[1:6])
+    assert all(line.split()[-1] == "µm" for line in block[1:6])
     u_c, k, u95 = float(block[6].split()[1]), float(block[7].split()[1]), float(block[8].split()[1])
-    assert block[8].split()[2] == "um"
+    assert block[8].split()[2] == "µm"
     assert u_c == pytest.approx(math.sqrt(sum(c * c for c in contributions)), abs=2e-4)
     assert u95 == pytest.approx(k * math.sqrt(sum(c * c for c in contributions)), abs=1e-3)
     markdown = (out / "section.md").read_text()

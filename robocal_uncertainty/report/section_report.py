@@ -47,6 +47,7 @@ from robocal_uncertainty.inspection.coverage_rule import (
     family_cells,
     holm_adjusted,
 )
+from robocal_uncertainty.inspection.coverage_study import ScenarioStudy
 from robocal_uncertainty.inspection.denoise import ResidualCheck
 from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS, ENVELOPE_STREAM
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, PARAMETER_UNITS
@@ -251,8 +252,8 @@ def _display(name: str) -> tuple[str, float, str, float]:
     if name == "twist_angle":
         return "deg", math.degrees(1.0), "mdeg", math.degrees(1.0) * 1e3
     if name.startswith("profile"):
-        return "um", 1e6, "um", 1e6
-    return "mm", 1e3, "um", 1e6
+        return "µm", 1e6, "µm", 1e6
+    return "mm", 1e3, "µm", 1e6
 
 
 def _decimals(u_scaled_to_value_unit: float) -> int:
@@ -262,7 +263,16 @@ def _decimals(u_scaled_to_value_unit: float) -> int:
     return max(0, 1 - math.floor(math.log10(u_scaled_to_value_unit)))
 
 
-def _rows(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...]) -> list[dict[str, Any]]:
+def _own_verdict(name: str, result: SectionUncertainty, study: ScenarioStudy) -> tuple[float, bool]:
+    """Lowest coverage of `name` in this cloud's own study and whether it is verified for the cloud
+    (every family's cell passes the rule and the cloud's residual check did not flag it)."""
+    check = result.check
+    return study.lowest(name), study.verified(name) and check is not None and not check.flagged
+
+
+def _rows(
+    result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], study: ScenarioStudy | None = None
+) -> list[dict[str, Any]]:
     rows = []
     measured = result.parameters.as_array()
     cloud_check = result.check
@@ -316,6 +326,24 @@ def _rows(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...]) -
                 "coverage_verified": stated_coverage(name, result.method, cloud_check, in_scope=in_scope)[2],
             }
         )
+        if study is not None:
+            lowest, verified = _own_verdict(name, result, study)
+            rows[-1]["coverage_measured"] = lowest
+            rows[-1]["coverage_verified"] = verified
+            rows[-1]["coverage_verified_by"] = "this cloud's coverage study"
+            rows[-1]["coverage_this_cloud_study"] = {
+                family: {
+                    "scans": cells[name].scans,
+                    "flagged": cells[name].flagged,
+                    "inside_unflagged": cells[name].inside,
+                    "inside_all": cells[name].inside_all,
+                    "coverage_unflagged": cells[name].coverage if math.isfinite(cells[name].coverage) else None,
+                    "u_binomial": cells[name].u if math.isfinite(cells[name].u) else None,
+                    "p_value_holm": cells[name].p_holm if math.isfinite(cells[name].p_holm) else None,
+                    "verified": cells[name].consistent,
+                }
+                for family, cells in study.cells.items()
+            }
     return rows
 
 
@@ -325,11 +353,13 @@ def section_report_dict(
     *,
     truth: NDArray[np.float64] | None = None,
     extra: dict[str, Any] | None = None,
+    study: ScenarioStudy | None = None,
 ) -> dict[str, Any]:
-    """The JSON content of a section report (SI units: m, rad)."""
+    """The JSON content of a section report (SI units: m, rad); with `study`, the coverage
+    verdict is that of the study run for this cloud (``coverage_study_this_cloud``)."""
     mc = result.monte_carlo
     inst = result.instrument
-    rows = _rows(result, corrections)
+    rows = _rows(result, corrections, study)
     if truth is not None:
         for row, value in zip(rows, truth):
             row["truth"] = float(value)
@@ -369,9 +399,50 @@ def section_report_dict(
         "parameters": rows,
         "residual_check": None if result.check is None else _check_dict(result.check),
         "roughness_envelope": _envelope_dict(result),
-        "coverage_note": coverage_summary(result),
+        "coverage_note": coverage_summary(result, study),
+        "coverage_study_this_cloud": None if study is None else _study_dict(study),
         "gum_with_repeatability": repeatability_budget(result),
         **(extra or {}),
+    }
+
+
+def _study_dict(study: ScenarioStudy) -> dict[str, Any]:
+    """The cloud's own coverage study (SI): scenario, settings, time, counts, verdict."""
+    inst = study.instrument
+    return {
+        "scenario": study.label,
+        "points": study.n_points,
+        "nominal_length_m": study.nominal_length,
+        "instrument": {
+            "name": inst.name,
+            "mpe_a_m": inst.mpe_a,
+            "mpe_k": inst.mpe_k,
+            "thermal_expansion_half_width_per_degc": inst.thermal_half_width,
+            "temperature_deviation_degc": inst.temperature_deviation,
+            "probing_half_width_m": inst.probing_half_width,
+            "algorithm_half_width_m": inst.algorithm_half_width,
+        },
+        "probe_vectors_from_cloud": study.probe_vectors,
+        "form_rms_m": study.form_rms if math.isfinite(study.form_rms) else None,
+        "form_scale": study.form_scale,
+        "study_seed": study.root_seed,
+        "scans_per_family": study.scans,
+        "scans_total": study.total_scans,
+        "trials_per_scan": study.trials,
+        "families": list(study.families),
+        "elapsed_s": study.elapsed_s,
+        "workers": study.workers,
+        "counts": {
+            family: {"scans": c[0], "flagged": c[1], "inside_unflagged": list(c[2]), "inside_all": list(c[3])}
+            for family, c in study.counts.items()
+        },
+        "rule": (
+            f"per parameter and family over the unflagged scans: at least {MIN_STUDY_SCANS} scans, coverage at "
+            f"least {COVERAGE_TOLERANCE[0]:.0%}, exact one-sided binomial test of >= 95 % not rejected at "
+            f"{BINOMIAL_LEVEL:.0%} after Holm over the study's cells"
+        ),
+        "verified": {name: study.verified(name) for name in PARAMETER_NAMES},
+        "verified_all": study.verified_all,
     }
 
 
@@ -494,7 +565,7 @@ def _check_dict(check: ResidualCheck) -> dict[str, Any]:
 
 
 _DEMO_SCENARIO_TEXT = (
-    "the demo scenario (Rotor 37 at the seed's size, 1 836 points, a 5 um three-wave form error, the seed's "
+    "the demo scenario (Rotor 37 at the seed's size, 1 836 points, a 5 µm three-wave form error, the seed's "
     "offsets and twist and CMM; 200 simulated scans)"
 )
 
@@ -512,11 +583,77 @@ def _family_text() -> str:
     return "; ".join(parts)
 
 
-def coverage_summary(result: SectionUncertainty) -> str:
-    """What the residual check of this cloud and the measured coverage say about its intervals (one paragraph)."""
+VERIFIED_OWN = "verified for this part, layout and instrument"
+"""The verdict of a parameter its cloud's own coverage study verifies."""
+
+
+def _own_study_text(study: ScenarioStudy) -> str:
+    parts = []
+    for family, cells in study.cells.items():
+        first = next(iter(cells.values()))
+        finite = [c for c in cells.values() if math.isfinite(c.coverage)]
+        if finite:
+            worst = min(finite, key=lambda c: c.coverage)
+            name = next(n for n, c in cells.items() if c is worst)
+            low = f"lowest coverage of the unflagged {worst.coverage:.1%} +- {worst.u:.1%} ({_LABELS[name]})"
+        else:
+            low = "every scan flagged"
+        parts.append(f"{family}: {first.scans} scans, {first.flagged} flagged, {low}")
+    return "; ".join(parts)
+
+
+def _own_summary(result: SectionUncertainty, study: ScenarioStudy, rule: str) -> str:
+    check = result.check
+    scale = (
+        f"form amplitudes x {study.form_scale:.2f} (the cloud's denoised form RMS "
+        f"{study.form_rms * 1e6:.2f} µm, the stored study's base form 3.54 µm)"
+        if math.isfinite(study.form_rms)
+        else "the stored amplitudes"
+    )
+    head = (
+        f"Coverage study of this cloud: {study.scans} simulated scans per family ({', '.join(study.families)}; "
+        f"{study.total_scans} in all, {study.trials} trials each, study seed {study.root_seed}, "
+        f"{study.elapsed_s:.0f} s) of {study.label}: its nominal, its {study.n_points}-point layout"
+        + (" and probe vectors" if study.probe_vectors else "")
+        + f", its offsets and twist, {scale}; method 'denoised' on each, coverage {rule}: {_own_study_text(study)}."
+    )
+    if check is None:
+        return head + " This cloud was not checked: no stated interval is verified for it."
+    if check.flagged:
+        return (
+            head + f" This cloud: {check.describe()}. Its intervals are NOT verified for this cloud: the study "
+            "holds for parts whose form the denoising follows."
+        )
+    short = [f for f, c in study.counts.items() if c[0] - c[1] < MIN_STUDY_SCANS]
+    failing = [_LABELS[n] for n in PARAMETER_NAMES if not study.verified(n)]
+    if not failing:
+        return head + f" This cloud: {check.describe()}. Every stated interval is {VERIFIED_OWN}."
+    why = (
+        f" (families with fewer than {MIN_STUDY_SCANS} unflagged scans cannot verify anything: {', '.join(short)})"
+        if short
+        else ""
+    )
+    return (
+        head
+        + f" This cloud: {check.describe()}. NOT verified for this part, layout and instrument{why}: "
+        + ", ".join(failing)
+        + "."
+    )
+
+
+def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = None) -> str:
+    """What the residual check of this cloud and the measured coverage say about its intervals
+    (one paragraph); with `study`, the verdict of the coverage study run for this cloud."""
     method = result.method
     check = result.check
     lo = COVERAGE_TOLERANCE[0]
+    if study is not None:
+        own_rule = (
+            f"at least {lo:.0%} and not significantly below 95 % (exact one-sided binomial test at "
+            f"{BINOMIAL_LEVEL:.0%}, Holm-adjusted over the study's cells, at least {MIN_STUDY_SCANS} unflagged "
+            "scans per family)"
+        )
+        return _own_summary(result, study, own_rule)
     rule = (
         f"at least {lo:.0%} and not significantly below 95 % (exact one-sided binomial test at "
         f"{BINOMIAL_LEVEL:.0%}, at least {MIN_STUDY_SCANS} scans) over {_DEMO_SCENARIO_TEXT} and over the unflagged "
@@ -548,7 +685,7 @@ def coverage_summary(result: SectionUncertainty) -> str:
         cloud = f"This cloud: {check.describe()}. NOT coverage-verified (coverage {rule}): " + ", ".join(failing) + "."
     families = (
         f" Scenario families (method 'denoised', {FAMILY_STUDY_COMMAND}; smooth forms of 2-13 waves, bumps and "
-        f"dents of 1-10 um over 1-20 mm on the sides and at the edges, edge erosion): {_family_text()}."
+        f"dents of 1-10 µm over 1-20 mm on the sides and at the edges, edge erosion): {_family_text()}."
     )
     background = (
         " The max/min-defined parameters (maximum thickness, chord, profiles) are biased upward by "
@@ -582,7 +719,13 @@ def coverage_summary(result: SectionUncertainty) -> str:
     )
 
 
-def _coverage_cell(name: str, result: SectionUncertainty) -> str:
+def _coverage_cell(name: str, result: SectionUncertainty, study: ScenarioStudy | None = None) -> str:
+    if study is not None:
+        if result.check is None or result.check.flagged:
+            return "not verified for this cloud"
+        lowest, verified = _own_verdict(name, result, study)
+        shown = f"{lowest:.1%}" if math.isfinite(lowest) else "-"
+        return f"{shown} {VERIFIED_OWN}" if verified else f"{shown} NOT VERIFIED for this part (own study)"
     _, value, verified = stated_coverage(name, result.method, result.check)
     if result.check is None or result.check.flagged or outside_study_scope(result) is not None:
         return "not verified for this cloud"
@@ -605,6 +748,7 @@ def format_section_table(
     corrections: tuple[BiasCorrection, ...],
     *,
     truth: NDArray[np.float64] | None = None,
+    study: ScenarioStudy | None = None,
 ) -> str:
     """Console table in the seed's layout: value, u, 95 % interval, GUM u, the JCGM 101 §8 GUM
     validation (``agree``/``differ``), and the measured coverage of the stated interval (``NOT
@@ -638,7 +782,7 @@ def format_section_table(
         verdict = f"{'agree' if result.validation[j].validated else 'differ':10s}"
         value = f"{_LABELS[name]:24s} {fix.measured * vf:>9.{digits}f} {vu:3s} "
         spread = f"{mc.standard_uncertainty * uf:>5.2f} {uu:4s} {mc.expanded_uncertainty * uf:>5.2f} {uu:4s} "
-        coverage = _coverage_cell(name, result)
+        coverage = _coverage_cell(name, result, study)
         gum = f"{result.gum.outputs[j].standard_uncertainty * uf:>5.2f} {uu:4s} {verdict} {coverage}"
         if denoised:
             interval = f"[{stated.low * vf:.{digits}f}, {stated.high * vf:.{digits}f}] {vu}"
@@ -755,6 +899,9 @@ def _markdown(data: dict[str, Any], table: str) -> str:
             for study in FAMILY_STUDY.values()
         ]
         out.append(f"| {_LABELS[name]} | " + " | ".join(cells) + " |")
+    own = data.get("coverage_study_this_cloud")
+    if own is not None:
+        out += _markdown_own_study(own)
     repeat = data.get("gum_with_repeatability")
     if repeat is not None:
         out += _markdown_repeatability(repeat, data.get("repeat_scans"))
@@ -762,11 +909,57 @@ def _markdown(data: dict[str, Any], table: str) -> str:
         "",
         "## Histograms",
         "",
-        "![Monte Carlo values of the nine parameters about the measured value; dashed: 95 % interval]"
+        "![Monte Carlo values of the nine parameters about the measured value; dashed: the stated 95 % interval]"
         "(section_histograms.png)",
         "",
     ]
     return "\n".join(out)
+
+
+def _markdown_own_study(own: dict[str, Any]) -> list[str]:
+    """The cloud's own coverage study: settings, then coverage per parameter and family and the verdict."""
+    inst = own["instrument"]
+    scale = (
+        f"form amplitudes x {own['form_scale']:.2f} (denoised form RMS {own['form_rms_m'] * 1e6:.2f} µm)"
+        if own["form_rms_m"] is not None
+        else "stored amplitudes"
+    )
+    families = own["families"]
+    out = [
+        "",
+        "## Coverage study of this cloud (its part, layout and instrument)",
+        "",
+        f"- scenario: {own['scenario']}",
+        f"- {own['points']} points per scan (the cloud's layout"
+        + (", its probe vectors" if own["probe_vectors_from_cloud"] else "")
+        + f"), nominal contour {own['nominal_length_m'] * 1e3:.1f} mm, {scale}",
+        f"- instrument {inst['name']}: MPE ({inst['mpe_a_m'] * 1e6:.2f} + L/{inst['mpe_k']:g}) µm, probing "
+        f"{inst['probing_half_width_m'] * 1e6:.2f} µm, thermal {inst['thermal_expansion_half_width_per_degc']:g} /°C "
+        f"x {inst['temperature_deviation_degc']:g} °C",
+        f"- {own['scans_per_family']} scans per family ({', '.join(families)}), {own['scans_total']} in all, "
+        f"{own['trials_per_scan']} trials each, study seed {own['study_seed']}, {own['elapsed_s']:.0f} s on "
+        f"{own['workers']} worker(s)",
+        f"- rule: {own['rule']}",
+        "",
+        "Coverage over the scans the residual check did not flag, ± its binomial standard uncertainty "
+        "(flagged scans per family in the header); verdict per parameter over every family:",
+        "",
+        "| parameter | "
+        + " | ".join(f"{f} ({own['counts'][f]['flagged']}/{own['counts'][f]['scans']} flagged)" for f in families)
+        + " | study verdict |",
+        "|---" * (len(families) + 2) + "|",
+    ]
+    for j, name in enumerate(PARAMETER_NAMES):
+        cells = []
+        for f in families:
+            c = own["counts"][f]
+            kept = c["scans"] - c["flagged"]
+            cells.append(
+                f"{c['inside_unflagged'][j] / kept:.1%} ± {math.sqrt(0.95 * 0.05 / kept):.1%}" if kept else "-"
+            )
+        verdict = "verified for this part, layout and instrument" if own["verified"][name] else "NOT VERIFIED"
+        out.append(f"| {_LABELS[name]} | " + " | ".join(cells) + f" | {verdict} |")
+    return out
 
 
 def _markdown_repeatability(repeat: dict[str, Any], files: list[str] | None) -> list[str]:
@@ -876,6 +1069,15 @@ def _markdown_to_html(markdown: str, title: str, directory: Path) -> str:
     return "\n".join(out) + "\n"
 
 
+def _stated_interval(name: str, result: SectionUncertainty, fix: BiasCorrection) -> Any:
+    """The interval the report states for `name`: the bias-corrected one (for ``denoised``, widened
+    to the roughness envelope), or the JCGM 101 one for the offsets and twist under ``seed``."""
+    j = PARAMETER_NAMES.index(name)
+    if stated_coverage(name, result.method)[0] == "jcgm101":
+        return result.monte_carlo.outputs[j].probabilistically_symmetric
+    return fix.interval
+
+
 def _plot(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], path: Path) -> None:
     import matplotlib as mpl
 
@@ -889,17 +1091,20 @@ def _plot(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], p
         hist = output.histogram
         y = corrections[j].measured
         ax.stairs(hist.counts, (hist.edges - y) * uf, fill=True, alpha=0.6)
-        iv = output.probabilistically_symmetric
+        # The interval the table states (widened to the roughness envelope, clipped at 0 for the
+        # max/min parameters), not the Monte Carlo-only one.
+        iv = _stated_interval(name, result, corrections[j])
         for x in (iv.low, iv.high):
             ax.axvline((x - y) * uf, color="C1", linestyle="--", linewidth=1)
         ax.axvline(0.0, color="k", linewidth=1)
         ax.set_title(f"{_LABELS[name]}", fontsize=10)
         digits = _decimals(output.standard_uncertainty * vf)
         ax.set_xlabel(f"{uu} from the measured {y * vf:.{digits}f} {vu}")
+        ax.set_ylabel("trials per bin")
     what = "values f(y) - Δ of the measurand" if result.method == "denoised" else "values"
     fig.suptitle(
         f"Monte Carlo {what} ({result.monte_carlo.n_trials} trials) about the measured value (black); "
-        "dashed: 95 % interval"
+        f"dashed: the stated {result.monte_carlo.coverage_probability:.0%} interval"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=90)
@@ -913,15 +1118,16 @@ def write_section_report(
     *,
     truth: NDArray[np.float64] | None = None,
     extra: dict[str, Any] | None = None,
+    study: ScenarioStudy | None = None,
 ) -> SectionReportFiles:
     """Write ``section.json``, ``section.md``, ``section.csv``, ``section_histograms.png`` and
     ``section.html`` (``section.md`` as a self-contained page, the histograms embedded)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    data = section_report_dict(result, corrections, truth=truth, extra=extra)
+    data = section_report_dict(result, corrections, truth=truth, extra=extra, study=study)
     files = SectionReportFiles(*(out / name for name in SECTION_REPORT_FILES))
     files.json.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    table = format_section_table(result, corrections, truth=truth)
+    table = format_section_table(result, corrections, truth=truth, study=study)
     files.markdown.write_text(_markdown(data, table), encoding="utf-8")
     with files.csv.open("w", newline="", encoding="utf-8") as stream:
         writer = csv.writer(stream)
