@@ -659,7 +659,7 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
         f"{BINOMIAL_LEVEL:.0%}, at least {MIN_STUDY_SCANS} scans) over {_DEMO_SCENARIO_TEXT} and over the unflagged "
         f"scans of every scenario family (there the test is Holm-adjusted over the study's {_FAMILY_CELLS} cells)"
     )
-    study = ", ".join(f"{_LABELS[n]} {v.denoised:.1%}" for n, v in COVERAGE_STUDY.items())
+    denoised = ", ".join(f"{_LABELS[n]} {v.denoised:.1%}" for n, v in COVERAGE_STUDY.items())
     seed = ", ".join(f"{_LABELS[n]} {v.jcgm101:.1%}" for n, v in COVERAGE_STUDY.items())
     reflected = ", ".join(f"{_LABELS[n]} {v.reflected:.1%}" for n, v in COVERAGE_STUDY.items())
     scope = outside_study_scope(result)
@@ -671,7 +671,8 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
             f"This cloud: {check.describe()}. Its intervals are NOT verified for this cloud: it is outside "
             f"the scope of the coverage studies below ({scope}; the studies simulate {STUDY_POINTS}-point "
             "scans of the Rotor 37 section at the seed's size on the seed's CMM), whose coverage is not "
-            "carried to another point density, blade or instrument."
+            "carried to another point density, blade or instrument; `section CLOUD --coverage-study N` runs the "
+            "study for this cloud's own part, layout and instrument."
         )
     elif check.flagged:
         cloud = (
@@ -705,7 +706,7 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
             "form the scan supports (one Cp window) and at the roughest (the measured deviations): a local "
             "feature the noise hides from the residual check can make the true form anywhere between, and "
             "its noise bias with it (asymmetric, wider than the Monte Carlo interval; it over-covers a "
-            f"smooth part). Over {_DEMO_SCENARIO_TEXT} its 95 % intervals cover the truth in: {study}."
+            f"smooth part). Over {_DEMO_SCENARIO_TEXT} its 95 % intervals cover the truth in: {denoised}."
             + families
             + background
         )
@@ -715,7 +716,7 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
         + background
         + " Offsets and twist are well calibrated. Thickness and chord under-cover even corrected; the "
         "profile intervals do not cover the true form deviation: read the profile values as an upper bound "
-        f"that includes the instrument noise range, or use method 'denoised' (coverage {study})." + families
+        f"that includes the instrument noise range, or use method 'denoised' (coverage {denoised})." + families
     )
 
 
