@@ -325,3 +325,13 @@ def test_a_study_that_verifies_says_so(cloud_file: Path) -> None:
     failing = dataclasses.replace(study, counts=worse, cells=family_cells(worse, PARAMETER_NAMES))
     table = format_section_table(run.result, run.corrections, study=failing)
     assert "85.7% NOT VERIFIED for this part (own study)" in table and table.count("verified for this part") == 8
+
+
+def test_shipped_nominal_beside_a_directory_of_its_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--out cascade --nominal cascade`: the report directory is claimed before the work, and a
+    directory named like a shipped blade is not a nominal file."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "cascade").mkdir()
+    (tmp_path / "rotor37").mkdir()
+    assert load_section_nominal("cascade").period == pytest.approx(0.2017, abs=1e-4)
+    assert load_section_nominal("rotor37").period == pytest.approx(0.80977, abs=1e-4)

@@ -131,7 +131,7 @@ def _shipped(*parts: str) -> Path:
 def resolve_instrument(spec: str | None) -> tuple[CmmInstrument, str]:
     """The instrument of a YAML path or a shipped name (None: the seed's CMM ``cmm_seed``)."""
     name = "cmm_seed" if spec is None else spec
-    if name in _SHIPPED_INSTRUMENTS and not Path(name).exists():
+    if name in _SHIPPED_INSTRUMENTS and not Path(name).is_file():
         return load_instrument(_shipped("instruments", f"{name}.yaml")), name
     path = Path(name).expanduser()
     if not path.is_file():
@@ -147,7 +147,7 @@ def load_section_nominal(spec: str, *, unit: str | None = None) -> NominalCurve:
     ``cascade`` (100 mm chord).
     """
     head, _, rest = spec.partition(":")
-    if head == "rotor37" and not Path(spec).exists():
+    if head == "rotor37" and not Path(spec).is_file():
         try:
             surface = int(rest) if rest else 2
         except ValueError:
@@ -157,7 +157,7 @@ def load_section_nominal(spec: str, *, unit: str | None = None) -> NominalCurve:
             raise ConfigError(msg)
         path = _shipped("blade_sections", "nasa_rotor37_blade_geometry.dat")
         return NominalCurve(read_rotor37_section(path, surface, scale=ROTOR37_SCALE))
-    if spec == "cascade" and not Path(spec).exists():
+    if spec == "cascade" and not Path(spec).is_file():
         return NominalCurve(
             read_cascade_profile(_shipped("blade_sections", "dfvlr_l030-4_cascade_profile.dat"), chord_m=0.1)
         )
