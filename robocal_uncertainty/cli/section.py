@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             print(
                 "Demo: NASA Rotor 37 surface 2 at the seed's size (x7.14), a simulated "
                 f"{DEMO_SCENARIO['n_points']}-point "
-                "CMM scan with offsets (-0.1013, 0.0538) mm, twist 0.0512 deg, a 5 um 3-wave form error and one draw "
+                "CMM scan with offsets (-0.1013, 0.0538) mm, twist 0.0512 deg, a 5 µm 3-wave form error and one draw "
                 "of the instrument errors; the true parameters are known."
             )
             run = section_demo(
