@@ -181,6 +181,7 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
     import time
 
     from robocal_uncertainty.app.section_inspection import section_coverage_study
+    from robocal_uncertainty.inspection.coverage_rule import MIN_STUDY_SCANS
     from robocal_uncertainty.inspection.coverage_study import FAMILIES
 
     scans = int(args.coverage_study)
@@ -192,6 +193,13 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
         f"scans of its nominal, layout and instrument, {args.study_trials} trials each, study seed {args.study_seed}",
         flush=True,
     )
+    if scans < MIN_STUDY_SCANS:
+        print(
+            f"  note: with fewer than {MIN_STUDY_SCANS} scans per family nothing can be verified (a family needs "
+            f"{MIN_STUDY_SCANS} scans its residual check does not flag; the stored study's check flagged 5-34 % "
+            "of each family's scans)",
+            flush=True,
+        )
 
     def estimate(seconds: float) -> None:
         expected = seconds * (total - 1) / workers
