@@ -3,6 +3,7 @@ report equals the API for the same seed, and every bad input ends in one line.""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -229,14 +230,14 @@ def test_repeat_scans_give_the_seeds_chord_budget(
     assert chord["U"] == pytest.approx(chord["k"] * math.sqrt(float((terms**2).sum())), rel=1e-9)
     # The printed budget: u1 MPE, u2 thermal, u3 repeatability, the other sources, u_c, k, U95 (um).
     block = text[text.index("GUM budget of the chord length with repeatability") :].splitlines()
-    assert "3 repeated scans" in block[0] and "in um" in block[0]
+    assert "3 repeated scans" in block[0] and "in µm" in block[0]
     assert [line.split()[:2] for line in block[1:4]] == [["u1", "MPE"], ["u2", "thermal"], ["u3", "repeatability"]]
     assert [line.split()[0] for line in block[4:9]] == ["probing", "algorithm", "u_c", "k", "U95"]
     assert float(block[3].split()[2]) == pytest.approx(u3 * 1e6, abs=6e-5)
     contributions = [float(line.split()[-2]) for line in block[1:6]]
-    assert all(line.split()[-1] == "um" for line in block[1:6])
+    assert all(line.split()[-1] == "µm" for line in block[1:6])
     u_c, k, u95 = float(block[6].split()[1]), float(block[7].split()[1]), float(block[8].split()[1])
-    assert block[8].split()[2] == "um"
+    assert block[8].split()[2] == "µm"
     assert u_c == pytest.approx(math.sqrt(sum(c * c for c in contributions)), abs=2e-4)
     assert u95 == pytest.approx(k * math.sqrt(sum(c * c for c in contributions)), abs=1e-3)
     markdown = (out / "section.md").read_text()
@@ -268,3 +269,69 @@ def test_bad_repeat_scans_end_in_one_line(
     assert len(err.splitlines()) == 1
     assert err.startswith("robocal-uncertainty section: error:")
     assert __import__("re").search(match, err), err
+
+
+def test_coverage_study_of_the_cloud(cloud_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--coverage-study N: the cloud's own study (its 400 points, its probe vectors, the seed's CMM);
+    one scan per family verifies nothing, and the report says so and records the study."""
+    out = tmp_path / "report"
+    argv = ["section", str(cloud_file), "--nominal", "rotor37", "--trials", "2000", "--out", str(out)]
+    assert main([*argv, "--coverage-study", "1", "--study-trials", "300", "--study-seed", "5", "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "4 simulated scans" in text and "expected" in text
+    assert text.count("NOT VERIFIED for this part (own study)") == 9
+    assert "NOT verified for this part, layout and instrument (families with fewer than 53" in text
+    assert "% verified for this part" not in text
+    data = json.loads((out / "section.json").read_text())
+    own = data["coverage_study_this_cloud"]
+    assert own["study_seed"] == 5 and own["scans_per_family"] == 1 and own["points"] == 400
+    assert own["families"] == ["smooth", "side", "edge", "erosion"] and own["elapsed_s"] > 0
+    assert own["probe_vectors_from_cloud"] is True and own["instrument"]["mpe_k"] == 350
+    assert all(c["scans"] == 1 for c in own["counts"].values()) and not own["verified_all"]
+    assert not any(row["coverage_verified"] for row in data["parameters"])
+    assert "## Coverage study of this cloud" in (out / "section.md").read_text()
+    # Without a study the same cloud is outside the stored studies' scope: not verified.
+    assert main([*argv, "--force", "--no-progress"]) == 0
+    assert "NOT verified for this cloud" in capsys.readouterr().out
+    # The study runs method denoised only.
+    assert main([*argv, "--force", "--method", "seed", "--coverage-study", "1"]) == 1
+    assert "give --method denoised" in capsys.readouterr().err
+
+
+def test_a_study_that_verifies_says_so(cloud_file: Path) -> None:
+    """The verdict of a study whose every cell passes the rule, rendered for a cloud the check passed."""
+    from robocal_uncertainty.app.section_inspection import inspect_section
+    from robocal_uncertainty.inspection.cmm_model import CmmInstrument
+    from robocal_uncertainty.inspection.coverage_rule import family_cells
+    from robocal_uncertainty.inspection.coverage_study import ScenarioStudy
+    from robocal_uncertainty.inspection.section import PARAMETER_NAMES
+    from robocal_uncertainty.report.section_report import coverage_summary, format_section_table
+
+    run = inspect_section(cloud_file, "rotor37", trials=2000, seed=1)
+    assert run.result.check is not None and not run.result.check.flagged
+    counts = dict.fromkeys(("smooth", "side", "edge", "erosion"), (80, 10, (68,) * 9, (77,) * 9))  # 97.1 %
+    study = ScenarioStudy(
+        "test", 400, 0.81, CmmInstrument(), 1.0, 3e-6, True, 23, 80, 2000, ("smooth", "side", "edge", "erosion"),
+        1.0, 1, counts, family_cells(counts, PARAMETER_NAMES),
+    )  # fmt: skip
+    assert study.verified_all
+    table = format_section_table(run.result, run.corrections, study=study)
+    assert table.count("97.1% verified for this part, layout and instrument") == 9
+    assert "Every stated interval is verified for this part, layout and instrument" in coverage_summary(
+        run.result, study
+    )
+    # One family at 60 of 70 (85.7 %) fails the floor: that parameter is not verified.
+    worse = dict(counts, edge=(80, 10, (60, *(68,) * 8), (70, *(77,) * 8)))
+    failing = dataclasses.replace(study, counts=worse, cells=family_cells(worse, PARAMETER_NAMES))
+    table = format_section_table(run.result, run.corrections, study=failing)
+    assert "85.7% NOT VERIFIED for this part (own study)" in table and table.count("verified for this part") == 8
+
+
+def test_shipped_nominal_beside_a_directory_of_its_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--out cascade --nominal cascade`: the report directory is claimed before the work, and a
+    directory named like a shipped blade is not a nominal file."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "cascade").mkdir()
+    (tmp_path / "rotor37").mkdir()
+    assert load_section_nominal("cascade").period == pytest.approx(0.2017, abs=1e-4)
+    assert load_section_nominal("rotor37").period == pytest.approx(0.80977, abs=1e-4)

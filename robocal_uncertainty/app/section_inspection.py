@@ -21,9 +21,10 @@ Shipped nominals (``--nominal``): ``rotor37`` (surface 2 scaled by 7.14: maximum
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -35,6 +36,7 @@ from robocal_uncertainty.bagio.point_cloud2 import read_point_cloud2
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.inspection.bias_correction import BiasCorrection, bias_corrections
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument, load_instrument
+from robocal_uncertainty.inspection.coverage_study import ScenarioStudy, run_scenario_study, scenario_from_cloud
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import (
     NominalSection,
@@ -58,6 +60,7 @@ __all__ = [
     "load_section_cloud",
     "load_section_nominal",
     "resolve_instrument",
+    "section_coverage_study",
     "section_demo",
 ]
 
@@ -102,6 +105,10 @@ class SectionInspection:
     repeats : tuple of str
         Sources of the repeated scans whose spread is in ``result.gum_with_repeatability``
         (empty when none were given).
+    curve : NominalCurve or None
+        The nominal curve the cloud was evaluated against.
+    study : ScenarioStudy or None
+        The coverage study run for this cloud (:func:`section_coverage_study`), else None.
     """
 
     result: SectionUncertainty
@@ -113,6 +120,8 @@ class SectionInspection:
     elapsed_s: float
     workers: int
     repeats: tuple[str, ...] = ()
+    curve: NominalCurve | None = None
+    study: ScenarioStudy | None = None
 
 
 def _shipped(*parts: str) -> Path:
@@ -122,7 +131,7 @@ def _shipped(*parts: str) -> Path:
 def resolve_instrument(spec: str | None) -> tuple[CmmInstrument, str]:
     """The instrument of a YAML path or a shipped name (None: the seed's CMM ``cmm_seed``)."""
     name = "cmm_seed" if spec is None else spec
-    if name in _SHIPPED_INSTRUMENTS and not Path(name).exists():
+    if name in _SHIPPED_INSTRUMENTS and not Path(name).is_file():
         return load_instrument(_shipped("instruments", f"{name}.yaml")), name
     path = Path(name).expanduser()
     if not path.is_file():
@@ -138,7 +147,7 @@ def load_section_nominal(spec: str, *, unit: str | None = None) -> NominalCurve:
     ``cascade`` (100 mm chord).
     """
     head, _, rest = spec.partition(":")
-    if head == "rotor37" and not Path(spec).exists():
+    if head == "rotor37" and not Path(spec).is_file():
         try:
             surface = int(rest) if rest else 2
         except ValueError:
@@ -148,7 +157,7 @@ def load_section_nominal(spec: str, *, unit: str | None = None) -> NominalCurve:
             raise ConfigError(msg)
         path = _shipped("blade_sections", "nasa_rotor37_blade_geometry.dat")
         return NominalCurve(read_rotor37_section(path, surface, scale=ROTOR37_SCALE))
-    if spec == "cascade" and not Path(spec).exists():
+    if spec == "cascade" and not Path(spec).is_file():
         return NominalCurve(
             read_cascade_profile(_shipped("blade_sections", "dfvlr_l030-4_cascade_profile.dat"), chord_m=0.1)
         )
@@ -221,6 +230,7 @@ def _run(
         elapsed_s=time.perf_counter() - start,
         workers=workers,
         repeats=tuple(r.source for r in repeats),
+        curve=curve,
     )
 
 
@@ -399,3 +409,69 @@ def section_demo(
         truth=clean.parameters.as_array(),
         method=method,
     )
+
+
+def section_coverage_study(
+    run: SectionInspection,
+    scans: int,
+    *,
+    seed: int = 23,
+    trials: int = 2000,
+    workers: int = 1,
+    dask: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    estimate: Callable[[float], None] | None = None,
+) -> SectionInspection:
+    """`run` with the coverage study of its own cloud: ``scans`` simulated scans per family.
+
+    The study simulates the cloud's nominal, its point layout (registered nominal-curve
+    parameters) and probe vectors, its instrument, its offsets and twist, and the four form
+    families scaled to its denoised form level
+    (:func:`~robocal_uncertainty.inspection.coverage_study.scenario_from_cloud`), runs method
+    ``denoised`` on each scan and applies the coverage rule
+    (:mod:`~robocal_uncertainty.inspection.coverage_rule`). The report then states "verified
+    for this part, layout and instrument" from that study instead of the stored ones.
+
+    Parameters
+    ----------
+    run : SectionInspection
+        A method-``denoised`` inspection (:func:`inspect_section` or :func:`section_demo`).
+    scans : int
+        Scans per family (>= 1).
+    seed : int
+        Root seed of the study (the stored study's: 23).
+    trials : int
+        Monte Carlo trials per scan.
+    workers, dask
+        Where the scans run (never changes the outcome).
+    progress, estimate
+        ``progress(done, total)`` per scan; ``estimate(seconds)`` after the first scan.
+
+    Returns
+    -------
+    SectionInspection
+        `run` with ``study`` set.
+    """
+    if run.result.method != "denoised":
+        msg = "--coverage-study runs method denoised on every simulated scan: give --method denoised"
+        raise ConfigError(msg)
+    if run.curve is None:
+        msg = "this inspection carries no nominal curve to simulate"
+        raise ConfigError(msg)
+    scenario = scenario_from_cloud(
+        run.cloud,
+        run.curve,
+        run.result.instrument,
+        label=f"{run.cloud.n_points} points of {run.cloud.source} on {run.nominal}, instrument {run.instrument}",
+    )
+    study = run_scenario_study(
+        scenario,
+        scans,
+        trials=trials,
+        root_seed=seed,
+        workers=workers,
+        dask=dask,
+        progress=progress,
+        estimate=estimate,
+    )
+    return dataclasses.replace(run, study=study)

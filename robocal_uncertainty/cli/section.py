@@ -6,7 +6,7 @@ import argparse
 from typing import Any
 
 from robocal_uncertainty.cli._common import parse_trials, timed_progress
-from robocal_uncertainty.cli._options import add_force_arg
+from robocal_uncertainty.cli._options import add_dask_arg, add_force_arg
 from robocal_uncertainty.errors import ConfigError
 
 
@@ -49,6 +49,20 @@ def register(sub: Any) -> None:
         "residual check flags it); "
         "seed: perturb the measured cloud as the seed does (max/min intervals under-cover) (default %(default)s)",
     )
+    p.add_argument(
+        "--coverage-study",
+        type=int,
+        metavar="N",
+        help="also run the coverage study of this cloud: N simulated scans per family (smooth, side, edge, "
+        "erosion) of its nominal, point layout, probe vectors and instrument, forms scaled to its level; "
+        "the verdict becomes 'verified for this part, layout and instrument' or not (at least 53 unflagged "
+        "scans per family are needed to verify; method denoised only)",
+    )
+    p.add_argument("--study-seed", type=int, default=23, help="root seed of the coverage study (default %(default)s)")
+    p.add_argument(
+        "--study-trials", type=int, default=2000, help="Monte Carlo trials per study scan (default %(default)s)"
+    )
+    add_dask_arg(p)
     p.add_argument("--out", default="section_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -79,6 +93,14 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(args.repeat_scans)}"
         )
+    if args.coverage_study is not None and args.coverage_study < 1:
+        raise ConfigError(f"--coverage-study needs N >= 1 scans per family, got {args.coverage_study}")
+    if args.coverage_study is not None and args.method != "denoised":
+        raise ConfigError("--coverage-study runs method denoised on every simulated scan: give --method denoised")
+    if args.study_seed < 0 or args.study_trials < 100:
+        raise ConfigError("--study-seed must be >= 0 and --study-trials >= 100")
+    if args.dask is not None and args.coverage_study is None:
+        raise ConfigError("--dask runs the scans of --coverage-study; give --coverage-study N")
     trials = parse_trials(args.trials) if args.trials is not None else (100_000 if args.demo else 1_000_000)
     adaptive = AdaptiveSettings() if trials == "auto" else None
     count = None if trials == "auto" else int(trials)
@@ -88,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             print(
                 "Demo: NASA Rotor 37 surface 2 at the seed's size (x7.14), a simulated "
                 f"{DEMO_SCENARIO['n_points']}-point "
-                "CMM scan with offsets (-0.1013, 0.0538) mm, twist 0.0512 deg, a 5 um 3-wave form error and one draw "
+                "CMM scan with offsets (-0.1013, 0.0538) mm, twist 0.0512 deg, a 5 µm 3-wave form error and one draw "
                 "of the instrument errors; the true parameters are known."
             )
             run = section_demo(
@@ -119,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
             )
     finally:
         finish()
+    if args.coverage_study is not None:
+        run = _coverage_study(run, args)
     result = run.result
     frame = f", frame {run.cloud.frame_id}" if run.cloud.frame_id else ""
     print(
@@ -126,12 +150,12 @@ def run(args: argparse.Namespace) -> int:
         f"{result.monte_carlo.n_trials} trials, seed {result.monte_carlo.seed}, {run.elapsed_s:.1f} s"
     )
     print()
-    print(format_section_table(result, run.corrections, truth=run.truth))
+    print(format_section_table(result, run.corrections, truth=run.truth, study=run.study))
     print()
     if result.gum_with_repeatability is not None:
         print(format_repeatability_budget(result))
         print()
-    print(f"note: {coverage_summary(result)}")
+    print(f"note: {coverage_summary(result, run.study)}")
     from robocal_uncertainty.app.output_paths import clear_earlier_report
 
     clear_earlier_report(args.out)
@@ -146,6 +170,58 @@ def run(args: argparse.Namespace) -> int:
         "demo": bool(args.demo),
         "repeat_scans": list(run.repeats),
     }
-    files = write_section_report(result, run.corrections, args.out, truth=run.truth, extra=extra)
+    files = write_section_report(result, run.corrections, args.out, truth=run.truth, extra=extra, study=run.study)
     print(f"section report written to {files.markdown.parent}")
     return 0
+
+
+def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
+    """Run the cloud's own coverage study, printing the expected time first and progress on stderr."""
+    import sys
+    import time
+
+    from robocal_uncertainty.app.section_inspection import section_coverage_study
+    from robocal_uncertainty.inspection.coverage_rule import MIN_STUDY_SCANS
+    from robocal_uncertainty.inspection.coverage_study import FAMILIES
+
+    scans = int(args.coverage_study)
+    total = scans * len(FAMILIES)
+    workers = max(1, int(args.workers))
+    start = time.perf_counter()
+    print(
+        f"Coverage study of this cloud: {scans} scans per family x {len(FAMILIES)} families = {total} simulated "
+        f"scans of its nominal, layout and instrument, {args.study_trials} trials each, study seed {args.study_seed}",
+        flush=True,
+    )
+    if scans < MIN_STUDY_SCANS:
+        print(
+            f"  note: with fewer than {MIN_STUDY_SCANS} scans per family nothing can be verified (a family needs "
+            f"{MIN_STUDY_SCANS} scans its residual check does not flag; the stored study's check flagged 5-34 % "
+            "of each family's scans)",
+            flush=True,
+        )
+
+    def estimate(seconds: float) -> None:
+        expected = seconds * (total - 1) / workers
+        print(
+            f"  first scan {seconds:.1f} s: expected {expected / 60:.1f} min more for the other {total - 1} "
+            f"on {workers} worker(s)",
+            flush=True,
+        )
+
+    step = max(1, total // 10)
+
+    def progress(done: int, target: int) -> None:
+        if not args.no_progress and (done % step == 0 or done == target):
+            print(f"  study: {done}/{target} scans, {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
+
+    return section_coverage_study(
+        run,
+        scans,
+        seed=args.study_seed,
+        trials=args.study_trials,
+        workers=workers,
+        dask=args.dask,
+        progress=progress,
+        estimate=estimate,
+    )

@@ -5,7 +5,8 @@
 the batched Monte Carlo under the CMM model (``load_instrument``) with the GUM comparison
 (method ``denoised``: the error sampled around ``denoise_section``'s cloud, whose residual check
 flags a cloud the denoising did not follow); ``coverage_study`` measures the intervals' coverage
-over scenario families of simulated parts.
+over scenario families of simulated parts (the stored Rotor 37 study, or a user's own part,
+layout and instrument) and ``coverage_rule`` says whether a study verifies it.
 """
 
 from typing import TYPE_CHECKING

@@ -70,6 +70,7 @@ def simulate_section_scan(
     edge_density: float = 4.0,
     height: float = 0.0,
     deviation: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    parameters: ArrayLike | None = None,
 ) -> PointCloud:
     """A noise-free scan of the nominal section with a known form error, offset and twist.
 
@@ -98,13 +99,22 @@ def simulate_section_scan(
     deviation : callable, optional
         ``deviation(u)`` [m], shape (n,), for the nominal-curve parameters u [m] of the points:
         an extra form error along the outward normal, added to the sinusoid.
+    parameters : array_like, shape (n_points,) [m], optional
+        Nominal-curve parameters of the scan points, in scan order (a measured cloud's point
+        layout: its registered feet); default :func:`scan_parameters` (``edge_density``).
 
     Returns
     -------
     PointCloud
         Points [m] in contour order and outward unit probe vectors.
     """
-    u = scan_parameters(curve, n_points, edge_density=edge_density)
+    if parameters is None:
+        u = scan_parameters(curve, n_points, edge_density=edge_density)
+    else:
+        u = np.asarray(parameters, dtype=np.float64)
+        if u.shape != (n_points,) or not np.isfinite(u).all():
+            msg = f"parameters must be {n_points} finite nominal-curve parameters [m], got shape {u.shape}"
+            raise InputError(msg)
     centre = polygon_centroid(curve.section.points) if pivot is None else np.asarray(pivot, dtype=np.float64)
     normal = curve.outward_normal(u)
     form = form_amplitude * np.sin(2 * math.pi * form_waves * u / curve.period + form_phase)

@@ -27,17 +27,27 @@ import html
 import json
 import math
 import re
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import binom
 
 from robocal_uncertainty.inspection.bias_correction import BiasCorrection
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument
+from robocal_uncertainty.inspection.coverage_rule import (
+    BINOMIAL_LEVEL,
+    COVERAGE_TOLERANCE,
+    MIN_STUDY_SCANS,
+    FamilyCounts,
+    FamilyCoverage,
+    binomial_tail,
+    coverage_verified,
+    family_cells,
+    holm_adjusted,
+)
+from robocal_uncertainty.inspection.coverage_study import ScenarioStudy
 from robocal_uncertainty.inspection.denoise import ResidualCheck
 from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS, ENVELOPE_STREAM
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, PARAMETER_UNITS
@@ -105,100 +115,14 @@ section with a known truth (one instrument-noise draw per scan; slow test
 ``test/inspection/test_inspection_section_mc.py::test_coverage_over_200_simulated_scans``).
 One scan in 200 is 0.5 %; the binomial standard error at 95 % is 1.5 %."""
 
-COVERAGE_TOLERANCE = (0.92, 0.98)
-"""95 ± 3 % (issue 9). A measured coverage below the lower limit is never verified; one above the
-upper limit is conservative (the interval is wider than it needs to be) and is said so."""
-
-MIN_STUDY_SCANS = 53
-"""Fewest scans (unflagged, for a family) a study needs before it can verify a coverage: the
-binomial standard uncertainty at 95 %, sqrt(0.95·0.05/N), is then at most 3 %, the tolerance."""
-
-BINOMIAL_LEVEL = 0.05
-"""Level of the exact one-sided binomial test of "coverage >= 95 %" (per cell in the demo study,
-family-wise over the cells of the scenario-family study: :func:`holm_adjusted`)."""
-
-
-def binomial_tail(inside: int, scans: int) -> float:
-    """P(X <= inside) for X ~ Binomial(scans, 0.95): the one-sided p-value of "coverage >= 95 %"."""
-    return float(binom.cdf(inside, scans, 0.95))
-
-
-def holm_adjusted(p_values: Sequence[float]) -> tuple[float, ...]:
-    """Holm's step-down adjusted p-values (nan stays nan and does not count as a test).
-
-    With m tests, sorted p_(1) <= ... <= p_(m): adjusted p_(i) = max over k <= i of
-    min(1, (m - k + 1) p_(k)). Rejecting where the adjusted p-value is at most a level keeps the
-    probability of rejecting any true hypothesis at most that level, whatever the dependence
-    between the tests (the nine parameters of a family share its scans).
-    """
-    values = [float(p) for p in p_values]
-    order = sorted((j for j, p in enumerate(values) if math.isfinite(p)), key=lambda j: values[j])
-    adjusted = [math.nan] * len(values)
-    running = 0.0
-    for rank, j in enumerate(order):
-        running = max(running, min(1.0, (len(order) - rank) * values[j]))
-        adjusted[j] = running
-    return tuple(adjusted)
-
-
-def coverage_verified(inside: int, scans: int, *, p_value: float | None = None) -> bool:
-    """Whether a study in which `inside` of `scans` intervals held the truth verifies 95 % coverage.
-
-    Verified when the study has at least :data:`MIN_STUDY_SCANS` scans, the measured coverage is at
-    least the lower limit of :data:`COVERAGE_TOLERANCE` (92 %), and the exact one-sided binomial
-    test does not reject a coverage of at least 95 %: ``p_value > BINOMIAL_LEVEL``, where
-    ``p_value`` is :func:`binomial_tail` of the cell unless given (the family study passes the
-    cell's :func:`holm_adjusted` one). The scan count keeps a small study (38 scans: one miss is
-    2.6 %) from verifying anything; the test keeps a large one from verifying a coverage that is
-    92.5 % but significantly below 95 %.
-    """
-    if scans < MIN_STUDY_SCANS:
-        return False
-    if inside / scans < COVERAGE_TOLERANCE[0]:
-        return False
-    return (binomial_tail(inside, scans) if p_value is None else p_value) > BINOMIAL_LEVEL
-
-
 DEMO_SCANS = 200
 """Scans of the demo scenario's study (:data:`COVERAGE_STUDY`)."""
-
-
-class FamilyCoverage(NamedTuple):
-    """Coverage of one parameter's 95 % interval (method ``denoised``) in one scenario family."""
-
-    scans: int
-    """Scans of the family."""
-    flagged: int
-    """Scans the residual check flagged."""
-    inside: int
-    """Unflagged scans whose interval held the truth."""
-    inside_all: int
-    """All scans whose interval held the truth (flagged ones included)."""
-    p_holm: float = math.nan
-    """Holm-adjusted p-value of "coverage >= 95 %" over the study's cells (:func:`holm_adjusted`)."""
-
-    @property
-    def coverage(self) -> float:
-        """Coverage over the unflagged scans (nan when all were flagged)."""
-        kept = self.scans - self.flagged
-        return self.inside / kept if kept else math.nan
-
-    @property
-    def u(self) -> float:
-        """Binomial standard uncertainty of :attr:`coverage` at 95 %."""
-        kept = self.scans - self.flagged
-        return math.sqrt(0.95 * 0.05 / kept) if kept else math.nan
-
-    @property
-    def consistent(self) -> bool:
-        """:func:`coverage_verified` over the unflagged scans, at the Holm-adjusted p-value."""
-        return coverage_verified(self.inside, self.scans - self.flagged, p_value=self.p_holm)
 
 
 FAMILY_STUDY_COMMAND = "python benchmarks/bench_section_coverage.py --scans 600 --workers 2"
 """The command whose output :data:`FAMILY_STUDY` holds."""
 
-_FAMILY_COUNTS: dict[str, tuple[int, int, tuple[int, ...], tuple[int, ...]]] = {
+_FAMILY_COUNTS: dict[str, FamilyCounts] = {
     # family: (scans, flagged, inside per parameter among the unflagged, inside among all)
     "smooth": (600, 30, (550, 544, 538, 540, 534, 561, 553, 561, 554), (578, 573, 567, 569, 563, 591, 582, 591, 581)),
     "side": (600, 93, (481, 474, 481, 482, 481, 496, 498, 487, 493), (568, 562, 570, 573, 571, 587, 591, 578, 581)),
@@ -207,24 +131,7 @@ _FAMILY_COUNTS: dict[str, tuple[int, int, tuple[int, ...], tuple[int, ...]]] = {
 }
 
 
-def _family_study() -> dict[str, dict[str, FamilyCoverage]]:
-    """:data:`_FAMILY_COUNTS` as cells, each with its Holm-adjusted p-value over the whole study."""
-    cells = [
-        (family, name, scans, flagged, kept[j], every[j])
-        for family, (scans, flagged, kept, every) in _FAMILY_COUNTS.items()
-        for j, name in enumerate(PARAMETER_NAMES)
-    ]
-    tails = [
-        binomial_tail(inside, scans - flagged) if scans > flagged else math.nan
-        for _, _, scans, flagged, inside, _ in cells
-    ]
-    study: dict[str, dict[str, FamilyCoverage]] = {family: {} for family in _FAMILY_COUNTS}
-    for (family, name, scans, flagged, inside, inside_all), p_holm in zip(cells, holm_adjusted(tails)):
-        study[family][name] = FamilyCoverage(scans, flagged, inside, inside_all, p_holm)
-    return study
-
-
-FAMILY_STUDY: dict[str, dict[str, FamilyCoverage]] = _family_study()
+FAMILY_STUDY: dict[str, dict[str, FamilyCoverage]] = family_cells(_FAMILY_COUNTS, PARAMETER_NAMES)
 """Coverage of method ``denoised`` per scenario family and parameter
 (:mod:`~robocal_uncertainty.inspection.coverage_study`: smooth forms of 2-13 waves; bumps and
 dents of 1-10 µm over 1-20 mm on the sides, at the edges; edge erosion), as printed by
@@ -345,8 +252,8 @@ def _display(name: str) -> tuple[str, float, str, float]:
     if name == "twist_angle":
         return "deg", math.degrees(1.0), "mdeg", math.degrees(1.0) * 1e3
     if name.startswith("profile"):
-        return "um", 1e6, "um", 1e6
-    return "mm", 1e3, "um", 1e6
+        return "µm", 1e6, "µm", 1e6
+    return "mm", 1e3, "µm", 1e6
 
 
 def _decimals(u_scaled_to_value_unit: float) -> int:
@@ -356,7 +263,16 @@ def _decimals(u_scaled_to_value_unit: float) -> int:
     return max(0, 1 - math.floor(math.log10(u_scaled_to_value_unit)))
 
 
-def _rows(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...]) -> list[dict[str, Any]]:
+def _own_verdict(name: str, result: SectionUncertainty, study: ScenarioStudy) -> tuple[float, bool]:
+    """Lowest coverage of `name` in this cloud's own study and whether it is verified for the cloud
+    (every family's cell passes the rule and the cloud's residual check did not flag it)."""
+    check = result.check
+    return study.lowest(name), study.verified(name) and check is not None and not check.flagged
+
+
+def _rows(
+    result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], study: ScenarioStudy | None = None
+) -> list[dict[str, Any]]:
     rows = []
     measured = result.parameters.as_array()
     cloud_check = result.check
@@ -410,6 +326,24 @@ def _rows(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...]) -
                 "coverage_verified": stated_coverage(name, result.method, cloud_check, in_scope=in_scope)[2],
             }
         )
+        if study is not None:
+            lowest, verified = _own_verdict(name, result, study)
+            rows[-1]["coverage_measured"] = lowest
+            rows[-1]["coverage_verified"] = verified
+            rows[-1]["coverage_verified_by"] = "this cloud's coverage study"
+            rows[-1]["coverage_this_cloud_study"] = {
+                family: {
+                    "scans": cells[name].scans,
+                    "flagged": cells[name].flagged,
+                    "inside_unflagged": cells[name].inside,
+                    "inside_all": cells[name].inside_all,
+                    "coverage_unflagged": cells[name].coverage if math.isfinite(cells[name].coverage) else None,
+                    "u_binomial": cells[name].u if math.isfinite(cells[name].u) else None,
+                    "p_value_holm": cells[name].p_holm if math.isfinite(cells[name].p_holm) else None,
+                    "verified": cells[name].consistent,
+                }
+                for family, cells in study.cells.items()
+            }
     return rows
 
 
@@ -419,11 +353,13 @@ def section_report_dict(
     *,
     truth: NDArray[np.float64] | None = None,
     extra: dict[str, Any] | None = None,
+    study: ScenarioStudy | None = None,
 ) -> dict[str, Any]:
-    """The JSON content of a section report (SI units: m, rad)."""
+    """The JSON content of a section report (SI units: m, rad); with `study`, the coverage
+    verdict is that of the study run for this cloud (``coverage_study_this_cloud``)."""
     mc = result.monte_carlo
     inst = result.instrument
-    rows = _rows(result, corrections)
+    rows = _rows(result, corrections, study)
     if truth is not None:
         for row, value in zip(rows, truth):
             row["truth"] = float(value)
@@ -463,9 +399,50 @@ def section_report_dict(
         "parameters": rows,
         "residual_check": None if result.check is None else _check_dict(result.check),
         "roughness_envelope": _envelope_dict(result),
-        "coverage_note": coverage_summary(result),
+        "coverage_note": coverage_summary(result, study),
+        "coverage_study_this_cloud": None if study is None else _study_dict(study),
         "gum_with_repeatability": repeatability_budget(result),
         **(extra or {}),
+    }
+
+
+def _study_dict(study: ScenarioStudy) -> dict[str, Any]:
+    """The cloud's own coverage study (SI): scenario, settings, time, counts, verdict."""
+    inst = study.instrument
+    return {
+        "scenario": study.label,
+        "points": study.n_points,
+        "nominal_length_m": study.nominal_length,
+        "instrument": {
+            "name": inst.name,
+            "mpe_a_m": inst.mpe_a,
+            "mpe_k": inst.mpe_k,
+            "thermal_expansion_half_width_per_degc": inst.thermal_half_width,
+            "temperature_deviation_degc": inst.temperature_deviation,
+            "probing_half_width_m": inst.probing_half_width,
+            "algorithm_half_width_m": inst.algorithm_half_width,
+        },
+        "probe_vectors_from_cloud": study.probe_vectors,
+        "form_rms_m": study.form_rms if math.isfinite(study.form_rms) else None,
+        "form_scale": study.form_scale,
+        "study_seed": study.root_seed,
+        "scans_per_family": study.scans,
+        "scans_total": study.total_scans,
+        "trials_per_scan": study.trials,
+        "families": list(study.families),
+        "elapsed_s": study.elapsed_s,
+        "workers": study.workers,
+        "counts": {
+            family: {"scans": c[0], "flagged": c[1], "inside_unflagged": list(c[2]), "inside_all": list(c[3])}
+            for family, c in study.counts.items()
+        },
+        "rule": (
+            f"per parameter and family over the unflagged scans: at least {MIN_STUDY_SCANS} scans, coverage at "
+            f"least {COVERAGE_TOLERANCE[0]:.0%}, exact one-sided binomial test of >= 95 % not rejected at "
+            f"{BINOMIAL_LEVEL:.0%} after Holm over the study's cells"
+        ),
+        "verified": {name: study.verified(name) for name in PARAMETER_NAMES},
+        "verified_all": study.verified_all,
     }
 
 
@@ -588,7 +565,7 @@ def _check_dict(check: ResidualCheck) -> dict[str, Any]:
 
 
 _DEMO_SCENARIO_TEXT = (
-    "the demo scenario (Rotor 37 at the seed's size, 1 836 points, a 5 um three-wave form error, the seed's "
+    "the demo scenario (Rotor 37 at the seed's size, 1 836 points, a 5 µm three-wave form error, the seed's "
     "offsets and twist and CMM; 200 simulated scans)"
 )
 
@@ -606,17 +583,83 @@ def _family_text() -> str:
     return "; ".join(parts)
 
 
-def coverage_summary(result: SectionUncertainty) -> str:
-    """What the residual check of this cloud and the measured coverage say about its intervals (one paragraph)."""
+VERIFIED_OWN = "verified for this part, layout and instrument"
+"""The verdict of a parameter its cloud's own coverage study verifies."""
+
+
+def _own_study_text(study: ScenarioStudy) -> str:
+    parts = []
+    for family, cells in study.cells.items():
+        first = next(iter(cells.values()))
+        finite = [c for c in cells.values() if math.isfinite(c.coverage)]
+        if finite:
+            worst = min(finite, key=lambda c: c.coverage)
+            name = next(n for n, c in cells.items() if c is worst)
+            low = f"lowest coverage of the unflagged {worst.coverage:.1%} +- {worst.u:.1%} ({_LABELS[name]})"
+        else:
+            low = "every scan flagged"
+        parts.append(f"{family}: {first.scans} scans, {first.flagged} flagged, {low}")
+    return "; ".join(parts)
+
+
+def _own_summary(result: SectionUncertainty, study: ScenarioStudy, rule: str) -> str:
+    check = result.check
+    scale = (
+        f"form amplitudes x {study.form_scale:.2f} (the cloud's denoised form RMS "
+        f"{study.form_rms * 1e6:.2f} µm, the stored study's base form 3.54 µm)"
+        if math.isfinite(study.form_rms)
+        else "the stored amplitudes"
+    )
+    head = (
+        f"Coverage study of this cloud: {study.scans} simulated scans per family ({', '.join(study.families)}; "
+        f"{study.total_scans} in all, {study.trials} trials each, study seed {study.root_seed}, "
+        f"{study.elapsed_s:.0f} s) of {study.label}: its nominal, its {study.n_points}-point layout"
+        + (" and probe vectors" if study.probe_vectors else "")
+        + f", its offsets and twist, {scale}; method 'denoised' on each, coverage {rule}: {_own_study_text(study)}."
+    )
+    if check is None:
+        return head + " This cloud was not checked: no stated interval is verified for it."
+    if check.flagged:
+        return (
+            head + f" This cloud: {check.describe()}. Its intervals are NOT verified for this cloud: the study "
+            "holds for parts whose form the denoising follows."
+        )
+    short = [f for f, c in study.counts.items() if c[0] - c[1] < MIN_STUDY_SCANS]
+    failing = [_LABELS[n] for n in PARAMETER_NAMES if not study.verified(n)]
+    if not failing:
+        return head + f" This cloud: {check.describe()}. Every stated interval is {VERIFIED_OWN}."
+    why = (
+        f" (families with fewer than {MIN_STUDY_SCANS} unflagged scans cannot verify anything: {', '.join(short)})"
+        if short
+        else ""
+    )
+    return (
+        head
+        + f" This cloud: {check.describe()}. NOT verified for this part, layout and instrument{why}: "
+        + ", ".join(failing)
+        + "."
+    )
+
+
+def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = None) -> str:
+    """What the residual check of this cloud and the measured coverage say about its intervals
+    (one paragraph); with `study`, the verdict of the coverage study run for this cloud."""
     method = result.method
     check = result.check
     lo = COVERAGE_TOLERANCE[0]
+    if study is not None:
+        own_rule = (
+            f"at least {lo:.0%} and not significantly below 95 % (exact one-sided binomial test at "
+            f"{BINOMIAL_LEVEL:.0%}, Holm-adjusted over the study's cells, at least {MIN_STUDY_SCANS} unflagged "
+            "scans per family)"
+        )
+        return _own_summary(result, study, own_rule)
     rule = (
         f"at least {lo:.0%} and not significantly below 95 % (exact one-sided binomial test at "
         f"{BINOMIAL_LEVEL:.0%}, at least {MIN_STUDY_SCANS} scans) over {_DEMO_SCENARIO_TEXT} and over the unflagged "
         f"scans of every scenario family (there the test is Holm-adjusted over the study's {_FAMILY_CELLS} cells)"
     )
-    study = ", ".join(f"{_LABELS[n]} {v.denoised:.1%}" for n, v in COVERAGE_STUDY.items())
+    denoised = ", ".join(f"{_LABELS[n]} {v.denoised:.1%}" for n, v in COVERAGE_STUDY.items())
     seed = ", ".join(f"{_LABELS[n]} {v.jcgm101:.1%}" for n, v in COVERAGE_STUDY.items())
     reflected = ", ".join(f"{_LABELS[n]} {v.reflected:.1%}" for n, v in COVERAGE_STUDY.items())
     scope = outside_study_scope(result)
@@ -628,7 +671,8 @@ def coverage_summary(result: SectionUncertainty) -> str:
             f"This cloud: {check.describe()}. Its intervals are NOT verified for this cloud: it is outside "
             f"the scope of the coverage studies below ({scope}; the studies simulate {STUDY_POINTS}-point "
             "scans of the Rotor 37 section at the seed's size on the seed's CMM), whose coverage is not "
-            "carried to another point density, blade or instrument."
+            "carried to another point density, blade or instrument; `section CLOUD --coverage-study N` runs the "
+            "study for this cloud's own part, layout and instrument."
         )
     elif check.flagged:
         cloud = (
@@ -642,7 +686,7 @@ def coverage_summary(result: SectionUncertainty) -> str:
         cloud = f"This cloud: {check.describe()}. NOT coverage-verified (coverage {rule}): " + ", ".join(failing) + "."
     families = (
         f" Scenario families (method 'denoised', {FAMILY_STUDY_COMMAND}; smooth forms of 2-13 waves, bumps and "
-        f"dents of 1-10 um over 1-20 mm on the sides and at the edges, edge erosion): {_family_text()}."
+        f"dents of 1-10 µm over 1-20 mm on the sides and at the edges, edge erosion): {_family_text()}."
     )
     background = (
         " The max/min-defined parameters (maximum thickness, chord, profiles) are biased upward by "
@@ -662,7 +706,7 @@ def coverage_summary(result: SectionUncertainty) -> str:
             "form the scan supports (one Cp window) and at the roughest (the measured deviations): a local "
             "feature the noise hides from the residual check can make the true form anywhere between, and "
             "its noise bias with it (asymmetric, wider than the Monte Carlo interval; it over-covers a "
-            f"smooth part). Over {_DEMO_SCENARIO_TEXT} its 95 % intervals cover the truth in: {study}."
+            f"smooth part). Over {_DEMO_SCENARIO_TEXT} its 95 % intervals cover the truth in: {denoised}."
             + families
             + background
         )
@@ -672,11 +716,17 @@ def coverage_summary(result: SectionUncertainty) -> str:
         + background
         + " Offsets and twist are well calibrated. Thickness and chord under-cover even corrected; the "
         "profile intervals do not cover the true form deviation: read the profile values as an upper bound "
-        f"that includes the instrument noise range, or use method 'denoised' (coverage {study})." + families
+        f"that includes the instrument noise range, or use method 'denoised' (coverage {denoised})." + families
     )
 
 
-def _coverage_cell(name: str, result: SectionUncertainty) -> str:
+def _coverage_cell(name: str, result: SectionUncertainty, study: ScenarioStudy | None = None) -> str:
+    if study is not None:
+        if result.check is None or result.check.flagged:
+            return "not verified for this cloud"
+        lowest, verified = _own_verdict(name, result, study)
+        shown = f"{lowest:.1%}" if math.isfinite(lowest) else "-"
+        return f"{shown} {VERIFIED_OWN}" if verified else f"{shown} NOT VERIFIED for this part (own study)"
     _, value, verified = stated_coverage(name, result.method, result.check)
     if result.check is None or result.check.flagged or outside_study_scope(result) is not None:
         return "not verified for this cloud"
@@ -699,6 +749,7 @@ def format_section_table(
     corrections: tuple[BiasCorrection, ...],
     *,
     truth: NDArray[np.float64] | None = None,
+    study: ScenarioStudy | None = None,
 ) -> str:
     """Console table in the seed's layout: value, u, 95 % interval, GUM u, the JCGM 101 §8 GUM
     validation (``agree``/``differ``), and the measured coverage of the stated interval (``NOT
@@ -732,7 +783,7 @@ def format_section_table(
         verdict = f"{'agree' if result.validation[j].validated else 'differ':10s}"
         value = f"{_LABELS[name]:24s} {fix.measured * vf:>9.{digits}f} {vu:3s} "
         spread = f"{mc.standard_uncertainty * uf:>5.2f} {uu:4s} {mc.expanded_uncertainty * uf:>5.2f} {uu:4s} "
-        coverage = _coverage_cell(name, result)
+        coverage = _coverage_cell(name, result, study)
         gum = f"{result.gum.outputs[j].standard_uncertainty * uf:>5.2f} {uu:4s} {verdict} {coverage}"
         if denoised:
             interval = f"[{stated.low * vf:.{digits}f}, {stated.high * vf:.{digits}f}] {vu}"
@@ -849,6 +900,9 @@ def _markdown(data: dict[str, Any], table: str) -> str:
             for study in FAMILY_STUDY.values()
         ]
         out.append(f"| {_LABELS[name]} | " + " | ".join(cells) + " |")
+    own = data.get("coverage_study_this_cloud")
+    if own is not None:
+        out += _markdown_own_study(own)
     repeat = data.get("gum_with_repeatability")
     if repeat is not None:
         out += _markdown_repeatability(repeat, data.get("repeat_scans"))
@@ -856,11 +910,57 @@ def _markdown(data: dict[str, Any], table: str) -> str:
         "",
         "## Histograms",
         "",
-        "![Monte Carlo values of the nine parameters about the measured value; dashed: 95 % interval]"
+        "![Monte Carlo values of the nine parameters about the measured value; dashed: the stated 95 % interval]"
         "(section_histograms.png)",
         "",
     ]
     return "\n".join(out)
+
+
+def _markdown_own_study(own: dict[str, Any]) -> list[str]:
+    """The cloud's own coverage study: settings, then coverage per parameter and family and the verdict."""
+    inst = own["instrument"]
+    scale = (
+        f"form amplitudes x {own['form_scale']:.2f} (denoised form RMS {own['form_rms_m'] * 1e6:.2f} µm)"
+        if own["form_rms_m"] is not None
+        else "stored amplitudes"
+    )
+    families = own["families"]
+    out = [
+        "",
+        "## Coverage study of this cloud (its part, layout and instrument)",
+        "",
+        f"- scenario: {own['scenario']}",
+        f"- {own['points']} points per scan (the cloud's layout"
+        + (", its probe vectors" if own["probe_vectors_from_cloud"] else "")
+        + f"), nominal contour {own['nominal_length_m'] * 1e3:.1f} mm, {scale}",
+        f"- instrument {inst['name']}: MPE ({inst['mpe_a_m'] * 1e6:.2f} + L/{inst['mpe_k']:g}) µm, probing "
+        f"{inst['probing_half_width_m'] * 1e6:.2f} µm, thermal {inst['thermal_expansion_half_width_per_degc']:g} /°C "
+        f"x {inst['temperature_deviation_degc']:g} °C",
+        f"- {own['scans_per_family']} scans per family ({', '.join(families)}), {own['scans_total']} in all, "
+        f"{own['trials_per_scan']} trials each, study seed {own['study_seed']}, {own['elapsed_s']:.0f} s on "
+        f"{own['workers']} worker(s)",
+        f"- rule: {own['rule']}",
+        "",
+        "Coverage over the scans the residual check did not flag, ± its binomial standard uncertainty "
+        "(flagged scans per family in the header); verdict per parameter over every family:",
+        "",
+        "| parameter | "
+        + " | ".join(f"{f} ({own['counts'][f]['flagged']}/{own['counts'][f]['scans']} flagged)" for f in families)
+        + " | study verdict |",
+        "|---" * (len(families) + 2) + "|",
+    ]
+    for j, name in enumerate(PARAMETER_NAMES):
+        cells = []
+        for f in families:
+            c = own["counts"][f]
+            kept = c["scans"] - c["flagged"]
+            cells.append(
+                f"{c['inside_unflagged'][j] / kept:.1%} ± {math.sqrt(0.95 * 0.05 / kept):.1%}" if kept else "-"
+            )
+        verdict = "verified for this part, layout and instrument" if own["verified"][name] else "NOT VERIFIED"
+        out.append(f"| {_LABELS[name]} | " + " | ".join(cells) + f" | {verdict} |")
+    return out
 
 
 def _markdown_repeatability(repeat: dict[str, Any], files: list[str] | None) -> list[str]:
@@ -970,6 +1070,15 @@ def _markdown_to_html(markdown: str, title: str, directory: Path) -> str:
     return "\n".join(out) + "\n"
 
 
+def _stated_interval(name: str, result: SectionUncertainty, fix: BiasCorrection) -> Any:
+    """The interval the report states for `name`: the bias-corrected one (for ``denoised``, widened
+    to the roughness envelope), or the JCGM 101 one for the offsets and twist under ``seed``."""
+    j = PARAMETER_NAMES.index(name)
+    if stated_coverage(name, result.method)[0] == "jcgm101":
+        return result.monte_carlo.outputs[j].probabilistically_symmetric
+    return fix.interval
+
+
 def _plot(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], path: Path) -> None:
     import matplotlib as mpl
 
@@ -983,17 +1092,20 @@ def _plot(result: SectionUncertainty, corrections: tuple[BiasCorrection, ...], p
         hist = output.histogram
         y = corrections[j].measured
         ax.stairs(hist.counts, (hist.edges - y) * uf, fill=True, alpha=0.6)
-        iv = output.probabilistically_symmetric
+        # The interval the table states (widened to the roughness envelope, clipped at 0 for the
+        # max/min parameters), not the Monte Carlo-only one.
+        iv = _stated_interval(name, result, corrections[j])
         for x in (iv.low, iv.high):
             ax.axvline((x - y) * uf, color="C1", linestyle="--", linewidth=1)
         ax.axvline(0.0, color="k", linewidth=1)
         ax.set_title(f"{_LABELS[name]}", fontsize=10)
         digits = _decimals(output.standard_uncertainty * vf)
         ax.set_xlabel(f"{uu} from the measured {y * vf:.{digits}f} {vu}")
+        ax.set_ylabel("trials per bin")
     what = "values f(y) - Δ of the measurand" if result.method == "denoised" else "values"
     fig.suptitle(
         f"Monte Carlo {what} ({result.monte_carlo.n_trials} trials) about the measured value (black); "
-        "dashed: 95 % interval"
+        f"dashed: the stated {result.monte_carlo.coverage_probability:.0%} interval"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=90)
@@ -1007,15 +1119,16 @@ def write_section_report(
     *,
     truth: NDArray[np.float64] | None = None,
     extra: dict[str, Any] | None = None,
+    study: ScenarioStudy | None = None,
 ) -> SectionReportFiles:
     """Write ``section.json``, ``section.md``, ``section.csv``, ``section_histograms.png`` and
     ``section.html`` (``section.md`` as a self-contained page, the histograms embedded)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    data = section_report_dict(result, corrections, truth=truth, extra=extra)
+    data = section_report_dict(result, corrections, truth=truth, extra=extra, study=study)
     files = SectionReportFiles(*(out / name for name in SECTION_REPORT_FILES))
     files.json.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    table = format_section_table(result, corrections, truth=truth)
+    table = format_section_table(result, corrections, truth=truth, study=study)
     files.markdown.write_text(_markdown(data, table), encoding="utf-8")
     with files.csv.open("w", newline="", encoding="utf-8") as stream:
         writer = csv.writer(stream)

@@ -324,3 +324,19 @@ def test_clouds_outside_the_studies_scope_are_never_stated_verified(demo: Sectio
         assert data["coverage_study_scope"]["outside_because"] == outside_study_scope(result)
         table = format_section_table(result, demo.corrections)
         assert "verified" not in table.replace("not verified for this cloud", "").replace("NOT verified", "")
+
+
+def test_histograms_mark_the_stated_interval(demo: SectionInspection) -> None:
+    """The dashed lines of the histograms are the interval the table states (for the leading-edge
+    profile the envelope-widened one, wider than the Monte Carlo interval), not the Monte Carlo one."""
+    from robocal_uncertainty.report.section_report import _stated_interval
+
+    j = PARAMETER_NAMES.index("profile_leading_edge")
+    stated = _stated_interval("profile_leading_edge", demo.result, demo.corrections[j])
+    mc = demo.result.monte_carlo.outputs[j].probabilistically_symmetric
+    table = format_section_table(demo.result, demo.corrections)
+    line = next(row for row in table.splitlines() if row.startswith("profile, leading edge"))
+    assert f"[{stated.low * 1e6:.2f}, {stated.high * 1e6:.2f}] µm" in line  # two decimals at u 0.78 µm
+    assert stated.high > mc.high + 0.5e-6  # the envelope widens it: the old plot showed the narrower one
+    k = PARAMETER_NAMES.index("twist_angle")
+    assert _stated_interval("twist_angle", demo.result, demo.corrections[k]) == demo.corrections[k].interval
