@@ -56,8 +56,8 @@ def walk_xp(xp: Any, flat: FlatLayout, params: Any, qs: Any, reference: tuple[An
     params : array, shape (n_p, n_params), n_p 1 or n_trials [m, rad]
     qs : array, shape (n_q, n_poses, n_joints), n_q 1 or n_trials [rad or m]
     reference : tuple of arrays
-        Reference readings (n_poses, n_joints), joint offsets (n_joints,), and the cosine and
-        sine of the reference angles (n_poses, n_joints).
+        Reference readings, joint offsets (n_joints,), and the cosine and sine of the reference
+        angles, each (n_joints, n_poses) but the offsets.
     poses : bool
         Also ``world_R_tool`` (row by row after the point, 12 values per pose).
 
@@ -91,9 +91,9 @@ def walk_xp(xp: Any, flat: FlatLayout, params: Any, qs: Any, reference: tuple[An
             angle = theta
         else:
             v[2] = v[2] + p[..., i_d]
-            change = (q - q_ref[:, j]) + (theta - theta_ref[j])
+            change = (q - q_ref[j]) + (theta - theta_ref[j])
             angle = q + theta
-        c, s = _cos_sin(xp, change, cos_ref[:, j], sin_ref[:, j], angle)
+        c, s = _cos_sin(xp, change, cos_ref[j], sin_ref[j], angle)
         for u in vectors:
             u[0], u[1] = c * u[0] - s * u[1], s * u[0] + c * u[1]
         if i_beta >= 0:

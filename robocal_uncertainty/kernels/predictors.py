@@ -61,8 +61,8 @@ class CompiledPredictor:
         Reference readings.
     theta : ndarray, shape (n_joints,)
         Reference joint offsets.
-    cos_ref, sin_ref : ndarray, shape (n_poses, n_joints)
-        Of the reference angles.
+    cos_ref, sin_ref : ndarray, shape (n_joints, n_poses)
+        Of the reference angles, joint by joint (contiguous over the poses).
     """
 
     layout: ParameterLayout
@@ -77,7 +77,7 @@ class CompiledPredictor:
         """Reference at `params` (n_params,) and readings (n_poses, n_joints)."""
         params = np.asarray(params, dtype=np.float64)
         joints = np.ascontiguousarray(joint_positions, dtype=np.float64)
-        angles = reference_angles(layout, params, joints)
+        angles = reference_angles(layout, params, joints).T
         theta = params[[idx["theta"] for idx in layout.joint_slices()]]
         return cls(
             layout,
@@ -102,7 +102,8 @@ class CompiledPredictor:
         n_poses = self.joints.shape[0]
         p, q, batch = _batched(self.layout, params, joint_positions, n_poses)
         out = np.empty((max(p.shape[0], q.shape[0]), n_poses, 12 if poses else 3))
-        walk(p, q, self.flat.joints, self.flat.blocks, self.joints, self.theta, self.cos_ref, self.sin_ref, poses, out)
+        q_ref = np.ascontiguousarray(self.joints.T)
+        walk(p, q, self.flat.joints, self.flat.blocks, q_ref, self.theta, self.cos_ref, self.sin_ref, poses, out)
         return out.reshape(*batch, n_poses, out.shape[-1])
 
 
@@ -129,6 +130,6 @@ class ArrayModulePredictor(CompiledPredictor):
         xp: Any = __import__(self.module)
         n_poses = self.joints.shape[0]
         p, q, batch = _batched(self.layout, params, joint_positions, n_poses)
-        reference = tuple(xp.asarray(a) for a in (self.joints, self.theta, self.cos_ref, self.sin_ref))
+        reference = tuple(xp.asarray(a) for a in (self.joints.T, self.theta, self.cos_ref, self.sin_ref))
         out = as_numpy(walk_xp(xp, self.flat, xp.asarray(p), xp.asarray(q), reference, poses=poses))
         return out.reshape(*batch, n_poses, out.shape[-1])
