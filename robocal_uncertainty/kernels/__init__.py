@@ -192,7 +192,8 @@ class NumbaBackend:
                 np.empty((1, 1, 12)),
             )
             NumbaBackend._ready = True
-            misses = sum(walk.stats.cache_misses.values())
+            stats = getattr(walk, "stats", None)  # cache statistics of the dispatcher
+            misses = 1 if stats is None else sum(stats.cache_misses.values())
             elapsed = time.perf_counter() - start
             if misses:
                 print(
