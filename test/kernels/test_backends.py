@@ -49,9 +49,9 @@ RTOL = 1e-12
 @pytest.fixture(autouse=True)
 def _cupy_on_numpy(monkeypatch: pytest.MonkeyPatch) -> None:
     """The ``cupy`` backend with numpy standing in for CuPy (restored after each test)."""
-    from robocal_uncertainty import kernels
+    from robocal_uncertainty.kernels import registry
 
-    monkeypatch.setitem(kernels._REGISTRY, "cupy", CupyBackend(module="numpy"))
+    monkeypatch.setitem(registry._REGISTRY, "cupy", CupyBackend(module="numpy"))
 
 
 BACKENDS = [pytest.param("numba", marks=needs_numba), "cupy"]
