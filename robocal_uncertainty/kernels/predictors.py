@@ -46,7 +46,14 @@ def _batched(
         if q.ndim == 2
         else np.broadcast_to(q, (*batch, n_poses, layout.n_joints)).reshape(n, n_poses, layout.n_joints)
     )
-    return np.ascontiguousarray(pf), np.ascontiguousarray(qf), batch
+    return _kernel_array(pf), _kernel_array(qf), batch
+
+
+def _kernel_array(values: Array) -> Array:
+    """C-contiguous and writeable: numba compiles one specialisation per array type, and a
+    read-only array is another type (another compilation, ~15 s, on first use)."""
+    out = np.ascontiguousarray(values, dtype=np.float64)
+    return out if out.flags.writeable else out.copy()
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +83,7 @@ class CompiledPredictor:
     def at(cls, layout: ParameterLayout, params: Array, joint_positions: Array) -> CompiledPredictor:
         """Reference at `params` (n_params,) and readings (n_poses, n_joints)."""
         params = np.asarray(params, dtype=np.float64)
-        joints = np.ascontiguousarray(joint_positions, dtype=np.float64)
+        joints = np.array(joint_positions, dtype=np.float64, order="C")  # a writeable copy
         angles = reference_angles(layout, params, joints).T
         theta = params[[idx["theta"] for idx in layout.joint_slices()]]
         return cls(

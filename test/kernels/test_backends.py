@@ -227,3 +227,32 @@ def test_backend_recorded_in_the_result_and_the_reports(tmp_path: Path) -> None:
         "version": result.backend.version,
         "requested": "cupy",
     }
+
+
+def test_cli_backend_option(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--backend picks the kernels and is recorded; one that is not there is a one-line error
+    before any work."""
+    from robocal_uncertainty.cli import main
+    from robocal_uncertainty.kernels import registry
+
+    campaign = tmp_path / "c.mcap"
+    assert main(["simulate", "--robot", "paper_arm", "--out", str(campaign), "--seed", "3"]) == 0
+    common = ["evaluate", str(campaign), "--robot", "paper_arm", "--trials", "400", "--no-budget", "--no-sweeps"]
+    common += ["--no-progress", "--test-joints", "0.1", "-1.9", "-1.2", "-1.6", "-1.1", "0.4"]
+    monkeypatch.setitem(registry._REGISTRY, "cupy", CupyBackend(module="no_such_array_module"))
+    capsys.readouterr()
+    assert main([*common, "--backend", "cupy", "--out", str(tmp_path / "gpu")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("robocal-uncertainty evaluate: error: backend 'cupy' is not available")
+    assert not (tmp_path / "gpu").exists()
+    # The recorded backend (one run: the numbers of each backend are the library tests' job).
+    name = "numba" if HAS_NUMBA else "numpy"
+    assert main([*common, "--backend", "auto", "--out", str(tmp_path / name)]) == 0
+    assert f"backend {name} " in capsys.readouterr().out
+    report = json.loads((tmp_path / name / "report.json").read_text())
+    assert report["monte_carlo"]["backend"]["name"] == name
+    assert report["monte_carlo"]["backend"]["requested"] == "auto"
+    assert f"Monte Carlo backend: {name} " in (tmp_path / name / "report.md").read_text()
