@@ -28,7 +28,8 @@ combination() {
     local installed=$SECONDS
     local versions
     versions="$("$venv/bin/python" -c 'import platform, numpy, scipy, matplotlib
-print(f"Python {platform.python_version()}, numpy {numpy.__version__}, scipy {scipy.__version__}, matplotlib {matplotlib.__version__}")')"
+import numba
+print(f"Python {platform.python_version()}, numpy {numpy.__version__}, scipy {scipy.__version__}, matplotlib {matplotlib.__version__}, numba {numba.__version__}")')"
     echo "python-matrix: $name: $versions, extras [$extras]"
     # The venv's pytest script, not python -m pytest: the repository root stays off sys.path,
     # so the tests import the installed package (its package data included).
@@ -37,6 +38,7 @@ print(f"Python {platform.python_version()}, numpy {numpy.__version__}, scipy {sc
 }
 
 # ROS 2 Humble (Ubuntu 22.04): Python 3.10. pin's wheels need numpy >= 1.26: no pinocchio extra.
-combination humble "${HUMBLE_PYTHON:-$pyenv_root/versions/3.10.13/bin/python}" .ci/constraints-humble.txt test
+# fast: the numba the distro ships (pinned in the constraints), for the backend equality tests.
+combination humble "${HUMBLE_PYTHON:-$pyenv_root/versions/3.10.13/bin/python}" .ci/constraints-humble.txt test,fast
 # ROS 2 Jazzy (Ubuntu 24.04): Python 3.12.
-combination jazzy "${JAZZY_PYTHON:-$pyenv_root/versions/3.12.1/bin/python}" .ci/constraints-jazzy.txt test,pinocchio
+combination jazzy "${JAZZY_PYTHON:-$pyenv_root/versions/3.12.1/bin/python}" .ci/constraints-jazzy.txt test,pinocchio,fast

@@ -4,7 +4,7 @@ Each subpackage imports only its own layer's peers and the layers below it, and 
 subpackages form no import cycle. Bottom to top::
 
     errors, _lazy
-    core, montecarlo
+    core, montecarlo, kernels
     uncertainty, inspection
     bagio, importers
     pipeline
@@ -41,6 +41,7 @@ RANK = {
     "srv": 0,
     "core": 1,
     "montecarlo": 1,
+    "kernels": 1,  # trial-kernel backends: the chain walk (core) compiled or on an array module
     "uncertainty": 2,
     "inspection": 2,
     "bagio": 3,

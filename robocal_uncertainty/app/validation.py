@@ -108,4 +108,5 @@ def validate(
         seed=options.seed,
         workers=workers,
         progress=progress,
+        backend=options.backend,
     )

@@ -156,8 +156,10 @@ def evaluation_options(
     args: argparse.Namespace, sources: Sequence[str], test_joints: NDArray[np.float64] | None
 ) -> Any:
     """The :class:`EvaluationOptions` of the parsed uncertainty arguments."""
+    from robocal_uncertainty.kernels import get_backend
     from robocal_uncertainty.uncertainty import EvaluationOptions, parse_sources
 
+    get_backend(args.backend)  # an unknown or missing backend stops here, before any work
     for option in ("budget_trials", "sweep_trials", "max_trials"):
         value = getattr(args, option)
         if value <= 0:
@@ -177,6 +179,7 @@ def evaluation_options(
         budget_trials=args.budget_trials,
         sweeps=args.sweeps,
         sweep_trials=args.sweep_trials,
+        backend=args.backend,
     )
 
 
@@ -250,7 +253,8 @@ def print_evaluation(
             f"adaptive JCGM 101 7.9: {state} at {adaptive.n_dig} significant digits of u, "
             f"{adaptive.n_sequences} sequences of {adaptive.sequence_trials} trials"
         )
-    print(f"{result.n_trials} trials in {seconds(elapsed)} ({result.n_trials / elapsed:.0f} trials/s)")
+    backend = "" if result.backend is None else f", backend {result.backend.describe()}"
+    print(f"{result.n_trials} trials in {seconds(elapsed)} ({result.n_trials / elapsed:.0f} trials/s{backend})")
     if evaluation.budget:
         print()
         print(format_budget(evaluation.budget))

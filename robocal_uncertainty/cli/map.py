@@ -16,7 +16,12 @@ from robocal_uncertainty.cli._common import (
     timed_progress,
 )
 from robocal_uncertainty.cli._evaluation import uncertainty_settings
-from robocal_uncertainty.cli._options import add_dask_arg, add_force_arg, add_frame_and_convergence_args
+from robocal_uncertainty.cli._options import (
+    add_backend_arg,
+    add_dask_arg,
+    add_force_arg,
+    add_frame_and_convergence_args,
+)
 from robocal_uncertainty.uncertainty.sources import sources_help
 
 
@@ -54,6 +59,7 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--base-unknown", action="store_true", help="identify the base transform even if known")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (never changes the result)")
+    add_backend_arg(p)
     add_dask_arg(p)
     p.add_argument("--out", default="robocal_map", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier map report in --out")
@@ -97,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
                 block_size=args.block_size,
                 executor=executor,
                 progress=progress,
+                backend=args.backend,
             )
     finally:
         elapsed = finish()

@@ -571,6 +571,7 @@ def _settings(
             f"random seed: {result.seed}; block size: {result.block_size}; trials: {result.n_trials}; "
             f"coverage probability: {result.coverage_probability:g}"
         ),
+        f"Monte Carlo backend: {'not recorded' if result.backend is None else result.backend.describe()}",
         f"tracker noise: uniform ±(a + b·L), a = {s.tracker_noise.a * 1e6:g} µm, b = {s.tracker_noise.b * 1e6:g} µm/m",
         f"encoder noise: uniform ±{math.degrees(s.encoder_noise.half_width):g} deg"
         + (

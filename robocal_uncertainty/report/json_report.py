@@ -509,6 +509,13 @@ def uncertainty_to_dict(
             "n_trials": result.n_trials,
             "seed": result.seed,
             "block_size": result.block_size,
+            "backend": None
+            if result.backend is None
+            else {
+                "name": result.backend.name,
+                "version": result.backend.version,
+                "requested": result.backend.requested,
+            },
             "coverage_probability": result.coverage_probability,
             "converged": result.converged,
             "convergence_tested": result.adaptive is not None,

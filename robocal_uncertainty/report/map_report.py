@@ -164,6 +164,7 @@ def _metadata(wmap: WorkspaceMap) -> dict[str, Any]:
         "n_dropped": wmap.n_dropped,
         "seed": wmap.seed,
         "block_size": wmap.block_size,
+        "backend": None if wmap.backend is None else wmap.backend.describe(),
         "sources": list(wmap.settings.sources),
         "frame": wmap.frame,
         "frame_id": wmap.frame_id,
@@ -269,7 +270,8 @@ def _markdown(wmap: WorkspaceMap, weak: WeakestRegion, files: tuple[str, str, st
         "",
         f"{len(wmap)} configurations, {wmap.n_trials} Monte Carlo trials (random seed {wmap.seed}, block size "
         f"{wmap.block_size}), sources {', '.join(wmap.settings.sources)}, positions in frame "
-        f"`{wmap.frame_id}` ({wmap.frame}). Each trial re-identifies once and evaluates every configuration.",
+        f"`{wmap.frame_id}` ({wmap.frame}). Each trial re-identifies once and evaluates every configuration"
+        f"{'' if wmap.backend is None else f' (trial kernels: {wmap.backend.describe()})'}.",
         "",
         f"u_pos = sqrt(u(x)² + u(y)² + u(z)²): median {weak.median_u * _UM:.1f} µm, 95th percentile "
         f"{weak.p95_u * _UM:.1f} µm, maximum {weak.max_u * _UM:.1f} µm.",

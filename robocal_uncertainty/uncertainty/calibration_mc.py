@@ -40,7 +40,6 @@ from scipy import stats
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.kinematics import (
-    NearbyPoints,
     forward_points,
     forward_points_and_jacobian,
     forward_poses,
@@ -52,6 +51,7 @@ from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import chordal_mean, quaternion_from_matrix, rotation_exp, rotation_log
 from robocal_uncertainty.core.session import effect_jacobian
 from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.kernels import Backend, BackendInfo, ToolPredictor, get_backend, resolve_backend
 from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, TrialsResult, run_trials
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
 from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
@@ -321,6 +321,7 @@ class CalibrationUncertainty:
     warnings: tuple[str, ...] = field(default=())
     rotation_samples: Array | None = None
     not_converged: tuple[str, ...] = field(default=())
+    backend: BackendInfo | None = None
 
     @property
     def converged(self) -> bool:
@@ -359,7 +360,7 @@ class CalibrationTrials:
     gauss_newton_iterations: int
     solver: ChordSolver | None = None
     reference_rotations: Array | None = None
-    test_predictor: NearbyPoints | None = None
+    test_predictor: ToolPredictor | None = None
 
     @property
     def orientation(self) -> bool:
@@ -691,23 +692,27 @@ def _gum_poses(
     return out
 
 
-_NEARBY_TEST_CONFIGURATIONS = 64
-"""Test configurations up to which the trials evaluate them by the nearby-point walk: it holds
-about 20 arrays of a slice's size (bounded by ``_TEST_ELEMENTS`` up to this many), where
-:func:`forward_points` holds fewer; a workspace map's thousands keep the smaller footprint."""
-
-
-def _test_predictor(calibration: IdentificationResult, test_q: Array, *, drop_base: bool) -> NearbyPoints | None:
-    """The tool at the test configurations near the calibration (series instead of a sine and a
-    cosine per joint, to a few ulps of :func:`forward_points`), or None where the walk does not
-    apply (prismatic joints, a mount) or the set is large (see ``_NEARBY_TEST_CONFIGURATIONS``)."""
+def _test_predictor(
+    calibration: IdentificationResult, test_q: Array, *, drop_base: bool, backend: Backend
+) -> ToolPredictor | None:
+    """The tool at the test configurations near the calibration, by the backend's walk (the
+    numpy one: series instead of a sine and a cosine per joint, to a few ulps of
+    :func:`forward_points`), or None where the backend has none (numpy: prismatic joints, a
+    mount, or a large set, see ``NEARBY_TEST_CONFIGURATIONS``)."""
     layout = calibration.model.layout
-    if not NearbyPoints.supports(layout) or test_q.shape[0] > _NEARBY_TEST_CONFIGURATIONS:
-        return None
     p_out = calibration.estimate.copy()
     if drop_base:
         p_out[layout.base_index : layout.base_index + 6] = 0.0
-    return NearbyPoints.at(layout, p_out, test_q)
+    return backend.tool_predictor(layout, p_out, test_q)
+
+
+def _chord_solver(problem: BatchProblem, params: Array, joints: Array, backend: Backend) -> ChordSolver:
+    """The chord solver at the calibration, predicting with the backend's walk."""
+    solver = ChordSolver.at(problem, params, joints)
+    if backend.name == "numpy":
+        return solver  # the measurement type's own nearby predictor, as ChordSolver.at gives it
+    predictor = backend.measurement_predictor(problem.measurement, problem.layout, params, joints)
+    return dataclasses.replace(solver, predictor=predictor)
 
 
 def _calibrated_rotations(calibration: IdentificationResult, test_q: Array, *, drop_base: bool) -> Array:
@@ -861,7 +866,9 @@ def _prepare(
     frame: str,
     *,
     orientation: bool = False,
+    backend: str = "numpy",
 ) -> _Prepared:
+    kernels = get_backend(backend)
     if frame not in OUTPUT_FRAMES:
         msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
         raise ConfigError(msg)
@@ -944,9 +951,9 @@ def _prepare(
         gauss_newton_iterations=settings.gauss_newton_iterations,
         solver=None
         if settings.jacobian == "exact"
-        else ChordSolver.at(problem, calibration.estimate, campaign.joint_positions),
+        else _chord_solver(problem, calibration.estimate, campaign.joint_positions, kernels),
         reference_rotations=_calibrated_rotations(calibration, test_q, drop_base=drop_base) if orientation else None,
-        test_predictor=_test_predictor(calibration, test_q, drop_base=drop_base),
+        test_predictor=_test_predictor(calibration, test_q, drop_base=drop_base, backend=kernels),
     )
     return _Prepared(
         trials=trials,
@@ -970,6 +977,7 @@ def prepare_calibration_trials(
     calibration: IdentificationResult | None = None,
     lambda_: str | float = "auto",
     frame: str = "measurement",
+    backend: str = "numpy",
 ) -> CalibrationTrials:
     """The picklable trial function of :func:`evaluate_uncertainty`, for other drivers.
 
@@ -983,10 +991,12 @@ def prepare_calibration_trials(
     ----------
     model, campaign, test_joint_positions, settings, calibration, lambda_, frame
         As for :func:`evaluate_uncertainty`.
+    backend : str
+        Trial kernels (see :attr:`EvaluationSettings.backend`).
     """
     settings = settings or UncertaintySettings()
     test_q, _ = _validate_inputs(model, test_joint_positions, 0.95, "auto")
-    return _prepare(model, campaign, test_q, settings, calibration, lambda_, frame).trials
+    return _prepare(model, campaign, test_q, settings, calibration, lambda_, frame, backend=backend).trials
 
 
 @dataclass(frozen=True)
@@ -1024,6 +1034,9 @@ class EvaluationSettings:
         Also evaluate the tool orientation (3 more columns per test configuration, see the
         module docstring); positions and parameters are the same either way, bit for bit.
         The adaptive procedure monitors the positions only.
+    backend : {"numpy", "numba", "cupy", "auto"}
+        Which trial kernels walk the chain (:mod:`robocal_uncertainty.kernels`): the same
+        draws, the same result to rounding (1e-12 relative, tested), recorded in the result.
     """
 
     uncertainty: UncertaintySettings = field(default_factory=UncertaintySettings)
@@ -1036,6 +1049,7 @@ class EvaluationSettings:
     block_size: int = 10_000
     frame: str = "measurement"
     orientation: bool = True
+    backend: str = "numpy"
 
     def replace(self, **keywords: Any) -> EvaluationSettings:
         """A copy with fields replaced; also takes the keyword names :func:`evaluate_uncertainty`
@@ -1119,7 +1133,15 @@ def evaluate_uncertainty(
         raise ConfigError(msg)
     test_q, n_trials = _validate_inputs(model, test_joint_positions, ev.coverage, ev.trials)
     prep = _prepare(
-        model, campaign, test_q, ev.uncertainty, calibration, ev.lambda_, ev.frame, orientation=ev.orientation
+        model,
+        campaign,
+        test_q,
+        ev.uncertainty,
+        calibration,
+        ev.lambda_,
+        ev.frame,
+        orientation=ev.orientation,
+        backend=ev.backend,
     )
     adaptive = None
     if n_trials is None:
@@ -1212,6 +1234,7 @@ def _statement(prep: _Prepared, ev: EvaluationSettings, result: TrialsResult) ->
         warnings=tuple(warns),
         rotation_samples=result.samples[:, dim * n_test + k :] if ev.orientation else None,
         not_converged=gum_disagreements(poses),
+        backend=resolve_backend(ev.backend),
     )
 
 

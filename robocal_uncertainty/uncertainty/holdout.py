@@ -388,6 +388,7 @@ def validate_holdout(
     workers: int = 1,
     levels: Sequence[float] = RELIABILITY_LEVELS,
     progress: Callable[[str], None] | None = None,
+    backend: str = "numpy",
 ) -> HoldoutValidation:
     """Calibrate on training poses, predict held-out measurements, count what the intervals hold.
 
@@ -417,6 +418,8 @@ def validate_holdout(
         Coverage probabilities of the reliability curve.
     progress : callable, optional
         Called with a one-line status per fold.
+    backend : str
+        Trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`).
 
     Returns
     -------
@@ -490,6 +493,7 @@ def validate_holdout(
                     coverage=coverage,
                     seed=seed + f if c == 0 else _chunk_seed(seed, f, c),
                     orientation=held.measurement.measures_orientation,
+                    backend=backend,
                 ),
                 calibration=calibration,
                 workers=workers,

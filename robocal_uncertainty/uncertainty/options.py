@@ -77,6 +77,9 @@ class EvaluationOptions:
         Also compute the uncertainty against lambda and against the number of equations.
     sweep_trials : int
         Trials per sweep point.
+    backend : {"numpy", "numba", "cupy", "auto"}
+        Trial kernels of every Monte Carlo run (:mod:`robocal_uncertainty.kernels`); the
+        result is the same to rounding whichever runs it.
 
     Raises
     ------
@@ -99,6 +102,7 @@ class EvaluationOptions:
     budget_trials: int = 2_000
     sweeps: bool = False
     sweep_trials: int = 300
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
         if self.test_joints is not None:
@@ -127,6 +131,7 @@ class EvaluationOptions:
             max_trials=self.max_trials,
             block_size=self.block_size,
             frame=self.output_frame,
+            backend=self.backend,
         )
 
 

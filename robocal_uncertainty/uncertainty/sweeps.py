@@ -107,6 +107,7 @@ def sweep_lambda(
     settings: UncertaintySettings | None = None,
     pose: int = 0,
     frame: str = "measurement",
+    backend: str = "numpy",
     workers: int = 1,
     executor: Any | None = None,
     progress: Callable[[int, int | None], None] | None = None,
@@ -137,6 +138,8 @@ def sweep_lambda(
         Which test configuration to report.
     frame : {"measurement", "base"}
         Frame of the output positions.
+    backend : str
+        Trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`).
     workers, executor
         Passed to ``evaluate_uncertainty``; they never change the result (`executor` only
         when given).
@@ -162,7 +165,9 @@ def sweep_lambda(
             cal = calibration
         else:
             cal = identify(model, campaign, lambda_=float(lam))
-        out[i] = _point_u(model, campaign, test_joints, fixed, cal, trials, seed, frame, workers, executor, pose)
+        out[i] = _point_u(
+            model, campaign, test_joints, fixed, cal, trials, seed, frame, workers, executor, pose, backend
+        )
         if progress is not None:
             progress((i + 1) * trials, lams.size * trials)
     return out
@@ -180,13 +185,14 @@ def _point_u(
     workers: int,
     executor: Any | None,
     pose: int,
+    backend: str = "numpy",
 ) -> list[float]:
     """u(x), u(y), u(z) of test configuration `pose` for one sweep point."""
     res = evaluate_uncertainty(
         model,
         campaign,
         test_joints,
-        EvaluationSettings(uncertainty=settings, trials=trials, seed=seed, frame=frame),
+        EvaluationSettings(uncertainty=settings, trials=trials, seed=seed, frame=frame, backend=backend),
         calibration=calibration,
         workers=workers,
         **_executor(executor),
@@ -206,6 +212,7 @@ def sweep_equations(
     settings: UncertaintySettings | None = None,
     pose: int = 0,
     frame: str = "measurement",
+    backend: str = "numpy",
     workers: int = 1,
     executor: Any | None = None,
     progress: Callable[[int, int | None], None] | None = None,
@@ -253,7 +260,7 @@ def sweep_equations(
     for i, n in enumerate(counts_f.astype(int)):
         point = dataclasses.replace(settings, sources=sources, subset_size=int(n))
         out[i] = _point_u(
-            model, campaign, test_joints, point, calibration, trials, seed, frame, workers, executor, pose
+            model, campaign, test_joints, point, calibration, trials, seed, frame, workers, executor, pose, backend
         )
         if progress is not None:
             progress((i + 1) * trials, counts_f.size * trials)
@@ -314,6 +321,7 @@ def evaluate_sweeps(
         "seed": seed,
         "settings": noise,
         "frame": options.output_frame,
+        "backend": options.backend,
         "workers": workers,
         "executor": executor,
     }

@@ -27,6 +27,7 @@ from robocal_uncertainty.core.joint_limits import check_joint_limits
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.kernels import BackendInfo, resolve_backend
 from robocal_uncertainty.montecarlo.engine import ProgressCallback, reduce_trials
 from robocal_uncertainty.montecarlo.region import coverage_region
 from robocal_uncertainty.montecarlo.streaming import Reduction
@@ -90,6 +91,8 @@ class WorkspaceMap:
     settings : UncertaintySettings
     calibration : IdentificationResult
     warnings : tuple of str
+    backend : BackendInfo or None
+        The trial kernels that ran the trials (:mod:`robocal_uncertainty.kernels`).
     """
 
     configurations: Array
@@ -113,6 +116,7 @@ class WorkspaceMap:
     settings: UncertaintySettings
     calibration: IdentificationResult
     warnings: tuple[str, ...] = field(default=())
+    backend: BackendInfo | None = None
 
     def __len__(self) -> int:
         return int(self.configurations.shape[0])
@@ -261,6 +265,7 @@ def map_workspace(
     executor: object | None = None,
     workers: int = 1,
     progress: ProgressCallback | None = None,
+    backend: str = "numpy",
 ) -> WorkspaceMap:
     """Monte Carlo uncertainty of the calibrated tool position at many configurations.
 
@@ -304,6 +309,9 @@ def map_workspace(
         Local processes when no executor is given (never changes the result).
     progress : callable, optional
         ``progress(done, target)`` after each chunk.
+    backend : str
+        Trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`);
+        the same result to rounding.
 
     Returns
     -------
@@ -350,7 +358,7 @@ def map_workspace(
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     trial_block = prepare_calibration_trials(
-        model, campaign, q, settings=settings, calibration=calibration, frame=frame
+        model, campaign, q, settings=settings, calibration=calibration, frame=frame, backend=backend
     )
     groups = np.arange(POSITION_DIM * n).reshape(n, POSITION_DIM)
     reduction = Reduction(groups, keep=groups[kept_configs].ravel())
@@ -406,4 +414,5 @@ def map_workspace(
         settings=settings,
         calibration=calibration,
         warnings=tuple(warns),
+        backend=resolve_backend(backend),
     )

@@ -1,0 +1,297 @@
+"""Backends of the trial kernels registered by name; see :mod:`robocal_uncertainty.kernels`."""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.kinematics import NearbyPoints
+from robocal_uncertainty.core.measurement import MeasurementType, PointMeasurement
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement
+from robocal_uncertainty.core.robot_model import ParameterLayout
+from robocal_uncertainty.errors import ConfigError
+
+__all__ = [
+    "BACKEND_CHOICES",
+    "NEARBY_TEST_CONFIGURATIONS",
+    "Backend",
+    "BackendInfo",
+    "CupyBackend",
+    "NumbaBackend",
+    "NumpyBackend",
+    "ToolPredictor",
+    "available_backends",
+    "backend_names",
+    "get_backend",
+    "register_backend",
+    "resolve_backend",
+]
+
+Array = NDArray[np.float64]
+Predictor = Callable[[Array, Array], Array]
+
+NEARBY_TEST_CONFIGURATIONS = 64
+"""Test configurations up to which the numpy backend evaluates them by the nearby-point walk:
+it holds about 20 arrays of a slice's size, where :func:`forward_points` holds fewer; a
+workspace map's thousands keep the smaller footprint. (The compiled walk holds none.)"""
+
+
+class ToolPredictor(Protocol):
+    """The tool near a reference: points by calling it, 6-DOF values by :meth:`poses`."""
+
+    def __call__(self, params: Array, joint_positions: Array) -> Array: ...
+
+    def poses(self, params: Array, joint_positions: Array) -> Array: ...
+
+
+class Backend(Protocol):
+    """The trial kernels of one backend.
+
+    ``measurement_predictor`` returns what the re-identification evaluates at every step
+    (the measurement type's prediction near the calibration), or None to use the type's own
+    ``predict``; ``tool_predictor`` the tool at the test configurations, or None to use
+    :func:`~robocal_uncertainty.core.kinematics.forward_points` and ``forward_poses``.
+    """
+
+    name: str
+
+    def available(self) -> bool: ...
+
+    def version(self) -> str: ...
+
+    def measurement_predictor(
+        self, measurement: MeasurementType, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> Predictor | None: ...
+
+    def tool_predictor(
+        self, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> ToolPredictor | None: ...
+
+
+@dataclass(frozen=True)
+class BackendInfo:
+    """What a report records of the backend that ran the trials.
+
+    Attributes
+    ----------
+    name : str
+        ``numpy``, ``numba`` or ``cupy``.
+    version : str
+        Version of the library behind it (numpy's for ``numpy``).
+    requested : str
+        What was asked for (``auto`` or a name).
+    """
+
+    name: str
+    version: str
+    requested: str
+
+    def describe(self) -> str:
+        """E.g. ``numba 0.59.0 (auto)``."""
+        suffix = f" ({self.requested})" if self.requested != self.name else ""
+        return f"{self.name} {self.version}{suffix}"
+
+
+class NumpyBackend:
+    """The reference backend: the kinematics module's own walks."""
+
+    name = "numpy"
+
+    def available(self) -> bool:
+        return True
+
+    def version(self) -> str:
+        return str(np.__version__)
+
+    def measurement_predictor(
+        self, measurement: MeasurementType, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> Predictor | None:
+        return measurement.nearby_predictor(layout, params, joint_positions)
+
+    def tool_predictor(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> ToolPredictor | None:
+        if not NearbyPoints.supports(layout) or joint_positions.shape[0] > NEARBY_TEST_CONFIGURATIONS:
+            return None
+        return NearbyPoints.at(layout, params, joint_positions)
+
+
+def _kind(measurement: MeasurementType) -> str | None:
+    """``points`` or ``poses`` for the built-in types the kernels walk, None for any other."""
+    if isinstance(measurement, PoseMeasurement):
+        return "poses"
+    if isinstance(measurement, PointMeasurement):
+        return "points"
+    return None
+
+
+class NumbaBackend:
+    """The compiled walk (:mod:`~robocal_uncertainty.kernels._numba_walk`)."""
+
+    name = "numba"
+    _ready = False
+
+    def available(self) -> bool:
+        try:
+            import numba  # noqa: F401
+        except ImportError:
+            return False
+        return True
+
+    def version(self) -> str:
+        import numba
+
+        return str(numba.__version__)
+
+    def warm_up(self) -> float:
+        """Compile (or load from the disk cache) the kernel; return the seconds it took.
+
+        The first time a process compiles it, the time is printed on stderr.
+        """
+        from robocal_uncertainty.kernels._numba_walk import walk
+
+        start = time.perf_counter()
+        if not NumbaBackend._ready:
+            from robocal_uncertainty.kernels._layout import flat_layout
+
+            layout = ParameterLayout(n_joints=1, has_beta=(False,))
+            flat = flat_layout(layout)
+            one = np.zeros((1, 1))
+            walk(
+                np.zeros((1, layout.size)),
+                np.zeros((1, 1, 1)),
+                flat.joints,
+                flat.blocks,
+                one,
+                np.zeros(1),
+                one,
+                one,
+                True,
+                np.empty((1, 1, 12)),
+            )
+            NumbaBackend._ready = True
+            stats = getattr(walk, "stats", None)  # cache statistics of the dispatcher
+            misses = 1 if stats is None else sum(stats.cache_misses.values())
+            elapsed = time.perf_counter() - start
+            if misses:
+                print(
+                    f"numba: trial kernels compiled in {elapsed:.1f} s (cached on disk for later runs)", file=sys.stderr
+                )
+            return elapsed
+        return time.perf_counter() - start
+
+    def measurement_predictor(
+        self, measurement: MeasurementType, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> Predictor | None:
+        from robocal_uncertainty.kernels.predictors import CompiledPredictor
+
+        kind = _kind(measurement)
+        if kind is None:
+            return measurement.nearby_predictor(layout, params, joint_positions)
+        self.warm_up()
+        predictor = CompiledPredictor.at(layout, params, joint_positions)
+        return predictor if kind == "points" else predictor.poses
+
+    def tool_predictor(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> ToolPredictor | None:
+        from robocal_uncertainty.kernels.predictors import CompiledPredictor
+
+        self.warm_up()
+        return CompiledPredictor.at(layout, params, joint_positions)
+
+
+class CupyBackend:
+    """The walk on an array module: CuPy, or numpy standing in (``module="numpy"``, for tests)."""
+
+    name = "cupy"
+
+    def __init__(self, module: str = "cupy") -> None:
+        self.module = module
+
+    def available(self) -> bool:
+        try:
+            xp: Any = __import__(self.module)
+            if self.module == "cupy":
+                return bool(xp.cuda.runtime.getDeviceCount() > 0)
+        except Exception:  # no CuPy, no driver or no device: not available
+            return False
+        return True
+
+    def version(self) -> str:
+        xp: Any = __import__(self.module)
+        return str(xp.__version__) + ("" if self.module == "cupy" else f" ({self.module} standing in)")
+
+    def measurement_predictor(
+        self, measurement: MeasurementType, layout: ParameterLayout, params: Array, joint_positions: Array
+    ) -> Predictor | None:
+        from robocal_uncertainty.kernels.predictors import ArrayModulePredictor
+
+        kind = _kind(measurement)
+        if kind is None:
+            return measurement.nearby_predictor(layout, params, joint_positions)
+        predictor = ArrayModulePredictor.on(self.module, layout, params, joint_positions)
+        return predictor if kind == "points" else predictor.poses
+
+    def tool_predictor(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> ToolPredictor | None:
+        from robocal_uncertainty.kernels.predictors import ArrayModulePredictor
+
+        return ArrayModulePredictor.on(self.module, layout, params, joint_positions)
+
+
+_REGISTRY: dict[str, Backend] = {}
+_AUTO_ORDER = ("numba", "numpy")
+BACKEND_CHOICES: tuple[str, ...] = ("auto", "numpy", "numba", "cupy")
+"""What ``--backend`` and the node parameter ``backend`` accept."""
+
+
+def register_backend(backend: Backend) -> None:
+    """Register `backend` under its name (replacing one of the same name)."""
+    _REGISTRY[backend.name] = backend
+
+
+def backend_names() -> tuple[str, ...]:
+    """Names of the registered backends, installed or not."""
+    return tuple(_REGISTRY)
+
+
+def available_backends() -> tuple[str, ...]:
+    """Names of the registered backends that can run here."""
+    return tuple(name for name, backend in _REGISTRY.items() if backend.available())
+
+
+def get_backend(name: str) -> Backend:
+    """The backend registered as `name` (``auto``: the fastest installed).
+
+    Raises
+    ------
+    ConfigError
+        An unknown name, or a backend that is not installed (the message names its extra).
+    """
+    if name == "auto":
+        for candidate in _AUTO_ORDER:
+            if _REGISTRY[candidate].available():
+                return _REGISTRY[candidate]
+    if name not in _REGISTRY:
+        msg = f"backend must be one of {', '.join(('auto', *_REGISTRY))}, got {name!r}"
+        raise ConfigError(msg)
+    backend = _REGISTRY[name]
+    if not backend.available():
+        extra = {"numba": "fast", "cupy": "gpu"}.get(name)
+        hint = f": pip install 'robocal_uncertainty[{extra}]'" if extra else ""
+        msg = f"backend {name!r} is not available here (not installed{', or no GPU' if name == 'cupy' else ''}){hint}"
+        raise ConfigError(msg)
+    return backend
+
+
+def resolve_backend(name: str) -> BackendInfo:
+    """The backend `name` resolves to, as recorded in reports."""
+    backend = get_backend(name)
+    return BackendInfo(name=backend.name, version=backend.version(), requested=name)
+
+
+register_backend(NumpyBackend())
+register_backend(NumbaBackend())
+register_backend(CupyBackend())
