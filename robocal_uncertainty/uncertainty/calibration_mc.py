@@ -52,12 +52,18 @@ from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import chordal_mean, quaternion_from_matrix, rotation_exp, rotation_log
 from robocal_uncertainty.core.session import effect_jacobian
 from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.montecarlo.distributions import Distribution, IndependentNormal
 from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, TrialsResult, run_trials
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
 from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
 from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary, coverage_window, summarize
 from robocal_uncertainty.montecarlo.validation import validate_gum
-from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy
+from robocal_uncertainty.uncertainty.model_adequacy import (
+    ModelAdequacy,
+    assess_model_adequacy,
+    pose_noise_covariances,
+)
+from robocal_uncertainty.uncertainty.model_error_draws import FieldEstimate, FieldNormal, estimate_field
 from robocal_uncertainty.uncertainty.reidentification import (
     BatchProblem,
     ChordSolver,
@@ -295,6 +301,9 @@ class CalibrationUncertainty:
     model_adequacy : ModelAdequacy
         Residuals against the stated noise; the residual source draws what is left over.
     warnings : tuple of str
+    model_error_field : FieldEstimate or None
+        The model-error field the residual source drew (None: no model error, or the
+        independent one of ``model_error="independent"``).
     """
 
     poses: tuple[PoseUncertainty, ...]
@@ -315,6 +324,7 @@ class CalibrationUncertainty:
     model_adequacy: ModelAdequacy
     warnings: tuple[str, ...] = field(default=())
     rotation_samples: Array | None = None
+    model_error_field: FieldEstimate | None = None
 
     @property
     def converged(self) -> bool:
@@ -491,6 +501,7 @@ class _Prepared:
     adequacy: ModelAdequacy
     lambda_range: tuple[float, float] | None
     frame_id: str
+    model_error_field: FieldEstimate | None = None
 
 
 def _field_sensitivities(prep: _Prepared, *, angular: bool = False) -> tuple[dict[str, Array], Array]:
@@ -564,11 +575,18 @@ def _gum(prep: _Prepared, coverage: float, *, angular: bool = False) -> GumResul
     if not smooth:
         return None
     fields, y0 = _field_sensitivities(prep, angular=angular)
-    inputs = {}
+    inputs: dict[str, Distribution] = {}
     columns = []
     for src in smooth:
-        inputs[src.name] = src.distribution
-        columns.extend(fields[name] for name, _ in src.segments)
+        block = np.hstack([fields[name] for name, _ in src.segments])
+        if isinstance(src.distribution, FieldNormal):
+            # The field's draws are F z with z standard normal: propagate z through S F, the
+            # same factor the Monte Carlo draws with, never the dense covariance of the draws.
+            inputs[src.name] = IndependentNormal(np.ones(src.distribution.size))
+            block = src.distribution.whitened_sensitivities(block)
+        elif src.distribution is not None:
+            inputs[src.name] = src.distribution
+        columns.append(block)
     sensitivities = np.hstack(columns)
 
     def estimate(x: Array) -> Array:
@@ -900,6 +918,14 @@ def _prepare(
     adequacy = assess_model_adequacy(
         calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
     )
+    field_estimate = None
+    field_draw = None
+    if "residual" in settings.sources and not adequacy.adequate and settings.model_error == "field":
+        noise = pose_noise_covariances(
+            calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
+        )
+        field_estimate = estimate_field(calibration, campaign.joint_positions, noise, adequacy.inadequacy_covariance)
+        field_draw = FieldNormal(campaign.joint_positions, test_q, field_estimate)
     context = TrialContext(
         n_poses=n_poses,
         n_joints=model.n_joints,
@@ -914,6 +940,7 @@ def _prepare(
         rotation_std=np.asarray(measurement.rotation_std) if isinstance(measurement, PoseMeasurement) else None,
         test_effect_jacobian=test_effect_jacobian(calibration, test_q, settings),
         prismatic=model.prismatic if any(model.prismatic) else (),
+        model_error_field=field_draw,
     )
     trials = CalibrationTrials(
         problem=problem,
@@ -942,6 +969,7 @@ def _prepare(
         adequacy=adequacy,
         lambda_range=lambda_range,
         frame_id=frame_id,
+        model_error_field=field_estimate,
     )
 
 
@@ -1192,6 +1220,7 @@ def _statement(prep: _Prepared, ev: EvaluationSettings, result: TrialsResult) ->
         model_adequacy=prep.adequacy,
         warnings=tuple(warns),
         rotation_samples=result.samples[:, dim * n_test + k :] if ev.orientation else None,
+        model_error_field=prep.model_error_field,
     )
 
 
