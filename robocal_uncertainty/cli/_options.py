@@ -122,6 +122,7 @@ def add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> 
         help="pose count of the 'pose_choice' source (default: 33/53 of the campaign's poses)",
     )
     add_noise_args(p)
+    add_model_error_arg(p)
     p.add_argument(
         "--workers", type=int, default=1, help="worker processes (never changes the result; default %(default)s)"
     )
@@ -165,6 +166,17 @@ def histogram_count(text: str) -> int | str:
         msg = f"expected a count >= 0 or 'all', got {text!r}"
         raise argparse.ArgumentTypeError(msg)
     return count
+
+
+def add_model_error_arg(p: argparse.ArgumentParser) -> None:
+    """--independent-model-error: the residual source's model error independent from pose to pose."""
+    p.add_argument(
+        "--independent-model-error",
+        action="store_true",
+        help="draw the model error independently from pose to pose (residual bootstrap, for comparison) instead "
+        "of the default Gaussian field over the joint configurations, drawn jointly over the calibration poses "
+        "and the test configurations",
+    )
 
 
 def add_frame_and_convergence_args(p: argparse.ArgumentParser) -> None:

@@ -166,6 +166,9 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
         "min_residual_dof": ad.min_residual_dof,
         "trustworthy": ad.trustworthy,
         "trust_note": ad.trust_note,
+        # The model error the residual source drew: the field over the joint configurations
+        # (None: adequate, residual off, or the independent model error).
+        "model_error_field": None if result.model_error_field is None else result.model_error_field.to_dict(),
     }
 
 
@@ -379,6 +382,7 @@ def _settings(result: CalibrationUncertainty) -> dict[str, Any]:
         "subset_size": s.subset_size,
         "gauss_newton_iterations": s.gauss_newton_iterations,
         "jacobian": s.jacobian,
+        "model_error": s.model_error,
     }
 
 
