@@ -302,8 +302,9 @@ class CalibrationUncertainty:
         Residuals against the stated noise; the residual source draws what is left over.
     warnings : tuple of str
     model_error_field : FieldEstimate or None
-        The model-error field the residual source drew (None: no model error, or the
-        independent one of ``model_error="independent"``).
+        The model-error field estimated for the residual source, drawn when it is
+        :attr:`~FieldEstimate.identified` (else the independent model error is drawn); None: no
+        model error, or ``model_error="independent"``.
     """
 
     poses: tuple[PoseUncertainty, ...]
@@ -924,8 +925,11 @@ def _prepare(
         noise = pose_noise_covariances(
             calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
         )
-        field_estimate = estimate_field(calibration, campaign.joint_positions, noise, adequacy.inadequacy_covariance)
-        field_draw = FieldNormal(campaign.joint_positions, test_q, field_estimate)
+        # The shape of the residuals' own covariance: the model error dominates it, and unlike the
+        # moment estimate (clipped to be PSD) it has variance in every direction the data have.
+        field_estimate = estimate_field(calibration, campaign.joint_positions, noise, adequacy.residual_covariance)
+        if field_estimate.identified:
+            field_draw = FieldNormal(campaign.joint_positions, test_q, field_estimate)
     context = TrialContext(
         n_poses=n_poses,
         n_joints=model.n_joints,

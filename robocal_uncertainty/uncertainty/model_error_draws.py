@@ -42,6 +42,7 @@ from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.measurement import row_weights
 from robocal_uncertainty.core.model_error_field import FIELD_KERNEL, FIELD_METRIC, chordal_distance, kernel_correlation
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty.model_adequacy import MIN_RESIDUAL_DOF_PER_COMPONENT
 
 __all__ = [
     "FIELD_MAX_EQUATIONS",
@@ -74,7 +75,10 @@ class FieldEstimate:
     length_scale : float [rad]
         ``l`` of the exponential kernel over the chordal joint distance.
     per_pose_covariance : ndarray, shape (d, d) [m^2; rad^2 for rotation components]
-        ``Sigma_m``: the model error's covariance at one configuration, measurement frame.
+        ``Sigma_m``: the model error's covariance at one configuration, measurement frame (its
+        scale from the leave-one-out prediction errors, see :func:`estimate_field`).
+    likelihood_per_pose_covariance : ndarray, shape (d, d), or None
+        The same with the restricted-likelihood scale (recorded for comparison).
     log_likelihood, independent_log_likelihood : float
         Restricted log-likelihood at the estimate and of the best ``c = 0`` model.
     dof : float
@@ -86,12 +90,26 @@ class FieldEstimate:
     correlated_fraction: float
     length_scale: float
     per_pose_covariance: Array
+    likelihood_per_pose_covariance: Array | None = None
     log_likelihood: float = float("nan")
     independent_log_likelihood: float = float("nan")
     dof: float = float("inf")
     poses_used: int = 0
     kernel: str = FIELD_KERNEL
     metric: str = FIELD_METRIC
+
+    @property
+    def identified(self) -> bool:
+        """Whether the data determine the field well enough to state it (``dof >= 32``).
+
+        The rule of :data:`~robocal_uncertainty.uncertainty.model_adequacy.MIN_RESIDUAL_DOF_PER_COMPONENT`
+        for one variance: with fewer effective degrees of freedom the scale is uncertain by more
+        than 25 % and a 95 % interval's coverage by more than 4 %. A correlated field's scale has
+        far fewer than ``d n`` (a 53-pose UR10 campaign: 1-30), and then the correlation length
+        and the scale trade off against each other; the residual source then draws the
+        independent model error (the field's ``c = 0`` case), whose covariance has ``d n - p``.
+        """
+        return bool(self.dof >= MIN_RESIDUAL_DOF_PER_COMPONENT)
 
     @property
     def standard_uncertainty(self) -> Array:
@@ -107,9 +125,13 @@ class FieldEstimate:
             "length_scale_rad": float(self.length_scale),
             "per_pose_covariance": self.per_pose_covariance.tolist(),
             "standard_uncertainty": self.standard_uncertainty.tolist(),
+            "likelihood_standard_uncertainty": None
+            if self.likelihood_per_pose_covariance is None
+            else np.sqrt(np.clip(np.diag(self.likelihood_per_pose_covariance), 0.0, None)).tolist(),
             "log_likelihood": float(self.log_likelihood),
             "independent_log_likelihood": float(self.independent_log_likelihood),
             "dof": float(self.dof),
+            "identified": self.identified,
             "poses_used": int(self.poses_used),
         }
 
@@ -239,15 +261,68 @@ def estimate_field(
         var_log_s = float("nan")
     dof = 2.0 / var_log_s if np.isfinite(var_log_s) and var_log_s > 0 else float(m)
     const = 0.5 * m * np.log(2 * np.pi)
+    unit = (1.0 - c) * white
+    if c > 0.0:
+        rho = kernel_correlation(distance, float(np.exp(log_l)))
+        unit = unit + c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * kron_ones
+    scale = _leave_one_out_scale(r, fit, n_cov, unit, d, (float(np.exp(lo_s)), float(np.exp(hi_s))))
+    if scale is None:  # no scale explains the prediction errors (a degenerate shape): the likelihood's
+        scale = float(np.exp(log_s))
     return FieldEstimate(
         correlated_fraction=float(c),
         length_scale=float(np.exp(log_l)),
-        per_pose_covariance=float(np.exp(log_s)) * shape,
+        per_pose_covariance=scale * shape,
+        likelihood_per_pose_covariance=float(np.exp(log_s)) * shape,
         log_likelihood=-fun - const,
         independent_log_likelihood=-float(independent.fun) - const,
         dof=float(min(max(dof, 1.0), m)),
         poses_used=int(n),
     )
+
+
+def _leave_one_out_scale(
+    r: Array, fit: Array, noise: Array, unit: Array, d: int, bounds: tuple[float, float]
+) -> float | None:
+    """The field's scale ``s`` at which the leave-one-out prediction errors have the spread the
+    field states for them.
+
+    For the (linearised) least-squares fit with hat matrix ``H = U U^T`` the prediction error of
+    pose i by a fit without it is ``(I - H_ii)^-1 r_i`` exactly, with covariance
+    ``(I - H_ii)^-1 [P V P]_ii (I - H_ii)^-T`` (``P = I - H``, ``V = N + s K``): the statement a
+    calibration makes at a configuration it did not see, cross term included. Its standardised
+    square is ``r_i^T [P V P]_ii^-1 r_i``; ``s`` makes their mean equal to ``d`` (bisection: the
+    mean decreases with ``s``). The restricted likelihood fixes the correlation (``c``, ``l``);
+    this estimate of the scale depends only on the per-pose blocks, so a misstated correlation
+    (too smooth a field, too much absorbed by the fit) shows as larger prediction errors and a
+    larger scale, not as an over-confident statement (cross-validated variance estimation is the
+    robust one under a misspecified kernel: Bachoc 2013, Comput. Stat. Data Anal. 66).
+    """
+    proj = np.eye(r.size) - fit @ fit.T
+    n = r.size // d
+    idx = np.arange(n)
+    pnp = (proj @ noise @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+    pkp = (proj @ unit @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+    # The residual's part in the fit space (a regularised fit leaves some) is no prediction error:
+    # the model's residual is P (e + eps), as in the restricted likelihood's contrasts.
+    r_pose = (proj @ r).reshape(n, d)
+
+    def excess(log_s: float) -> float:
+        blocks = pnp + float(np.exp(log_s)) * pkp
+        sol = np.linalg.solve(blocks + 1e-300 * np.eye(d), r_pose[..., None])[..., 0]
+        return float(np.mean(np.sum(r_pose * sol, axis=1))) / d - 1.0
+
+    lo, hi = np.log(bounds[0]), np.log(bounds[1])
+    if excess(lo) <= 0.0:
+        return float(bounds[0])
+    if excess(hi) >= 0.0:
+        return None
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if excess(mid) > 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return float(np.exp(0.5 * (lo + hi)))
 
 
 def _psd_factor(matrix: Array) -> Array:

