@@ -264,7 +264,7 @@ def estimate_field(
     unit: Array = (1.0 - c) * white
     if c > 0.0:
         rho = kernel_correlation(distance, float(np.exp(log_l)))
-        unit = unit + c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * kron_ones
+        unit = np.asarray(unit + c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * kron_ones, dtype=np.float64)
     scale = _leave_one_out_scale(r, fit, n_cov, unit, d, (float(np.exp(lo_s)), float(np.exp(hi_s))))
     if scale is None:  # no scale explains the prediction errors (a degenerate shape): the likelihood's
         scale = float(np.exp(log_s))
