@@ -261,7 +261,7 @@ def estimate_field(
         var_log_s = float("nan")
     dof = 2.0 / var_log_s if np.isfinite(var_log_s) and var_log_s > 0 else float(m)
     const = 0.5 * m * np.log(2 * np.pi)
-    unit: Array = (1.0 - c) * white
+    unit: Array = np.asarray((1.0 - c) * white, dtype=np.float64)
     if c > 0.0:
         rho = kernel_correlation(distance, float(np.exp(log_l)))
         unit = np.asarray(unit + c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * kron_ones, dtype=np.float64)
