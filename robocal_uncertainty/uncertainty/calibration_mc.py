@@ -63,7 +63,12 @@ from robocal_uncertainty.uncertainty.model_adequacy import (
     assess_model_adequacy,
     pose_noise_covariances,
 )
-from robocal_uncertainty.uncertainty.model_error_draws import FieldEstimate, FieldNormal, estimate_field
+from robocal_uncertainty.uncertainty.model_error_draws import (
+    FieldEstimate,
+    FieldNormal,
+    estimate_field,
+    standardised_innovations,
+)
 from robocal_uncertainty.uncertainty.reidentification import (
     BatchProblem,
     ChordSolver,
@@ -929,7 +934,12 @@ def _prepare(
         # moment estimate (clipped to be PSD) it has variance in every direction the data have.
         field_estimate = estimate_field(calibration, campaign.joint_positions, noise, adequacy.residual_covariance)
         if field_estimate.identified:
-            field_draw = FieldNormal(campaign.joint_positions, test_q, field_estimate)
+            field_draw = FieldNormal(
+                campaign.joint_positions,
+                test_q,
+                field_estimate,
+                innovations=standardised_innovations(np.asarray(calibration.residuals, dtype=np.float64)),
+            )
     context = TrialContext(
         n_poses=n_poses,
         n_joints=model.n_joints,

@@ -50,6 +50,7 @@ __all__ = [
     "FieldEstimate",
     "FieldNormal",
     "estimate_field",
+    "standardised_innovations",
 ]
 
 Array = NDArray[np.float64]
@@ -325,6 +326,23 @@ def _leave_one_out_scale(
     return float(np.exp(0.5 * (lo + hi)))
 
 
+def standardised_innovations(residuals: Array) -> Array | None:
+    """The residuals centred and whitened to identity covariance, shape (n, d); None when their
+    covariance is singular (a direction without scatter: normal innovations then).
+
+    Resampling them keeps the shape of the residual distribution (its tails, its mixture of
+    directions) in the drawn model errors, at exactly the field's covariance.
+    """
+    r = np.asarray(residuals, dtype=np.float64)
+    if r.shape[0] < 2 * r.shape[1]:
+        return None
+    centred = r - r.mean(axis=0)
+    evals, evecs = np.linalg.eigh(centred.T @ centred / r.shape[0])
+    if evals[0] <= 1e-12 * max(float(evals[-1]), np.finfo(float).tiny):
+        return None
+    return np.asarray(centred @ (evecs / np.sqrt(evals)) @ evecs.T, dtype=np.float64)
+
+
 def _psd_factor(matrix: Array) -> Array:
     """A factor ``F`` with ``F F^T = matrix`` (Cholesky; symmetric eigen-factor when singular)."""
     sym = 0.5 * (matrix + matrix.T)
@@ -337,22 +355,28 @@ def _psd_factor(matrix: Array) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class FieldNormal:
-    """Joint normal draw of the field at calibration poses and (negated) at test configurations.
+    """Joint draw of the field at calibration poses and (negated) at test configurations.
 
     A :class:`~robocal_uncertainty.montecarlo.distributions.Distribution` of size
     ``(n_t + n_c) d``: pose-major ``e_t`` (the calibration poses' model errors), then
-    ``-e_c`` (the test configurations'), see the module docstring.
+    ``-e_c`` (the test configurations'), see the module docstring. The draws are
+    ``(F_s (x) Sigma_m^(1/2)) z``; ``z`` is standard normal, or, with `innovations`, resampled
+    from them (the residuals' own distribution, standardised): the covariance is the same either
+    way, and with ``c = 0`` the latter is the independent residual bootstrap.
 
     Parameters
     ----------
     calibration_joints : ndarray, shape (n_t, n_joints) [rad]
     test_joints : ndarray, shape (n_c, n_joints) [rad]
     estimate : FieldEstimate
+    innovations : ndarray, shape (m, d), optional
+        Zero-mean vectors with identity covariance (:func:`standardised_innovations`).
     """
 
     calibration_joints: Array
     test_joints: Array
     estimate: FieldEstimate
+    innovations: Array | None = None
     _tt: Array = field(init=False, repr=False)
     _ct: Array = field(init=False, repr=False)
     _cc: Array = field(init=False, repr=False)
@@ -424,7 +448,10 @@ class FieldNormal:
         """``n`` draws, shape (n, size): ``(F_s (x) Sigma_m^(1/2)) z`` with one standard normal
         vector ``z`` per draw, consumed in a fixed order."""
         n_t, n_c, d = self._tt.shape[0], self._ct.shape[0], self.dimension
-        z = rng.standard_normal((int(n), n_t + n_c, d))
+        if self.innovations is None:
+            z = rng.standard_normal((int(n), n_t + n_c, d))
+        else:
+            z = self.innovations[rng.integers(0, self.innovations.shape[0], size=(int(n), n_t + n_c))]
         values = self._instances(z) @ self._root.T
         return np.asarray(values.reshape(int(n), self.size), dtype=np.float64)
 
