@@ -142,6 +142,7 @@ _MONTE_CARLO = frozenset(
         "lambda_range_high",
         "min_poses",
         "subset_size",
+        "independent_model_error",
         "tracker_xyz_m",
         "output_frame",
         "accept_unconverged",
@@ -257,6 +258,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "min_poses", 0, "Smallest pose count of the 'n_poses' source; 0 = automatic", "poses", low=0, high=100_000
     ),
     ParamSpec("subset_size", 0, "Pose count of the 'pose_choice' source; 0 = automatic", "poses", low=0, high=100_000),
+    ParamSpec(
+        "independent_model_error",
+        False,
+        "Draw the residual source's model error independently from pose to pose (for comparison) instead of "
+        "the field over the joint configurations",
+        "",
+    ),
     ParamSpec(
         "tracker_xyz_m",
         [2.0, 0.5, 0.3],
@@ -460,6 +468,7 @@ class UncertaintyNode(Node):
             min_poses=int(get("min_poses")) or None,
             subset_size=int(get("subset_size")) or None,
             tracker_xyz=tuple(float(v) for v in get("tracker_xyz_m")),
+            model_error="independent" if bool(get("independent_model_error")) else "field",
         )
         trials = int(get("trials"))
         return EvaluationOptions(
