@@ -5,13 +5,13 @@ the field from the training residuals alone (as the residual source does), and p
 held-out points twice: with the calibrated kinematics, and with the kinematics plus the best
 linear predictor of their error given the training residuals,
 
-``E[delta_c | r_t] = Cov(delta_c, r_t) Cov(r_t)^+ r_t``,
-``delta_c = e_c - J_c G (e_t + eps_t)``, ``r_t = P (e_t + eps_t)``, ``P = I - A G``
+``E[delta_c | z] = Cov(delta_c, z) Cov(z)^-1 z``, ``z = Q^T r_t = Q^T (e_t + eps_t)``,
+``delta_c = e_c - J_c G (e_t + eps_t)`` (``Q`` orthonormal, orthogonal to the fit's Jacobian ``A``)
 
 (``G`` the fit's gain, ``A`` its Jacobian, ``e`` the field, ``eps`` the stated noise). Prints the
 held-out 3-D RMS error with and without the correction, and the fraction of held-out points
-inside 95 % per-axis intervals from the kriging variance (``Cov(delta_c) - Cov(delta_c, r_t)
-Cov(r_t)^+ Cov(r_t, delta_c)`` plus the held-out point's tracker noise).
+inside 95 % per-axis intervals from the kriging variance (``Cov(delta_c) - Cov(delta_c, z)
+Cov(z)^-1 Cov(z, delta_c)`` plus the held-out point's tracker noise).
 
     python benchmarks/study_field_kriging.py --series B --train 200 500 1000 --splits 3
 
@@ -72,15 +72,18 @@ def one_split(model, campaign, train: np.ndarray, held: np.ndarray) -> tuple[flo
     a_mat = jac_t[:, :, names].reshape(-1, len(names))
     j_c = jac_c[:, :, names].reshape(-1, len(names))
     n_t = q_t.shape[0]
-    proj = np.eye(3 * n_t) - a_mat @ gain
     k_tt = np.kron(_correlation(q_t, q_t, c, ell, True), s_m) + linalg.block_diag(*noise)
     k_ct = np.kron(_correlation(q_c, q_t, c, ell, False), s_m)
     k_cc_diag = np.kron(np.eye(q_c.shape[0]), s_m)  # per-configuration blocks only
-    cov_r = proj @ k_tt @ proj.T
-    cross = (k_ct - j_c @ gain @ k_tt) @ proj.T  # Cov(delta_c, r_t)
-    r_t = np.asarray(cal.residuals).reshape(-1)
-    pinv = np.linalg.pinv(cov_r, rcond=1e-10, hermitian=True)
-    correction = (cross @ pinv @ r_t).reshape(-1, 3)
+    # Contrasts z = Q^T r (Q orthonormal, orthogonal to the fit's Jacobian): Q^T r = Q^T (e + eps),
+    # whatever the parameters; what the residuals carry about the field is in them.
+    u_full = np.linalg.svd(a_mat, full_matrices=True)[0]
+    q_mat = u_full[:, np.linalg.matrix_rank(a_mat) :]
+    cov_z = q_mat.T @ k_tt @ q_mat
+    cross = (k_ct - j_c @ gain @ k_tt) @ q_mat  # Cov(delta_c, z)
+    z_t = q_mat.T @ np.asarray(cal.residuals).reshape(-1)
+    pinv = np.linalg.inv(cov_z)
+    correction = (cross @ pinv @ z_t).reshape(-1, 3)
     y = ho.points
     err_plain = y - pred_c
     err_krig = err_plain - correction

@@ -269,10 +269,11 @@ def estimate_field(
     scale = _leave_one_out_scale(r, fit, n_cov, unit, d, (float(np.exp(lo_s)), float(np.exp(hi_s))))
     if scale is None:  # no scale explains the prediction errors (a degenerate shape): the likelihood's
         scale = float(np.exp(log_s))
+    factors = _leave_one_out_components(r, fit, n_cov, unit, d, scale)
     return FieldEstimate(
         correlated_fraction=float(c),
         length_scale=float(np.exp(log_l)),
-        per_pose_covariance=scale * shape,
+        per_pose_covariance=shape * np.outer(factors, factors),
         likelihood_per_pose_covariance=float(np.exp(log_s)) * shape,
         log_likelihood=-fun - const,
         independent_log_likelihood=-float(independent.fun) - const,
@@ -324,6 +325,40 @@ def _leave_one_out_scale(
         else:
             hi = mid
     return float(np.exp(0.5 * (lo + hi)))
+
+
+def _leave_one_out_components(
+    r: Array, fit: Array, noise: Array, unit: Array, d: int, scale: float, iterations: int = 40
+) -> Array:
+    """Per-component factors ``f_j`` of the field (``Sigma_m = diag(f) S diag(f)``) at which every
+    component's leave-one-out prediction errors have the spread the field states for them.
+
+    The pooled scale of :func:`_leave_one_out_scale` matches their mean over the components;
+    the correlation length is shared by all components, and a component the field states too
+    smooth (say the rotations of a 6-DOF pose, or one axis) would keep a too narrow statement.
+    Here, with ``e_i = (I - H_ii)^-1 r_i`` and its stated covariance ``M_i`` (as there), every
+    component's mean of ``e_ij^2 / M_i,jj`` is brought to 1 by the fixed-point iteration
+    ``f_j <- f_j sqrt(mean)``; starting from ``f = sqrt(s)``. Returns ``f``, shape (d,).
+    """
+    n = r.size // d
+    proj = np.eye(r.size) - fit @ fit.T
+    idx = np.arange(n)
+    lever = (fit @ fit.T).reshape(n, d, n, d)[idx, :, idx, :]
+    inv = np.linalg.pinv(np.eye(d)[None] - lever)
+    pnp = (proj @ noise @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+    err = np.einsum("pij,pj->pi", inv, (proj @ r).reshape(n, d))
+    factors = np.full(d, np.sqrt(max(scale, 0.0)))
+    if not np.all(factors > 0.0):
+        return factors
+    for _ in range(iterations):
+        scaled = unit * np.outer(np.tile(factors, n), np.tile(factors, n))
+        pkp = (proj @ scaled @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+        stated = np.einsum("pij,pjk,plk->pil", inv, pnp + pkp, inv)
+        ratio = np.mean(err**2 / np.maximum(np.diagonal(stated, axis1=1, axis2=2), np.finfo(float).tiny), axis=0)
+        if np.max(np.abs(ratio - 1.0)) < 1e-3:
+            break
+        factors = factors * np.sqrt(ratio)
+    return np.asarray(factors, dtype=np.float64)
 
 
 def standardised_innovations(residuals: Array) -> Array | None:
