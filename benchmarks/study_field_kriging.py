@@ -71,7 +71,6 @@ def one_split(model, campaign, train: np.ndarray, held: np.ndarray) -> tuple[flo
     pred_c, jac_c = forward_points_and_jacobian(layout, cal.estimate, q_c)
     a_mat = jac_t[:, :, names].reshape(-1, len(names))
     j_c = jac_c[:, :, names].reshape(-1, len(names))
-    n_t = q_t.shape[0]
     k_tt = np.kron(_correlation(q_t, q_t, c, ell, True), s_m) + linalg.block_diag(*noise)
     k_ct = np.kron(_correlation(q_c, q_t, c, ell, False), s_m)
     k_cc_diag = np.kron(np.eye(q_c.shape[0]), s_m)  # per-configuration blocks only
