@@ -24,9 +24,14 @@ configurations, beyond (a workspace map's thousands) with the diagonal of ``D`` 
 configuration's marginal (and its correlation with the calibration poses) is exact and memory
 grows as ``n_c n_t``, never ``n_c^2``.
 
-The hyperparameters (``c``, ``l`` and the scale ``s`` of ``Sigma_m = s S``, ``S`` the shape of
-the model-adequacy estimate) come from restricted maximum likelihood on the calibration's own
-residuals, whitened by the measurement type's weights (points and 6-DOF poses alike): no
+The correlation (``c``, ``l``) comes from restricted maximum likelihood on the calibration's own
+residuals, whitened by the measurement type's weights (points and 6-DOF poses alike); the
+per-pose covariance ``Sigma_m = diag(f) S diag(f)`` (``S`` the shape of the residuals'
+covariance) from their leave-one-out prediction errors, component by component: the spread a
+prediction at a configuration the fit did not see has, which a misstated kernel cannot make too
+small. The draws resample the standardised residuals (the field's covariance, the residuals'
+distribution). A field whose scale the poses do not determine (fewer than 32 effective degrees
+of freedom) is not drawn: the residual source then draws the independent model error. No
 constant is tuned to a data set.
 """
 
