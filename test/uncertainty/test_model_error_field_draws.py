@@ -20,7 +20,7 @@ import pytest
 from robocal_uncertainty.core import SimulationSettings, forward_points, identify, load_robot_model, simulate_campaign
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty import UncertaintySettings, calibration_mc, evaluate_uncertainty
-from robocal_uncertainty.uncertainty.model_error_draws import FieldEstimate, FieldNormal
+from robocal_uncertainty.uncertainty.model_error_draws import FieldEstimate, FieldNormal, standardised_innovations
 
 ROOT = Path(__file__).resolve().parents[2]
 SIGMA = 150e-6  # per-axis model error [m]
@@ -151,3 +151,43 @@ def test_conditional_path_keeps_marginals_and_pose_correlation(monkeypatch) -> N
     for i in range(5):
         block = slice(n_t + 3 * i, n_t + 3 * i + 3)
         np.testing.assert_allclose(marginal[block, block], joint[block, block], atol=1e-20)
+
+
+def test_innovations_keep_the_covariance_and_the_residual_shape() -> None:
+    rng = np.random.default_rng(5)
+    residuals = rng.standard_t(6, size=(400, 3)) @ np.array([[2.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.0, 0.3, 0.7]])
+    z = standardised_innovations(residuals)
+    assert z is not None
+    np.testing.assert_allclose(z.T @ z / z.shape[0], np.eye(3), atol=1e-12)
+    q_t = rng.uniform(-2, 2, (8, 6))
+    est = FieldEstimate(correlated_fraction=0.0, length_scale=0.5, per_pose_covariance=np.eye(3) * 1e-8)
+    draw = FieldNormal(q_t, q_t[:2] + 0.1, est, innovations=z)
+    samples = draw.sample(np.random.default_rng(1), 20_000)
+    np.testing.assert_allclose(np.cov(samples.T), draw.covariance(), atol=0.15 * 1e-8)  # heavy tails
+    # c = 0: every drawn vector is one of the standardised residuals (the residual bootstrap).
+    first = samples[:, :3] / 1e-4
+    assert np.min(np.linalg.norm(first[:50, None, :] - z[None], axis=2), axis=1).max() < 1e-9
+    assert standardised_innovations(np.zeros((40, 3))) is None
+
+
+def test_independent_model_error_flag_reaches_the_settings() -> None:
+    from robocal_uncertainty.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["validate", "--help"])
+    import argparse
+
+    from robocal_uncertainty.cli._evaluation import uncertainty_settings
+
+    base = {
+        "tracker_noise_um": 5.0,
+        "tracker_noise_um_per_m": 0.0,
+        "encoder_noise_deg": 0.005,
+        "linear_encoder_noise_um": 5.0,
+        "lambda_range": None,
+        "min_poses": None,
+        "subset_size": None,
+    }
+    on = uncertainty_settings(argparse.Namespace(independent_model_error=True, **base), None, ("residual",))
+    off = uncertainty_settings(argparse.Namespace(independent_model_error=False, **base), None, ("residual",))
+    assert (on.model_error, off.model_error) == ("independent", "field")
