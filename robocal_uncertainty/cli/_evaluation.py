@@ -160,7 +160,7 @@ def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Seque
         lambda_range=None if args.lambda_range is None else (args.lambda_range[0], args.lambda_range[1]),
         min_poses=args.min_poses,
         subset_size=args.subset_size,
-        model_error="independent" if getattr(args, "independent_model_error", False) else "field",
+        model_error="field" if getattr(args, "model_error_field", False) else "independent",
     )
 
 

@@ -142,7 +142,7 @@ _MONTE_CARLO = frozenset(
         "lambda_range_high",
         "min_poses",
         "subset_size",
-        "independent_model_error",
+        "model_error_field",
         "tracker_xyz_m",
         "output_frame",
         "accept_unconverged",
@@ -259,10 +259,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec("subset_size", 0, "Pose count of the 'pose_choice' source; 0 = automatic", "poses", low=0, high=100_000),
     ParamSpec(
-        "independent_model_error",
+        "model_error_field",
         False,
-        "Draw the residual source's model error independently from pose to pose (for comparison) instead of "
-        "the field over the joint configurations",
+        "Draw the residual source's model error as a field over the joint configurations instead of "
+        "independently from pose to pose",
         "",
     ),
     ParamSpec(
@@ -468,7 +468,7 @@ class UncertaintyNode(Node):
             min_poses=int(get("min_poses")) or None,
             subset_size=int(get("subset_size")) or None,
             tracker_xyz=tuple(float(v) for v in get("tracker_xyz_m")),
-            model_error="independent" if bool(get("independent_model_error")) else "field",
+            model_error="field" if bool(get("model_error_field")) else "independent",
         )
         trials = int(get("trials"))
         return EvaluationOptions(

@@ -421,7 +421,7 @@ for _spec in (
         "residual",
         "model error left after calibration (model inadequacy): a Gaussian field over the joint "
         "configurations (restricted maximum likelihood on the residuals), drawn jointly on the data and "
-        "the predictions (independent residual bootstrap with --independent-model-error)",
+        "the predictions with --model-error-field; else a residual bootstrap, independent from pose to pose",
         True,
         _residual,
     ),
@@ -561,12 +561,13 @@ class UncertaintySettings:
     jacobian : {"frozen", "exact"}
         ``frozen``: chord iterations with the calibration's Jacobian (fast, default);
         ``exact``: Gauss-Newton with each trial's own Jacobian (reference).
-    model_error : {"field", "independent"}
-        How the ``residual`` source draws the model error: ``field`` (default), a Gaussian field
-        correlated over the joint configurations, drawn jointly over the calibration poses and
-        the test configurations (:mod:`~robocal_uncertainty.uncertainty.model_error_draws`);
-        ``independent``, its ``c = 0`` special case as a residual bootstrap, independent from
-        pose to pose (for comparison).
+    model_error : {"independent", "field"}
+        How the ``residual`` source draws the model error: ``independent`` (default), a residual
+        bootstrap independent from pose to pose; ``field``, a Gaussian field correlated over the
+        joint configurations, drawn jointly over the calibration poses and the test
+        configurations (:mod:`~robocal_uncertainty.uncertainty.model_error_draws`). Not the
+        default: on the UR10 series D with 53 training poses it states held-out poses too
+        narrow (``benchmarks/study_model_error_field.py``).
     """
 
     sources: tuple[str, ...] = field(default_factory=default_sources)
@@ -579,7 +580,7 @@ class UncertaintySettings:
     gauss_newton_iterations: int = 4
     jacobian: Literal["frozen", "exact"] = "frozen"
     between_session: BetweenSessions | None = None
-    model_error: Literal["field", "independent"] = "field"
+    model_error: Literal["field", "independent"] = "independent"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sources", parse_sources(self.sources))

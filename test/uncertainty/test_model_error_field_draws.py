@@ -54,7 +54,7 @@ def field_case():
 
 def _field_run(monkeypatch, model, campaign, calibration, q_c, **kw):
     monkeypatch.setattr(calibration_mc, "estimate_field", lambda *a, **k: ESTIMATE)
-    settings = UncertaintySettings(sources=("residual",), tracker_noise=TrackerNoise(a=1e-6))
+    settings = UncertaintySettings(sources=("residual",), tracker_noise=TrackerNoise(a=1e-6), model_error="field")
     return evaluate_uncertainty(
         model, campaign, q_c, settings=settings, calibration=calibration, trials=kw.pop("trials", 20_000), **kw
     )
@@ -170,7 +170,7 @@ def test_innovations_keep_the_covariance_and_the_residual_shape() -> None:
     assert standardised_innovations(np.zeros((40, 3))) is None
 
 
-def test_independent_model_error_flag_reaches_the_settings() -> None:
+def test_model_error_field_flag_reaches_the_settings() -> None:
     from robocal_uncertainty.cli import main
 
     with pytest.raises(SystemExit):
@@ -188,6 +188,6 @@ def test_independent_model_error_flag_reaches_the_settings() -> None:
         "min_poses": None,
         "subset_size": None,
     }
-    on = uncertainty_settings(argparse.Namespace(independent_model_error=True, **base), None, ("residual",))
-    off = uncertainty_settings(argparse.Namespace(independent_model_error=False, **base), None, ("residual",))
-    assert (on.model_error, off.model_error) == ("independent", "field")
+    on = uncertainty_settings(argparse.Namespace(model_error_field=True, **base), None, ("residual",))
+    off = uncertainty_settings(argparse.Namespace(model_error_field=False, **base), None, ("residual",))
+    assert (on.model_error, off.model_error) == ("field", "independent")
