@@ -21,6 +21,7 @@ from robocal_uncertainty.cli._options import (
     add_dask_arg,
     add_force_arg,
     add_frame_and_convergence_args,
+    add_model_error_arg,
 )
 from robocal_uncertainty.uncertainty.sources import sources_help
 
@@ -64,6 +65,7 @@ def register(sub: Any) -> None:
     p.add_argument("--out", default="robocal_map", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier map report in --out")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_model_error_arg(p)
     add_frame_and_convergence_args(p)
     p.set_defaults(func=run, lambda_range=None, min_poses=None, subset_size=None)
 

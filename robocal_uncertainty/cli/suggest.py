@@ -24,6 +24,7 @@ from robocal_uncertainty.cli._options import (
     add_campaign_args,
     add_force_arg,
     add_frame_and_convergence_args,
+    add_model_error_arg,
     add_noise_args,
 )
 from robocal_uncertainty.errors import ConfigError
@@ -166,6 +167,7 @@ def register(sub: Any) -> None:
         help="write the suggested joint positions to this CSV file, best first, in rad (deg with --degrees)",
     )
     add_force_arg(p, "the --json and --csv files")
+    add_model_error_arg(p)
     add_frame_and_convergence_args(p)
     p.set_defaults(func=run, lambda_range=None, min_poses=None, subset_size=None)
 

@@ -148,6 +148,7 @@ _MONTE_CARLO = frozenset(
         "lambda_range_high",
         "min_poses",
         "subset_size",
+        "model_error_field",
         "tracker_xyz_m",
         "output_frame",
         "accept_unconverged",
@@ -274,6 +275,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "min_poses", 0, "Smallest pose count of the 'n_poses' source; 0 = automatic", "poses", low=0, high=100_000
     ),
     ParamSpec("subset_size", 0, "Pose count of the 'pose_choice' source; 0 = automatic", "poses", low=0, high=100_000),
+    ParamSpec(
+        "model_error_field",
+        False,
+        "Draw the residual source's model error as a field over the joint configurations instead of "
+        "independently from pose to pose",
+        "",
+    ),
     ParamSpec(
         "tracker_xyz_m",
         [2.0, 0.5, 0.3],
@@ -486,6 +494,7 @@ class UncertaintyNode(Node):
             min_poses=int(get("min_poses")) or None,
             subset_size=int(get("subset_size")) or None,
             tracker_xyz=tuple(float(v) for v in get("tracker_xyz_m")),
+            model_error="field" if bool(get("model_error_field")) else "independent",
         )
         trials = int(get("trials"))
         return EvaluationOptions(

@@ -167,6 +167,9 @@ def _adequacy(result: CalibrationUncertainty) -> dict[str, Any]:
         "trustworthy": ad.trustworthy,
         "trust_note": ad.trust_note,
         "repeated_poses": getattr(ad, "repeated_poses", 0),
+        # The model error the residual source drew: the field over the joint configurations
+        # (None: adequate, residual off, or the independent model error).
+        "model_error_field": None if result.model_error_field is None else result.model_error_field.to_dict(),
     }
 
 
@@ -380,6 +383,7 @@ def _settings(result: CalibrationUncertainty) -> dict[str, Any]:
         "subset_size": s.subset_size,
         "gauss_newton_iterations": s.gauss_newton_iterations,
         "jacobian": s.jacobian,
+        "model_error": s.model_error,
     }
 
 

@@ -66,6 +66,7 @@ def validation_to_dict(validation: HoldoutValidation, *, extra: Mapping[str, Any
                 "trustworthy": f.trustworthy,
                 "model_error_standard_uncertainty_m": f.model_error_std.tolist(),
                 "n_trials": f.n_trials,
+                "model_error": f.model_error,
             }
             for f in v.folds
         ],
@@ -111,6 +112,13 @@ def format_validation(validation: HoldoutValidation) -> str:
                 f"{a.axis:<6}{a.rms_error * 1e3:>16.4f}{a.normalized_rms:>16.3f}{100 * a.inside_fraction:>20.1f}"
             )
     lines.append(f"3-D region (JCGM 102) at {p:g} %: {100 * v.region_inside_fraction:.1f} % inside")
+    kinds = [f.model_error for f in v.folds]
+    if any(k != "none" for k in kinds):
+        lines.append(
+            f"model error: a field over the joint configurations in {kinds.count('field')} of {len(kinds)} fold(s), "
+            f"independent from pose to pose in {kinds.count('independent')} (the default, or the field not "
+            "identified by the training poses)"
+        )
     rot_names = "".join(f", {a.axis}" for a in v.orientation_axes)
     lines.append(f"reliability: stated p / observed % (x, y, z, 3-D{rot_names})")
     for i, level in enumerate(v.levels):

@@ -52,12 +52,23 @@ from robocal_uncertainty.core.rotation import chordal_mean, quaternion_from_matr
 from robocal_uncertainty.core.session import effect_jacobian
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.kernels import Backend, BackendInfo, ToolPredictor, get_backend, resolve_backend
+from robocal_uncertainty.montecarlo.distributions import Distribution, IndependentNormal
 from robocal_uncertainty.montecarlo.engine import AdaptiveReport, AdaptiveSettings, TrialsResult, run_trials
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
 from robocal_uncertainty.montecarlo.region import EllipsoidalRegion, coverage_region
 from robocal_uncertainty.montecarlo.summary import OutputSummary, Summary, coverage_window, summarize
 from robocal_uncertainty.montecarlo.validation import validate_gum
-from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy
+from robocal_uncertainty.uncertainty.model_adequacy import (
+    ModelAdequacy,
+    assess_model_adequacy,
+    pose_noise_covariances,
+)
+from robocal_uncertainty.uncertainty.model_error_draws import (
+    FieldEstimate,
+    FieldNormal,
+    estimate_field,
+    standardised_innovations,
+)
 from robocal_uncertainty.uncertainty.reidentification import (
     BatchProblem,
     ChordSolver,
@@ -300,6 +311,10 @@ class CalibrationUncertainty:
         Why the run is no statement although it ran (its spread disagrees with its own GUM
         statement: :func:`~robocal_uncertainty.uncertainty.statement_check.gum_disagreements`);
         empty for a statement.
+    model_error_field : FieldEstimate or None
+        The model-error field estimated for the residual source, drawn when it is
+        :attr:`~FieldEstimate.identified` (else the independent model error is drawn); None: no
+        model error, or ``model_error="independent"``.
     """
 
     poses: tuple[PoseUncertainty, ...]
@@ -322,6 +337,7 @@ class CalibrationUncertainty:
     rotation_samples: Array | None = None
     not_converged: tuple[str, ...] = field(default=())
     backend: BackendInfo | None = None
+    model_error_field: FieldEstimate | None = None
 
     @property
     def converged(self) -> bool:
@@ -508,6 +524,7 @@ class _Prepared:
     adequacy: ModelAdequacy
     lambda_range: tuple[float, float] | None
     frame_id: str
+    model_error_field: FieldEstimate | None = None
 
 
 def _field_sensitivities(prep: _Prepared, *, angular: bool = False) -> tuple[dict[str, Array], Array]:
@@ -581,11 +598,18 @@ def _gum(prep: _Prepared, coverage: float, *, angular: bool = False) -> GumResul
     if not smooth:
         return None
     fields, y0 = _field_sensitivities(prep, angular=angular)
-    inputs = {}
+    inputs: dict[str, Distribution] = {}
     columns = []
     for src in smooth:
-        inputs[src.name] = src.distribution
-        columns.extend(fields[name] for name, _ in src.segments)
+        block = np.hstack([fields[name] for name, _ in src.segments])
+        if isinstance(src.distribution, FieldNormal):
+            # The field's draws are F z with z standard normal: propagate z through S F, the
+            # same factor the Monte Carlo draws with, never the dense covariance of the draws.
+            inputs[src.name] = IndependentNormal(np.ones(src.distribution.size))
+            block = src.distribution.whitened_sensitivities(block)
+        elif src.distribution is not None:
+            inputs[src.name] = src.distribution
+        columns.append(block)
     sensitivities = np.hstack(columns)
 
     def estimate(x: Array) -> Array:
@@ -923,6 +947,22 @@ def _prepare(
     adequacy = assess_model_adequacy(
         calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
     )
+    field_estimate = None
+    field_draw = None
+    if "residual" in settings.sources and not adequacy.adequate and settings.model_error == "field":
+        noise = pose_noise_covariances(
+            calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances
+        )
+        # The shape of the residuals' own covariance: the model error dominates it, and unlike the
+        # moment estimate (clipped to be PSD) it has variance in every direction the data have.
+        field_estimate = estimate_field(calibration, campaign.joint_positions, noise, adequacy.residual_covariance)
+        if field_estimate.identified:
+            field_draw = FieldNormal(
+                campaign.joint_positions,
+                test_q,
+                field_estimate,
+                innovations=standardised_innovations(np.asarray(calibration.residuals, dtype=np.float64)),
+            )
     context = TrialContext(
         n_poses=n_poses,
         n_joints=model.n_joints,
@@ -937,6 +977,7 @@ def _prepare(
         rotation_std=np.asarray(measurement.rotation_std) if isinstance(measurement, PoseMeasurement) else None,
         test_effect_jacobian=test_effect_jacobian(calibration, test_q, settings),
         prismatic=model.prismatic if any(model.prismatic) else (),
+        model_error_field=field_draw,
     )
     trials = CalibrationTrials(
         problem=problem,
@@ -965,6 +1006,7 @@ def _prepare(
         adequacy=adequacy,
         lambda_range=lambda_range,
         frame_id=frame_id,
+        model_error_field=field_estimate,
     )
 
 
@@ -1235,6 +1277,7 @@ def _statement(prep: _Prepared, ev: EvaluationSettings, result: TrialsResult) ->
         rotation_samples=result.samples[:, dim * n_test + k :] if ev.orientation else None,
         not_converged=gum_disagreements(poses),
         backend=resolve_backend(ev.backend),
+        model_error_field=prep.model_error_field,
     )
 
 

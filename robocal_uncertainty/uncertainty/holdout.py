@@ -157,6 +157,10 @@ class FoldResult:
     n_trials: int
     trustworthy: bool = True
     trust_note: str = ""
+    model_error: str = "none"
+    """How the residual source drew the model error: ``"field"`` (correlated over the
+    configurations), ``"independent"`` (pose by pose: asked for, or the field not identified by
+    the training poses) or ``"none"`` (model adequate, or no ``residual`` source)."""
 
 
 @dataclass(frozen=True)
@@ -345,6 +349,14 @@ def _chunk_statistics(
     return held_points - mean, std, inside, region, rot
 
 
+def _model_error_kind(result: CalibrationUncertainty) -> str:
+    """``field``, ``independent`` or ``none``: what the residual source drew in `result`."""
+    if "residual" not in result.settings.sources or result.model_adequacy.adequate:
+        return "none"
+    me_field = result.model_error_field
+    return "field" if me_field is not None and me_field.identified else "independent"
+
+
 def _check_frame(calibration: IdentificationResult, held: Campaign, std: Array, coverage: float) -> FrameComparison:
     """Compare the validation campaign's frame with the calibration's; refuse a move.
 
@@ -526,6 +538,7 @@ def validate_holdout(
                 n_trials=result.n_trials,
                 trustworthy=adequacy.trustworthy,
                 trust_note=adequacy.trust_note,
+                model_error=_model_error_kind(result),
             )
         )
         if progress is not None:
