@@ -288,3 +288,22 @@ def test_a_csv_coordinate_no_tracker_measures_is_refused(tmp_path: Path, capsys:
     line = _error_line(capsys.readouterr().err)
     assert "line 6 (data row 5): column 'measurement_x': '1e300' is a coordinate of 1e+297 m" in line
     assert not (tmp_path / "big.mcap").exists()
+
+
+def test_a_map_whose_trials_diverge_is_refused_and_an_honest_one_is_not(
+    series: Campaign, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The map shares evaluate's trials: on the same diverging 10-pose subset its spread is checked
+    # against the first-order statement at configurations spread over the map, and refused.
+    poses = [24, 53, 59, 112, 113, 148, 366, 503, 505, 546]
+    write_campaign(tmp_path / "ten.mcap", series.subset(np.array(poses)))
+    argv = ["--robot", "ur10", "--configurations", "40", "--trials", "2000", "--no-progress"]
+    status = main(["map", str(tmp_path / "ten.mcap"), *argv, "--out", str(tmp_path / "ten_map")])
+    captured = capsys.readouterr()
+    assert status == 1
+    line = _error_line(captured.err)
+    assert "did not converge to a map: map configuration " in line
+    assert float(line.split("(ratio ")[1].split(",")[0]) > 1e6
+    # 120 poses of the same series: an honest map, within the factor everywhere it is checked.
+    write_campaign(tmp_path / "many.mcap", series.subset(np.arange(0, 600, 5)))
+    assert main(["map", str(tmp_path / "many.mcap"), *argv, "--out", str(tmp_path / "many_map")]) == 0

@@ -43,7 +43,7 @@ from robocal_uncertainty.core.kinematics import forward_points, forward_points_a
 from robocal_uncertainty.core.measurement import joint_columns
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.simulation import draw_joint_positions
-from robocal_uncertainty.errors import InputError
+from robocal_uncertainty.errors import ConvergenceError, InputError
 from robocal_uncertainty.uncertainty.calibration_mc import EvaluationSettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
@@ -453,6 +453,9 @@ def suggest_poses(
                 q_test,
                 EvaluationSettings(uncertainty=settings, lambda_=lambda_, trials=trials, seed=seed, frame=frame),
             )
+            if result.not_converged:  # diverged trials: no statement to rank by
+                msg = f"the Monte Carlo check did not converge to a statement: {result.not_converged[0]}"
+                raise ConvergenceError(msg)
             return _rms_u(np.array([pose.covariance for pose in result.poses]))
 
         mc_current = mc_u(campaign)

@@ -95,6 +95,7 @@ __all__ = [
     "OrientationUncertainty",
     "PoseUncertainty",
     "evaluate_uncertainty",
+    "first_order_standard_uncertainty",
     "prepare_calibration_trials",
 ]
 
@@ -617,6 +618,49 @@ def _gum(prep: _Prepared, coverage: float, *, angular: bool = False) -> GumResul
         return np.broadcast_to(y0, (x.shape[0], y0.size))
 
     return propagate_gum(estimate, inputs, coverage=coverage, sensitivities=sensitivities)
+
+
+def first_order_standard_uncertainty(
+    model: RobotModel,
+    campaign: Campaign,
+    test_q: Array,
+    settings: UncertaintySettings,
+    calibration: IdentificationResult,
+    frame: str = "measurement",
+) -> Array | None:
+    """GUM (first-order) standard uncertainty of the tool position at `test_q`, as `evaluate` states it.
+
+    The same propagation as the ``gum`` part of :func:`evaluate_uncertainty`'s statement, for
+    callers that run their own trials (the workspace map) and check them against it.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+        Calibration data (joint readings [rad], points [m]).
+    test_q : ndarray, shape (n, n_joints) [rad]
+        Configurations.
+    settings : UncertaintySettings
+        Sources and their models.
+    calibration : IdentificationResult
+        The calibration of `campaign`.
+    frame : {"measurement", "base"}
+        Output frame.
+
+    Returns
+    -------
+    ndarray, shape (n, 3) [m], or None
+        Per configuration and axis; None when no source is smooth (nothing to propagate).
+    """
+    prep = _prepare(
+        model, campaign, np.atleast_2d(np.asarray(test_q, dtype=np.float64)), settings, calibration, "auto", frame
+    )
+    gum = _gum(prep, 0.95)
+    if gum is None:
+        return None
+    variance = np.clip(np.diag(np.asarray(gum.covariance)), 0.0, None)
+    return np.asarray(np.sqrt(variance).reshape(-1, _N_AXES), dtype=np.float64)
 
 
 def _regularisation_bias(prep: _Prepared) -> Array:

@@ -32,12 +32,14 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 __all__ = [
     "GUM_DISAGREEMENT_FACTOR",
     "gum_disagreements",
     "interval_trial_floor",
     "recommended_trials",
+    "spread_disagreements",
     "too_few_trials_note",
 ]
 
@@ -70,6 +72,54 @@ def too_few_trials_note(n_trials: int, coverage: float) -> str | None:
     )
 
 
+def spread_disagreements(
+    mc_std: NDArray[np.float64],
+    gum_std: NDArray[np.float64],
+    labels: Sequence[str],
+    *,
+    factor: float = GUM_DISAGREEMENT_FACTOR,
+) -> tuple[str, ...]:
+    """Where a Monte Carlo standard uncertainty and the first-order one differ by more than `factor`.
+
+    Parameters
+    ----------
+    mc_std : ndarray, shape (n, 3) [m]
+        Monte Carlo standard uncertainties along x, y, z.
+    gum_std : ndarray, shape (n, 3) [m]
+        First-order (GUM) standard uncertainties of the same outputs; an entry that is not
+        finite and positive has nothing to compare with and is skipped.
+    labels : sequence of str, length n
+        How each row is named in the message (e.g. ``test configuration 1``).
+    factor : float
+        Largest accepted ratio either way.
+
+    Returns
+    -------
+    tuple of str
+        One line per row with a disagreement or a non-finite Monte Carlo value.
+    """
+    problems = []
+    for label, mc, gum in zip(labels, np.asarray(mc_std, dtype=np.float64), np.asarray(gum_std, dtype=np.float64)):
+        if not np.isfinite(mc).all():
+            problems.append(f"{label}: the Monte Carlo gave non-finite values")
+            continue
+        worst = None
+        for j in range(len(_AXES)):
+            if not (np.isfinite(gum[j]) and gum[j] > 0.0):
+                continue  # no first-order value to compare with (no smooth source)
+            ratio = mc[j] / gum[j]
+            off = max(ratio, 1.0 / ratio) if ratio > 0.0 else math.inf
+            if off > factor and (worst is None or off > worst[0]):
+                worst = (off, j, ratio)
+        if worst is not None:
+            _, j, ratio = worst
+            problems.append(
+                f"{label}: Monte Carlo u = {mc[j] * 1e3:.4g} mm against its first-order (GUM) "
+                f"u = {gum[j] * 1e3:.4g} mm along {_AXES[j]} (ratio {ratio:.3g}, more than {factor:g} either way)"
+            )
+    return tuple(problems)
+
+
 def gum_disagreements(poses: Sequence[Any], *, factor: float = GUM_DISAGREEMENT_FACTOR) -> tuple[str, ...]:
     """Where the Monte Carlo position u and the run's GUM u differ by more than `factor`.
 
@@ -86,26 +136,12 @@ def gum_disagreements(poses: Sequence[Any], *, factor: float = GUM_DISAGREEMENT_
         One line per test configuration with a disagreement (or a non-finite Monte Carlo
         value); empty when every axis agrees or has no GUM value to compare with.
     """
-    problems = []
+    mc = np.empty((len(poses), len(_AXES)))
+    gum = np.empty((len(poses), len(_AXES)))
     for i, pose in enumerate(poses):
-        mc = np.array([a.standard_uncertainty for a in pose.axes], dtype=np.float64)
-        mean = np.asarray(pose.mean, dtype=np.float64)
-        if not (np.isfinite(mc).all() and np.isfinite(mean).all()):
-            problems.append(f"test configuration {i + 1}: the Monte Carlo gave non-finite values")
-            continue
-        gum = np.asarray(pose.gum.standard_uncertainty, dtype=np.float64)
-        worst = None
-        for j in range(len(_AXES)):
-            if not (np.isfinite(gum[j]) and gum[j] > 0.0):
-                continue  # no first-order value to compare with (no smooth source)
-            ratio = mc[j] / gum[j]
-            off = max(ratio, 1.0 / ratio) if ratio > 0.0 else math.inf
-            if off > factor and (worst is None or off > worst[0]):
-                worst = (off, j, ratio)
-        if worst is not None:
-            _, j, ratio = worst
-            problems.append(
-                f"test configuration {i + 1}: Monte Carlo u = {mc[j] * 1e3:.4g} mm against its first-order (GUM) "
-                f"u = {gum[j] * 1e3:.4g} mm along {_AXES[j]} (ratio {ratio:.3g}, more than {factor:g} either way)"
-            )
-    return tuple(problems)
+        mc[i] = [a.standard_uncertainty for a in pose.axes]
+        if not np.isfinite(np.asarray(pose.mean, dtype=np.float64)).all():
+            mc[i] = np.nan  # a non-finite mean is no statement either
+        gum[i] = np.asarray(pose.gum.standard_uncertainty, dtype=np.float64)
+    labels = [f"test configuration {i + 1}" for i in range(len(poses))]
+    return spread_disagreements(mc, gum, labels, factor=factor)

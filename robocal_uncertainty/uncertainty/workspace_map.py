@@ -26,14 +26,19 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.joint_limits import check_joint_limits
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.errors import ConfigError, InputError
+from robocal_uncertainty.errors import ConfigError, ConvergenceError, InputError
 from robocal_uncertainty.kernels import BackendInfo, resolve_backend
 from robocal_uncertainty.montecarlo.engine import ProgressCallback, reduce_trials
 from robocal_uncertainty.montecarlo.region import coverage_region
 from robocal_uncertainty.montecarlo.streaming import Reduction
-from robocal_uncertainty.uncertainty.calibration_mc import OUTPUT_FRAMES, prepare_calibration_trials
+from robocal_uncertainty.uncertainty.calibration_mc import (
+    OUTPUT_FRAMES,
+    first_order_standard_uncertainty,
+    prepare_calibration_trials,
+)
 from robocal_uncertainty.uncertainty.memory import check_fits, grid_bytes, grid_size, map_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+from robocal_uncertainty.uncertainty.statement_check import GUM_DISAGREEMENT_FACTOR, spread_disagreements
 
 __all__ = [
     "DEFAULT_MAP_BLOCK_SIZE",
@@ -48,6 +53,11 @@ Array = NDArray[np.float64]
 
 POSITION_DIM = 3
 """Columns per configuration in a trial row: the tool position x, y, z [m]."""
+
+GUM_CHECKED_CONFIGURATIONS = 16
+"""Map configurations, spread evenly over the map, whose Monte Carlo spread is checked against
+the first-order (GUM) statement as `evaluate` checks every test configuration: the trials are
+shared by all configurations, so trials that diverged show at any of them."""
 
 DEFAULT_MAP_BLOCK_SIZE = 1_000
 """Trials per block of a map: a block holds n_trials x 3 n_configurations values on a
@@ -246,6 +256,31 @@ def _nearest_distance(points: Array, references: Array) -> Array:
     return out
 
 
+def _check_against_gum(
+    model: RobotModel,
+    campaign: Campaign,
+    q: Array,
+    std: Array,
+    settings: UncertaintySettings,
+    calibration: IdentificationResult,
+    frame: str,
+) -> None:
+    """Refuse a map whose trials did not re-identify the calibration (see :mod:`.statement_check`)."""
+    picked = np.unique(np.linspace(0, q.shape[0] - 1, min(GUM_CHECKED_CONFIGURATIONS, q.shape[0])).round().astype(int))
+    gum_std = first_order_standard_uncertainty(model, campaign, q[picked], settings, calibration, frame)
+    if gum_std is None:
+        return
+    problems = spread_disagreements(std[picked], gum_std, [f"map configuration {int(i)}" for i in picked])
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        msg = (
+            f"the Monte Carlo did not converge to a map: {problems[0]}{more}; its trials do not re-identify the "
+            f"calibration's solution (honest runs stay within a factor {GUM_DISAGREEMENT_FACTOR:g}; causes: a unit "
+            "slip, a wrong robot model, or too few poses for the model error)"
+        )
+        raise ConvergenceError(msg)
+
+
 def map_workspace(
     model: RobotModel,
     campaign: Campaign,
@@ -323,6 +358,10 @@ def map_workspace(
         Bad configurations, settings, frame or region indices.
     InputError
         Configurations outside the joint limits or not finite.
+    ConvergenceError
+        The trials' spread disagrees with the first-order (GUM) statement by more than
+        :data:`~.statement_check.GUM_DISAGREEMENT_FACTOR` at a checked configuration
+        (:data:`GUM_CHECKED_CONFIGURATIONS`): they did not re-identify the calibration.
     """
     settings = settings or UncertaintySettings()
     if frame not in OUTPUT_FRAMES:
@@ -376,6 +415,7 @@ def map_workspace(
     mean = run.moments.mean[: POSITION_DIM * n].reshape(n, POSITION_DIM)
     covariance = run.moments.group_covariance
     std = np.sqrt(np.einsum("nii->ni", covariance))
+    _check_against_gum(model, campaign, q, std, settings, calibration, frame)
     warns: list[str] = list(calibration.warnings)
     semi = np.full((n, POSITION_DIM), np.nan)
     for slot, i in enumerate(kept_configs):
