@@ -600,6 +600,16 @@ class UncertaintyNode(Node):
         result = evaluation.uncertainty
         for warning in evaluation.input_warnings:
             self._causes.warning("input_warning", warning)
+        if result.not_converged:
+            # As on the command line: trials that did not re-identify the calibration are no
+            # statement, so nothing is published (the last good statement stays latched).
+            error = (
+                f"the Monte Carlo of the {n}-sample calibration did not converge to a statement: "
+                f"{result.not_converged[0]}; nothing published"
+            )
+            self._causes.warning("evaluation_failed", error)
+            self._status({"state": "failed", "sample_count": n, "error": error})
+            return
         self._check_same_calibration(result, job.calibration)
         self._publish(result, job.calibration)
         campaign = pipeline.campaign

@@ -273,3 +273,57 @@ def test_sample_to_result_on_sim_time_and_none_on_another_clock(ros_context, tmp
     assert on_sim["sample_to_result_s"] == 0.25
     on_wall = _status_after_evaluation(ros_context, tmp_path, samples, calibration, sim_now_ns=None)
     assert on_wall["sample_to_result_s"] is None
+
+
+def test_a_result_that_is_no_statement_is_not_published(ros_context, tmp_path, model, replay, monkeypatch) -> None:
+    # The command line refuses a run whose spread disagrees with its own GUM statement; the
+    # node must not publish it either. The app's evaluate is wrapped to mark its (honest)
+    # result as such, so the node's handling is tested, not the guard (tested offline).
+    import dataclasses
+    import json
+
+    from std_msgs.msg import String
+
+    from robocal_uncertainty.nodes import uncertainty_node
+
+    real = uncertainty_node.evaluate
+    problem = "test configuration 1: Monte Carlo u = 1e+11 mm against its first-order (GUM) u = 1 mm along x"
+
+    def not_converged(*args, **kwargs):
+        evaluation = real(*args, **kwargs)
+        marked = dataclasses.replace(evaluation.uncertainty, not_converged=(problem,))
+        return dataclasses.replace(evaluation, uncertainty=marked)
+
+    monkeypatch.setattr(uncertainty_node, "evaluate", not_converged)
+    node = _node(
+        UncertaintyNode,
+        ros_context,
+        node_name="uncertainty_no_statement",
+        campaign_path=str(tmp_path / "none.mcap"),
+        test_joints_deg=TEST_JOINTS_DEG,
+        trials=TRIALS,
+        seed=SEED,
+    )
+    peer = rclpy.create_node("listener_no_statement", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(peer)
+    got: list[PoseUncertaintyMsg] = []
+    status: list[dict] = []
+    peer.create_subscription(PoseUncertaintyMsg, "robocal/uncertainty", got.append, latched_qos(2))
+    peer.create_subscription(String, "robocal/uncertainty_status", lambda m: status.append(json.loads(m.data)), 10)
+    try:
+        for msg in _sample_msgs(replay):
+            node._on_sample(msg)
+        node._on_calibration(
+            to_ros(calibration_to_msg(identify(model, replay.campaign), stamp_ns=1), CalibrationResultMsg)
+        )
+        assert spin_until(executor, lambda: bool(status) and status[-1]["state"] in ("failed", "done"), timeout_s=120.0)
+        assert status[-1]["state"] == "failed"
+        assert "did not converge to a statement" in status[-1]["error"] and "nothing published" in status[-1]["error"]
+        executor.spin_once(timeout_sec=0.5)
+        assert got == []
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
