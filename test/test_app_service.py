@@ -117,3 +117,10 @@ def test_service_refuses_missing_test_joints_and_bad_trials(replayed) -> None:
         evaluate(model, result.replay.campaign, EvaluationOptions())
     with pytest.raises(ConfigError, match="budget_trials must be a positive integer"):
         EvaluationOptions(budget_trials=0)
+    # The one entry the nodes and compensate share refuses what the command line refuses:
+    # below 2/(1-p) trials (40 at 95 %, 20 at 90 %) no trial lies beyond the interval's ends.
+    joints = np.zeros((1, model.n_joints))
+    for trials, coverage, floor in ((11, 0.95, 40), (39, 0.95, 40), (19, 0.90, 20)):
+        options = EvaluationOptions(test_joints=joints, trials=trials, coverage=coverage)
+        with pytest.raises(ConfigError, match=rf"trials {trials} cannot state .* 2/\(1-p\) = {floor} trials"):
+            evaluate(model, result.replay.campaign, options)

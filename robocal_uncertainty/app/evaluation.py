@@ -26,6 +26,7 @@ from robocal_uncertainty.uncertainty.budget import evaluate_budget
 from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.memory import check_fits, evaluation_bytes
 from robocal_uncertainty.uncertainty.options import EvaluationOptions, Progress, evaluate_campaign
+from robocal_uncertainty.uncertainty.statement_check import interval_trial_floor, recommended_trials
 from robocal_uncertainty.uncertainty.sweeps import Sweep, evaluate_sweeps
 
 __all__ = ["Evaluation", "PhaseProgress", "evaluate", "small_campaign_options"]
@@ -166,13 +167,25 @@ def evaluate(
     Raises
     ------
     ConfigError
-        No test joints, or invalid options.
+        No test joints, invalid options, or a fixed trial count below 2/(1-p) for the
+        coverage probability asked (no trial beyond the interval's ends).
     IdentifiabilityError, ConvergenceError
         The campaign cannot identify the model (see
         :func:`~robocal_uncertainty.core.identification.identify`).
     """
     if options.test_joints is None:
         raise ConfigError("no test joint configurations given for the uncertainty evaluation")
+    if options.trials != "auto" and int(options.trials) < interval_trial_floor(options.coverage):
+        # Below 2/(1-p) not one trial lies beyond either end of the interval: no statement
+        # (the command line says the same of --trials before this; the nodes and compensate
+        # meet it here).
+        floor = interval_trial_floor(options.coverage)
+        msg = (
+            f"trials {int(options.trials)} cannot state a {options.coverage * 100:g} % coverage interval: below "
+            f"2/(1-p) = {floor} trials not one trial lies beyond either end (JCGM 101 7.2); use "
+            f"{recommended_trials(options.coverage)} or more, or the adaptive procedure"
+        )
+        raise ConfigError(msg)
     if calibration is None:
         calibration = identify(model, campaign, lambda_=options.lambda_, accept_unconverged=options.accept_unconverged)
     options, notes = small_campaign_options(campaign, calibration, options)

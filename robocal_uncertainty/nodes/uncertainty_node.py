@@ -533,6 +533,7 @@ class UncertaintyNode(Node):
             options = self._options(msg, measures_orientation=bool(samples) and samples[0].orientation is not None)
         except CalibError as err:
             self.get_logger().error(f"invalid Monte Carlo settings: {err}")
+            self._status({"state": "failed", "error": f"invalid Monte Carlo settings: {err}"})
             return
         with self._wake:
             self._generation += 1

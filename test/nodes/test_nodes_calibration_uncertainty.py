@@ -327,3 +327,42 @@ def test_a_result_that_is_no_statement_is_not_published(ros_context, tmp_path, m
         executor.shutdown()
         peer.destroy_node()
         node.destroy_node()
+
+
+def test_too_few_trials_for_the_interval_are_refused(ros_context, tmp_path, model, replay) -> None:
+    # 11 trials cannot state a 95 % interval (below 2/(1-p) = 40): refused with the reason in
+    # the status, nothing evaluated or published, as the command line refuses --trials 11.
+    import json
+
+    from std_msgs.msg import String
+
+    node = _node(
+        UncertaintyNode,
+        ros_context,
+        node_name="uncertainty_eleven_trials",
+        campaign_path=str(tmp_path / "none.mcap"),
+        test_joints_deg=TEST_JOINTS_DEG,
+        trials=11,
+    )
+    peer = rclpy.create_node("listener_eleven_trials", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(peer)
+    status: list[dict] = []
+    got: list[PoseUncertaintyMsg] = []
+    peer.create_subscription(String, "robocal/uncertainty_status", lambda m: status.append(json.loads(m.data)), 10)
+    peer.create_subscription(PoseUncertaintyMsg, "robocal/uncertainty", got.append, latched_qos(2))
+    try:
+        for msg in _sample_msgs(replay):
+            node._on_sample(msg)
+        node._on_calibration(
+            to_ros(calibration_to_msg(identify(model, replay.campaign), stamp_ns=1), CalibrationResultMsg)
+        )
+        assert spin_until(executor, lambda: any(s["state"] == "failed" for s in status), timeout_s=30.0)
+        error = next(s for s in status if s["state"] == "failed")["error"]
+        assert "trials 11 cannot state a 95 % coverage interval" in error and "40" in error
+        assert got == []
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
