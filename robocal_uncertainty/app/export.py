@@ -29,6 +29,7 @@ import yaml
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.calibration_file import apply_calibration
+from robocal_uncertainty.core.inverse_kinematics import UR_JOINT_NAMES
 from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.urdf_model import (
@@ -61,14 +62,6 @@ Array = NDArray[np.float64]
 EXPORT_FORMATS = ("urdf", "ur-kinematics", "yaml")
 SIDECAR_FORMAT = "robocal_uncertainty/export-uncertainty/1"
 UR_KINEMATICS_KEYS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
-_UR_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
 
 
 @dataclass(frozen=True)
@@ -449,9 +442,9 @@ def _robot_yaml(model: RobotModel, comment: str) -> str:
 
 def _ur_kinematics(chain: UrdfChain, origins: dict[str, tuple[Array, Array]], comment: str) -> str:
     movable = chain.movable
-    if len(movable) != 6 or not all(j.name.endswith(ur) for j, ur in zip(movable, _UR_JOINTS)):
+    if len(movable) != 6 or not all(j.name.endswith(ur) for j, ur in zip(movable, UR_JOINT_NAMES)):
         msg = (
-            f"--format ur-kinematics needs a Universal Robots chain ({', '.join(_UR_JOINTS)}), "
+            f"--format ur-kinematics needs a Universal Robots chain ({', '.join(UR_JOINT_NAMES)}), "
             f"got {[j.name for j in movable]}"
         )
         raise ConfigError(msg)
