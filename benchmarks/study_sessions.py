@@ -49,10 +49,10 @@ from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, ValidatedLevel, verify_session
 from robocal_uncertainty.importers import read_tracker_csv
 
-DATA = Path("/work/shared/data/ur10_laser_tracker")
 SERIES = {
-    "D": "measurements_iso_cubes.csv",
-    "B": "series_b/measurements_joint_configurations.csv",
+    # Series D ships with the repository; Series B lies in shared/ beside it.
+    "D": ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv",
+    "B": ROOT.parent / "shared" / "data" / "ur10_laser_tracker" / "series_b" / "measurements_joint_configurations.csv",
 }
 SIZES = (10, 20, 50, 200)
 N_CAL = 53
@@ -144,7 +144,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     model = load_robot_model(ROOT / "robocal_uncertainty" / "data" / "ur10.yaml")
-    series = {name: read_tracker_csv(DATA / path) for name, path in SERIES.items()}
+    series = {name: read_tracker_csv(path) for name, path in SERIES.items()}
     if args.write_example:
         write_example(series, Path(args.write_example), args.seed)
         return

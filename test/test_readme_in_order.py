@@ -11,8 +11,11 @@ test; nothing else of the command lines is changed.
 
 from __future__ import annotations
 
+import os
 import re
 import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -22,6 +25,9 @@ from robocal_uncertainty.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 PROGRAM = "robocal-uncertainty"
+SCRIPT = "python3 benchmarks/"
+"""A README line that runs one of the repository's scripts (e.g. to write an example's inputs)."""
+SERIES_B = ROOT.parent / "shared" / "data" / "ur10_laser_tracker" / "series_b"
 _TRIALS = 2000
 _MONTE_CARLO = ("demo", "evaluate", "validate", "replay", "map", "suggest")
 
@@ -41,6 +47,8 @@ def readme_commands(text: str) -> list[tuple[list[str], str | None]]:
                 part = piece.split(" #")[0].strip()
                 if part.startswith(PROGRAM + " "):
                     commands.append((shlex.split(part)[1:], None))
+                elif part.startswith(SCRIPT):
+                    commands.append((shlex.split(part), None))
     return commands
 
 
@@ -77,9 +85,17 @@ def test_readme_examples_run_in_one_folder_in_order(
     (tmp_path / "test").mkdir()
     (tmp_path / "test" / "data").symlink_to(ROOT / "test" / "data")
     (tmp_path / "robocal_uncertainty").symlink_to(ROOT / "robocal_uncertainty")
+    (tmp_path / "benchmarks").symlink_to(ROOT / "benchmarks")
+    if not SERIES_B.is_dir():
+        pytest.skip(f"the README's real-session example reads Series B from {SERIES_B} (shared/ beside the repository)")
     monkeypatch.chdir(tmp_path)
     outputs = {}
     for argv, expected_error in readme_commands(README.read_text(encoding="utf-8")):
+        if argv[0] == "python3":  # a repository script, run as the README says, in this folder
+            env = {**os.environ, "PYTHONPATH": str(ROOT)}
+            done = subprocess.run([sys.executable, *argv[1:]], capture_output=True, text=True, env=env, check=False)
+            assert done.returncode == 0, f"README command: {' '.join(argv)}\n{done.stderr[-2000:]}"
+            continue
         status = main(reduced(argv))
         captured = capsys.readouterr()
         where = f"README command: {PROGRAM} {' '.join(argv)}\n{captured.err[-2000:]}"
