@@ -51,10 +51,12 @@ from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.model_adequacy import MIN_RESIDUAL_DOF_PER_COMPONENT
 
 __all__ = [
+    "FIELD_LENGTH_BOUNDS",
     "FIELD_MAX_EQUATIONS",
     "JOINT_TEST_MAX",
     "FieldEstimate",
     "FieldNormal",
+    "central_hessian",
     "estimate_field",
     "standardised_innovations",
 ]
@@ -67,7 +69,9 @@ factorisation of this size per evaluation."""
 JOINT_TEST_MAX = 1024
 """Test configurations up to which their model errors are drawn jointly (their correlation kept);
 beyond, each conditionally on the calibration poses alone (exact per-configuration marginals)."""
-_LENGTH_BOUNDS = (0.02, 20.0)
+FIELD_LENGTH_BOUNDS = (0.02, 20.0)
+"""Range [rad] of the field's correlation length searched by the likelihood (shared with the
+session field of :mod:`.sessions`)."""
 _JITTER = 1e-10
 
 
@@ -143,7 +147,7 @@ class FieldEstimate:
         }
 
 
-def _hessian(fun: Callable[[Array], float], x0: Array, free: list[int], step: float = 1e-3) -> Array:
+def central_hessian(fun: Callable[[Array], float], x0: Array, free: list[int], step: float = 1e-3) -> Array:
     """Central-difference Hessian of `fun` at `x0` over the coordinates `free`."""
     hess = np.empty((len(free), len(free)))
     for a, i in enumerate(free):
@@ -250,7 +254,7 @@ def estimate_field(
     s0 = max(mean_square - noise_level, 1e-3 * max(noise_level, 1e-30))
     floor = max(noise_level, 1e-30)
     lo_s, hi_s = np.log(1e-6 * floor), np.log(1e4 * max(mean_square, floor))
-    lo_l, hi_l = np.log(_LENGTH_BOUNDS[0]), np.log(_LENGTH_BOUNDS[1])
+    lo_l, hi_l = np.log(FIELD_LENGTH_BOUNDS[0]), np.log(FIELD_LENGTH_BOUNDS[1])
     independent = optimize.minimize_scalar(lambda a: nll(a, 0.0, 0.0), bounds=(lo_s, hi_s), method="bounded")
     best = (float(independent.fun), float(independent.x), 0.0, float(np.log(0.5)))
     for length in (0.1, 0.5, 2.0):
@@ -264,7 +268,7 @@ def estimate_field(
             best = (float(res.fun), float(res.x[0]), float(res.x[1]), float(res.x[2]))
     fun, log_s, c, log_l = best
     free = [0] if c <= 1e-6 else ([0, 1, 2] if c < 1.0 - 1e-6 else [0, 2])
-    hess = _hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
+    hess = central_hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
     try:
         var_log_s = float(np.linalg.inv(hess)[0, 0])
     except np.linalg.LinAlgError:

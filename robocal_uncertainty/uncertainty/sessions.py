@@ -17,7 +17,6 @@ with the independent model error, 96.1 % of 1 600 with the field).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +38,7 @@ from robocal_uncertainty.core.session import (
 )
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy, pose_noise_covariances
+from robocal_uncertainty.uncertainty.model_error_draws import FIELD_LENGTH_BOUNDS, central_hessian
 
 __all__ = [
     "FIELD_MAX_POSES",
@@ -354,22 +354,6 @@ def cross_validated_model_error(
 
 FIELD_MAX_POSES = 200
 """Most poses the field's hyperparameters are estimated from (a seeded subset of larger campaigns)."""
-_FIELD_LENGTH_BOUNDS = (0.02, 20.0)
-
-
-def _hessian(fun: Callable[[Array], float], x0: Array, free: list[int], step: float = 1e-3) -> Array:
-    """Central-difference Hessian of `fun` at `x0` over the coordinates `free`."""
-    hess = np.empty((len(free), len(free)))
-    for a, i in enumerate(free):
-        for b, j in enumerate(free):
-            values = []
-            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                x = x0.copy()
-                x[i] += si * step
-                x[j] += sj * step
-                values.append(fun(x))
-            hess[a, b] = (values[0] - values[1] - values[2] + values[3]) / (4 * step * step)
-    return hess
 
 
 def _fit_space(calibration: IdentificationResult, q: Array) -> Array:
@@ -468,7 +452,7 @@ def estimate_model_error_field(
 
     s0 = max(mean_square - noise_level, 1e-3 * noise_level)
     lo_s, hi_s = np.log(1e-6 * noise_level), np.log(1e4 * max(mean_square, noise_level))
-    lo_l, hi_l = np.log(_FIELD_LENGTH_BOUNDS[0]), np.log(_FIELD_LENGTH_BOUNDS[1])
+    lo_l, hi_l = np.log(FIELD_LENGTH_BOUNDS[0]), np.log(FIELD_LENGTH_BOUNDS[1])
     independent = optimize.minimize_scalar(lambda a: nll(a, 0.0, 0.0), bounds=(lo_s, hi_s), method="bounded")
     best = (float(independent.fun), float(independent.x), 0.0, float(np.log(0.5)))
     for length in (0.1, 0.5, 2.0):
@@ -484,7 +468,7 @@ def estimate_model_error_field(
     # Degrees of freedom of s: 2 / var(log s), var from the curvature of the likelihood in the
     # free hyperparameters (log s, and c and log l where c is inside (0, 1)).
     free = [0] if c <= 1e-6 else ([0, 1, 2] if c < 1.0 - 1e-6 else [0, 2])
-    hess = _hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
+    hess = central_hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
     hyper = np.zeros((3, 3))
     try:
         inv = np.linalg.inv(hess)
