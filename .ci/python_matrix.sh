@@ -37,8 +37,16 @@ print(f"Python {platform.python_version()}, numpy {numpy.__version__}, scipy {sc
     echo "python-matrix: $name: passed; install $((installed - start)) s, tests $((SECONDS - installed)) s"
 }
 
-# ROS 2 Humble (Ubuntu 22.04): Python 3.10. pin's wheels need numpy >= 1.26: no pinocchio extra.
-# fast: the numba the distro ships (pinned in the constraints), for the backend equality tests.
-combination humble "${HUMBLE_PYTHON:-$pyenv_root/versions/3.10.13/bin/python}" .ci/constraints-humble.txt test,fast
-# ROS 2 Jazzy (Ubuntu 24.04): Python 3.12.
-combination jazzy "${JAZZY_PYTHON:-$pyenv_root/versions/3.12.1/bin/python}" .ci/constraints-jazzy.txt test,pinocchio,fast
+# Usage: python_matrix.sh [humble|jazzy ...] (default: both, one after the other).
+combinations=("$@")
+if [[ ${#combinations[@]} -eq 0 ]]; then combinations=(humble jazzy); fi
+for name in "${combinations[@]}"; do
+    case "$name" in
+    # ROS 2 Humble (Ubuntu 22.04): Python 3.10. pin's wheels need numpy >= 1.26: no pinocchio extra.
+    # fast: the numba the distro ships (pinned in the constraints), for the backend equality tests.
+    humble) combination humble "${HUMBLE_PYTHON:-$pyenv_root/versions/3.10.13/bin/python}" .ci/constraints-humble.txt test,fast ;;
+    # ROS 2 Jazzy (Ubuntu 24.04): Python 3.12.
+    jazzy) combination jazzy "${JAZZY_PYTHON:-$pyenv_root/versions/3.12.1/bin/python}" .ci/constraints-jazzy.txt test,pinocchio,fast ;;
+    *) echo "python-matrix: unknown combination '$name' (humble, jazzy)" >&2; exit 2 ;;
+    esac
+done
