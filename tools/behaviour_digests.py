@@ -171,10 +171,14 @@ def _scrub(value: Any) -> Any:
     return value
 
 
-def _digest(path: Path) -> str:
+def _digest(path: Path, workdir: Path) -> str:
     data = path.read_bytes()
     if path.suffix == ".json":
         data = json.dumps(_scrub(json.loads(data)), sort_keys=True).encode()
+    # Reports name their inputs by path: the checkout's and the scratch folder's location are
+    # circumstances of the run, so both become placeholders (a digest is then the same in any
+    # worktree).
+    data = data.replace(str(REPO).encode(), b"<repo>").replace(str(workdir).encode(), b"<work>")
     return hashlib.sha256(data).hexdigest()
 
 
@@ -201,7 +205,7 @@ def run_all(workdir: Path, only: set[str] | None = None) -> dict[str, str]:
             print(proc.stderr[-2000:], file=sys.stderr)
     for path in sorted(workdir.rglob("*")):
         if path.is_file() and path.suffix not in {".png", ".html", ".svg"}:
-            digests[str(path.relative_to(workdir))] = _digest(path)
+            digests[str(path.relative_to(workdir))] = _digest(path, workdir)
     return digests
 
 
