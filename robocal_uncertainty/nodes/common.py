@@ -29,8 +29,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from visualization_msgs.msg import Marker, MarkerArray
 
-from robocal_uncertainty.core import load_robot_model
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats import load_robot_source
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus as Status
@@ -61,13 +61,9 @@ def robot_config_path(name: str) -> Path:
 
 
 def load_model(robot_config: str, *, base_unknown: bool = False) -> RobotModel:
-    """Load the robot model; `base_unknown` forces identification of the base transform."""
-    model = load_robot_model(robot_config_path(robot_config))
-    if base_unknown:
-        from dataclasses import replace
-
-        model = replace(model, base_known=False)
-    return model
+    """Load the robot model (a robot YAML, a shipped model name or a URDF file, read by the
+    package's one robot loader); `base_unknown` forces identification of the base transform."""
+    return load_robot_source(robot_config, base_known=False if base_unknown else None).model
 
 
 def campaign_file(text: str) -> Path:
