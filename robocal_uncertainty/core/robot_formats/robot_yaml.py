@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from robocal_uncertainty.core.robot_formats.registry import robot_format_named
 from robocal_uncertainty.core.robot_formats.source import ExportRequest, ReadRequest, RobotSource, Written
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
@@ -254,10 +255,6 @@ def resolve_robot_config(name: str) -> Path:
     raise ConfigError(msg)
 
 
-COMPANION_URDF_SUFFIX = ".urdf"
-"""A URDF beside a robot YAML (same name, this suffix) is the structure an export corrects."""
-
-
 def read_robot(name: str, request: ReadRequest) -> RobotSource:
     """A robot YAML or a shipped model name as a :class:`RobotSource` (the reader of this format).
 
@@ -275,7 +272,8 @@ def read_robot(name: str, request: ReadRequest) -> RobotSource:
             raise
         msg = f"robot config {path}: {err}"  # every message names the file it is about
         raise ConfigError(msg) from err
-    companion = path.with_suffix(COMPANION_URDF_SUFFIX)
+    # A URDF beside the YAML (same name) is the structure an export corrects.
+    companion = path.with_suffix(robot_format_named("urdf").suffixes[0])
     structure = Path(request.urdf) if request.urdf is not None else companion if companion.is_file() else None
     return RobotSource(
         model=model, urdf=None, base_link=request.base_link, tip_link=request.tip_link, structure_file=structure
