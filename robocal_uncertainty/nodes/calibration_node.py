@@ -40,15 +40,15 @@ node's callbacks while it runs (about a second with the default 20 000 null draw
 
 from __future__ import annotations
 
-import os
+from robocal_uncertainty._threads import limit_threads
 
-# Same BLAS policy as the command line (see robocal_uncertainty/cli.py), so the
-# identification gives the command line's numbers. Must precede the numpy import.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+# The command line's thread policy, so the node computes the command line's numbers; before
+# numpy loads its BLAS.
+limit_threads()
 
 import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
