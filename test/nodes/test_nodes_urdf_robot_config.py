@@ -1,6 +1,6 @@
 """Calibration node with a URDF file in ``robot_config``: read by the one robot loader with the
 same ``base_link``/``tip_link``/``tool_point_m`` parameters as a ``robot_description``, and the
-same model as from that parameter."""
+same model as from that parameter; the nodes without those parameters refuse a URDF."""
 
 from __future__ import annotations
 
@@ -16,8 +16,9 @@ from rclpy.parameter import Parameter
 
 from robocal_uncertainty.core import load_robot_model
 from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.nodes.calibration_node import CalibrationNode
-from robocal_uncertainty.nodes.common import robot_config_path
+from robocal_uncertainty.nodes.common import load_model, robot_config_path
 
 UR10_URDF = Path(__file__).resolve().parents[2] / "robocal_uncertainty" / "data" / "ur10.urdf"
 
@@ -43,3 +44,11 @@ def test_a_urdf_file_in_robot_config(ros_context, tmp_path) -> None:
     finally:
         for node in (from_file, from_text, unknown):
             node.destroy_node()
+
+
+def test_the_nodes_without_chain_parameters_refuse_a_urdf() -> None:
+    """The collector and uncertainty nodes have no base_link/tip_link: a URDF read with default
+    chain ends could be another chain than the calibration node's, so it is refused."""
+    with pytest.raises(ConfigError, match="is a URDF, which this node does not read"):
+        load_model(str(UR10_URDF))
+    assert load_model("ur10", base_unknown=True).base_known is False
