@@ -3,7 +3,7 @@
 Each subpackage imports only its own layer's peers and the layers below it, and the
 subpackages form no import cycle. Bottom to top::
 
-    errors, _lazy
+    errors, _lazy, _threads
     core, montecarlo, kernels
     uncertainty, inspection
     bagio, importers
@@ -37,6 +37,7 @@ PACKAGE_DIR = Path(robocal_uncertainty.__file__).resolve().parent
 RANK = {
     "errors": 0,
     "_lazy": 0,
+    "_threads": 0,  # the thread policy, set before numpy loads
     "msg": 0,  # interfaces rosidl generates in a colcon build
     "srv": 0,
     "core": 1,

@@ -13,37 +13,32 @@ Beside every export, :attr:`Export.sidecar` states the uncertainty that travels 
 parameters with their standard uncertainties, which of them the data determined, their
 covariance where the calibration file holds one, the tracker placement (not part of a URDF)
 and the calibrated measured point in the tip link frame.
+
+The writers live beside their readers in :mod:`robocal_uncertainty.core.robot_formats` (one
+module per format); this module adds what every export shares: the calibration applied to the
+nominal model, the identifying comment, the uncertainty sidecar.
 """
 
 from __future__ import annotations
 
-import hashlib
-import xml.etree.ElementTree as ET
-from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.calibration_file import apply_calibration
-from robocal_uncertainty.core.inverse_kinematics import UR_JOINT_NAMES
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
-from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.urdf_model import (
-    UrdfChain,
-    UrdfRobot,
-    calibrated_joint_origins,
-    load_urdf,
-    model_frames,
-    parse_urdf,
-    robot_model_from_urdf,
-    transform,
-    urdf_chain,
-    urdf_rpy,
+from robocal_uncertainty.core.robot_formats import (
+    EXPORT_FORMATS,
+    ExportRequest,
+    RobotSource,
+    Written,
+    load_robot_source,
+    robot_format_named,
+    robot_source_from_description,
 )
+from robocal_uncertainty.core.robot_formats.ur_kinematics import UR_KINEMATICS_KEYS
+from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
@@ -55,113 +50,12 @@ __all__ = [
     "calibrated_robot_description",
     "export_calibration",
     "load_robot_source",
+    "robot_source_from_description",
 ]
 
 Array = NDArray[np.float64]
 
-EXPORT_FORMATS = ("urdf", "ur-kinematics", "yaml")
 SIDECAR_FORMAT = "robocal_uncertainty/export-uncertainty/1"
-UR_KINEMATICS_KEYS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
-
-
-@dataclass(frozen=True)
-class RobotSource:
-    """A nominal robot model and, where there is one, the URDF chain it came from or maps to.
-
-    Attributes
-    ----------
-    model : RobotModel
-    urdf : UrdfRobot or None
-        The URDF read with ``--robot X.urdf``, or the one shipped beside a shipped model
-        (``ur10``), or None.
-    base_link, tip_link : str or None
-        The chain ends asked for.
-    from_urdf : bool
-        True when `model` was built from `urdf` (its base frame is the chain's base link).
-    """
-
-    model: RobotModel
-    urdf: UrdfRobot | None
-    base_link: str | None = None
-    tip_link: str | None = None
-    from_urdf: bool = False
-
-    def chain(self) -> UrdfChain:
-        """The URDF chain (``ConfigError`` without a URDF)."""
-        if self.urdf is None:
-            msg = f"robot {self.model.name!r} has no URDF: give one (--urdf robot.urdf)"
-            raise ConfigError(msg)
-        if self.from_urdf:
-            return urdf_chain(self.urdf, self.base_link, self.tip_link)
-        # A DH model mapped onto a URDF: by default the URDF joints of the model's names.
-        base, tip = self.base_link, self.tip_link
-        if base is None or tip is None:
-            first = next((j for j in self.urdf.joints if j.name == self.model.joint_names[0]), None)
-            last = next((j for j in self.urdf.joints if j.name == self.model.joint_names[-1]), None)
-            if first is None or last is None:
-                msg = (
-                    f"{self.urdf.where} has no joints {self.model.joint_names[0]!r} ... "
-                    f"{self.model.joint_names[-1]!r} of robot model {self.model.name!r}"
-                )
-                raise ConfigError(msg)
-            base = base if base is not None else first.parent
-            tip = tip if tip is not None else last.child
-        return urdf_chain(self.urdf, base, tip)
-
-
-def is_urdf_source(name: str) -> bool:
-    """Whether a ``--robot`` value names a URDF (``.urdf`` file) rather than a robot YAML."""
-    return Path(name).suffix.lower() == ".urdf"
-
-
-def load_robot_source(
-    name: str,
-    *,
-    base_link: str | None = None,
-    tip_link: str | None = None,
-    urdf: str | None = None,
-) -> RobotSource:
-    """Resolve ``--robot`` (a robot YAML, a shipped model name, or a ``.urdf`` file).
-
-    Parameters
-    ----------
-    name : str
-        ``--robot`` value.
-    base_link, tip_link : str, optional
-        Chain ends for a URDF (``--base-link``, ``--tip-link``).
-    urdf : str, optional
-        A URDF whose joint origins an export corrects, for a model given in DH form (e.g.
-        ``xacro ur.urdf.xacro ur_type:=ur10 > ur10.urdf``); the shipped ``ur10`` has one.
-    """
-    if is_urdf_source(name):
-        robot = load_urdf(name)
-        model = robot_model_from_urdf(robot, base_link, tip_link)
-        return RobotSource(model=model, urdf=robot, base_link=base_link, tip_link=tip_link, from_urdf=True)
-    path = resolve_robot_config(name)
-    model = load_robot_model(path)
-    structure: UrdfRobot | None = None
-    if urdf is not None:
-        structure = load_urdf(urdf)
-    elif path.with_suffix(".urdf").is_file():
-        structure = load_urdf(path.with_suffix(".urdf"))
-    return RobotSource(model=model, urdf=structure, base_link=base_link, tip_link=tip_link)
-
-
-def robot_source_from_description(
-    text: str,
-    *,
-    base_link: str | None = None,
-    tip_link: str | None = None,
-    where: str = "robot_description",
-    tool_point: Sequence[float] | None = None,
-) -> RobotSource:
-    """A :class:`RobotSource` from URDF text (a ``robot_description`` parameter or topic);
-    `tool_point` [m, in the tip link] when the measured point is known (None: fitted, not
-    regularised; see :func:`~robocal_uncertainty.core.urdf_model.robot_model_from_urdf`)."""
-    robot = parse_urdf(text, where=where)
-    point = None if tool_point is None else np.asarray(tool_point, dtype=np.float64)
-    model = robot_model_from_urdf(robot, base_link, tip_link, tool_point=point)
-    return RobotSource(model=model, urdf=robot, base_link=base_link, tip_link=tip_link, from_urdf=True)
 
 
 @dataclass(frozen=True)
@@ -298,173 +192,6 @@ def _sidecar(
     }
 
 
-def _fmt(value: float) -> str:
-    return repr(float(value)) if value != 0.0 else "0"
-
-
-def _clean(value: float) -> float:
-    """``value`` as a float, with -0.0 written as 0.0."""
-    return float(value) + 0.0
-
-
-def _corrected_urdf_text(text: str, origins: dict[str, tuple[Array, Array]], comment: str, where: str) -> str:
-    try:
-        root = ET.fromstring(text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
-    except ET.ParseError as err:
-        msg = f"{where} is not valid XML: {err}"
-        raise ConfigError(msg) from err
-    for joint in root.findall("joint"):
-        name = joint.get("name")
-        if name not in origins:
-            continue
-        xyz, rpy = origins[name]
-        origin = joint.find("origin")
-        if origin is None:
-            origin = ET.SubElement(joint, "origin")
-        origin.set("xyz", " ".join(_fmt(v) for v in xyz))
-        origin.set("rpy", " ".join(_fmt(v) for v in rpy))
-    note = ET.Comment(" " + comment.replace("--", "- -").replace("\n", "\n     ") + " ")
-    note.tail = "\n  "
-    root.insert(0, note)
-    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
-
-
-def _generated_urdf(model: RobotModel, comment: str) -> tuple[str, Array, str]:
-    """A URDF of a modified-DH model: one link per frame, joints at the model frames."""
-    frames, _ = model_frames(model)
-    base = model.base_frame_id
-    links = [base] + [f"{name}_link" for name in model.joint_names] + ["flange", "measured_point"]
-    body = [f"  <link name={_q(link)}/>" for link in links]
-    previous = np.eye(4)
-    for j, name in enumerate(model.joint_names):
-        origin = np.linalg.inv(previous) @ frames[j]
-        kind = "prismatic" if model.prismatic[j] else "revolute"
-        lo, hi = model.joint_limits[j]
-        body.append(
-            f"  <joint name={_q(name)} type={_q(kind)}>\n"
-            f"    <parent link={_q(links[j])}/><child link={_q(links[j + 1])}/>\n"
-            f"    <origin xyz={_q(' '.join(_fmt(v) for v in origin[:3, 3]))} "
-            f"rpy={_q(' '.join(_fmt(v) for v in urdf_rpy(origin[:3, :3])))}/>\n"
-            f'    <axis xyz="0 0 1"/>\n    <limit lower={_q(_fmt(lo))} upper={_q(_fmt(hi))} effort="0" velocity="0"/>\n'
-            "  </joint>"
-        )
-        previous = previous @ transform(origin[:3, 3], urdf_rpy(origin[:3, :3]))
-    flange = np.linalg.inv(previous) @ frames[-1]
-    body.append(
-        f'  <joint name="flange_joint" type="fixed">\n    <parent link={_q(links[-3])}/><child link="flange"/>\n'
-        f"    <origin xyz={_q(' '.join(_fmt(v) for v in flange[:3, 3]))} "
-        f"rpy={_q(' '.join(_fmt(v) for v in urdf_rpy(flange[:3, :3])))}/>\n  </joint>"
-    )
-    body.append(
-        '  <joint name="measured_point_joint" type="fixed">\n'
-        '    <parent link="flange"/><child link="measured_point"/>\n'
-        f"    <origin xyz={_q(' '.join(_fmt(v) for v in model.tool_point))} "
-        f"rpy={_q(' '.join(_fmt(v) for v in model.tool_rpy))}/>\n  </joint>"
-    )
-    text = (
-        '<?xml version="1.0"?>\n<robot name=' + _q(model.name) + ">\n  <!-- " + comment.replace("--", "- -") + " -->\n"
-    )
-    return text + "\n".join(body) + "\n</robot>\n", np.zeros(3), "measured_point"
-
-
-def _q(value: str) -> str:
-    return '"' + value.replace("&", "&amp;").replace('"', "&quot;").replace("<", "&lt;") + '"'
-
-
-def _link_pose(robot: UrdfRobot, link: str) -> Array:
-    """Root link <- `link` at zero joint readings."""
-    out = np.eye(4)
-    joint = robot.parent_joint(link)
-    while joint is not None:
-        out = joint.origin @ out
-        joint = robot.parent_joint(joint.parent)
-    return out
-
-
-def _frame0(source: RobotSource, chain: UrdfChain) -> Array | None:
-    """Chain base link <- the model's base frame (None: they are the same frame)."""
-    if source.from_urdf:
-        return None
-    base_id = source.model.base_frame_id
-    if base_id == chain.base_link:
-        return None
-    robot = chain.robot
-    if base_id not in robot.links:
-        # A DH model on a URDF whose links do not name its base: the chain's base it is.
-        return None
-    return np.asarray(np.linalg.inv(_link_pose(robot, chain.base_link)) @ _link_pose(robot, base_id))
-
-
-def _robot_yaml(model: RobotModel, comment: str) -> str:
-    if any(model.prismatic) or model.mounted:
-        msg = (
-            f"robot model {model.name!r} comes from a URDF (a mount, prismatic joints), which the robot "
-            "YAML cannot hold: use --format urdf"
-        )
-        raise ConfigError(msg)
-    beta_rows = [j + 1 for j in range(model.n_joints) if model.has_beta[j]]
-    joints = [
-        {
-            "name": name,
-            "alpha": float(model.alpha[j]),
-            "a": float(model.a[j]),
-            "d": float(model.d[j]),
-            "theta": float(model.theta[j]),
-            "limits": [float(v) for v in model.joint_limits[j]],
-        }
-        for j, name in enumerate(model.joint_names)
-    ]
-    if any(model.beta[j] != 0.0 for j in range(model.n_joints)):
-        # The robot YAML has no beta field: refuse rather than drop an identified beta.
-        msg = (
-            f"robot model {model.name!r} has identified Hayati beta rotations, which the robot YAML cannot "
-            "hold: use --format urdf"
-        )
-        raise ConfigError(msg)
-    data = {
-        "name": model.name,
-        "convention": "modified_dh",
-        "units": {"length": "m", "angle": "rad"},
-        "hayati_beta_joints": beta_rows,
-        "joints": joints,
-        "tool_point": [float(v) for v in model.tool_point],
-        "base": {
-            "known": model.base_known,
-            "frame_id": model.base_frame_id,
-            "measurement_frame_id": model.measurement_frame_id,
-            "xyz": [float(v) for v in model.base_xyz],
-            "rpy": [float(v) for v in model.base_rpy],
-        },
-    }
-    header = "".join(f"# {line}\n" for line in comment.splitlines())
-    return header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
-
-
-def _ur_kinematics(chain: UrdfChain, origins: dict[str, tuple[Array, Array]], comment: str) -> str:
-    movable = chain.movable
-    if len(movable) != 6 or not all(j.name.endswith(ur) for j, ur in zip(movable, UR_JOINT_NAMES)):
-        msg = (
-            f"--format ur-kinematics needs a Universal Robots chain ({', '.join(UR_JOINT_NAMES)}), "
-            f"got {[j.name for j in movable]}"
-        )
-        raise ConfigError(msg)
-    kin: dict[str, Any] = {}
-    for key, joint in zip(UR_KINEMATICS_KEYS, movable):
-        xyz, rpy = origins[joint.name]
-        kin[key] = {
-            "x": _clean(xyz[0]),
-            "y": _clean(xyz[1]),
-            "z": _clean(xyz[2]),
-            "roll": _clean(rpy[0]),
-            "pitch": _clean(rpy[1]),
-            "yaw": _clean(rpy[2]),
-        }
-    digest = hashlib.sha256(repr(sorted((k, sorted(v.items())) for k, v in kin.items())).encode()).hexdigest()
-    kin["hash"] = "calib_robocal_" + digest[:16]
-    header = "".join(f"# {line}\n" for line in comment.splitlines())
-    return header + yaml.safe_dump({"kinematics": kin}, sort_keys=False)
-
-
 def export_calibration(
     data: dict[str, Any],
     source: RobotSource,
@@ -501,36 +228,17 @@ def export_calibration(
         raise ConfigError(msg)
     calibrated = apply_calibration(source.model, data, where=where)
     nominal = source.model.with_tool_rotation() if calibrated.tool_rotation else source.model
-    if fmt == "yaml":
-        text = _robot_yaml(calibrated, _comment(data, where, "Calibrated robot model"))
-        return Export(fmt, text, _sidecar(data, calibrated, None, None), np.zeros(3), "")
-    if fmt == "urdf" and source.urdf is None:
-        text, point, tip = _generated_urdf(
-            calibrated, _comment(data, where, "Calibrated URDF (generated)", uncertainty)
-        )
-        return Export(fmt, text, _sidecar(data, calibrated, point, tip), point, tip)
-    if fmt == "ur-kinematics" and source.urdf is None:
-        msg = (
-            f"--format ur-kinematics needs the robot's ur_description URDF for model {source.model.name!r}: "
-            "give --urdf (xacro ur.urdf.xacro ur_type:=... name:=ur > ur.urdf)"
-        )
-        raise ConfigError(msg)
-    chain = source.chain()
-    origins, point = calibrated_joint_origins(chain, nominal, calibrated, frame0=_frame0(source, chain))
-    assert source.urdf is not None
-    if fmt == "urdf":
-        raw = urdf_text
-        if raw is None and Path(source.urdf.where).is_file():
-            raw = Path(source.urdf.where).read_text(encoding="utf-8")
-        if raw is None:
-            msg = f"cannot read the URDF text of {source.urdf.where}"
-            raise ConfigError(msg)
-        text = _corrected_urdf_text(
-            raw, origins, _comment(data, where, "Calibrated URDF", uncertainty), source.urdf.where
-        )
-    else:
-        text = _ur_kinematics(chain, origins, _comment(data, where, "UR kinematics_params_file"))
-    return Export(fmt, text, _sidecar(data, calibrated, point, chain.tip_link), point, chain.tip_link)
+    request = ExportRequest(
+        calibrated=calibrated,
+        nominal=nominal,
+        source=source.with_structure(),
+        comment=lambda what: _comment(data, where, what, uncertainty),
+        urdf_text=urdf_text,
+    )
+    written: Written = robot_format_named(fmt).load().write_calibrated(request)
+    point = np.zeros(3) if written.point_in_tip is None else written.point_in_tip
+    sidecar = _sidecar(data, calibrated, written.point_in_tip, written.tip_link)
+    return Export(fmt, written.text, sidecar, point, written.tip_link or "")
 
 
 def calibrated_robot_description(data: dict[str, Any], source: RobotSource, *, urdf_text: str | None = None) -> str:

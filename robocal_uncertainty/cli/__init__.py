@@ -10,15 +10,9 @@ parses arguments, calls the same functions the tests and the ROS nodes call, and
 stderr and exit status 1.
 """
 
-import os
+from robocal_uncertainty._threads import limit_threads
 
-# Trials are batched into many small matrix products; BLAS threads only add synchronisation
-# there (measured 2.7x slower on 2 cores). Parallelism comes from --workers processes.
-# Must be set before numpy loads its BLAS; a user's explicit setting wins. The numba
-# backend's kernels likewise run on one thread per process (its threads waiting between the
-# many short kernel calls cost more than they gave on the shared 2-core machine).
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+limit_threads()  # before numpy loads its BLAS (see robocal_uncertainty._threads)
 
 from typing import TYPE_CHECKING
 

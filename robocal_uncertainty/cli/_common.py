@@ -8,7 +8,6 @@ import re
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -31,33 +30,35 @@ def load_robot(
     tip_link: str | None = None,
     tool_point: Sequence[float] | None = None,
 ) -> Any:
+    """The model of :func:`load_robot_source`."""
+    return load_robot_source(
+        name, base_known=base_known, base_link=base_link, tip_link=tip_link, tool_point=tool_point
+    ).model
+
+
+def load_robot_source(
+    name: str,
+    *,
+    base_known: bool | None = None,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    tool_point: Sequence[float] | None = None,
+) -> Any:
     """``--robot``: a robot YAML, a shipped model name, or a URDF (``.urdf``) with its chain ends
-    and, when known, the measured point in the tip link (``--tool-point``, m)."""
-    from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+    and, when known, the measured point in the tip link (``--tool-point``, m); read by the
+    package's one robot loader (:func:`robocal_uncertainty.core.robot_formats.load_robot_source`)."""
+    from robocal_uncertainty.core import robot_formats
 
-    if Path(name).suffix.lower() == ".urdf":
-        from robocal_uncertainty.core.urdf_model import load_urdf, robot_model_from_urdf
-
-        point = None if tool_point is None else np.asarray(tool_point, dtype=np.float64)
-        model = robot_model_from_urdf(load_urdf(name), base_link, tip_link, tool_point=point)
-        return replace(model, base_known=base_known) if base_known is not None else model
-    if base_link is not None or tip_link is not None or tool_point is not None:
+    chain_given = base_link is not None or tip_link is not None or tool_point is not None
+    if chain_given and not robot_formats.robot_format_of(name).chain_ends:
         msg = (
             f"--base-link, --tip-link and --tool-point describe a URDF chain; --robot {name} is not a .urdf file "
             "(a robot YAML gives its tool_point)"
         )
         raise ConfigError(msg)
-    path = resolve_robot_config(name)
-    try:
-        model = load_robot_model(path)
-    except ConfigError as err:
-        if str(path) in str(err) or Path(path).name in str(err):
-            raise
-        msg = f"robot config {path}: {err}"  # every message names the file it is about
-        raise ConfigError(msg) from err
-    if base_known is not None:
-        model = replace(model, base_known=base_known)
-    return model
+    return robot_formats.load_robot_source(
+        name, base_link=base_link, tip_link=tip_link, tool_point=tool_point, base_known=base_known
+    )
 
 
 def _in_radians(q: NDArray[np.float64], degrees: bool, prismatic: Sequence[bool]) -> NDArray[np.float64]:
@@ -275,37 +276,36 @@ def campaign_and_robot(args: argparse.Namespace) -> tuple[Any, Any]:
     refuse campaign joint readings outside the robot's joint limits."""
     campaign = read_campaign_checked(args, args.campaign)
     check_campaign_counts(args, campaign.n_poses)
-    model = load_robot(
+    source = load_robot_source(
         args.robot,
         base_known=False if args.base_unknown else None,
         base_link=getattr(args, "base_link", None),
         tip_link=getattr(args, "tip_link", None),
         tool_point=getattr(args, "tool_point", None),
     )
+    model = source.model
     check_campaign_joints(model, campaign, args.campaign)
-    check_campaign_frame(args.robot, model, campaign, args.campaign)
+    check_campaign_frame(args.robot, model, campaign, args.campaign, urdf=source.urdf if source.from_urdf else None)
     return campaign, model
 
 
-def check_campaign_frame(robot: str, model: Any, campaign: Any, path: str) -> None:
+def check_campaign_frame(robot: str, model: Any, campaign: Any, path: str, *, urdf: Any = None) -> None:
     """A campaign in the robot base frame must be in the model's base frame.
 
     Its points are taken as given in the model's base frame. When the campaign names another
     link of the same URDF (UR's ``base`` is ``base_link`` turned by 180 degrees), that is a known,
-    different frame: refused, naming ``--base-link``. Another name is warned about.
+    different frame: refused, naming ``--base-link``. Another name is warned about. `urdf` is the
+    URDF the model was read from (None for a model in DH form).
     """
     frame_id = str(getattr(campaign, "frame_id", "") or "")
     if campaign.frame != "base" or not frame_id or frame_id == model.base_frame_id:
         return
-    if Path(robot).suffix.lower() == ".urdf":
-        from robocal_uncertainty.core.urdf_model import load_urdf
-
-        if frame_id in load_urdf(robot).links:
-            msg = (
-                f"{path}: the points are in URDF link {frame_id!r}, the chain starts at {model.base_frame_id!r} "
-                f"(another frame of {robot}): give --base-link {frame_id}"
-            )
-            raise InputError(msg)
+    if urdf is not None and frame_id in urdf.links:
+        msg = (
+            f"{path}: the points are in URDF link {frame_id!r}, the chain starts at {model.base_frame_id!r} "
+            f"(another frame of {robot}): give --base-link {frame_id}"
+        )
+        raise InputError(msg)
     print(
         f"warning: {path}: the points are in frame {frame_id!r}, the robot model's base frame is "
         f"{model.base_frame_id!r}: taken as the same frame",

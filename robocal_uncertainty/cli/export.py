@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from robocal_uncertainty.cli._options import add_force_arg, add_urdf_chain_args
+from robocal_uncertainty.core.robot_formats.registry import EXPORT_FORMATS
 
 
 def sidecar_path(out: str | Path) -> Path:
@@ -25,7 +26,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--format",
         required=True,
-        choices=("urdf", "ur-kinematics", "yaml"),
+        choices=EXPORT_FORMATS,
         dest="export_format",
         help="urdf: the robot's URDF with corrected joint origins; ur-kinematics: ur_description's "
         "kinematics_params_file; yaml: the package's robot YAML",

@@ -14,8 +14,11 @@ names it in ``verify_calibration``, no command line needed.
 Its health (samples, condition number, residual RMS, lambda, convergence, time since the last
 calibration; OK/WARN/ERROR) goes to ``/diagnostics`` every ``diagnostics_period_s``.
 After each calibration the calibrated URDF goes to ``~/robot_description`` (``std_msgs/String``,
-reliable, transient local, depth 1). A URDF in the ``robot_description`` parameter (with
-``base_link``/``tip_link``, default the first serial chain) replaces ``robot_config``.
+reliable, transient local, depth 1). The robot is read by the package's one robot loader
+(:func:`robocal_uncertainty.core.robot_formats.load_robot_source`): ``robot_config`` names a
+robot YAML, a shipped model or a URDF file (``.urdf``); a URDF in the ``robot_description``
+parameter replaces ``robot_config``. For a URDF, file or parameter, ``base_link``/``tip_link``
+give the chain (default the first serial chain) and ``tool_point_m`` the measured point.
 
 Check measurement (``verify``, the shop-floor question "is my robot still within its
 calibration today?"): with ``verify_calibration`` naming a calibration written by
@@ -37,15 +40,15 @@ node's callbacks while it runs (about a second with the default 20 000 null draw
 
 from __future__ import annotations
 
-import os
+from robocal_uncertainty._threads import limit_threads
 
-# Same BLAS policy as the command line (see robocal_uncertainty/cli.py), so the
-# identification gives the command line's numbers. Must precede the numpy import.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+# The command line's thread policy, so the node computes the command line's numbers; before
+# numpy loads its BLAS.
+limit_threads()
 
 import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -58,15 +61,12 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from robocal_uncertainty.app.export import (
-    calibrated_robot_description,
-    load_robot_source,
-    robot_source_from_description,
-)
+from robocal_uncertainty.app.export import calibrated_robot_description
 from robocal_uncertainty.app.verification import VerificationRun, calibrate_session, verify
 from robocal_uncertainty.bagio.messages import calibration_to_msg, msg_to_sample
 from robocal_uncertainty.core.calibration_file import calibration_to_dict, write_calibration
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.robot_formats import load_robot_source, robot_format_of, robot_source_from_description
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import CalibError, ConfigError, InputError
@@ -76,7 +76,6 @@ from robocal_uncertainty.nodes.common import (
     CauseLogger,
     campaign_file,
     diagnostic_array,
-    load_model,
     run_node,
     to_ros,
 )
@@ -123,7 +122,11 @@ def _tool_point(value: Any) -> str | None:
 
 
 PARAMETERS: tuple[ParamSpec, ...] = (
-    ROBOT_CONFIG,
+    replace(
+        ROBOT_CONFIG,
+        description="Robot model: a YAML file, a shipped model name (paper_arm, ur10) or a URDF file (.urdf, its "
+        "chain from base_link to tip_link)",
+    ),
     BASE_UNKNOWN,
     CAMPAIGN_PATH_READ,
     READ_CAMPAIGN_AT_START,
@@ -192,8 +195,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "tool_point_m",
         None,
-        "With robot_description: the measured point (probe, reflector) in tip_link, x y z, when known; unset = "
-        "fitted to the campaign and not regularised",
+        "With a URDF (robot_description or a .urdf robot_config): the measured point (probe, reflector) in "
+        "tip_link, x y z, when known; unset = fitted to the campaign and not regularised",
         "m",
         read_only=True,
         check=_tool_point,
@@ -234,24 +237,28 @@ class CalibrationNode(Node):
         self._changed = False
         p = declare_parameters(self, PARAMETERS, on_change=self._note_change)
         self.robot_config = p["robot_config"]
-        self.model = load_model(self.robot_config, base_unknown=p["base_unknown"])
         # A URDF in `robot_description` (as robot_state_publisher takes it) replaces robot_config.
         self._description = str(self.declare_parameter("robot_description", "").value)
         chain = {k: str(self.declare_parameter(k, "").value) or None for k in ("base_link", "tip_link")}
-        self._source = None
+        point = p["tool_point_m"]
+        tool_point = None if point is None else [float(v) for v in point]
+        base_known = False if p["base_unknown"] else None
         if self._description.strip():
-            point = p["tool_point_m"]
             self._source = robot_source_from_description(
-                self._description, **chain, tool_point=None if point is None else [float(v) for v in point]
+                self._description, **chain, tool_point=tool_point, base_known=base_known
             )
-            self.model = replace(self._source.model, base_known=not p["base_unknown"] and self._source.model.base_known)
             self.robot_config = "robot_description"
-        elif p["tool_point_m"] is not None:
+        elif robot_format_of(self.robot_config).chain_ends:  # a URDF file: the same chain parameters
+            self._source = load_robot_source(self.robot_config, **chain, tool_point=tool_point, base_known=base_known)
+        elif tool_point is not None:
             msg = (
                 "parameter tool_point_m describes the probe of a robot_description (URDF); "
                 "a robot YAML gives tool_point"
             )
             raise ConfigError(msg)
+        else:
+            self._source = load_robot_source(self.robot_config, base_known=base_known)
+        self.model = self._source.model
         self.store = SampleStore(self.model)
         self.campaign_path = campaign_file(p["campaign_path"])
         self.calibration_path = (
@@ -530,7 +537,7 @@ class CalibrationNode(Node):
     def _publish_description(self, result: IdentificationResult) -> None:
         """The calibrated URDF on the latched ``~/robot_description`` (for robot_description topic readers)."""
         try:
-            source = self._source or load_robot_source(self.robot_config)
+            source = self._source
             data = calibration_to_dict(result, robot=self.robot_config)
             text = calibrated_robot_description(data, source, urdf_text=self._description or None)
         except CalibError as err:

@@ -46,12 +46,12 @@ of the campaign to ``save_copy_path`` (a file, or a directory for a timestamped 
 
 from __future__ import annotations
 
-import os
+from robocal_uncertainty._threads import limit_threads
 
-# Same BLAS policy as the command line (see robocal_uncertainty/cli.py), so every number a
-# node computes is the one the command line computes. Must precede the numpy import.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+# The command line's thread policy, so the node computes the command line's numbers; before
+# numpy loads its BLAS.
+limit_threads()
+
 
 import dataclasses
 import json

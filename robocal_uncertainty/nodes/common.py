@@ -29,10 +29,10 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from visualization_msgs.msg import Marker, MarkerArray
 
-from robocal_uncertainty.core import load_robot_model
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats import load_robot_source, robot_format_of
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.errors import CalibError
+from robocal_uncertainty.errors import CalibError, ConfigError
 from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus as Status
 from robocal_uncertainty.pipeline.markers import MarkerSpec
 from robocal_uncertainty.pipeline.sample_store import SampleStore
@@ -61,13 +61,21 @@ def robot_config_path(name: str) -> Path:
 
 
 def load_model(robot_config: str, *, base_unknown: bool = False) -> RobotModel:
-    """Load the robot model; `base_unknown` forces identification of the base transform."""
-    model = load_robot_model(robot_config_path(robot_config))
-    if base_unknown:
-        from dataclasses import replace
+    """Load the robot model of a node without chain parameters (a robot YAML or a shipped model
+    name, read by the package's one robot loader); `base_unknown` forces identification of the
+    base transform.
 
-        model = replace(model, base_known=False)
-    return model
+    A URDF is refused here: its chain ends and measured point are parameters of the calibration
+    node only, and a URDF read with default ones could silently be another chain than the one
+    the calibration node reads.
+    """
+    if robot_format_of(robot_config).chain_ends:
+        msg = (
+            f"robot_config {robot_config} is a URDF, which this node does not read: give it a robot YAML or a "
+            "shipped model name (the calibration node reads a URDF, with base_link and tip_link)"
+        )
+        raise ConfigError(msg)
+    return load_robot_source(robot_config, base_known=False if base_unknown else None).model
 
 
 def campaign_file(text: str) -> Path:
