@@ -10,7 +10,7 @@ components with 10 degrees of freedom ``(kurtosis - 1) / 2 = 1.5``; a same-sessi
 normal errors is rejected in 5 % of draws at every check size, and the power against a larger
 error level grows with the check. Measured (``python -m pytest -q -m slow
 test/core/test_level_test.py -s``), false alarms at 10 / 50 / 200 poses: errors shared by a
-pose's axes 7-9 % (component-kurtosis factor alone 13-21 %), heavy-tailed poses 10-13 %
+pose's axes 7-8 % (component-kurtosis factor alone 15-17 %), heavy-tailed poses 10-13 %
 (15-22 %): the dispersion measured on 53 poses is itself uncertain, and that is not propagated.
 """
 
