@@ -106,7 +106,7 @@ def calibrate_session(
         default). Off: independent from pose to pose (held-out folds as above).
     validate_level : bool
         Measure the calibration's error level on its own held-out poses, re-registered as a
-        check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level`, five folds):
+        check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level`, four splits into five folds):
         ``verify`` tests a check against it and states the check's error ratio.
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)

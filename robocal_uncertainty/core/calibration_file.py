@@ -24,7 +24,11 @@ model-error field), a JSON object with
     The session the calibration was measured in: ``frame`` (``tracker`` or ``base``),
     ``frame_id``, ``n_poses``, ``registration`` (``names`` base.x .. base.yaw, ``world_T_base``:
     the robot base pose in the measurement frame, and its ``covariance``), ``tool``
-    (``point_m`` and its ``covariance``), ``campaign`` (the file it came from, when known).
+    (``point_m`` and its ``covariance``), ``campaign`` (the file it came from, when known),
+    ``validated_level`` (the calibration's error level on its own held-out poses, what ``verify``
+    tests a check against: ``level`` [m^2], ``dof``, ``kurtosis``, ``folds``, ``poses``, ``seed``,
+    and since the repeated splits ``repeats`` and ``dispersion``; see
+    :class:`~robocal_uncertainty.core.session.ValidatedLevel`).
 ``noise``
     The stated instruments: ``tracker_noise_a_m``, ``tracker_noise_b_m_per_m``,
     ``encoder_noise_half_width_rad``, ``linear_encoder_noise_half_width_m`` (prismatic joints;

@@ -66,12 +66,14 @@ __all__ = [
     "LENGTH_SCALE",
     "MIN_CHECK_DOF",
     "TOOL_NAMES",
+    "LevelTest",
     "SessionState",
     "TrackerMove",
     "ValidatedLevel",
     "Verification",
     "check_level",
     "effect_jacobian",
+    "level_test",
     "parameter_covariance",
     "parameter_gain",
     "tracker_move",
@@ -98,32 +100,47 @@ _MAX_ITERATIONS = 30
 class ValidatedLevel:
     """The calibration session's own error level on held-out poses: the reference of ``verify``.
 
-    The campaign is cut into folds; each fold is predicted by a calibration of the other poses
-    and re-registered as a check would be. Its *level* is the mean square error per component
-    left after the re-registration, ``r^T P r / m_kept`` with ``P`` the projection off the
-    re-registration (ordinary least squares) and ``m_kept = 3 n tr(P C P) / tr(C)`` the
-    equations it keeps (``C`` the stated covariance: only its shape enters, through the share a
-    smooth error loses to the re-registration), pooled over the folds. A check of a later
-    session is compared with this measured level, not with the statement's scale, which a
-    model-error field estimated from one campaign hardly fixes.
+    The campaign is cut into folds, several times over (repeated random splits); each fold is
+    predicted by a calibration of the other poses and re-registered as a check would be. Its
+    *level* is the mean square error per component left after the re-registration,
+    ``r^T P r / m_kept`` with ``P`` the projection off the re-registration (ordinary least
+    squares) and ``m_kept = 3 n tr(P C P) / tr(C)`` the equations it keeps (``C`` the stated
+    covariance: only its shape enters, through the share a smooth error loses to the
+    re-registration), pooled over every fold of every split. A check of a later session is
+    compared with this measured level, not with the statement's scale, which a model-error
+    field estimated from one campaign hardly fixes.
+
+    Why repeated splits: one split's level depends on which poses happened to share a fold
+    (on the UR10 series one 5-fold split scatters 0.21-0.27 in log against the calibration's
+    level on all its other poses, three splits 0.17). Why the scatter of the fold levels: a
+    level of ``nu`` equations would have relative variance ``2 / nu`` with independent normal
+    components; real held-out errors are heavier-tailed, unequal between the axes and
+    correlated within a pose, so a level of ten real poses scatters more (about 1.5x on the
+    UR10 series). The folds measure it: their levels' relative variance over what ``2 / nu``
+    says is the *dispersion*, and every degree of freedom of the test (the check's and this
+    level's) is divided by it.
 
     Attributes
     ----------
     level : float [m^2]
         Pooled mean square error per component after re-registration.
     dof : float
-        Degrees of freedom of `level` before the kurtosis correction: the folds' kept equations
-        summed, at most ``2 K mean^2 / var`` of the K fold levels (their scatter shows how
-        correlated the held-out errors are).
+        Degrees of freedom of `level` before the dispersion correction: one split's kept
+        equations (every split holds out each pose once: repeating splits steadies the level
+        but measures no new pose).
     kurtosis : float
         ``mean(z^4) / mean(z^2)^2`` of the folds' standardised residual components (3 for
-        normal errors); the variance of a mean square is ``(kurtosis - 1) / 2`` times the
-        normal one, so the test's degrees of freedom are scaled by ``2 / (kurtosis - 1)``
-        (at most 1).
+        normal errors); kept for the record, and the correction of files written without a
+        `dispersion` (``2 / (kurtosis - 1)``).
     folds, poses : int
-        Folds and held-out poses it was measured on.
+        Folds per split and held-out poses of one split.
     seed : int
-        Seed of the fold split.
+        Seed of the fold splits.
+    repeats : int
+        Random splits into `folds` folds.
+    dispersion : float or None
+        Relative variance of the fold levels about `level` over the mean of their ``2 / nu``
+        (1 for independent normal components); None in files written before it.
     """
 
     level: float
@@ -132,26 +149,39 @@ class ValidatedLevel:
     folds: int
     poses: int
     seed: int = 0
+    repeats: int = 1
+    dispersion: float | None = None
 
     @property
     def dof_factor(self) -> float:
-        """``min(1, 2 / (kurtosis - 1))``: the degrees of freedom heavy tails leave a mean square."""
+        """What the degrees of freedom of a level are multiplied by (at most 1).
+
+        ``1 / dispersion`` (the fold levels' scatter against their normal-theory variance);
+        for files without a dispersion, ``2 / (kurtosis - 1)``.
+        """
+        if self.dispersion is not None and self.dispersion > 0.0:
+            return float(min(1.0, 1.0 / self.dispersion))
         return float(min(1.0, 2.0 / max(self.kurtosis - 1.0, 1e-9)))
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready (the calibration file's ``session.validated_level``)."""
-        return {
+        out: dict[str, object] = {
             "level": self.level,
             "dof": self.dof,
             "kurtosis": self.kurtosis,
             "folds": self.folds,
             "poses": self.poses,
             "seed": self.seed,
+            "repeats": self.repeats,
         }
+        if self.dispersion is not None:
+            out["dispersion"] = self.dispersion
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, object]) -> ValidatedLevel:
         """Inverse of :meth:`to_dict`."""
+        dispersion = data.get("dispersion")
         return cls(
             level=float(data["level"]),  # type: ignore[arg-type]
             dof=float(data["dof"]),  # type: ignore[arg-type]
@@ -159,6 +189,8 @@ class ValidatedLevel:
             folds=int(data["folds"]),  # type: ignore[call-overload]
             poses=int(data["poses"]),  # type: ignore[call-overload]
             seed=int(data.get("seed", 0)),  # type: ignore[call-overload]
+            repeats=int(data.get("repeats", 1)),  # type: ignore[call-overload]
+            dispersion=None if dispersion is None else float(dispersion),  # type: ignore[arg-type]
         )
 
 
@@ -350,7 +382,7 @@ class Verification:
     level : float [m^2]
         The check's mean square error per kept equation (see :class:`ValidatedLevel`).
     level_dof : float
-        Its degrees of freedom before the kurtosis correction (``3 n - k``).
+        Its degrees of freedom before the dispersion correction (``3 n - k``).
     error_ratio : float or None
         ``sqrt(level / validated level)``: the check's errors relative to the calibration
         session's own held-out errors (1: as validated).
@@ -896,33 +928,12 @@ def verify_session(
     nu_c = nu_r = float("nan")
     test = "chi-square"
     if reference is not None and reference.level > 0.0:
-        # The check's level against the calibration session's own held-out level: an F test
-        # whose degrees of freedom shrink with heavy tails (the folds' kurtosis).
-        test = "error level"
-        factor = reference.dof_factor
-        nu_c, nu_r = max(level_dof * factor, 1e-3), max(reference.dof * factor, 1e-3)
-        t_stat = level / reference.level
-        p_value = float(stats.f.sf(t_stat, nu_c, nu_r))
         between_level = state.extra.get("between_session")
-        between_dict: dict[str, object] = dict(between_level) if isinstance(between_level, dict) else {}
-        log_std = between_dict.get("level_log_std")
-        if isinstance(log_std, (int, float)) and float(log_std) > 0.0:
-            # A future session: its error level varies from session to session (log standard
-            # deviation tau over S - 1 degrees of freedom); a t test on the log level with
-            # Welch-Satterthwaite degrees of freedom.
-            test = "error level, future session"
-            parts = np.array([2.0 / nu_c, 2.0 / nu_r, float(log_std) ** 2])
-            between_dof_raw = between_dict.get("level_dof", 1.0)
-            dofs = np.array(
-                [nu_c, nu_r, max(float(between_dof_raw) if isinstance(between_dof_raw, (int, float)) else 1.0, 1.0)]
-            )
-            welch = float(np.sum(parts) ** 2 / np.sum(parts**2 / dofs))
-            p_value = float(stats.t.sf(np.log(t_stat) / np.sqrt(np.sum(parts)), welch))
-        ratio = float(np.sqrt(t_stat))
-        ratio_interval = (
-            float(np.sqrt(t_stat / stats.f.ppf(0.975, nu_c, nu_r))),
-            float(np.sqrt(t_stat / stats.f.ppf(0.025, nu_c, nu_r))),
+        outcome = level_test(
+            level, level_dof, reference, dict(between_level) if isinstance(between_level, dict) else None
         )
+        test, p_value, nu_c, nu_r = outcome.test, outcome.p_value, outcome.check_dof, outcome.reference_dof
+        ratio, ratio_interval = outcome.ratio, outcome.ratio_interval
     res_cov = c_mat - a_mat @ reg_cov @ a_mat.T
     res_std = np.sqrt(np.clip(np.diag(res_cov), 1e-30, None)).reshape(n, 3)
     residuals = r.reshape(n, 3)
@@ -1074,12 +1085,12 @@ def _level(r: Array, a_mat: Array, shape: Array) -> tuple[float, float, Array, f
     else:
         proj = np.eye(m)
     rp = proj @ r
-    # Degrees of freedom 3 n - k (before the kurtosis factor). The stated field's own account
+    # Degrees of freedom 3 n - k (before the dispersion factor). The stated field's own account
     # (the share of a smooth error the projection takes, Satterthwaite's t1^2 / t2) leans on
     # its correlation length, which one campaign hardly fixes (it ran to its bound on the UR10
     # series): it made the level unstable between calibrations of one series and the power of
-    # 200-pose checks lower than of 10-pose ones. What correlation the real errors have shows
-    # in the scatter of the calibration's fold levels, which bounds the reference's dof.
+    # 200-pose checks lower than of 10-pose ones. What correlation and tails the real errors
+    # have shows in the scatter of the calibration's fold levels (ValidatedLevel.dispersion).
     dof = float(m - (np.linalg.matrix_rank(a_mat) if a_mat.shape[1] else 0))
     trace = float(np.trace(shape))
     kept = m * float(np.trace(proj @ shape @ proj)) / trace if trace > 0.0 else dof
@@ -1089,15 +1100,98 @@ def _level(r: Array, a_mat: Array, shape: Array) -> tuple[float, float, Array, f
     return level, dof, np.asarray(z, dtype=np.float64), kept
 
 
-def check_level(verifications: list[Verification], *, seed: int = 0) -> ValidatedLevel:
+@dataclass(frozen=True)
+class LevelTest:
+    """A check's error level tested against a :class:`ValidatedLevel` (:func:`level_test`).
+
+    Attributes
+    ----------
+    test : str
+        ``"error level"`` (F test) or ``"error level, future session"`` (t test on the log level).
+    p_value : float
+        One-sided: the check's errors larger than the reference's.
+    check_dof, reference_dof : float
+        The F test's degrees of freedom after the reference's dof factor.
+    ratio : float
+        ``sqrt(level / reference level)``.
+    ratio_interval : tuple of float
+        Its 95 % interval from the F distribution.
+    """
+
+    test: str
+    p_value: float
+    check_dof: float
+    reference_dof: float
+    ratio: float
+    ratio_interval: tuple[float, float]
+
+
+def level_test(
+    level: float, level_dof: float, reference: ValidatedLevel, between: dict[str, object] | None = None
+) -> LevelTest:
+    """Test a check's error level against the calibration session's validated level.
+
+    ``level / reference.level`` is F distributed with ``(level_dof f, reference.dof f)`` degrees
+    of freedom when nothing changed, ``f`` = :attr:`ValidatedLevel.dof_factor` (the dispersion
+    the folds showed). With a between-session spread of the level (`between`'s
+    ``level_log_std`` over ``level_dof`` degrees of freedom) the statement is for a future
+    session: a t test on the log level with Welch-Satterthwaite degrees of freedom.
+
+    Parameters
+    ----------
+    level : float [m^2]
+        The check's mean square error per kept equation.
+    level_dof : float
+        Its degrees of freedom before the factor (``3 n - k``).
+    reference : ValidatedLevel
+    between : dict, optional
+        The calibration file's ``between_session`` record.
+    """
+    factor = reference.dof_factor
+    nu_c, nu_r = max(level_dof * factor, 1e-3), max(reference.dof * factor, 1e-3)
+    t_stat = level / reference.level
+    test = "error level"
+    p_value = float(stats.f.sf(t_stat, nu_c, nu_r))
+    log_std = (between or {}).get("level_log_std")
+    if isinstance(log_std, (int, float)) and float(log_std) > 0.0:
+        # A future session: its error level varies from session to session (log standard
+        # deviation tau over S - 1 degrees of freedom).
+        test = "error level, future session"
+        parts = np.array([2.0 / nu_c, 2.0 / nu_r, float(log_std) ** 2])
+        between_dof_raw = (between or {}).get("level_dof", 1.0)
+        between_dof = float(between_dof_raw) if isinstance(between_dof_raw, (int, float)) else 1.0
+        dofs = np.array([nu_c, nu_r, max(between_dof, 1.0)])
+        welch = float(np.sum(parts) ** 2 / np.sum(parts**2 / dofs))
+        p_value = float(stats.t.sf(np.log(t_stat) / np.sqrt(np.sum(parts)), welch))
+    interval = (
+        float(np.sqrt(t_stat / stats.f.ppf(0.975, nu_c, nu_r))),
+        float(np.sqrt(t_stat / stats.f.ppf(0.025, nu_c, nu_r))),
+    )
+    return LevelTest(test, p_value, float(nu_c), float(nu_r), float(np.sqrt(t_stat)), interval)
+
+
+def check_level(verifications: list[Verification], *, seed: int = 0, repeats: int = 1) -> ValidatedLevel:
     """Pool held-out fold checks of the calibration session into its :class:`ValidatedLevel`.
 
+    Parameters
+    ----------
+    verifications : list of Verification
+        The fold checks of `repeats` splits (each split holds out every pose once).
+    seed : int
+        Seed of the splits (recorded).
+    repeats : int
+        Splits the folds come from.
+
     The pooled level is the folds' squared residuals over their kept equations (a mean square
-    per component [m^2]); its degrees of freedom are the folds' summed (independent folds),
-    at most what the scatter of the fold levels shows.
+    per component [m^2]); its degrees of freedom are one split's summed; the dispersion is the
+    fold levels' relative variance about the pooled level over the mean of their normal-theory
+    ``2 / nu`` (at least two folds; 1 with one).
     """
     if not verifications:
         raise IdentifiabilityError("no held-out fold to validate the calibration's error level on")
+    if repeats < 1 or len(verifications) % repeats:
+        msg = f"{len(verifications)} fold checks cannot come from {repeats} splits"
+        raise ConfigError(msg)
     num = den = dof = 0.0
     zs = []
     for v in verifications:
@@ -1110,20 +1204,23 @@ def check_level(verifications: list[Verification], *, seed: int = 0) -> Validate
     kurt = float(np.mean(z**4) / np.mean(z**2) ** 2) if z.size else 3.0
     level = num / den
     levels = np.array([v.level for v in verifications])
-    if levels.size > 1 and np.var(levels, ddof=1) > 0.0:
-        # The folds scatter more than their stated shape says when the held-out error is
-        # smooth over poses (a fold of neighbours shares it): the spread of the fold levels
-        # bounds the degrees of freedom (2 K mean^2 / var), before the kurtosis factor.
-        empirical = 2.0 * levels.size * float(np.mean(levels)) ** 2 / float(np.var(levels, ddof=1))
-        factor = min(1.0, 2.0 / max(kurt - 1.0, 1e-9))
-        dof = min(dof, empirical / factor)
+    dispersion = None
+    if levels.size > 1 and level > 0.0:
+        # The fold levels scatter more than their normal-theory 2 / nu when the held-out
+        # errors are heavy-tailed, unequal between the axes or correlated within a pose (and
+        # by the calibrations of the folds differing): measured, not assumed.
+        observed = float(np.sum((levels / level - 1.0) ** 2)) / (levels.size - 1)
+        stated = float(np.mean([2.0 / max(v.level_dof, 1e-9) for v in verifications]))
+        dispersion = observed / stated
     return ValidatedLevel(
         level=level,
-        dof=dof,
+        dof=dof / repeats,
         kurtosis=kurt,
-        folds=len(verifications),
-        poses=int(sum(v.n_poses for v in verifications)),
+        folds=len(verifications) // repeats,
+        poses=int(sum(v.n_poses for v in verifications)) // repeats,
         seed=seed,
+        repeats=repeats,
+        dispersion=dispersion,
     )
 
 

@@ -4,12 +4,15 @@ Simulated UR10 sessions (known truth: nothing changed but the tracker, or a join
 drift) and the shipped real UR10 series (held-out poses of the calibration's own series):
 false alarms near the 5 % level at every check size, power that does not fall as a check grows.
 Measured with these tests (seeds as written, OPENBLAS_NUM_THREADS=1, loaded two-core machine;
-printed by ``python -m pytest -q -m slow test/uncertainty/test_verify_level_slow.py -s``):
-- simulated, rejected at 0 / 0.005 / 0.01 deg of joint-2 drift: 5.6 / 64.4 / 97.8 % (10 poses),
-  7.8 / 78.9 / 100 % (20), 6.7 / 93.3 / 100 % (50), 90 checks each (3 min 16 s);
-- real series D, same session: 87.5 / 87.5 / 90.0 / 87.5 % consistent at 10 / 20 / 50 / 200
-  poses (8 calibrations x 5 checks; 2 min 9 s): below the nominal 95 %, the calibration draw
-  dominates (a calibration whose five folds under-state its held-out level fails most checks).
+printed by ``python -m pytest -q -m slow test/uncertainty/test_verify_level_slow.py -s``, 9 min):
+- simulated, rejected at 0 / 0.005 / 0.01 deg of joint-2 drift: 4.4 / 65.6 / 98.9 % (10 poses),
+  7.8 / 75.6 / 100 % (20), 8.9 / 95.6 / 100 % (50), 90 checks each;
+- real series D, same session: 90.0 / 87.5 / 92.5 / 87.5 % consistent at 10 / 20 / 50 / 200
+  poses (8 calibrations x 5 checks), below the nominal 95 %: one calibration of the eight
+  predicts its other poses 1.62x worse in mean square than its four 5-fold splits say, and
+  fails most of its checks (the others fail 0-2 of 20). The repeated splits and the measured
+  dispersion fixed the reference's noise, not a calibration whose own held-out level departs
+  from that of calibrations on 42 of its poses.
 """
 
 from __future__ import annotations
@@ -100,4 +103,4 @@ def test_real_series_same_session_checks_by_size() -> None:
     rates = {n: float(np.mean(v)) for n, v in consistent.items()}
     print("UR10 series D, same session, consistent: " + ", ".join(f"{rates[n]:.3f} at {n} poses" for n in sizes))
     for n in sizes:
-        assert rates[n] >= 0.85  # 40 checks each, 8 calibrations: the calibration draw dominates
+        assert rates[n] >= 0.85  # nominal 95 %; 40 checks over 8 calibrations, clustered by calibration
