@@ -120,7 +120,9 @@ class NodePath:
         self.calibration_store = SampleStore(model)
         self.uncertainty_store = SampleStore(model)
         self.pool = (
-            WorkerPool(2, preload=("robocal_uncertainty.uncertainty.calibration_mc",)) if "kept" in mode else None
+            WorkerPool(2, preload=("robocal_uncertainty.uncertainty.calibration.evaluation",))
+            if "kept" in mode
+            else None
         )
         if self.pool is not None:
             self.pool.start()  # the node starts its pool before the first sample

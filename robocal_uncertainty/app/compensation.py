@@ -45,7 +45,7 @@ from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.importers.targets import Targets
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
 __all__ = [

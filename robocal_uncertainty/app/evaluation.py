@@ -23,7 +23,7 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.budget import evaluate_budget
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.memory import check_fits, evaluation_bytes
 from robocal_uncertainty.uncertainty.options import EvaluationOptions, Progress, evaluate_campaign
 from robocal_uncertainty.uncertainty.statement_check import interval_trial_floor, recommended_trials

@@ -420,7 +420,7 @@ class UncertaintyNode(Node):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self._health: dict[str, Any] = {"state": "idle"}
         # Started by the worker thread; the trial block's module is imported once per process.
-        self._pool = WorkerPool(int(p["workers"]), preload=("robocal_uncertainty.uncertainty.calibration_mc",))
+        self._pool = WorkerPool(int(p["workers"]), preload=("robocal_uncertainty.uncertainty.calibration.evaluation",))
         self._evaluated: tuple[Campaign, IdentificationResult, EvaluationOptions] | None = None
         self.create_service(SuggestPoses, "~/suggest_poses", self._suggest_poses)
         self.create_service(CompensateTargets, "~/compensate_targets", self._compensate_targets)

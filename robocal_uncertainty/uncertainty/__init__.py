@@ -6,16 +6,16 @@ from robocal_uncertainty._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from robocal_uncertainty.uncertainty.budget import evaluate_budget
-    from robocal_uncertainty.uncertainty.calibration_mc import (
-        CalibrationTrials,
+    from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
+    from robocal_uncertainty.uncertainty.calibration.preparation import prepare_calibration_trials
+    from robocal_uncertainty.uncertainty.calibration.results import (
         CalibrationUncertainty,
-        EvaluationSettings,
         GumPose,
         OrientationUncertainty,
         PoseUncertainty,
-        evaluate_uncertainty,
-        prepare_calibration_trials,
     )
+    from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
+    from robocal_uncertainty.uncertainty.calibration.trials import CalibrationTrials
     from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
     from robocal_uncertainty.uncertainty.reidentification import (
         BatchProblem,

@@ -15,7 +15,7 @@ from typing import Any
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
 
 __all__ = ["evaluate_budget"]

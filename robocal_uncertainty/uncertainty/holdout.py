@@ -34,7 +34,7 @@ from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pos
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.errors import ConfigError, ConvergenceError, InputError
-from robocal_uncertainty.uncertainty.calibration_mc import (
+from robocal_uncertainty.uncertainty.calibration import (
     CalibrationUncertainty,
     EvaluationSettings,
     evaluate_uncertainty,

@@ -2,7 +2,7 @@
 
 :class:`EvaluationOptions` is what the command line parses, the nodes read from their
 parameters and the tests construct; :func:`evaluate_campaign` turns it into the one call
-of :func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty`. The
+of :func:`~robocal_uncertainty.uncertainty.calibration.evaluation.evaluate_uncertainty`. The
 application service :func:`robocal_uncertainty.app.evaluate` adds the calibration, the
 budget and the sweeps on top; this module is below it so that the ROS-free pipeline can
 hold the options too.
@@ -21,7 +21,7 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.calibration_mc import (
+from robocal_uncertainty.uncertainty.calibration import (
     CalibrationUncertainty,
     EvaluationSettings,
     evaluate_uncertainty,
@@ -63,7 +63,7 @@ class EvaluationOptions:
         Coverage probability p in (0, 1).
     n_dig, max_trials, block_size : int
         Adaptive-procedure digits, its trial cap, and trials per random stream (see
-        :func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty`).
+        :func:`~robocal_uncertainty.uncertainty.calibration.evaluation.evaluate_uncertainty`).
     output_frame : {"measurement", "base"}
         Frame of the output positions (the frame of the campaign's points by default).
     accept_unconverged : bool

@@ -23,7 +23,7 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.calibration_mc import EvaluationSettings, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import EvaluationSettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.options import EvaluationOptions
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 

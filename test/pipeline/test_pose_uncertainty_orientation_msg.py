@@ -18,7 +18,7 @@ from robocal_uncertainty.bagio.messages import (
 )
 from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 UR10 = Path(__file__).resolve().parents[2] / "config" / "ur10.yaml"

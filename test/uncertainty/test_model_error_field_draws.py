@@ -19,7 +19,8 @@ import pytest
 
 from robocal_uncertainty.core import SimulationSettings, forward_points, identify, load_robot_model, simulate_campaign
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
-from robocal_uncertainty.uncertainty import UncertaintySettings, calibration_mc, evaluate_uncertainty
+from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import preparation
 from robocal_uncertainty.uncertainty.model_error_draws import FieldEstimate, FieldNormal, standardised_innovations
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -53,7 +54,7 @@ def field_case():
 
 
 def _field_run(monkeypatch, model, campaign, calibration, q_c, **kw):
-    monkeypatch.setattr(calibration_mc, "estimate_field", lambda *a, **k: ESTIMATE)
+    monkeypatch.setattr(preparation, "estimate_field", lambda *a, **k: ESTIMATE)
     settings = UncertaintySettings(sources=("residual",), tracker_noise=TrackerNoise(a=1e-6), model_error="field")
     return evaluate_uncertainty(
         model, campaign, q_c, settings=settings, calibration=calibration, trials=kw.pop("trials", 20_000), **kw

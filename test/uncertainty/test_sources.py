@@ -17,7 +17,7 @@ from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledEr
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import IndependentRectangular
 from robocal_uncertainty.montecarlo.engine import block_rng
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty, prepare_calibration_trials
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty, prepare_calibration_trials
 from robocal_uncertainty.uncertainty.sources import (
     SOURCE_REGISTRY,
     SOURCES,

@@ -14,7 +14,7 @@ from robocal_uncertainty.core.robot_config import resolve_robot_config
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.executor import open_executor
 from robocal_uncertainty.report.map_report import weakest_region, write_map_report
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 from robocal_uncertainty.uncertainty.workspace_map import (
     grid_configurations,

@@ -1,0 +1,125 @@
+"""Monte Carlo uncertainty of a calibrated arm's tool pose (JCGM 101): the one service call.
+
+A trial perturbs the campaign according to the enabled sources, re-identifies the
+parameters, and evaluates the tool pose at every requested joint configuration: the tool
+point and, unless switched off, the tool orientation (:mod:`.trials`). Trials run in blocks
+with independent seeded streams (see :mod:`robocal_uncertainty.montecarlo.engine`), so the
+result is the same whatever the chunk size or the number of workers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, run_trials
+from robocal_uncertainty.uncertainty.calibration.preparation import prepare, validate_inputs
+from robocal_uncertainty.uncertainty.calibration.results import N_AXES, OUTPUT_FRAMES, CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
+from robocal_uncertainty.uncertainty.calibration.statement import state_uncertainty
+
+__all__ = ["evaluate_uncertainty"]
+
+Array = NDArray[np.float64]
+
+
+def evaluate_uncertainty(
+    model: RobotModel,
+    campaign: Campaign,
+    test_joint_positions: Array,
+    evaluation: EvaluationSettings | None = None,
+    *,
+    calibration: IdentificationResult | None = None,
+    workers: int = 1,
+    chunk_blocks: int = 1,
+    progress: Callable[[int, int | None], None] | None = None,
+    executor: object | None = None,
+    **fields: Any,
+) -> CalibrationUncertainty:
+    """Monte Carlo uncertainty of the calibrated tool pose at test configurations.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model.
+    campaign : Campaign
+        Calibration data (joint readings [rad], points [m]).
+    test_joint_positions : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
+        Configurations at which the tool position is evaluated.
+    evaluation : EvaluationSettings, optional
+        What determines the result (sources, lambda method, trials, coverage, seed, ...);
+        the defaults when omitted.
+    calibration : IdentificationResult, optional
+        An existing calibration of `campaign`; computed with ``evaluation.lambda_`` when
+        omitted.
+    workers : int
+        Local processes (never changes the result).
+    chunk_blocks : int
+        Blocks evaluated per task (never changes the result). Memory is bounded by a
+        fixed sub-batch of trials re-identified at once.
+    progress : callable, optional
+        ``progress(done, target_or_None)``.
+    executor : Executor-like, optional
+        Runs the trial blocks instead of local processes: anything with a
+        ``concurrent.futures``-style ``submit`` (a process pool, a ``dask.distributed``
+        Client). Never changes the result.
+    **fields
+        Fields of :class:`EvaluationSettings` replaced in `evaluation` (the keyword call of
+        before: ``settings=``, ``trials=``, ``seed=``, ``frame=``, ...), see
+        :meth:`EvaluationSettings.replace`.
+
+    Returns
+    -------
+    CalibrationUncertainty
+
+    Raises
+    ------
+    ConfigError
+        Bad settings (trials, coverage, test joints, lambda range, pose counts).
+    """
+    ev = (evaluation or EvaluationSettings()).replace(**fields)
+    if ev.frame not in OUTPUT_FRAMES:
+        msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {ev.frame!r}"
+        raise ConfigError(msg)
+    test_q, n_trials = validate_inputs(model, test_joint_positions, ev.coverage, ev.trials)
+    prep = prepare(
+        model,
+        campaign,
+        test_q,
+        ev.uncertainty,
+        calibration,
+        ev.lambda_,
+        ev.frame,
+        orientation=ev.orientation,
+        backend=ev.backend,
+    )
+    result = run_trials(
+        prep.trials,
+        seed=ev.seed,
+        n_trials=n_trials,
+        adaptive=None if n_trials is not None else _adaptive(ev, test_q.shape[0]),
+        block_size=ev.block_size,
+        chunk_blocks=chunk_blocks,
+        workers=workers,
+        executor=executor,
+        progress=progress,
+    )
+    return state_uncertainty(prep, ev, result)
+
+
+def _adaptive(ev: EvaluationSettings, n_test: int) -> AdaptiveSettings:
+    """The JCGM 101 §7.9 procedure of `ev`.
+
+    The measurand is the tool position: its components decide convergence; the parameter
+    columns ride along and report the tolerance they reached.
+    """
+    return AdaptiveSettings(
+        n_dig=ev.n_dig, coverage=ev.coverage, max_trials=ev.max_trials, monitored=tuple(range(N_AXES * n_test))
+    )
