@@ -79,12 +79,11 @@ from visualization_msgs.msg import MarkerArray
 from robocal_uncertainty.app import Evaluation, evaluate
 from robocal_uncertainty.app.pose_suggestion import service_arguments, service_response, suggest_poses
 from robocal_uncertainty.bagio.messages import msg_to_sample, pose_with_covariance, uncertainty_to_msgs
-from robocal_uncertainty.core import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError, ConfigError
-from robocal_uncertainty.montecarlo.executor import WorkerPool
+from robocal_uncertainty.montecarlo.executor import RunContext, WorkerPool
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.msg import PoseUncertainty as PoseUncertaintyMsg
@@ -114,12 +113,12 @@ from robocal_uncertainty.pipeline.sample_store import SampleStore
 from robocal_uncertainty.srv import CompensateTargets, SuggestPoses
 from robocal_uncertainty.uncertainty import (
     CalibrationUncertainty,
-    EvaluationOptions,
-    UncertaintySettings,
+    EvaluationSettings,
     default_sources,
     parse_sources,
     sources_help,
 )
+from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings, build_uncertainty_settings
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
 
@@ -374,7 +373,7 @@ class _Job:
     generation: int
     samples: tuple[CalibrationSample, ...]
     calibration: CalibrationResultMsg
-    options: EvaluationOptions
+    options: EvaluationSettings
 
 
 class UncertaintyNode(Node):
@@ -421,7 +420,7 @@ class UncertaintyNode(Node):
         self._health: dict[str, Any] = {"state": "idle"}
         # Started by the worker thread; the trial block's module is imported once per process.
         self._pool = WorkerPool(int(p["workers"]), preload=("robocal_uncertainty.uncertainty.calibration.evaluation",))
-        self._evaluated: tuple[Campaign, IdentificationResult, EvaluationOptions] | None = None
+        self._evaluated: tuple[Campaign, IdentificationResult, EvaluationSettings] | None = None
         self.create_service(SuggestPoses, "~/suggest_poses", self._suggest_poses)
         self.create_service(CompensateTargets, "~/compensate_targets", self._compensate_targets)
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
@@ -476,37 +475,37 @@ class UncertaintyNode(Node):
             return given + ",tracker_orientation"
         return given
 
-    def _options(self, msg: CalibrationResultMsg, *, measures_orientation: bool = False) -> EvaluationOptions:
-        """The :class:`EvaluationOptions` of the parameters, with the calibration's lambda choice."""
+    def _options(self, msg: CalibrationResultMsg, *, measures_orientation: bool = False) -> EvaluationSettings:
+        """The :class:`EvaluationSettings` of the parameters, with the calibration's lambda choice
+        (built by the same functions as the command line's options)."""
 
         def get(name: str) -> Any:
             return self.get_parameter(name).value
 
         low, high = float(get("lambda_range_low")), float(get("lambda_range_high"))
-        settings = UncertaintySettings(
-            sources=parse_sources(self._sources_for(measures_orientation)),
-            tracker_noise=TrackerNoise(a=get("tracker_noise_um") * 1e-6, b=get("tracker_noise_um_per_m") * 1e-6),
-            encoder_noise=EncoderNoise(
-                half_width=float(np.radians(get("encoder_noise_deg"))),
-                linear_half_width=float(get("linear_encoder_noise_um")) * 1e-6,
-            ),
+        settings = build_uncertainty_settings(
+            sources=self._sources_for(measures_orientation),
+            tracker_noise_um=get("tracker_noise_um"),
+            tracker_noise_um_per_m=get("tracker_noise_um_per_m"),
+            encoder_noise_deg=get("encoder_noise_deg"),
+            linear_encoder_noise_um=float(get("linear_encoder_noise_um")),
+            model_error_field=bool(get("model_error_field")),
             lambda_range=None if low == high == 0.0 else (low, high),
             min_poses=int(get("min_poses")) or None,
             subset_size=int(get("subset_size")) or None,
-            tracker_xyz=tuple(float(v) for v in get("tracker_xyz_m")),
-            model_error="field" if bool(get("model_error_field")) else "independent",
+            tracker_xyz_m=get("tracker_xyz_m"),
         )
         trials = int(get("trials"))
-        return EvaluationOptions(
+        return build_evaluation_settings(
+            settings,
             lambda_=self._lambda_of(msg),
-            uncertainty=settings,
             test_joints=self.test_joints,
             trials=trials if trials > 0 else "auto",
             seed=int(get("seed")),
             coverage=float(get("coverage")),
             n_dig=int(get("n_dig")),
             max_trials=int(get("max_trials")),
-            output_frame=str(get("output_frame")),
+            frame=str(get("output_frame")),
             accept_unconverged=bool(get("accept_unconverged")),
             budget=bool(get("budget")),
             budget_trials=int(get("budget_trials")),
@@ -585,8 +584,7 @@ class UncertaintyNode(Node):
                 pipeline.campaign,
                 job.options,
                 calibration=calibration,
-                executor=self._pool.executor(),
-                progress=progress,
+                run=RunContext(executor=self._pool.executor(), progress=progress),
             )
         except _Superseded:
             self.get_logger().info(f"Monte Carlo of the {n}-sample calibration superseded; abandoned")
@@ -756,7 +754,7 @@ class UncertaintyNode(Node):
                 settings=options.uncertainty,
                 calibration=calibration,
                 lambda_=options.lambda_,
-                frame=options.output_frame,
+                frame=options.frame,
                 **arguments,  # type: ignore[arg-type]
             )
         except CalibError as err:

@@ -31,7 +31,7 @@ def result(request: pytest.FixtureRequest):  # type: ignore[no-untyped-def]
     sim = simulate_campaign(model, SimulationSettings(frame="tracker", orientation_std=request.param), seed=3)
     sources = ("tracker", "encoder") if request.param is None else ("tracker", "tracker_orientation", "encoder")
     return evaluate_uncertainty(
-        model, sim.campaign, Q, settings=UncertaintySettings(sources=sources), trials=400, block_size=400
+        model, sim.campaign, Q, uncertainty=UncertaintySettings(sources=sources), trials=400, block_size=400
     )
 
 

@@ -42,7 +42,7 @@ def test_block_values_do_not_depend_on_the_slices_of_test_configurations(
     def block(elements: int) -> tuple[np.ndarray, np.ndarray]:
         monkeypatch.setattr(calibration_trials, "_TEST_ELEMENTS", elements)
         result = evaluate_uncertainty(
-            model, campaign, test_joints, settings=settings, calibration=calibration, trials=n, seed=4, block_size=n
+            model, campaign, test_joints, uncertainty=settings, calibration=calibration, trials=n, seed=4, block_size=n
         )
         assert result.rotation_samples is not None
         return np.asarray(result.samples), np.asarray(result.rotation_samples)

@@ -57,7 +57,7 @@ def _field_run(monkeypatch, model, campaign, calibration, q_c, **kw):
     monkeypatch.setattr(preparation, "estimate_field", lambda *a, **k: ESTIMATE)
     settings = UncertaintySettings(sources=("residual",), tracker_noise=TrackerNoise(a=1e-6), model_error="field")
     return evaluate_uncertainty(
-        model, campaign, q_c, settings=settings, calibration=calibration, trials=kw.pop("trials", 20_000), **kw
+        model, campaign, q_c, uncertainty=settings, calibration=calibration, trials=kw.pop("trials", 20_000), **kw
     )
 
 

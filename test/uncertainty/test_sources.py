@@ -105,7 +105,7 @@ def test_gum_from_source_distributions_equals_a_dense_first_order_propagation(tr
     model, campaign, calibration = tracker_campaign
     settings = UncertaintySettings(sources=("tracker", "encoder", "residual"))
     result = evaluate_uncertainty(
-        model, campaign, TEST_JOINTS, settings=settings, calibration=calibration, trials=200, seed=1, frame="base"
+        model, campaign, TEST_JOINTS, uncertainty=settings, calibration=calibration, trials=200, seed=1, frame="base"
     )
     assert not result.model_adequacy.adequate
     layout = model.layout

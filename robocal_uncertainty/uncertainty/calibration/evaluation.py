@@ -9,7 +9,6 @@ result is the same whatever the chunk size or the number of workers.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -20,6 +19,7 @@ from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, run_trials
+from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty.calibration.preparation import prepare, validate_inputs
 from robocal_uncertainty.uncertainty.calibration.results import N_AXES, OUTPUT_FRAMES, CalibrationUncertainty
 from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
@@ -37,10 +37,7 @@ def evaluate_uncertainty(
     evaluation: EvaluationSettings | None = None,
     *,
     calibration: IdentificationResult | None = None,
-    workers: int = 1,
-    chunk_blocks: int = 1,
-    progress: Callable[[int, int | None], None] | None = None,
-    executor: object | None = None,
+    run: RunContext | None = None,
     **fields: Any,
 ) -> CalibrationUncertainty:
     """Monte Carlo uncertainty of the calibrated tool pose at test configurations.
@@ -52,28 +49,18 @@ def evaluate_uncertainty(
     campaign : Campaign
         Calibration data (joint readings [rad], points [m]).
     test_joint_positions : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
-        Configurations at which the tool position is evaluated.
+        Configurations at which the tool pose is evaluated.
     evaluation : EvaluationSettings, optional
         What determines the result (sources, lambda method, trials, coverage, seed, ...);
-        the defaults when omitted.
+        the defaults when omitted. Its ``test_joints``, budget and sweep fields are not read.
     calibration : IdentificationResult, optional
-        An existing calibration of `campaign`; computed with ``evaluation.lambda_`` when
-        omitted.
-    workers : int
-        Local processes (never changes the result).
-    chunk_blocks : int
-        Blocks evaluated per task (never changes the result). Memory is bounded by a
-        fixed sub-batch of trials re-identified at once.
-    progress : callable, optional
-        ``progress(done, target_or_None)``.
-    executor : Executor-like, optional
-        Runs the trial blocks instead of local processes: anything with a
-        ``concurrent.futures``-style ``submit`` (a process pool, a ``dask.distributed``
-        Client). Never changes the result.
+        An existing calibration of `campaign`; computed with ``evaluation.lambda_`` when omitted.
+    run : RunContext, optional
+        Where and how the trial blocks run (executor, workers, progress, chunking, start
+        method); never changes the result. Default: in this process.
     **fields
-        Fields of :class:`EvaluationSettings` replaced in `evaluation` (the keyword call of
-        before: ``settings=``, ``trials=``, ``seed=``, ``frame=``, ...), see
-        :meth:`EvaluationSettings.replace`.
+        Fields of :class:`EvaluationSettings` replaced in `evaluation` (``trials=``,
+        ``seed=``, ``frame=``, ``uncertainty=``, ...), see :meth:`EvaluationSettings.replace`.
 
     Returns
     -------
@@ -85,31 +72,26 @@ def evaluate_uncertainty(
         Bad settings (trials, coverage, test joints, lambda range, pose counts).
     """
     ev = (evaluation or EvaluationSettings()).replace(**fields)
+    run = run or RunContext()
     if ev.frame not in OUTPUT_FRAMES:
         msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {ev.frame!r}"
         raise ConfigError(msg)
     test_q, n_trials = validate_inputs(model, test_joint_positions, ev.coverage, ev.trials)
     prep = prepare(
-        model,
-        campaign,
-        test_q,
-        ev.uncertainty,
-        calibration,
-        ev.lambda_,
-        ev.frame,
-        orientation=ev.orientation,
-        backend=ev.backend,
-    )
+        model, campaign, test_q, ev.uncertainty, calibration, ev.lambda_, ev.frame,
+        orientation=ev.orientation, backend=ev.backend,
+    )  # fmt: skip
     result = run_trials(
         prep.trials,
         seed=ev.seed,
         n_trials=n_trials,
         adaptive=None if n_trials is not None else _adaptive(ev, test_q.shape[0]),
         block_size=ev.block_size,
-        chunk_blocks=chunk_blocks,
-        workers=workers,
-        executor=executor,
-        progress=progress,
+        chunk_blocks=run.chunk_blocks,
+        workers=run.workers,
+        executor=run.executor,
+        progress=run.progress,
+        mp_context=run.mp_context,
     )
     return state_uncertainty(prep, ev, result)
 
