@@ -34,25 +34,7 @@ def print_calibration(result: Any) -> None:
             "and not regularised"
         )
     if result.measurement.measures_orientation:
-        stated, used = result.measurement.std, 1.0 / result.measurement.weights
-        print(
-            f"  rotation residual RMS {result.rotation_rms_before * 1e3:.5g} mrad -> "
-            f"{result.rotation_rms_after * 1e3:.5g} mrad (position RMS above: the position part)"
-        )
-
-        def triple(std: Any) -> str:
-            return (
-                f"position ({', '.join(f'{v * 1e6:.3g}' for v in std[:3])}) um, "
-                f"rotation ({', '.join(f'{v * 1e6:.3g}' for v in std[3:])}) urad"
-            )
-
-        if result.weighting == "variance_components":
-            print(
-                f"  weighting: each residual divided by its scatter (variance components, "
-                f"{result.weighting_iterations} fits): {triple(used)}; stated: {triple(stated)}"
-            )
-        else:
-            print(f"  weighting: each residual divided by its stated standard uncertainty, {triple(stated)}")
+        _print_orientation_fit(result)
     from robocal_uncertainty.report.table2 import format_significant, round_to_uncertainty
 
     print("  parameter            nominal        estimate   1st-order std")
@@ -102,6 +84,29 @@ def print_calibration(result: Any) -> None:
         )
     for warning in result.warnings:
         print(f"  warning: {warning}")
+
+
+def _print_orientation_fit(result: Any) -> None:
+    """The rotation residuals and the weighting of a calibration from 6-DOF measurements."""
+    stated, used = result.measurement.std, 1.0 / result.measurement.weights
+    print(
+        f"  rotation residual RMS {result.rotation_rms_before * 1e3:.5g} mrad -> "
+        f"{result.rotation_rms_after * 1e3:.5g} mrad (position RMS above: the position part)"
+    )
+
+    def triple(std: Any) -> str:
+        return (
+            f"position ({', '.join(f'{v * 1e6:.3g}' for v in std[:3])}) um, "
+            f"rotation ({', '.join(f'{v * 1e6:.3g}' for v in std[3:])}) urad"
+        )
+
+    if result.weighting == "variance_components":
+        print(
+            f"  weighting: each residual divided by its scatter (variance components, "
+            f"{result.weighting_iterations} fits): {triple(used)}; stated: {triple(stated)}"
+        )
+    else:
+        print(f"  weighting: each residual divided by its stated standard uncertainty, {triple(stated)}")
 
 
 def print_adequacy(result: Any) -> None:

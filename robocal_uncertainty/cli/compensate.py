@@ -103,10 +103,10 @@ def _campaign_path(args: argparse.Namespace, data: dict[str, Any]) -> str | None
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from robocal_uncertainty.app.campaign_checks import check_campaign_joints
     from robocal_uncertainty.app.compensation import compensate
     from robocal_uncertainty.app.output_paths import check_output_file
     from robocal_uncertainty.cli._common import (
-        check_campaign_joints,
         default_sources,
         joint_configurations,
         load_robot,

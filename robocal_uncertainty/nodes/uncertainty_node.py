@@ -64,7 +64,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import json
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,6 +77,7 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from robocal_uncertainty.app import Evaluation, evaluate
+from robocal_uncertainty.app.campaign_checks import check_campaign_joints
 from robocal_uncertainty.app.pose_suggestion import service_arguments, service_response, suggest_poses
 from robocal_uncertainty.bagio.messages import msg_to_sample, pose_with_covariance, uncertainty_to_msgs
 from robocal_uncertainty.core.campaign import Campaign
@@ -559,10 +560,11 @@ class UncertaintyNode(Node):
                 self.get_logger().error(f"uncertainty evaluation failed: {type(err).__name__}: {err}")
                 self._status({"state": "failed", "error": str(err)})
 
-    def _run(self, job: _Job) -> None:
+    def _progress_of(self, job: _Job, started: float) -> Callable[[int, int | None], None]:
+        """The progress callback of `job`'s main run: logs and status every progress_period_s,
+        and abandons the run (raising :class:`_Superseded`) once a newer job is queued."""
         n = len(job.samples)
         period = float(self.get_parameter("progress_period_s").value)
-        started = time.monotonic()
         last = [started]
 
         def progress(done: int, target: int | None) -> None:
@@ -575,9 +577,35 @@ class UncertaintyNode(Node):
                 self.get_logger().info(f"Monte Carlo of the {n}-sample calibration: {done}{of} trials")
                 self._status({"state": "running", "done": done, "target": target, "sample_count": n})
 
+        return progress
+
+    def _latency_s(self, job: _Job) -> float | None:
+        """Seconds from the newest sample's stamp (when the pose was taken) to now, on this node's
+        clock; None (with a warning) when the stamps are not on it."""
+        # A played recording needs `ros2 bag play --clock` and use_sim_time, else its stamps are
+        # not on the node's clock and no latency is stated.
+        newest = max(sample.stamp_ns for sample in job.samples)
+        latency = (self.get_clock().now().nanoseconds - newest) / 1e9
+        if not (-_CLOCK_SLACK_S <= latency <= _LATENCY_LIMIT_S):
+            self._causes.warning(
+                "clock",
+                f"sample stamps are {latency:.3g} s from this node's clock: no sample_to_result_s "
+                "(playing a recording? use `ros2 bag play --clock` and use_sim_time:=true)",
+            )
+            return None
+        return latency
+
+    def _run(self, job: _Job) -> None:
+        n = len(job.samples)
+        started = time.monotonic()
+        progress = self._progress_of(job, started)
         self._status({"state": "running", "done": 0, "target": job.options.trials, "sample_count": n})
         pipeline = SampleStore.pipeline_of(self.model, job.samples, options=job.options)
         try:
+            if pipeline.campaign is not None:
+                # The command line's check of a campaign file, on the samples: readings outside
+                # the joint limits (degrees sent as radians) are refused, not calibrated.
+                check_campaign_joints(self.model, pipeline.campaign, f"the {n}-sample campaign")
             calibration = pipeline.calibrate()
             evaluation = evaluate(
                 self.model,
@@ -617,18 +645,7 @@ class UncertaintyNode(Node):
         self._evaluated = (campaign, calibration, job.options)
         self.completed += 1
         elapsed = time.monotonic() - started
-        # Latency: from the newest sample's stamp (when the pose was taken) to publication, on
-        # this node's clock: a played recording needs `ros2 bag play --clock` and use_sim_time,
-        # else its stamps are not on the node's clock and no latency is stated.
-        newest = max(sample.stamp_ns for sample in job.samples)
-        latency: float | None = (self.get_clock().now().nanoseconds - newest) / 1e9
-        if latency is not None and not (-_CLOCK_SLACK_S <= latency <= _LATENCY_LIMIT_S):
-            self._causes.warning(
-                "clock",
-                f"sample stamps are {latency:.3g} s from this node's clock: no sample_to_result_s "
-                "(playing a recording? use `ros2 bag play --clock` and use_sim_time:=true)",
-            )
-            latency = None
+        latency = self._latency_s(job)
         self._health = {
             "state": "done",
             "trials": result.n_trials,

@@ -252,6 +252,16 @@ def sweep_equations(
     return out
 
 
+def _sweep_points(calibration: IdentificationResult, n_poses: int) -> tuple[Array, NDArray[np.int_]]:
+    """The lambdas and pose counts of the report's sweeps (see :func:`evaluate_sweeps`)."""
+    lam = calibration.lambda_
+    lambdas = np.geomspace(lam / 10.0, lam * 10.0, 9) if lam > 0 else np.geomspace(1e-4, 1e-1, 9)
+    n_est = int(calibration.estimated.sum())
+    lowest = max(int(np.ceil(1.5 * n_est / 3)), int(np.ceil(40 / 3)))
+    counts = np.unique(np.linspace(min(lowest, n_poses), n_poses, 8).round().astype(int))
+    return lambdas, counts
+
+
 def evaluate_sweeps(
     model: RobotModel,
     campaign: Campaign,
@@ -293,10 +303,7 @@ def evaluate_sweeps(
         sources=tuple(s for s in settings.sources if s in ("tracker", "encoder", "residual")) or ("tracker", "encoder"),
     )
     lam = calibration.lambda_
-    lambdas = np.geomspace(lam / 10.0, lam * 10.0, 9) if lam > 0 else np.geomspace(1e-4, 1e-1, 9)
-    n_est = int(calibration.estimated.sum())
-    lowest = max(int(np.ceil(1.5 * n_est / 3)), int(np.ceil(40 / 3)))
-    counts = np.unique(np.linspace(min(lowest, campaign.n_poses), campaign.n_poses, 8).round().astype(int))
+    lambdas, counts = _sweep_points(calibration, campaign.n_poses)
     trials, seed = options.sweep_trials, options.seed
     common: dict[str, Any] = {
         "trials": trials,
@@ -318,6 +325,20 @@ def evaluate_sweeps(
     u_eq = sweep_equations(
         model, campaign, calibration, options.test_joints, counts, run=_shifted(lambdas.size * trials), **common
     )
+    return _as_sweeps(lambdas, u_lam, lam, counts, u_eq, campaign.n_poses, trials, seed)
+
+
+def _as_sweeps(
+    lambdas: Array,
+    u_lam: Array,
+    lam: float,
+    counts: NDArray[np.int_],
+    u_eq: Array,
+    n_poses: int,
+    trials: int,
+    seed: int,
+) -> tuple[Sweep, Sweep]:
+    """The two curves of :func:`evaluate_sweeps` as :class:`Sweep` results."""
     return (
         Sweep(
             name="lambda",
@@ -334,7 +355,7 @@ def evaluate_sweeps(
             xlabel="number of equations (3 per pose)",
             values=3 * counts.astype(float),
             standard_uncertainty=u_eq,
-            reference=float(3 * campaign.n_poses),
+            reference=float(3 * n_poses),
             log_x=False,
             n_trials=trials,
             seed=seed,

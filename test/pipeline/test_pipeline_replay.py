@@ -15,8 +15,13 @@ from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.bagio.raw_bag_simulator import RawBagTruth
 from robocal_uncertainty.core import RobotModel, SimulationSettings
 from robocal_uncertainty.errors import BagError, CampaignError
-from robocal_uncertainty.pipeline import EvaluationSettings, replay_bag
-from robocal_uncertainty.uncertainty import CalibrationUncertainty, UncertaintySettings, evaluate_uncertainty
+from robocal_uncertainty.pipeline import replay_bag
+from robocal_uncertainty.uncertainty import (
+    CalibrationUncertainty,
+    EvaluationSettings,
+    UncertaintySettings,
+    evaluate_uncertainty,
+)
 
 OPTIONS = EvaluationSettings(test_joints=TEST_JOINTS, trials=TRIALS, seed=SEED)
 ENCODER = SimulationSettings().encoder_noise

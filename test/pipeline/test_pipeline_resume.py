@@ -15,8 +15,8 @@ from robocal_uncertainty.app import evaluate
 from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.core import RobotModel
 from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
-from robocal_uncertainty.pipeline import CalibrationPipeline, CalibrationSample, EvaluationSettings, replay_bag
-from robocal_uncertainty.uncertainty import evaluate_uncertainty
+from robocal_uncertainty.pipeline import CalibrationPipeline, CalibrationSample, replay_bag
+from robocal_uncertainty.uncertainty import EvaluationSettings, evaluate_uncertainty
 
 
 @pytest.fixture(scope="module")
