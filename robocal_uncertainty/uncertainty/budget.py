@@ -14,6 +14,7 @@ from types import MappingProxyType
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.calibration.results import CalibrationUncertainty
@@ -54,6 +55,9 @@ def evaluate_budget(
     sources = options.uncertainty.sources
     if len(sources) < 2:
         return MappingProxyType({})
+    if options.test_joints is None:
+        raise ConfigError("no test joint configurations given for the uncertainty evaluation")
+    test_joints = options.test_joints
     run = run or RunContext()
     progress = run.progress
     total = len(sources) * options.budget_trials
@@ -72,6 +76,6 @@ def evaluate_budget(
                 progress(before + done, total)
 
         out[source] = evaluate_uncertainty(
-            model, campaign, alone.test_joints, alone, calibration=calibration, run=run.with_progress(hook)
+            model, campaign, test_joints, alone, calibration=calibration, run=run.with_progress(hook)
         )
     return MappingProxyType(out)

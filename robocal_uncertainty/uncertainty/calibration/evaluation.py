@@ -11,8 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
@@ -27,13 +26,11 @@ from robocal_uncertainty.uncertainty.calibration.statement import state_uncertai
 
 __all__ = ["evaluate_uncertainty"]
 
-Array = NDArray[np.float64]
-
 
 def evaluate_uncertainty(
     model: RobotModel,
     campaign: Campaign,
-    test_joint_positions: Array,
+    test_joint_positions: ArrayLike,
     evaluation: EvaluationSettings | None = None,
     *,
     calibration: IdentificationResult | None = None,
