@@ -52,10 +52,10 @@ from robocal_uncertainty.core.robot_config import resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.importers import read_tracker_csv
-from robocal_uncertainty.montecarlo.executor import WorkerPool
+from robocal_uncertainty.montecarlo.executor import RunContext, WorkerPool
 from robocal_uncertainty.pipeline.markers import uncertainty_markers
 from robocal_uncertainty.pipeline.sample_store import SampleStore
-from robocal_uncertainty.uncertainty import EvaluationOptions, UncertaintySettings
+from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED_TEST_JOINTS_DEG = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]  # the node's default
@@ -113,14 +113,16 @@ def samples_of(campaign: Campaign) -> list[CalibrationSample]:
 class NodePath:
     """The calibration and uncertainty nodes' work for one way of running the trials."""
 
-    def __init__(self, model: RobotModel, options: EvaluationOptions, mode: str) -> None:
+    def __init__(self, model: RobotModel, options: EvaluationSettings, mode: str) -> None:
         self.model = model
         self.options = options
         self.mode = mode
         self.calibration_store = SampleStore(model)
         self.uncertainty_store = SampleStore(model)
         self.pool = (
-            WorkerPool(2, preload=("robocal_uncertainty.uncertainty.calibration_mc",)) if "kept" in mode else None
+            WorkerPool(2, preload=("robocal_uncertainty.uncertainty.calibration.evaluation",))
+            if "kept" in mode
+            else None
         )
         if self.pool is not None:
             self.pool.start()  # the node starts its pool before the first sample
@@ -138,10 +140,16 @@ class NodePath:
         campaign = pipeline.campaign
         assert campaign is not None
         if self.pool is not None:
-            run = evaluate(self.model, campaign, self.options, calibration=calibration, executor=self.pool.executor())
+            run = evaluate(
+                self.model,
+                campaign,
+                self.options,
+                calibration=calibration,
+                run=RunContext(executor=self.pool.executor()),
+            )
         else:
             workers = 1 if self.mode == "1 worker" else 2
-            run = evaluate(self.model, campaign, self.options, calibration=calibration, workers=workers)
+            run = evaluate(self.model, campaign, self.options, calibration=calibration, run=RunContext(workers=workers))
         result = run.uncertainty
         uncertainty_to_msgs(result, stamp_ns=sample.stamp_ns, frame_id=result.frame_id)
         for pose in result.poses:
@@ -179,7 +187,9 @@ def main() -> None:
     )
     for setting in args.settings.split(","):
         trials: int | str = "auto" if setting.strip() == "auto" else int(setting)
-        options = EvaluationOptions(test_joints=test_joints, uncertainty=node_settings(), trials=trials, seed=args.seed)
+        options = EvaluationSettings(
+            test_joints=test_joints, uncertainty=node_settings(), trials=trials, seed=args.seed
+        )
         paths = [NodePath(model, options, mode) for mode in MODES]
         wall: dict[str, list[float]] = {mode: [] for mode in MODES}
         cpu: dict[str, list[float]] = {mode: [] for mode in MODES}

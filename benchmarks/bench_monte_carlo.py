@@ -45,6 +45,7 @@ from robocal_uncertainty.core import (
     simulate_campaign,
 )
 from robocal_uncertainty.montecarlo.engine import run_trials
+from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty import (
     EvaluationSettings,
     UncertaintySettings,
@@ -92,7 +93,7 @@ def engine_rate(model, campaign, calibration, settings, n_trials: int, seed: int
         TEST_JOINTS,
         EvaluationSettings(uncertainty=settings, trials=n_trials, seed=seed),
         calibration=calibration,
-        workers=workers,
+        run=RunContext(workers=workers),
     )
     return n_trials / (clock() - start), result
 

@@ -64,7 +64,7 @@ def main() -> None:
     many = draw_joint_positions(model, args.configurations, rng=np.random.default_rng(2), margin=np.radians(5.0))
     settings = UncertaintySettings(sources=("tracker", "encoder"))
     results = {
-        n: evaluate_uncertainty(model, campaign, many[:n], settings=settings, trials=args.trials, seed=1)
+        n: evaluate_uncertainty(model, campaign, many[:n], uncertainty=settings, trials=args.trials, seed=1)
         for n in (1, args.configurations)
     }
     histograms = _histograms(args.histograms)

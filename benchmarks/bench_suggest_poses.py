@@ -47,7 +47,7 @@ def main() -> None:
     settings = UncertaintySettings()
 
     def u(campaign: object, seed: int) -> float:
-        result = evaluate_uncertainty(model, campaign, TEST_JOINTS, settings=settings, trials=args.trials, seed=seed)
+        result = evaluate_uncertainty(model, campaign, TEST_JOINTS, uncertainty=settings, trials=args.trials, seed=seed)
         return float(np.sqrt(np.mean([np.trace(p.covariance) for p in result.poses])))
 
     ratios = []

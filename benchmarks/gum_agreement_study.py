@@ -41,7 +41,7 @@ from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robo
 from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledErrors, simulate_campaign
 from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
-from robocal_uncertainty.uncertainty.calibration_mc import EvaluationSettings, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import EvaluationSettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 UR10_CSV = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"

@@ -48,7 +48,7 @@ from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robo
 from robocal_uncertainty.core.rotation import EULER_CONVENTIONS, euler_to_matrix, rotation_log
 from robocal_uncertainty.importers.targets import Targets
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
-from robocal_uncertainty.uncertainty import EvaluationOptions, UncertaintySettings
+from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings
 from robocal_uncertainty.uncertainty.holdout import split_campaign
 
 CSV = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
 
     calibration = identify(model, train_campaign, lambda_="auto")
     data = calibration_to_dict(calibration, robot="ur10")
-    options = EvaluationOptions(
+    options = EvaluationSettings(
         uncertainty=UncertaintySettings(sources=SOURCES), trials=args.trials, seed=args.seed, coverage=0.95
     )
     targets = Targets(registered[held], None, "Series D Goal x/y/z, registered", "m")

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocal_uncertainty.app import Evaluation, EvaluationOptions, evaluate, replay
+from robocal_uncertainty.app import Evaluation, EvaluationSettings, evaluate, replay
 from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.bagio.messages import msg_to_sample, sample_to_msg
 from robocal_uncertainty.cli import main
@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 BASE_BAG = REPO / "test" / "data" / "paper_arm_base_raw.mcap"
 COLLECTOR = CollectorSettings(window_s=0.1, guard_s=0.025, min_points=10)  # the test bags' short dwells
 JOINTS_DEG = [[-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451], [30.0, -180.0, 45.0, 10.0, -20.0, 5.0]]
-OPTIONS = EvaluationOptions(
+OPTIONS = EvaluationSettings(
     uncertainty=UncertaintySettings(sources=("tracker", "encoder")),
     test_joints=np.radians(JOINTS_DEG),
     trials=300,
@@ -68,7 +68,7 @@ def test_replay_equals_evaluate_of_the_recorded_campaign(replayed) -> None:
         model,
         result.replay.campaign,
         OPTIONS.test_joints,
-        settings=OPTIONS.uncertainty,
+        uncertainty=OPTIONS.uncertainty,
         trials=OPTIONS.trials,
         seed=OPTIONS.seed,
     )
@@ -114,13 +114,13 @@ def test_command_line_equals_service(replayed, tmp_path: Path) -> None:
 def test_service_refuses_missing_test_joints_and_bad_trials(replayed) -> None:
     model, result, _ = replayed
     with pytest.raises(ConfigError, match="no test joint"):
-        evaluate(model, result.replay.campaign, EvaluationOptions())
+        evaluate(model, result.replay.campaign, EvaluationSettings())
     with pytest.raises(ConfigError, match="budget_trials must be a positive integer"):
-        EvaluationOptions(budget_trials=0)
+        EvaluationSettings(budget_trials=0)
     # The one entry the nodes and compensate share refuses what the command line refuses:
     # below 2/(1-p) trials (40 at 95 %, 20 at 90 %) no trial lies beyond the interval's ends.
     joints = np.zeros((1, model.n_joints))
     for trials, coverage, floor in ((11, 0.95, 40), (39, 0.95, 40), (19, 0.90, 20)):
-        options = EvaluationOptions(test_joints=joints, trials=trials, coverage=coverage)
+        options = EvaluationSettings(test_joints=joints, trials=trials, coverage=coverage)
         with pytest.raises(ConfigError, match=rf"trials {trials} cannot state .* 2/\(1-p\) = {floor} trials"):
             evaluate(model, result.replay.campaign, options)

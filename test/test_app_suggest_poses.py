@@ -77,7 +77,7 @@ def test_top_ranked_pose_lowers_the_monte_carlo_uncertainty_more_than_a_bottom_r
     top, bottom = candidates[np.argmax(reductions)], candidates[np.argmin(reductions)]
 
     def u(c) -> float:
-        result = evaluate_uncertainty(arm, c, TEST_JOINTS, settings=SETTINGS, trials=2000, seed=5)
+        result = evaluate_uncertainty(arm, c, TEST_JOINTS, uncertainty=SETTINGS, trials=2000, seed=5)
         return float(np.sqrt(np.mean([np.trace(p.covariance) for p in result.poses])))
 
     now = u(campaign)
@@ -151,7 +151,7 @@ def test_suggested_poses_beat_random_poses(arm: RobotModel) -> None:
         random = draw_joint_positions(arm, 5, rng=np.random.default_rng(seed + 50), margin=0.05)
 
         def u(c, seed: int = seed) -> float:
-            result = evaluate_uncertainty(arm, c, TEST_JOINTS, settings=SETTINGS, trials=1000, seed=seed)
+            result = evaluate_uncertainty(arm, c, TEST_JOINTS, uncertainty=SETTINGS, trials=1000, seed=seed)
             return float(np.sqrt(np.mean([np.trace(p.covariance) for p in result.poses])))
 
         ratios.append(

@@ -60,7 +60,7 @@ def test_evaluate_report_equals_api(campaign_file: Path, tmp_path: Path) -> None
         model,
         campaign,
         np.radians(PAPER_TEST_JOINTS_DEG),
-        settings=UncertaintySettings(sources=("tracker", "encoder", "pose_choice")),
+        uncertainty=UncertaintySettings(sources=("tracker", "encoder", "pose_choice")),
         calibration=identify(model, campaign),
         trials=600,
         seed=3,

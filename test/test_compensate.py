@@ -201,7 +201,7 @@ def test_the_uncertainty_is_evaluates_at_the_same_joints(tmp_path: Path) -> None
     from robocal_uncertainty.app import evaluate
     from robocal_uncertainty.bagio import read_campaign
     from robocal_uncertainty.core.calibration_file import read_calibration
-    from robocal_uncertainty.uncertainty import EvaluationOptions, UncertaintySettings
+    from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings
 
     camp, cal = tmp_path / "c.mcap", tmp_path / "cal.json"
     assert main(["simulate", "--robot", "paper_arm", "--poses", "40", "--frame", "tracker", "--out", str(camp)]) == 0
@@ -212,7 +212,7 @@ def test_the_uncertainty_is_evaluates_at_the_same_joints(tmp_path: Path) -> None
     calibrated = apply_calibration(model, data)
     q = campaign.joint_positions[:6] + 0.01
     targets = Targets(forward_points(calibrated, calibrated.parameter_vector(), q) + 2e-4, None, "t", "m")
-    options = EvaluationOptions(
+    options = EvaluationSettings(
         uncertainty=UncertaintySettings(sources=("tracker", "encoder", "residual")), trials=500, seed=4
     )
     result = compensate(model, data, targets, seeds=q, campaign=campaign, options=options)

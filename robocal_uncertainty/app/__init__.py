@@ -26,14 +26,16 @@ if TYPE_CHECKING:
     from robocal_uncertainty.app.section_inspection import SectionInspection, inspect_section, section_demo
     from robocal_uncertainty.app.simulation import SimulationFiles, simulate
     from robocal_uncertainty.app.validation import validate
-    from robocal_uncertainty.uncertainty.options import EvaluationOptions
+    from robocal_uncertainty.montecarlo.executor import RunContext
+    from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
 __all__ = [
     "Compensation",
     "Evaluation",
-    "EvaluationOptions",
+    "EvaluationSettings",
     "PoseSuggestion",
     "ReplayEvaluation",
+    "RunContext",
     "SectionInspection",
     "SimulationFiles",
     "Suggestions",

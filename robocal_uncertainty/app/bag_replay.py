@@ -10,15 +10,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from robocal_uncertainty.app.evaluation import Evaluation, PhaseProgress, evaluate
 from robocal_uncertainty.bagio.campaign_format import JOINT_TOPIC, POINT_TOPIC
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import IdentifiabilityError
+from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.pipeline.collector import CollectorSettings, LogCallback
 from robocal_uncertainty.pipeline.replay import ReplayResult, replay_bag
-from robocal_uncertainty.uncertainty.options import EvaluationOptions, Progress
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
 __all__ = ["ReplayEvaluation", "replay"]
 
@@ -34,7 +34,7 @@ class ReplayEvaluation:
 def replay(
     bag: str | Path,
     model: RobotModel,
-    options: EvaluationOptions,
+    options: EvaluationSettings,
     *,
     joint_topic: str = JOINT_TOPIC,
     point_topic: str = POINT_TOPIC,
@@ -44,9 +44,7 @@ def replay(
     campaign_path: str | Path | None = None,
     log: LogCallback | None = None,
     auto_window: bool = False,
-    executor: Any | None = None,
-    workers: int = 1,
-    progress: Progress | None = None,
+    run: RunContext | None = None,
     phase_progress: PhaseProgress | None = None,
 ) -> ReplayEvaluation:
     """Replay a raw bag into a campaign and evaluate it with `options`.
@@ -57,11 +55,11 @@ def replay(
         Raw recording: one MCAP file or a rosbag2 directory.
     model : RobotModel
         Nominal model.
-    options : EvaluationOptions
+    options : EvaluationSettings
         As for :func:`~robocal_uncertainty.app.evaluate`; must have ``test_joints``.
     joint_topic, point_topic, tracker_pose_topic, tracker_frame_id, collector, campaign_path, log, auto_window
         See :func:`~robocal_uncertainty.pipeline.replay.replay_bag`.
-    executor, workers, progress, phase_progress
+    run, phase_progress
         See :func:`~robocal_uncertainty.app.evaluate`.
 
     Raises
@@ -93,9 +91,7 @@ def replay(
         model,
         result.campaign,
         options,
-        executor=executor,
-        workers=workers,
-        progress=progress,
+        run=run,
         phase_progress=phase_progress,
     )
     return ReplayEvaluation(replay=result, evaluation=evaluation)

@@ -45,8 +45,9 @@ from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.importers.targets import Targets
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
-from robocal_uncertainty.uncertainty.options import EvaluationOptions
+from robocal_uncertainty.montecarlo.executor import RunContext
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
 __all__ = [
     "COMPENSATION_FORMAT",
@@ -442,7 +443,7 @@ def compensate(
     frame: str | None = None,
     seeds: Array | None = None,
     campaign: Campaign | None = None,
-    options: EvaluationOptions | None = None,
+    options: EvaluationSettings | None = None,
     settings: IkSettings | None = None,
     branch: dict[str, int] | None = None,
     where: str = "calibration",
@@ -466,9 +467,9 @@ def compensate(
         pose nearest to each target (needs `campaign`).
     campaign : Campaign, optional
         The calibration's campaign: the seeds' start, and the Monte Carlo of the statement.
-    options : EvaluationOptions, optional
+    options : EvaluationSettings, optional
         Monte Carlo settings (sources, trials, seed, coverage); ``test_joints``, ``lambda_``
-        and ``output_frame`` are set here. None: no uncertainty (joints only).
+        and ``frame`` are set here. None: no uncertainty (joints only).
     settings : IkSettings, optional
     branch : dict of str to int, optional
         Without `seeds`, for pose targets of a UR arm: the analytic nominal solution's branch
@@ -549,8 +550,8 @@ def compensate(
             msg = f"{where} has no numeric 'lambda': cannot re-identify its campaign for the uncertainty"
             raise ConfigError(msg)
         q_ok = solution.joints[accepted]
-        run = replace(options, test_joints=q_ok, lambda_=float(lam), output_frame=chosen)
-        evaluation = evaluate(model, campaign, run, workers=workers)
+        asked = replace(options, test_joints=q_ok, lambda_=float(lam), frame=chosen)
+        evaluation = evaluate(model, campaign, asked, run=RunContext(workers=workers))
         again = model.with_tool_rotation() if evaluation.calibration.model.tool_rotation else model
         reidentified = _frame_params(again.with_parameters(evaluation.calibration.estimate), chosen)
         gap = forward_points(calibrated.layout, reidentified, q_ok) - forward_points(

@@ -1,9 +1,11 @@
 """The evaluation service: calibration, Monte Carlo uncertainty, budget and sweeps of a campaign.
 
 :func:`evaluate` is the one path from a campaign and
-:class:`~robocal_uncertainty.uncertainty.options.EvaluationOptions` to results: the command
-line's ``evaluate``, ``demo`` and ``replay``, the uncertainty node and the tests all call
-it, so the same campaign, options and seed give the same numbers bit for bit.
+:class:`~robocal_uncertainty.uncertainty.calibration.settings.EvaluationSettings` to results:
+the command line's ``evaluate``, ``demo`` and ``replay``, the uncertainty node, ``compensate``
+and the tests all call it, so the same campaign, settings and seed give the same numbers bit
+for bit (with the small-campaign adaptation, the trial floor and the memory check applied for
+every caller alike).
 """
 
 from __future__ import annotations
@@ -16,16 +18,19 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robocal_uncertainty.bagio.campaign_reader import READ_WARNINGS_KEY
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty.budget import evaluate_budget
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration.results import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 from robocal_uncertainty.uncertainty.memory import check_fits, evaluation_bytes
-from robocal_uncertainty.uncertainty.options import EvaluationOptions, Progress, evaluate_campaign
 from robocal_uncertainty.uncertainty.statement_check import interval_trial_floor, recommended_trials
 from robocal_uncertainty.uncertainty.sweeps import Sweep, evaluate_sweeps
 
@@ -78,8 +83,8 @@ def _merge(*groups: Sequence[str]) -> tuple[str, ...]:
 
 
 def small_campaign_options(
-    campaign: Campaign, calibration: IdentificationResult, options: EvaluationOptions
-) -> tuple[EvaluationOptions, tuple[str, ...]]:
+    campaign: Campaign, calibration: IdentificationResult, options: EvaluationSettings
+) -> tuple[EvaluationSettings, tuple[str, ...]]:
     """Adapt the pose-count defaults to a campaign too small for them; return the notes.
 
     The defaults of ``min_poses`` (40 equations or 1.5 x the identifiable parameters) and
@@ -122,16 +127,14 @@ def small_campaign_options(
 def evaluate(
     model: RobotModel,
     campaign: Campaign,
-    options: EvaluationOptions,
+    settings: EvaluationSettings,
     *,
     calibration: IdentificationResult | None = None,
-    executor: Any | None = None,
-    workers: int = 1,
-    progress: Progress | None = None,
+    run: RunContext | None = None,
     phase_progress: PhaseProgress | None = None,
     input_warnings: Sequence[str] = (),
 ) -> Evaluation:
-    """Calibrate `campaign` and evaluate its uncertainty, budget and sweeps as `options` say.
+    """Calibrate `campaign` and evaluate its uncertainty, budget and sweeps as `settings` say.
 
     Parameters
     ----------
@@ -140,18 +143,15 @@ def evaluate(
     campaign : Campaign
         Joint readings [rad] and points [m]. Its reader's warnings
         (``campaign.metadata["warnings"]``) are carried into the result's warnings.
-    options : EvaluationOptions
+    settings : EvaluationSettings
         Must have ``test_joints``.
     calibration : IdentificationResult, optional
-        ``identify(model, campaign, lambda_=options.lambda_,
-        accept_unconverged=options.accept_unconverged)`` if already computed (a node's
+        ``identify(model, campaign, lambda_=settings.lambda_,
+        accept_unconverged=settings.accept_unconverged)`` if already computed (a node's
         pipeline has it); computed so when omitted, so the result does not depend on it.
-    executor : concurrent.futures.Executor-like, optional
-        Runs the Monte Carlo trial blocks (forwarded only when given); never changes the result.
-    workers : int
-        Local worker processes when no `executor` is given; never changes the result.
-    progress : callable, optional
-        ``progress(done, target)`` of the main Monte Carlo run.
+    run : RunContext, optional
+        Where the trial blocks run (executor, local workers) and the main run's
+        ``progress(done, target)``; never changes the result. Default: in this process.
     phase_progress : callable, optional
         Progress of the budget and the sweeps (see :data:`PhaseProgress`).
     input_warnings : sequence of str
@@ -167,79 +167,23 @@ def evaluate(
     Raises
     ------
     ConfigError
-        No test joints, invalid options, or a fixed trial count below 2/(1-p) for the
-        coverage probability asked (no trial beyond the interval's ends).
+        No test joints, invalid settings, a fixed trial count below 2/(1-p) for the
+        coverage probability asked (no trial beyond the interval's ends), or a size that
+        cannot fit in memory.
     IdentifiabilityError, ConvergenceError
         The campaign cannot identify the model (see
         :func:`~robocal_uncertainty.core.identification.identify`).
     """
-    if options.test_joints is None:
-        raise ConfigError("no test joint configurations given for the uncertainty evaluation")
-    if options.trials != "auto" and int(options.trials) < interval_trial_floor(options.coverage):
-        # Below 2/(1-p) not one trial lies beyond either end of the interval: no statement
-        # (the command line says the same of --trials before this; the nodes and compensate
-        # meet it here).
-        floor = interval_trial_floor(options.coverage)
-        msg = (
-            f"trials {int(options.trials)} cannot state a {options.coverage * 100:g} % coverage interval: below "
-            f"2/(1-p) = {floor} trials not one trial lies beyond either end (JCGM 101 7.2); use "
-            f"{recommended_trials(options.coverage)} or more, or the adaptive procedure"
-        )
-        raise ConfigError(msg)
+    run = run or RunContext()
+    test_joints = _check_trials(settings)
     if calibration is None:
-        calibration = identify(model, campaign, lambda_=options.lambda_, accept_unconverged=options.accept_unconverged)
-    options, notes = small_campaign_options(campaign, calibration, options)
-    if options.trials != "auto":
-        # Refuse a size that cannot fit before the work, naming it, instead of an allocation
-        # traceback after minutes (the adaptive procedure is bounded by its own cap).
-        n_test = int(np.atleast_2d(options.test_joints).shape[0])
-        check_fits(
-            evaluation_bytes(
-                int(options.trials),
-                n_test,
-                int(np.count_nonzero(calibration.estimated)),
-                n_poses=campaign.n_poses,
-                n_joints=model.n_joints,
-                block_rows=options.block_size,
-                workers=workers if executor is None else 1,
-            ),
-            f"--trials {int(options.trials)} at {n_test} test configuration{'s' if n_test != 1 else ''}",
-            "use fewer --trials (or fewer test configurations)",
+        calibration = identify(
+            model, campaign, lambda_=settings.lambda_, accept_unconverged=settings.accept_unconverged
         )
-    uncertainty = evaluate_campaign(
-        model, campaign, options, calibration=calibration, workers=workers, progress=progress, executor=executor
-    )
-    budget: Mapping[str, CalibrationUncertainty] = MappingProxyType({})
-    if options.budget:
-        budget = evaluate_budget(
-            model,
-            campaign,
-            calibration,
-            options,
-            workers=workers,
-            executor=executor,
-            progress=None if phase_progress is None else (lambda d, t: phase_progress("budget", d, t)),
-        )
-    sweeps: tuple[Sweep, ...] = ()
-    if options.sweeps:
-        sweeps = evaluate_sweeps(
-            model,
-            campaign,
-            calibration,
-            options,
-            workers=workers,
-            executor=executor,
-            progress=None if phase_progress is None else (lambda d, t: phase_progress("sweeps", d, t)),
-        )
-        short = [sw for sw in sweeps if sw.name == "equations" and len(sw.values) < 2]
-        if short:
-            sweeps = tuple(sw for sw in sweeps if sw not in short)
-            notes = (
-                *notes,
-                f"the sweep over the number of equations is skipped: the campaign's {campaign.n_poses} poses "
-                "are fewer than the smallest pose count it starts from (40 equations or 1.5 x the identifiable "
-                "parameters)",
-            )
+    settings, notes = small_campaign_options(campaign, calibration, settings)
+    _check_memory(model, campaign, calibration, settings, run)
+    uncertainty = evaluate_uncertainty(model, campaign, test_joints, settings, calibration=calibration, run=run)
+    budget, sweeps, sweep_notes = _phases(model, campaign, calibration, settings, run, phase_progress)
     inputs = _merge(campaign.metadata.get(READ_WARNINGS_KEY) or (), input_warnings)
     return Evaluation(
         calibration=calibration,
@@ -248,5 +192,83 @@ def evaluate(
         sweeps=sweeps,
         warnings=_merge(inputs, uncertainty.warnings),
         input_warnings=inputs,
-        notes=notes,
+        notes=(*notes, *sweep_notes),
     )
+
+
+def _check_trials(settings: EvaluationSettings) -> NDArray[np.float64]:
+    """The test joints of `settings`; refuse a fixed trial count that cannot state the interval."""
+    if settings.test_joints is None:
+        raise ConfigError("no test joint configurations given for the uncertainty evaluation")
+    if settings.trials != "auto" and int(settings.trials) < interval_trial_floor(settings.coverage):
+        # Below 2/(1-p) not one trial lies beyond either end of the interval: no statement
+        # (the command line says the same of --trials before this; the nodes and compensate
+        # meet it here).
+        floor = interval_trial_floor(settings.coverage)
+        msg = (
+            f"trials {int(settings.trials)} cannot state a {settings.coverage * 100:g} % coverage interval: below "
+            f"2/(1-p) = {floor} trials not one trial lies beyond either end (JCGM 101 7.2); use "
+            f"{recommended_trials(settings.coverage)} or more, or the adaptive procedure"
+        )
+        raise ConfigError(msg)
+    return settings.test_joints
+
+
+def _check_memory(
+    model: RobotModel,
+    campaign: Campaign,
+    calibration: IdentificationResult,
+    settings: EvaluationSettings,
+    run: RunContext,
+) -> None:
+    """Refuse a size that cannot fit before the work, naming it, instead of an allocation
+    traceback after minutes (the adaptive procedure is bounded by its own cap)."""
+    if settings.trials == "auto":
+        return
+    n_test = int(np.atleast_2d(settings.test_joints).shape[0])
+    check_fits(
+        evaluation_bytes(
+            int(settings.trials),
+            n_test,
+            int(np.count_nonzero(calibration.estimated)),
+            n_poses=campaign.n_poses,
+            n_joints=model.n_joints,
+            block_rows=settings.block_size,
+            workers=run.workers if run.executor is None else 1,
+        ),
+        f"--trials {int(settings.trials)} at {n_test} test configuration{'s' if n_test != 1 else ''}",
+        "use fewer --trials (or fewer test configurations)",
+    )
+
+
+def _phases(
+    model: RobotModel,
+    campaign: Campaign,
+    calibration: IdentificationResult,
+    settings: EvaluationSettings,
+    run: RunContext,
+    phase_progress: PhaseProgress | None,
+) -> tuple[Mapping[str, CalibrationUncertainty], tuple[Sweep, ...], tuple[str, ...]]:
+    """The budget and the sweeps `settings` ask for, and a note for a sweep skipped."""
+
+    def phase(name: str) -> RunContext:
+        if phase_progress is None:
+            return run.with_progress(None)
+        return run.with_progress(lambda d, t: phase_progress(name, d, t))
+
+    budget: Mapping[str, CalibrationUncertainty] = MappingProxyType({})
+    if settings.budget:
+        budget = evaluate_budget(model, campaign, calibration, settings, run=phase("budget"))
+    sweeps: tuple[Sweep, ...] = ()
+    notes: tuple[str, ...] = ()
+    if settings.sweeps:
+        sweeps = evaluate_sweeps(model, campaign, calibration, settings, run=phase("sweeps"))
+        short = [sw for sw in sweeps if sw.name == "equations" and len(sw.values) < 2]
+        if short:
+            sweeps = tuple(sw for sw in sweeps if sw not in short)
+            notes = (
+                f"the sweep over the number of equations is skipped: the campaign's {campaign.n_poses} poses "
+                "are fewer than the smallest pose count it starts from (40 equations or 1.5 x the identifiable "
+                "parameters)",
+            )
+    return budget, sweeps, notes

@@ -44,7 +44,7 @@ from robocal_uncertainty.core.measurement import joint_columns
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.simulation import draw_joint_positions
 from robocal_uncertainty.errors import ConvergenceError, InputError
-from robocal_uncertainty.uncertainty.calibration_mc import EvaluationSettings, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import EvaluationSettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [

@@ -14,8 +14,8 @@ from collections.abc import Callable
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 from robocal_uncertainty.uncertainty.holdout import HoldoutValidation, split_campaign, validate_holdout
-from robocal_uncertainty.uncertainty.options import EvaluationOptions
 
 __all__ = ["DEFAULT_HOLDOUT_FRACTION", "validate"]
 
@@ -26,7 +26,7 @@ DEFAULT_HOLDOUT_FRACTION = 0.25
 def validate(
     model: RobotModel,
     campaign: Campaign,
-    options: EvaluationOptions,
+    options: EvaluationSettings,
     *,
     train_poses: int | None = None,
     holdout_fraction: float | None = None,
@@ -43,10 +43,10 @@ def validate(
         Nominal model.
     campaign : Campaign
         Calibration campaign.
-    options : EvaluationOptions
+    options : EvaluationSettings
         Lambda, sources, a fixed trial count, seed and coverage of the statement under test
         (``test_joints`` is not used: the held-out joint readings are the test
-        configurations); ``output_frame`` must be ``"measurement"``.
+        configurations); ``frame`` must be ``"measurement"``.
     train_poses, holdout_fraction, k_folds : optional
         At most one: calibrate on this many random poses; hold out this fraction at random
         (default :data:`DEFAULT_HOLDOUT_FRACTION`); or k-fold cross-validation.
@@ -68,7 +68,7 @@ def validate(
     """
     if options.trials == "auto":
         raise ConfigError("validate needs a fixed number of --trials, not auto")
-    if options.output_frame != "measurement":
+    if options.frame != "measurement":
         # Held-out measurements exist only in the campaign's frame; moving them into the base
         # frame would use the uncertain identified base and bias the comparison.
         raise ConfigError(

@@ -27,7 +27,7 @@ from robocal_uncertainty.bagio.ros_messages import DECODE_ERRORS, ros_typestore,
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import BagError, InputError
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, PoseUncertainty
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty, PoseUncertainty
 
 __all__ = [
     "CALIBRATION_RESULT",

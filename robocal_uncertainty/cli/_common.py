@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal_uncertainty.app.campaign_checks import check_campaign_joints, refuse_raw_recording
 from robocal_uncertainty.errors import ConfigError, InputError
 
 DEFAULT_PAIRING_TOLERANCE_MS = 50.0
@@ -334,38 +335,6 @@ def read_campaign_checked(args: argparse.Namespace, path: str) -> Any:
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
     return campaign
-
-
-def check_campaign_joints(model: Any, campaign: Any, path: str) -> None:
-    from robocal_uncertainty.core import check_joint_limits
-
-    check_joint_limits(
-        model,
-        campaign.reorder_joints(model.joint_names).joint_positions,
-        what=f"{path}: campaign pose",
-        degrees_hint="the readings look like degrees (import-csv --angle-unit deg?)",
-    )
-
-
-RAW_RECORDING_GAP_S = 0.25
-"""A campaign whose tracker points are typically closer in time than this is a raw recording:
-a robot cannot move to a new pose and settle that fast (the shipped raw bags stream points every
-5 ms; a campaign has one point per pose, seconds apart)."""
-
-
-def refuse_raw_recording(path: str, campaign: Any) -> None:
-    """Refuse a raw recording read as a campaign: pairing every streamed tracker point with a
-    joint reading turns the motion between poses into "poses", and the calibration is nonsense."""
-    stamps = campaign.stamps_ns
-    if stamps is None or campaign.n_poses < 3:
-        return
-    gap_s = float(np.median(np.diff(np.sort(np.asarray(stamps, dtype=np.int64))))) / 1e9
-    if gap_s < RAW_RECORDING_GAP_S:
-        msg = (
-            f"{path}: {campaign.n_poses} tracker points, typically {gap_s * 1e3:.3g} ms apart: this is a raw "
-            "recording (a campaign has one point per static pose, seconds apart), not a campaign: use 'replay' on it"
-        )
-        raise InputError(msg)
 
 
 def read_test_joints(args: argparse.Namespace, model: Any) -> NDArray[np.float64]:

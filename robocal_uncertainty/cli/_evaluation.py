@@ -12,7 +12,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.cli._common import Progress, count, in_cli_words, parse_lambda, parse_trials, seconds
-from robocal_uncertainty.cli._options import encoder_noise
 from robocal_uncertainty.errors import ConfigError
 
 
@@ -35,25 +34,7 @@ def print_calibration(result: Any) -> None:
             "and not regularised"
         )
     if result.measurement.measures_orientation:
-        stated, used = result.measurement.std, 1.0 / result.measurement.weights
-        print(
-            f"  rotation residual RMS {result.rotation_rms_before * 1e3:.5g} mrad -> "
-            f"{result.rotation_rms_after * 1e3:.5g} mrad (position RMS above: the position part)"
-        )
-
-        def triple(std: Any) -> str:
-            return (
-                f"position ({', '.join(f'{v * 1e6:.3g}' for v in std[:3])}) um, "
-                f"rotation ({', '.join(f'{v * 1e6:.3g}' for v in std[3:])}) urad"
-            )
-
-        if result.weighting == "variance_components":
-            print(
-                f"  weighting: each residual divided by its scatter (variance components, "
-                f"{result.weighting_iterations} fits): {triple(used)}; stated: {triple(stated)}"
-            )
-        else:
-            print(f"  weighting: each residual divided by its stated standard uncertainty, {triple(stated)}")
+        _print_orientation_fit(result)
     from robocal_uncertainty.report.table2 import format_significant, round_to_uncertainty
 
     print("  parameter            nominal        estimate   1st-order std")
@@ -105,6 +86,29 @@ def print_calibration(result: Any) -> None:
         print(f"  warning: {warning}")
 
 
+def _print_orientation_fit(result: Any) -> None:
+    """The rotation residuals and the weighting of a calibration from 6-DOF measurements."""
+    stated, used = result.measurement.std, 1.0 / result.measurement.weights
+    print(
+        f"  rotation residual RMS {result.rotation_rms_before * 1e3:.5g} mrad -> "
+        f"{result.rotation_rms_after * 1e3:.5g} mrad (position RMS above: the position part)"
+    )
+
+    def triple(std: Any) -> str:
+        return (
+            f"position ({', '.join(f'{v * 1e6:.3g}' for v in std[:3])}) um, "
+            f"rotation ({', '.join(f'{v * 1e6:.3g}' for v in std[3:])}) urad"
+        )
+
+    if result.weighting == "variance_components":
+        print(
+            f"  weighting: each residual divided by its scatter (variance components, "
+            f"{result.weighting_iterations} fits): {triple(used)}; stated: {triple(stated)}"
+        )
+    else:
+        print(f"  weighting: each residual divided by its stated standard uncertainty, {triple(stated)}")
+
+
 def print_adequacy(result: Any) -> None:
     ad = result.model_adequacy
     if ad.adequate:
@@ -150,32 +154,37 @@ def print_adequacy(result: Any) -> None:
 
 
 def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Sequence[str]) -> Any:
-    from robocal_uncertainty.core import TrackerNoise
-    from robocal_uncertainty.uncertainty import UncertaintySettings
+    """The :class:`UncertaintySettings` of the parsed noise and source arguments (the node's
+    parameters go through the same :func:`build_uncertainty_settings`)."""
+    from robocal_uncertainty.uncertainty.calibration.settings import build_uncertainty_settings
 
     between = None
     if getattr(args, "between_session", None):
         from robocal_uncertainty.uncertainty.between_sessions import between_sessions_from_file
 
         between = between_sessions_from_file(args.between_session)
-    return UncertaintySettings(
-        between_session=between,
+    return build_uncertainty_settings(
         sources=tuple(sources),
-        tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
-        encoder_noise=encoder_noise(args),
+        tracker_noise_um=args.tracker_noise_um,
+        tracker_noise_um_per_m=args.tracker_noise_um_per_m,
+        encoder_noise_deg=args.encoder_noise_deg,
+        linear_encoder_noise_um=args.linear_encoder_noise_um,
+        model_error_field=bool(getattr(args, "model_error_field", False)),
         lambda_range=None if args.lambda_range is None else (args.lambda_range[0], args.lambda_range[1]),
         min_poses=args.min_poses,
         subset_size=args.subset_size,
-        model_error="field" if getattr(args, "model_error_field", False) else "independent",
+        between_session=between,
     )
 
 
 def evaluation_options(
     args: argparse.Namespace, sources: Sequence[str], test_joints: NDArray[np.float64] | None
 ) -> Any:
-    """The :class:`EvaluationOptions` of the parsed uncertainty arguments."""
+    """The :class:`EvaluationSettings` of the parsed uncertainty arguments (the node's
+    parameters go through the same :func:`build_evaluation_settings`)."""
     from robocal_uncertainty.kernels import get_backend
-    from robocal_uncertainty.uncertainty import EvaluationOptions, parse_sources
+    from robocal_uncertainty.uncertainty import parse_sources
+    from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings
 
     get_backend(args.backend)  # an unknown or missing backend stops here, before any work
     for option in ("budget_trials", "sweep_trials", "max_trials"):
@@ -183,15 +192,15 @@ def evaluation_options(
         if value <= 0:
             msg = f"--{option.replace('_', '-')} must be a positive integer, got {value}"
             raise ConfigError(msg)
-    return EvaluationOptions(
+    return build_evaluation_settings(
+        uncertainty_settings(args, None, parse_sources(list(sources))),
         lambda_=parse_lambda(args.lambda_),
-        uncertainty=uncertainty_settings(args, None, parse_sources(list(sources))),
         test_joints=test_joints,
         trials=parse_trials(args.trials),
         seed=args.seed,
         coverage=args.coverage,
         max_trials=args.max_trials,
-        output_frame=args.frame,
+        frame=args.frame,
         accept_unconverged=args.accept_unconverged,
         budget=args.budget,
         budget_trials=args.budget_trials,
@@ -201,7 +210,7 @@ def evaluation_options(
     )
 
 
-def run_evaluation(
+def evaluate_and_report(
     model: Any,
     campaign: Any,
     test_joints: NDArray[np.float64],
@@ -214,16 +223,15 @@ def run_evaluation(
     """Evaluate through :func:`robocal_uncertainty.app.evaluate`, print and write the report:
     shared by ``evaluate`` and ``demo``. Returns the uncertainty result."""
     from robocal_uncertainty.app import evaluate
-    from robocal_uncertainty.montecarlo.executor import open_executor
+    from robocal_uncertainty.montecarlo.executor import RunContext, open_executor
 
     options = evaluation_options(args, sources, test_joints)
     bars = Progress(not args.no_progress, label, max_trials=args.max_trials)
     try:
         # --dask (evaluate only) or --workers: one executor for the main run, budget and sweeps.
         with open_executor(workers=args.workers, dask=getattr(args, "dask", None)) as executor:
-            evaluation = evaluate(
-                model, campaign, options, executor=executor, progress=bars.main, phase_progress=bars.phase
-            )
+            run = RunContext(executor=executor, progress=bars.main)
+            evaluation = evaluate(model, campaign, options, run=run, phase_progress=bars.phase)
     finally:
         bars.close()
     print_evaluation(evaluation, options, model, out_dir, bars, args)

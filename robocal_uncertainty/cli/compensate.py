@@ -103,10 +103,10 @@ def _campaign_path(args: argparse.Namespace, data: dict[str, Any]) -> str | None
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from robocal_uncertainty.app.campaign_checks import check_campaign_joints
     from robocal_uncertainty.app.compensation import compensate
     from robocal_uncertainty.app.output_paths import check_output_file
     from robocal_uncertainty.cli._common import (
-        check_campaign_joints,
         default_sources,
         joint_configurations,
         load_robot,
@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     options = None
     if not args.no_uncertainty:
         from robocal_uncertainty.core import TrackerNoise
-        from robocal_uncertainty.uncertainty import EvaluationOptions, UncertaintySettings
+        from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings
 
         if campaign is None:
             msg = (
@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
             )
             raise ConfigError(msg)
         sources = parse_sources_arg(default_sources(args.sources, campaign))
-        options = EvaluationOptions(
+        options = EvaluationSettings(
             uncertainty=UncertaintySettings(
                 sources=sources,
                 tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from robocal_uncertainty.cli._common import load_robot
-from robocal_uncertainty.cli._evaluation import run_evaluation
+from robocal_uncertainty.cli._evaluation import evaluate_and_report
 from robocal_uncertainty.cli._options import add_force_arg, add_uncertainty_args
 
 PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"({', '.join(f'{v:g}' for v in PAPER_TEST_JOINTS_DEG)}) deg. Sources: {', '.join(DEMO_SOURCES)}.")
     print()
     test_q = np.radians(np.array(PAPER_TEST_JOINTS_DEG))[None, :]
-    result = run_evaluation(
+    result = evaluate_and_report(
         model, sim.campaign, test_q, sources=DEMO_SOURCES, args=args, out_dir=Path(args.out), label="demo"
     )
     from robocal_uncertainty.core import forward_points

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from robocal_uncertainty.cli._common import SOURCES_DEFAULT_HELP, campaign_and_robot, default_sources, read_test_joints
-from robocal_uncertainty.cli._evaluation import run_evaluation
+from robocal_uncertainty.cli._evaluation import evaluate_and_report
 from robocal_uncertainty.cli._options import (
     add_campaign_args,
     add_dask_arg,
@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     sources = parse_sources(default_sources(args.sources, campaign))
     if args.between_session and "between_session" not in sources:
         sources = (*sources, "between_session")
-    run_evaluation(
+    evaluate_and_report(
         model,
         campaign,
         test_q,

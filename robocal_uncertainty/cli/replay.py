@@ -23,6 +23,7 @@ from robocal_uncertainty.cli._options import (
     add_uncertainty_args,
     add_urdf_chain_args,
 )
+from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty.sources import default_sources as default_source_names
 from robocal_uncertainty.uncertainty.sources import sources_help
 
@@ -133,8 +134,7 @@ def run(args: argparse.Namespace) -> int:
             campaign_path=args.campaign_out,
             log=log,
             auto_window=window is None,
-            workers=args.workers,
-            progress=bars.main,
+            run=RunContext(workers=args.workers, progress=bars.main),
             phase_progress=bars.phase,
         )
     finally:

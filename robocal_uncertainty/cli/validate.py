@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from robocal_uncertainty.app.campaign_checks import check_campaign_joints
 from robocal_uncertainty.cli._common import (
     SOURCES_DEFAULT_HELP,
     campaign_and_robot,
-    check_campaign_joints,
     default_sources,
     parse_sources_arg,
     read_campaign_checked,

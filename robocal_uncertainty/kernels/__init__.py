@@ -1,6 +1,6 @@
 """Backends of the Monte Carlo trial kernels, registered by name.
 
-A trial block (:class:`~robocal_uncertainty.uncertainty.calibration_mc.CalibrationTrials`)
+A trial block (:class:`~robocal_uncertainty.uncertainty.calibration.trials.CalibrationTrials`)
 draws its inputs with numpy from its own seeded streams, then spends most of its time walking
 the kinematic chain: the prediction at the campaign's poses in every re-identification step,
 and the tool at the test (or map) configurations. A backend supplies those walks; the

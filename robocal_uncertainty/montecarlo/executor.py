@@ -17,6 +17,7 @@ import multiprocessing
 from collections.abc import Callable, Generator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import Any, Protocol, runtime_checkable
 
@@ -25,6 +26,7 @@ from robocal_uncertainty.errors import ConfigError
 __all__ = [
     "LOCAL_DASK",
     "FutureLike",
+    "RunContext",
     "SubmitExecutor",
     "WorkerPool",
     "check_executor",
@@ -55,6 +57,40 @@ class SubmitExecutor(Protocol):
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> FutureLike:
         """Schedule ``fn(*args, **kwargs)``."""
         ...
+
+
+@dataclass(frozen=True, eq=False)
+class RunContext:
+    """How a Monte Carlo run is carried out: never what it gives.
+
+    Every field is a choice of where and how fast the trial blocks run; the result is the
+    same for every value (each block draws from its own seeded stream, blocks are collected
+    in block order), so a run context is never part of a result's settings.
+
+    Attributes
+    ----------
+    executor : SubmitExecutor or None
+        Runs the trial blocks (a process pool, a ``dask.distributed`` client); None runs
+        them in `workers` local processes.
+    workers : int
+        Local worker processes when no `executor` is given (1: in this process).
+    progress : callable or None
+        ``progress(trials_done, trials_target_or_None)`` after each chunk of the main run.
+    chunk_blocks : int
+        Blocks per task: a memory and overhead knob.
+    mp_context : str or None
+        Start method of local worker processes (None: ``forkserver`` where available).
+    """
+
+    executor: SubmitExecutor | None = None
+    workers: int = 1
+    progress: Callable[[int, int | None], None] | None = None
+    chunk_blocks: int = 1
+    mp_context: str | None = None
+
+    def with_progress(self, progress: Callable[[int, int | None], None] | None) -> RunContext:
+        """The same run context reporting to `progress` (e.g. a budget's or a sweep's phase)."""
+        return replace(self, progress=progress)
 
 
 def _is_dask_client(executor: object) -> bool:

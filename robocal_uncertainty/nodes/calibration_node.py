@@ -104,7 +104,7 @@ from robocal_uncertainty.report.verification_report import (
     verification_to_dict,
     write_verification_report,
 )
-from robocal_uncertainty.uncertainty.options import EvaluationOptions
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
 __all__ = ["PARAMETERS", "CalibrationNode", "main"]
 
@@ -349,7 +349,7 @@ class CalibrationNode(Node):
             return None
         lambda_ = parse_lambda(str(self.get_parameter("lambda").value))
         try:
-            options = EvaluationOptions(
+            options = EvaluationSettings(
                 lambda_=lambda_, accept_unconverged=bool(self.get_parameter("accept_unconverged").value)
             )
             result = self.store.pipeline(options=options, min_samples=min_samples).calibrate()

@@ -64,7 +64,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import json
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,14 +77,14 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from robocal_uncertainty.app import Evaluation, evaluate
+from robocal_uncertainty.app.campaign_checks import check_campaign_joints
 from robocal_uncertainty.app.pose_suggestion import service_arguments, service_response, suggest_poses
 from robocal_uncertainty.bagio.messages import msg_to_sample, pose_with_covariance, uncertainty_to_msgs
-from robocal_uncertainty.core import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CalibError, ConfigError
-from robocal_uncertainty.montecarlo.executor import WorkerPool
+from robocal_uncertainty.montecarlo.executor import RunContext, WorkerPool
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg
 from robocal_uncertainty.msg import PoseUncertainty as PoseUncertaintyMsg
@@ -114,12 +114,12 @@ from robocal_uncertainty.pipeline.sample_store import SampleStore
 from robocal_uncertainty.srv import CompensateTargets, SuggestPoses
 from robocal_uncertainty.uncertainty import (
     CalibrationUncertainty,
-    EvaluationOptions,
-    UncertaintySettings,
+    EvaluationSettings,
     default_sources,
     parse_sources,
     sources_help,
 )
+from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings, build_uncertainty_settings
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
 
@@ -374,7 +374,7 @@ class _Job:
     generation: int
     samples: tuple[CalibrationSample, ...]
     calibration: CalibrationResultMsg
-    options: EvaluationOptions
+    options: EvaluationSettings
 
 
 class UncertaintyNode(Node):
@@ -420,8 +420,8 @@ class UncertaintyNode(Node):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
         self._health: dict[str, Any] = {"state": "idle"}
         # Started by the worker thread; the trial block's module is imported once per process.
-        self._pool = WorkerPool(int(p["workers"]), preload=("robocal_uncertainty.uncertainty.calibration_mc",))
-        self._evaluated: tuple[Campaign, IdentificationResult, EvaluationOptions] | None = None
+        self._pool = WorkerPool(int(p["workers"]), preload=("robocal_uncertainty.uncertainty.calibration.evaluation",))
+        self._evaluated: tuple[Campaign, IdentificationResult, EvaluationSettings] | None = None
         self.create_service(SuggestPoses, "~/suggest_poses", self._suggest_poses)
         self.create_service(CompensateTargets, "~/compensate_targets", self._compensate_targets)
         self.create_subscription(CalibrationSampleMsg, "robocal/samples", self._on_sample, SAMPLE_QOS)
@@ -476,37 +476,37 @@ class UncertaintyNode(Node):
             return given + ",tracker_orientation"
         return given
 
-    def _options(self, msg: CalibrationResultMsg, *, measures_orientation: bool = False) -> EvaluationOptions:
-        """The :class:`EvaluationOptions` of the parameters, with the calibration's lambda choice."""
+    def _options(self, msg: CalibrationResultMsg, *, measures_orientation: bool = False) -> EvaluationSettings:
+        """The :class:`EvaluationSettings` of the parameters, with the calibration's lambda choice
+        (built by the same functions as the command line's options)."""
 
         def get(name: str) -> Any:
             return self.get_parameter(name).value
 
         low, high = float(get("lambda_range_low")), float(get("lambda_range_high"))
-        settings = UncertaintySettings(
-            sources=parse_sources(self._sources_for(measures_orientation)),
-            tracker_noise=TrackerNoise(a=get("tracker_noise_um") * 1e-6, b=get("tracker_noise_um_per_m") * 1e-6),
-            encoder_noise=EncoderNoise(
-                half_width=float(np.radians(get("encoder_noise_deg"))),
-                linear_half_width=float(get("linear_encoder_noise_um")) * 1e-6,
-            ),
+        settings = build_uncertainty_settings(
+            sources=self._sources_for(measures_orientation),
+            tracker_noise_um=get("tracker_noise_um"),
+            tracker_noise_um_per_m=get("tracker_noise_um_per_m"),
+            encoder_noise_deg=get("encoder_noise_deg"),
+            linear_encoder_noise_um=float(get("linear_encoder_noise_um")),
+            model_error_field=bool(get("model_error_field")),
             lambda_range=None if low == high == 0.0 else (low, high),
             min_poses=int(get("min_poses")) or None,
             subset_size=int(get("subset_size")) or None,
-            tracker_xyz=tuple(float(v) for v in get("tracker_xyz_m")),
-            model_error="field" if bool(get("model_error_field")) else "independent",
+            tracker_xyz_m=get("tracker_xyz_m"),
         )
         trials = int(get("trials"))
-        return EvaluationOptions(
+        return build_evaluation_settings(
+            settings,
             lambda_=self._lambda_of(msg),
-            uncertainty=settings,
             test_joints=self.test_joints,
             trials=trials if trials > 0 else "auto",
             seed=int(get("seed")),
             coverage=float(get("coverage")),
             n_dig=int(get("n_dig")),
             max_trials=int(get("max_trials")),
-            output_frame=str(get("output_frame")),
+            frame=str(get("output_frame")),
             accept_unconverged=bool(get("accept_unconverged")),
             budget=bool(get("budget")),
             budget_trials=int(get("budget_trials")),
@@ -560,10 +560,11 @@ class UncertaintyNode(Node):
                 self.get_logger().error(f"uncertainty evaluation failed: {type(err).__name__}: {err}")
                 self._status({"state": "failed", "error": str(err)})
 
-    def _run(self, job: _Job) -> None:
+    def _progress_of(self, job: _Job, started: float) -> Callable[[int, int | None], None]:
+        """The progress callback of `job`'s main run: logs and status every progress_period_s,
+        and abandons the run (raising :class:`_Superseded`) once a newer job is queued."""
         n = len(job.samples)
         period = float(self.get_parameter("progress_period_s").value)
-        started = time.monotonic()
         last = [started]
 
         def progress(done: int, target: int | None) -> None:
@@ -576,17 +577,42 @@ class UncertaintyNode(Node):
                 self.get_logger().info(f"Monte Carlo of the {n}-sample calibration: {done}{of} trials")
                 self._status({"state": "running", "done": done, "target": target, "sample_count": n})
 
+        return progress
+
+    def _latency_s(self, job: _Job) -> float | None:
+        """Seconds from the newest sample's stamp (when the pose was taken) to now, on this node's
+        clock; None (with a warning) when the stamps are not on it."""
+        # A played recording needs `ros2 bag play --clock` and use_sim_time, else its stamps are
+        # not on the node's clock and no latency is stated.
+        newest = max(sample.stamp_ns for sample in job.samples)
+        latency = (self.get_clock().now().nanoseconds - newest) / 1e9
+        if not (-_CLOCK_SLACK_S <= latency <= _LATENCY_LIMIT_S):
+            self._causes.warning(
+                "clock",
+                f"sample stamps are {latency:.3g} s from this node's clock: no sample_to_result_s "
+                "(playing a recording? use `ros2 bag play --clock` and use_sim_time:=true)",
+            )
+            return None
+        return latency
+
+    def _run(self, job: _Job) -> None:
+        n = len(job.samples)
+        started = time.monotonic()
+        progress = self._progress_of(job, started)
         self._status({"state": "running", "done": 0, "target": job.options.trials, "sample_count": n})
         pipeline = SampleStore.pipeline_of(self.model, job.samples, options=job.options)
         try:
+            if pipeline.campaign is not None:
+                # The command line's check of a campaign file, on the samples: readings outside
+                # the joint limits (degrees sent as radians) are refused, not calibrated.
+                check_campaign_joints(self.model, pipeline.campaign, f"the {n}-sample campaign")
             calibration = pipeline.calibrate()
             evaluation = evaluate(
                 self.model,
                 pipeline.campaign,
                 job.options,
                 calibration=calibration,
-                executor=self._pool.executor(),
-                progress=progress,
+                run=RunContext(executor=self._pool.executor(), progress=progress),
             )
         except _Superseded:
             self.get_logger().info(f"Monte Carlo of the {n}-sample calibration superseded; abandoned")
@@ -619,18 +645,7 @@ class UncertaintyNode(Node):
         self._evaluated = (campaign, calibration, job.options)
         self.completed += 1
         elapsed = time.monotonic() - started
-        # Latency: from the newest sample's stamp (when the pose was taken) to publication, on
-        # this node's clock: a played recording needs `ros2 bag play --clock` and use_sim_time,
-        # else its stamps are not on the node's clock and no latency is stated.
-        newest = max(sample.stamp_ns for sample in job.samples)
-        latency: float | None = (self.get_clock().now().nanoseconds - newest) / 1e9
-        if latency is not None and not (-_CLOCK_SLACK_S <= latency <= _LATENCY_LIMIT_S):
-            self._causes.warning(
-                "clock",
-                f"sample stamps are {latency:.3g} s from this node's clock: no sample_to_result_s "
-                "(playing a recording? use `ros2 bag play --clock` and use_sim_time:=true)",
-            )
-            latency = None
+        latency = self._latency_s(job)
         self._health = {
             "state": "done",
             "trials": result.n_trials,
@@ -756,7 +771,7 @@ class UncertaintyNode(Node):
                 settings=options.uncertainty,
                 calibration=calibration,
                 lambda_=options.lambda_,
-                frame=options.output_frame,
+                frame=options.frame,
                 **arguments,  # type: ignore[arg-type]
             )
         except CalibError as err:

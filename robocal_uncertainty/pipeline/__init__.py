@@ -3,8 +3,7 @@ pipeline (sample accumulation, recording, resume) and bag replay into samples an
 
 Thin ROS 2 nodes wrap these objects; ``robocal-uncertainty replay`` drives them offline.
 The uncertainty evaluation is :func:`robocal_uncertainty.app.evaluate`, above this layer.
-``EvaluationOptions`` and ``evaluate_campaign`` are re-exported from
-:mod:`robocal_uncertainty.uncertainty.options`. Nothing here imports ROS.
+Nothing here imports ROS.
 """
 
 from typing import TYPE_CHECKING
@@ -26,7 +25,6 @@ if TYPE_CHECKING:
     from robocal_uncertainty.pipeline.replay import ReplayResult, replay_bag
     from robocal_uncertainty.pipeline.sample_store import SampleStore
     from robocal_uncertainty.pipeline.stream_merge import StreamMerger
-    from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
 
 __all__ = [
     "DROP_CAUSES",
@@ -36,14 +34,12 @@ __all__ = [
     "DiagnosticLevel",
     "DiagnosticStatus",
     "DiagnosticThresholds",
-    "EvaluationOptions",
     "LogCallback",
     "MarkerSpec",
     "ReplayResult",
     "SampleStore",
     "StaticPoseCollector",
     "StreamMerger",
-    "evaluate_campaign",
     "replay_bag",
     "samples_to_campaign",
     "uncertainty_markers",

@@ -4,12 +4,9 @@
 recorded to a campaign MCAP file pose by pose, so a crash loses nothing, and resumed from
 that file on restart) and identifies the parameters. The uncertainty of that calibration
 is the application service's job: ``robocal_uncertainty.app.evaluate(model,
-pipeline.campaign, options, calibration=pipeline.calibrate())``, the call the command line,
-the replay and the nodes make, so the same campaign and options give the same numbers bit
+pipeline.campaign, settings, calibration=pipeline.calibrate())``, the call the command line,
+the replay and the nodes make, so the same campaign and settings give the same numbers bit
 for bit.
-
-:class:`EvaluationOptions` and :func:`evaluate_campaign` are re-exported from
-:mod:`robocal_uncertainty.uncertainty.options`, where they now live.
 """
 
 from __future__ import annotations
@@ -31,9 +28,9 @@ from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.rotation import quaternion_from_matrix, quaternion_to_matrix
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
-from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
-__all__ = ["CalibrationPipeline", "EvaluationOptions", "evaluate_campaign"]  # the last two: re-exports
+__all__ = ["CalibrationPipeline"]
 
 Array = NDArray[np.float64]
 
@@ -45,9 +42,9 @@ class CalibrationPipeline:
     ----------
     model : RobotModel
         Nominal model; samples must carry exactly its joints (any order).
-    options : EvaluationOptions, optional
+    options : EvaluationSettings, optional
         Its ``lambda_`` and ``accept_unconverged`` set the identification of
-        :meth:`calibrate` (defaults: ``EvaluationOptions()``); the rest is carried for the
+        :meth:`calibrate` (defaults: ``EvaluationSettings()``); the rest is carried for the
         evaluation (``robocal_uncertainty.app.evaluate``).
     min_samples : int, optional
         Fewest samples :meth:`calibrate` accepts; None leaves the check to the
@@ -88,7 +85,7 @@ class CalibrationPipeline:
         self,
         model: RobotModel,
         *,
-        options: EvaluationOptions | None = None,
+        options: EvaluationSettings | None = None,
         min_samples: int | None = None,
         campaign_path: str | Path | None = None,
         fsync: bool = True,
@@ -101,7 +98,7 @@ class CalibrationPipeline:
             raise ConfigError(msg)
         self.model = model
         self.min_samples = min_samples
-        self.options = EvaluationOptions() if options is None else options
+        self.options = EvaluationSettings() if options is None else options
         self.campaign_path = None if campaign_path is None else Path(campaign_path)
         self.resume_warnings: tuple[str, ...] = ()
         """Warnings raised while reading the resumed campaign file (e.g. truncation)."""

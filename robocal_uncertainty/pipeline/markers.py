@@ -1,7 +1,7 @@
 """RViz marker descriptions of an uncertainty result (ROS-free).
 
 :func:`uncertainty_markers` turns a
-:class:`~robocal_uncertainty.uncertainty.calibration_mc.CalibrationUncertainty` into
+:class:`~robocal_uncertainty.uncertainty.calibration.results.CalibrationUncertainty` into
 :class:`MarkerSpec` values that the uncertainty node copies into a
 ``visualization_msgs/MarkerArray`` (``robocal/uncertainty_markers``):
 
@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from robocal_uncertainty.core.rotation import quaternion_from_matrix as rotation_quaternion
 from robocal_uncertainty.errors import InputError
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty
 
 __all__ = [
     "MarkerSpec",

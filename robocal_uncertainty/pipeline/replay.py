@@ -39,7 +39,7 @@ from robocal_uncertainty.errors import BagError, CampaignError
 from robocal_uncertainty.pipeline.auto_window import AutoWindowCollector
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
 from robocal_uncertainty.pipeline.collector import CollectorSettings, LogCallback
-from robocal_uncertainty.uncertainty.options import EvaluationOptions
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
 __all__ = [
     "POSE_WITH_COVARIANCE_STAMPED",
@@ -279,7 +279,7 @@ def replay_bag(
     tracker_pose_topic: str | None = None,
     tracker_frame_id: str | None = None,
     collector: CollectorSettings | None = None,
-    options: EvaluationOptions | None = None,
+    options: EvaluationSettings | None = None,
     min_samples: int | None = None,
     campaign_path: str | Path | None = None,
     calibrate: bool = True,

@@ -26,7 +26,7 @@ from robocal_uncertainty.core.rotation import quaternion_from_matrix
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.pipeline.calibration_pipeline import CalibrationPipeline
-from robocal_uncertainty.uncertainty.options import EvaluationOptions
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
 __all__ = ["SampleStore"]
 
@@ -128,7 +128,7 @@ class SampleStore:
         return [self._samples[s] for s in stamps]
 
     def pipeline(
-        self, n: int | None = None, *, options: EvaluationOptions | None = None, min_samples: int | None = None
+        self, n: int | None = None, *, options: EvaluationSettings | None = None, min_samples: int | None = None
     ) -> CalibrationPipeline:
         """A fresh in-memory :class:`CalibrationPipeline` of the `n` earliest samples."""
         return self.pipeline_of(self.model, self.first(n), options=options, min_samples=min_samples)
@@ -138,7 +138,7 @@ class SampleStore:
         model: RobotModel,
         samples: Iterable[CalibrationSample],
         *,
-        options: EvaluationOptions | None = None,
+        options: EvaluationSettings | None = None,
         min_samples: int | None = None,
     ) -> CalibrationPipeline:
         """A fresh in-memory :class:`CalibrationPipeline` of `samples` (see its parameters)."""

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty
 
 __all__ = [
     "DEFAULT_HISTOGRAMS",

@@ -56,7 +56,7 @@ from robocal_uncertainty.report.table2 import (
     round_to_uncertainty,
     table2_rows,
 )
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty, PoseUncertainty
+from robocal_uncertainty.uncertainty.calibration import CalibrationUncertainty, PoseUncertainty
 from robocal_uncertainty.uncertainty.sources import SOURCE_DESCRIPTIONS
 from robocal_uncertainty.uncertainty.sweeps import Sweep
 

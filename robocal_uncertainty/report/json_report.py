@@ -31,7 +31,7 @@ from robocal_uncertainty.core.rotation import quaternion_from_matrix
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.montecarlo import CoverageInterval, OutputSummary
 from robocal_uncertainty.report.configurations import ConfigurationSummary, summarize_configurations
-from robocal_uncertainty.uncertainty.calibration_mc import (
+from robocal_uncertainty.uncertainty.calibration import (
     ROTATION_AXES,
     CalibrationUncertainty,
     PoseUncertainty,

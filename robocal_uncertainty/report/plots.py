@@ -34,7 +34,7 @@ from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.summary import OutputSummary
 from robocal_uncertainty.report.configurations import ConfigurationSummary, summarize_configurations
 from robocal_uncertainty.report.table2 import LENGTH_UNITS
-from robocal_uncertainty.uncertainty.calibration_mc import (
+from robocal_uncertainty.uncertainty.calibration import (
     CalibrationUncertainty,
 )
 
@@ -221,7 +221,7 @@ def plot_rotation_histograms(result: CalibrationUncertainty, path: str | Path, *
         `pose` out of range, or the result has no orientation.
     """
     from robocal_uncertainty.core.rotation import rotation_log
-    from robocal_uncertainty.uncertainty.calibration_mc import ROTATION_AXES
+    from robocal_uncertainty.uncertainty.calibration import ROTATION_AXES
 
     _check_pose(result, pose)
     o = result.poses[pose].orientation

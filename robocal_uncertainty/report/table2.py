@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.report.references import ROBOT_PAPER, ROBOT_PAPER_REFERENCE
-from robocal_uncertainty.uncertainty.calibration_mc import (
+from robocal_uncertainty.uncertainty.calibration import (
     ROTATION_AXES,
     CalibrationUncertainty,
     OrientationUncertainty,

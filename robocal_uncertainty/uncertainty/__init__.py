@@ -6,17 +6,16 @@ from robocal_uncertainty._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from robocal_uncertainty.uncertainty.budget import evaluate_budget
-    from robocal_uncertainty.uncertainty.calibration_mc import (
-        CalibrationTrials,
+    from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
+    from robocal_uncertainty.uncertainty.calibration.preparation import prepare_calibration_trials
+    from robocal_uncertainty.uncertainty.calibration.results import (
         CalibrationUncertainty,
-        EvaluationSettings,
         GumPose,
         OrientationUncertainty,
         PoseUncertainty,
-        evaluate_uncertainty,
-        prepare_calibration_trials,
     )
-    from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
+    from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings, build_evaluation_settings
+    from robocal_uncertainty.uncertainty.calibration.trials import CalibrationTrials
     from robocal_uncertainty.uncertainty.reidentification import (
         BatchProblem,
         ChordSolver,
@@ -54,7 +53,6 @@ __all__ = [
     "CalibrationTrials",
     "CalibrationUncertainty",
     "ChordSolver",
-    "EvaluationOptions",
     "EvaluationSettings",
     "GumPose",
     "OrientationUncertainty",
@@ -66,9 +64,9 @@ __all__ = [
     "TrialContext",
     "UncertaintySettings",
     "WorkspaceMap",
+    "build_evaluation_settings",
     "default_sources",
     "evaluate_budget",
-    "evaluate_campaign",
     "evaluate_sweeps",
     "evaluate_uncertainty",
     "grid_configurations",

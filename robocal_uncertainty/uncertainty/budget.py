@@ -8,15 +8,17 @@ the combined uncertainty that source alone produces.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Any
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.uncertainty.calibration_mc import CalibrationUncertainty
-from robocal_uncertainty.uncertainty.options import EvaluationOptions, evaluate_campaign
+from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.montecarlo.executor import RunContext
+from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration.results import CalibrationUncertainty
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 
 __all__ = ["evaluate_budget"]
 
@@ -25,11 +27,9 @@ def evaluate_budget(
     model: RobotModel,
     campaign: Campaign,
     calibration: IdentificationResult,
-    options: EvaluationOptions,
+    options: EvaluationSettings,
     *,
-    workers: int = 1,
-    executor: Any | None = None,
-    progress: Callable[[int, int | None], None] | None = None,
+    run: RunContext | None = None,
 ) -> Mapping[str, CalibrationUncertainty]:
     """Each source of ``options.uncertainty`` alone, ``options.budget_trials`` trials each.
 
@@ -40,12 +40,11 @@ def evaluate_budget(
     campaign : Campaign
     calibration : IdentificationResult
         Calibration of `campaign` (shared by every run).
-    options : EvaluationOptions
+    options : EvaluationSettings
         Must have ``test_joints``; its ``trials`` is replaced by ``budget_trials``.
-    workers, executor
-        Passed through; they never change the result.
-    progress : callable (done, total), optional
-        Trials done over all the sources and their total, as the runs go.
+    run : RunContext, optional
+        Where the runs go (never changes the result); its ``progress`` is called with the
+        trials done over all the sources and their total, as the runs go.
 
     Returns
     -------
@@ -56,6 +55,11 @@ def evaluate_budget(
     sources = options.uncertainty.sources
     if len(sources) < 2:
         return MappingProxyType({})
+    if options.test_joints is None:
+        raise ConfigError("no test joint configurations given for the uncertainty evaluation")
+    test_joints = options.test_joints
+    run = run or RunContext()
+    progress = run.progress
     total = len(sources) * options.budget_trials
     out = {}
     for i, source in enumerate(sources):
@@ -71,7 +75,7 @@ def evaluate_budget(
             def hook(done: int, _target: int | None, before: int = before) -> None:
                 progress(before + done, total)
 
-        out[source] = evaluate_campaign(
-            model, campaign, alone, calibration=calibration, workers=workers, executor=executor, progress=hook
+        out[source] = evaluate_uncertainty(
+            model, campaign, test_joints, alone, calibration=calibration, run=run.with_progress(hook)
         )
     return MappingProxyType(out)

@@ -34,7 +34,8 @@ from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pos
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.errors import ConfigError, ConvergenceError, InputError
-from robocal_uncertainty.uncertainty.calibration_mc import (
+from robocal_uncertainty.montecarlo.executor import RunContext
+from robocal_uncertainty.uncertainty.calibration import (
     CalibrationUncertainty,
     EvaluationSettings,
     evaluate_uncertainty,
@@ -508,7 +509,7 @@ def validate_holdout(
                     backend=backend,
                 ),
                 calibration=calibration,
-                workers=workers,
+                run=RunContext(workers=workers),
             )
             stats = _chunk_statistics(result, held, settings, levels_arr, seed, f, c)
             if mode == "campaign" and c == 0:

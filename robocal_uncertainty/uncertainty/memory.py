@@ -127,7 +127,7 @@ def evaluation_bytes(
     workers: int = 1,
     orientation: bool = True,
 ) -> int:
-    """Peak memory of :func:`~robocal_uncertainty.uncertainty.calibration_mc.evaluate_uncertainty`.
+    """Peak memory of :func:`~robocal_uncertainty.uncertainty.calibration.evaluation.evaluate_uncertainty`.
 
     The run keeps every trial's row (positions, parameters and, with orientation, rotations:
     ``3 n_test + k + 3 n_test`` values) and the summary sorts a copy (2 copies); each worker

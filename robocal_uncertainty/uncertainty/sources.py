@@ -304,9 +304,9 @@ def _tracker(settings: UncertaintySettings, ctx: TrialContext) -> Source:
     rotations = list(ctx.rotation_components)
     if rotations:
         # Position components only: the orientation noise is the tracker_orientation source.
-        half = half.reshape(ctx.n_poses, d)
-        half[:, rotations] = 0.0
-        half = half.reshape(-1)
+        per_pose = half.reshape(ctx.n_poses, d)
+        per_pose[:, rotations] = 0.0
+        half = per_pose.reshape(-1)
     return AdditiveSource("tracker", IndependentRectangular(half), (("points", (ctx.n_poses, d)),))
 
 
@@ -461,7 +461,7 @@ def source_rng(block_rng: np.random.Generator, stream: int) -> np.random.Generat
     than the engine gives it.
     """
     bit_generator = block_rng.bit_generator
-    seq = getattr(bit_generator, "seed_seq", None) or bit_generator._seed_seq  # numpy < 1.25
+    seq = getattr(bit_generator, "seed_seq", None) or bit_generator._seed_seq  # type: ignore[attr-defined]  # numpy < 1.25
     return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, int(stream))))
 
 

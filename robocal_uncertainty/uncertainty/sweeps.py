@@ -5,14 +5,14 @@ trends, not uncertainty statements. Every point uses the same root seed, so diff
 between points come from the setting, not from the random stream.
 
 :func:`evaluate_sweeps` gives the report's two standard curves (against lambda and against
-the number of equations) from :class:`~robocal_uncertainty.uncertainty.options.EvaluationOptions`;
+the number of equations) from :class:`~robocal_uncertainty.uncertainty.calibration.settings.EvaluationSettings`;
 :mod:`robocal_uncertainty.report` only plots and tabulates the :class:`Sweep` results.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,8 +23,9 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.calibration_mc import EvaluationSettings, evaluate_uncertainty
-from robocal_uncertainty.uncertainty.options import EvaluationOptions
+from robocal_uncertainty.montecarlo.executor import RunContext
+from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = ["DEFAULT_SWEEP_TRIALS", "Sweep", "evaluate_sweeps", "sweep_equations", "sweep_lambda"]
@@ -91,10 +92,6 @@ def _check_points(name: str, values: ArrayLike) -> Array:
     return arr
 
 
-def _executor(executor: Any | None) -> dict[str, Any]:
-    return {} if executor is None else {"executor": executor}
-
-
 def sweep_lambda(
     model: RobotModel,
     campaign: Campaign,
@@ -108,9 +105,7 @@ def sweep_lambda(
     pose: int = 0,
     frame: str = "measurement",
     backend: str = "numpy",
-    workers: int = 1,
-    executor: Any | None = None,
-    progress: Callable[[int, int | None], None] | None = None,
+    run: RunContext | None = None,
 ) -> Array:
     """Standard uncertainty of the tool position with lambda fixed at each value (Fig. 7).
 
@@ -140,11 +135,9 @@ def sweep_lambda(
         Frame of the output positions.
     backend : str
         Trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`).
-    workers, executor
-        Passed to ``evaluate_uncertainty``; they never change the result (`executor` only
-        when given).
-    progress : callable (done, total), optional
-        Called after each point with the trials done and the total.
+    run : RunContext, optional
+        Where the points run (never changes the result); its ``progress`` is called after
+        each point with the trials done and the total.
 
     Returns
     -------
@@ -165,11 +158,9 @@ def sweep_lambda(
             cal = calibration
         else:
             cal = identify(model, campaign, lambda_=float(lam))
-        out[i] = _point_u(
-            model, campaign, test_joints, fixed, cal, trials, seed, frame, workers, executor, pose, backend
-        )
-        if progress is not None:
-            progress((i + 1) * trials, lams.size * trials)
+        out[i] = _point_u(model, campaign, test_joints, fixed, cal, trials, seed, frame, run, pose, backend)
+        if run is not None and run.progress is not None:
+            run.progress((i + 1) * trials, lams.size * trials)
     return out
 
 
@@ -182,20 +173,18 @@ def _point_u(
     trials: int,
     seed: int,
     frame: str,
-    workers: int,
-    executor: Any | None,
+    run: RunContext | None,
     pose: int,
     backend: str = "numpy",
 ) -> list[float]:
-    """u(x), u(y), u(z) of test configuration `pose` for one sweep point."""
+    """u(x), u(y), u(z) of test configuration `pose` for one sweep point (its own progress: none)."""
     res = evaluate_uncertainty(
         model,
         campaign,
         test_joints,
         EvaluationSettings(uncertainty=settings, trials=trials, seed=seed, frame=frame, backend=backend),
         calibration=calibration,
-        workers=workers,
-        **_executor(executor),
+        run=None if run is None else run.with_progress(None),
     )
     return [a.standard_uncertainty for a in res.poses[pose].axes]
 
@@ -213,9 +202,7 @@ def sweep_equations(
     pose: int = 0,
     frame: str = "measurement",
     backend: str = "numpy",
-    workers: int = 1,
-    executor: Any | None = None,
-    progress: Callable[[int, int | None], None] | None = None,
+    run: RunContext | None = None,
 ) -> Array:
     """Standard uncertainty when each trial re-identifies from n random poses (Figs. 8-9).
 
@@ -232,7 +219,7 @@ def sweep_equations(
     test_joints : ndarray, shape (n_test, n_joints) or (n_joints,) [rad]
     pose_counts : sequence of int, length n_points
         Poses per subset, each between ceil(n_identifiable / 3) and the campaign size.
-    trials, seed, settings, pose, frame, workers, executor, progress
+    trials, seed, settings, pose, frame, backend, run
         As for :func:`sweep_lambda`.
 
     Returns
@@ -259,23 +246,29 @@ def sweep_equations(
     out = np.empty((counts_f.size, 3))
     for i, n in enumerate(counts_f.astype(int)):
         point = dataclasses.replace(settings, sources=sources, subset_size=int(n))
-        out[i] = _point_u(
-            model, campaign, test_joints, point, calibration, trials, seed, frame, workers, executor, pose, backend
-        )
-        if progress is not None:
-            progress((i + 1) * trials, counts_f.size * trials)
+        out[i] = _point_u(model, campaign, test_joints, point, calibration, trials, seed, frame, run, pose, backend)
+        if run is not None and run.progress is not None:
+            run.progress((i + 1) * trials, counts_f.size * trials)
     return out
+
+
+def _sweep_points(calibration: IdentificationResult, n_poses: int) -> tuple[Array, NDArray[np.int_]]:
+    """The lambdas and pose counts of the report's sweeps (see :func:`evaluate_sweeps`)."""
+    lam = calibration.lambda_
+    lambdas = np.geomspace(lam / 10.0, lam * 10.0, 9) if lam > 0 else np.geomspace(1e-4, 1e-1, 9)
+    n_est = int(calibration.estimated.sum())
+    lowest = max(int(np.ceil(1.5 * n_est / 3)), int(np.ceil(40 / 3)))
+    counts = np.unique(np.linspace(min(lowest, n_poses), n_poses, 8).round().astype(int))
+    return lambdas, counts
 
 
 def evaluate_sweeps(
     model: RobotModel,
     campaign: Campaign,
     calibration: IdentificationResult,
-    options: EvaluationOptions,
+    options: EvaluationSettings,
     *,
-    workers: int = 1,
-    executor: Any | None = None,
-    progress: Callable[[int, int | None], None] | None = None,
+    run: RunContext | None = None,
 ) -> tuple[Sweep, ...]:
     """The report's sweeps: u against lambda (seed Fig. 7) and against the number of equations (Figs. 8-9).
 
@@ -291,12 +284,11 @@ def evaluate_sweeps(
     campaign : Campaign
     calibration : IdentificationResult
         Calibration of the whole campaign (the reference lambda and pose count).
-    options : EvaluationOptions
+    options : EvaluationSettings
         Must have ``test_joints``.
-    workers, executor
-        Passed through; they never change the result.
-    progress : callable (done, total), optional
-        Called after each point with the trials done over both sweeps and their total.
+    run : RunContext, optional
+        Where the points run (never changes the result); its ``progress`` is called after
+        each point with the trials done over both sweeps and their total.
 
     Returns
     -------
@@ -311,31 +303,42 @@ def evaluate_sweeps(
         sources=tuple(s for s in settings.sources if s in ("tracker", "encoder", "residual")) or ("tracker", "encoder"),
     )
     lam = calibration.lambda_
-    lambdas = np.geomspace(lam / 10.0, lam * 10.0, 9) if lam > 0 else np.geomspace(1e-4, 1e-1, 9)
-    n_est = int(calibration.estimated.sum())
-    lowest = max(int(np.ceil(1.5 * n_est / 3)), int(np.ceil(40 / 3)))
-    counts = np.unique(np.linspace(min(lowest, campaign.n_poses), campaign.n_poses, 8).round().astype(int))
+    lambdas, counts = _sweep_points(calibration, campaign.n_poses)
     trials, seed = options.sweep_trials, options.seed
     common: dict[str, Any] = {
         "trials": trials,
         "seed": seed,
         "settings": noise,
-        "frame": options.output_frame,
+        "frame": options.frame,
         "backend": options.backend,
-        "workers": workers,
-        "executor": executor,
     }
+    run = run or RunContext()
+    progress = run.progress
     total = (lambdas.size + counts.size) * trials
 
-    def _shifted(offset: int) -> Callable[[int, int | None], None] | None:
+    def _shifted(offset: int) -> RunContext:
         if progress is None:
-            return None
-        return lambda done, _total: progress(offset + done, total)
+            return run
+        return run.with_progress(lambda done, _total: progress(offset + done, total))
 
-    u_lam = sweep_lambda(model, campaign, calibration, options.test_joints, lambdas, progress=_shifted(0), **common)
+    u_lam = sweep_lambda(model, campaign, calibration, options.test_joints, lambdas, run=_shifted(0), **common)
     u_eq = sweep_equations(
-        model, campaign, calibration, options.test_joints, counts, progress=_shifted(lambdas.size * trials), **common
+        model, campaign, calibration, options.test_joints, counts, run=_shifted(lambdas.size * trials), **common
     )
+    return _as_sweeps(lambdas, u_lam, lam, counts, u_eq, campaign.n_poses, trials, seed)
+
+
+def _as_sweeps(
+    lambdas: Array,
+    u_lam: Array,
+    lam: float,
+    counts: NDArray[np.int_],
+    u_eq: Array,
+    n_poses: int,
+    trials: int,
+    seed: int,
+) -> tuple[Sweep, Sweep]:
+    """The two curves of :func:`evaluate_sweeps` as :class:`Sweep` results."""
     return (
         Sweep(
             name="lambda",
@@ -352,7 +355,7 @@ def evaluate_sweeps(
             xlabel="number of equations (3 per pose)",
             values=3 * counts.astype(float),
             standard_uncertainty=u_eq,
-            reference=float(3 * campaign.n_poses),
+            reference=float(3 * n_poses),
             log_x=False,
             n_trials=trials,
             seed=seed,

@@ -31,7 +31,7 @@ from robocal_uncertainty.kernels import BackendInfo, resolve_backend
 from robocal_uncertainty.montecarlo.engine import ProgressCallback, reduce_trials
 from robocal_uncertainty.montecarlo.region import coverage_region
 from robocal_uncertainty.montecarlo.streaming import Reduction
-from robocal_uncertainty.uncertainty.calibration_mc import (
+from robocal_uncertainty.uncertainty.calibration import (
     OUTPUT_FRAMES,
     first_order_standard_uncertainty,
     prepare_calibration_trials,

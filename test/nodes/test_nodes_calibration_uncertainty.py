@@ -30,8 +30,7 @@ from robocal_uncertainty.nodes.common import robot_config_path, to_ros
 from robocal_uncertainty.nodes.qos import latched_qos
 from robocal_uncertainty.nodes.uncertainty_node import UncertaintyNode
 from robocal_uncertainty.pipeline import CollectorSettings, replay_bag
-from robocal_uncertainty.pipeline.calibration_pipeline import EvaluationOptions, evaluate_campaign
-from robocal_uncertainty.uncertainty import UncertaintySettings
+from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings, evaluate_uncertainty
 
 TEST_JOINTS_DEG = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451, 30.0, -180.0, 45.0, 10.0, -20.0, 5.0]
 TRIALS, SEED = 400, 7
@@ -125,13 +124,13 @@ def test_uncertainty_node_publishes_the_offline_numbers(ros_context, tmp_path, m
             tracker_noise=TrackerNoise(a=5.0 * 1e-6, b=0.0 * 1e-6),
             encoder_noise=EncoderNoise(half_width=float(np.radians(0.005))),
         )
-        options = EvaluationOptions(
+        options = EvaluationSettings(
             uncertainty=settings,
             test_joints=np.radians(np.reshape(TEST_JOINTS_DEG, (-1, 6))),
             trials=TRIALS,
             seed=SEED,
         )
-        expected = evaluate_campaign(model, replay.campaign, options, calibration=calibration)
+        expected = evaluate_uncertainty(model, replay.campaign, options.test_joints, options, calibration=calibration)
         for msg, pose, pose_msg in zip(got, expected.poses, poses):
             assert np.array_equal(np.array(msg.covariance), pose.covariance.reshape(-1))
             assert [msg.mean.x, msg.mean.y, msg.mean.z] == pose.mean.tolist()

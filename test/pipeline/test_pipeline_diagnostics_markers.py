@@ -165,7 +165,7 @@ def test_bad_thresholds_raise() -> None:
 def uncertainty(paper_arm: RobotModel) -> tuple[CalibrationUncertainty, object]:
     sim = simulate_campaign(paper_arm, SimulationSettings(n_poses=20), seed=3)
     result = evaluate_uncertainty(
-        paper_arm, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(), trials=400, seed=SEED
+        paper_arm, sim.campaign, TEST_JOINTS, uncertainty=UncertaintySettings(), trials=400, seed=SEED
     )
     return result, sim.campaign
 

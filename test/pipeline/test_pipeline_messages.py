@@ -39,7 +39,7 @@ FIELD = re.compile(r"^(?P<type>[A-Za-z0-9_/]+(\[\d*\])?)\s+(?P<name>[a-z][a-z0-9
 def uncertainty(paper_arm: RobotModel) -> CalibrationUncertainty:
     sim = simulate_campaign(paper_arm, SimulationSettings(n_poses=20), seed=3)
     settings = UncertaintySettings(sources=("tracker", "encoder", "lambda"))
-    return evaluate_uncertainty(paper_arm, sim.campaign, TEST_JOINTS, settings=settings, trials=200, seed=SEED)
+    return evaluate_uncertainty(paper_arm, sim.campaign, TEST_JOINTS, uncertainty=settings, trials=200, seed=SEED)
 
 
 def _sample() -> CalibrationSample:

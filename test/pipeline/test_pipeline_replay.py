@@ -15,10 +15,15 @@ from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.bagio.raw_bag_simulator import RawBagTruth
 from robocal_uncertainty.core import RobotModel, SimulationSettings
 from robocal_uncertainty.errors import BagError, CampaignError
-from robocal_uncertainty.pipeline import EvaluationOptions, replay_bag
-from robocal_uncertainty.uncertainty import CalibrationUncertainty, UncertaintySettings, evaluate_uncertainty
+from robocal_uncertainty.pipeline import replay_bag
+from robocal_uncertainty.uncertainty import (
+    CalibrationUncertainty,
+    EvaluationSettings,
+    UncertaintySettings,
+    evaluate_uncertainty,
+)
 
-OPTIONS = EvaluationOptions(test_joints=TEST_JOINTS, trials=TRIALS, seed=SEED)
+OPTIONS = EvaluationSettings(test_joints=TEST_JOINTS, trials=TRIALS, seed=SEED)
 ENCODER = SimulationSettings().encoder_noise
 TRACKER = SimulationSettings().tracker_noise
 
@@ -90,7 +95,7 @@ def test_replay_uncertainty_is_bit_identical_to_evaluate(base_replay, paper_arm:
         paper_arm,
         result.replay.campaign,
         TEST_JOINTS,
-        settings=UncertaintySettings(),
+        uncertainty=UncertaintySettings(),
         trials=TRIALS,
         seed=SEED,
         coverage=0.95,

@@ -15,8 +15,8 @@ from robocal_uncertainty.app import evaluate
 from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.core import RobotModel
 from robocal_uncertainty.errors import CampaignError, ConfigError, IdentifiabilityError, InputError
-from robocal_uncertainty.pipeline import CalibrationPipeline, CalibrationSample, EvaluationOptions, replay_bag
-from robocal_uncertainty.uncertainty import evaluate_uncertainty
+from robocal_uncertainty.pipeline import CalibrationPipeline, CalibrationSample, replay_bag
+from robocal_uncertainty.uncertainty import EvaluationSettings, evaluate_uncertainty
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def test_abandoned_pipeline_resumes_on_the_same_path(
 
 
 def test_evaluate_matches_evaluate_uncertainty(paper_arm: RobotModel, samples) -> None:
-    options = EvaluationOptions(test_joints=TEST_JOINTS, trials=200, seed=SEED)
+    options = EvaluationSettings(test_joints=TEST_JOINTS, trials=200, seed=SEED)
     pipeline = CalibrationPipeline(paper_arm, options=options)
     for sample in samples:
         pipeline.add_sample(sample)

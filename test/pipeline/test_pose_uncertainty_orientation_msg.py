@@ -18,7 +18,7 @@ from robocal_uncertainty.bagio.messages import (
 )
 from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 UR10 = Path(__file__).resolve().parents[2] / "config" / "ur10.yaml"
@@ -31,7 +31,7 @@ def result(request: pytest.FixtureRequest):  # type: ignore[no-untyped-def]
     sim = simulate_campaign(model, SimulationSettings(frame="tracker", orientation_std=request.param), seed=3)
     sources = ("tracker", "encoder") if request.param is None else ("tracker", "tracker_orientation", "encoder")
     return evaluate_uncertainty(
-        model, sim.campaign, Q, settings=UncertaintySettings(sources=sources), trials=400, block_size=400
+        model, sim.campaign, Q, uncertainty=UncertaintySettings(sources=sources), trials=400, block_size=400
     )
 
 

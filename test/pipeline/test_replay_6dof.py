@@ -82,13 +82,13 @@ def six_dof_bag(simulated: SimulatedCampaign, tmp_path_factory: pytest.TempPathF
 def replayed(
     paper_arm: RobotModel, six_dof_bag: tuple[Path, RawBagTruth], tmp_path_factory: pytest.TempPathFactory
 ) -> tuple[ReplayEvaluation, Path]:
-    from robocal_uncertainty.app import EvaluationOptions
+    from robocal_uncertainty.app import EvaluationSettings
 
     campaign_path = tmp_path_factory.mktemp("six_dof_replay") / "campaign.mcap"
     result = replay(
         six_dof_bag[0],
         paper_arm,
-        EvaluationOptions(**OPTIONS_KW),
+        EvaluationSettings(**OPTIONS_KW),
         tracker_pose_topic=POSE_TOPIC,
         collector=COLLECTOR,
         campaign_path=campaign_path,
@@ -159,7 +159,7 @@ def _node_path(model: RobotModel, path: Path, frame_id: str, recorder_path: Path
 def test_node_path_equals_replay_samples_calibration_and_uncertainty(
     replayed, six_dof_bag, paper_arm: RobotModel, simulated: SimulatedCampaign, tmp_path: Path
 ) -> None:
-    from robocal_uncertainty.app import EvaluationOptions
+    from robocal_uncertainty.app import EvaluationSettings
 
     path, truth = six_dof_bag
     result, campaign_path = replayed
@@ -181,7 +181,7 @@ def test_node_path_equals_replay_samples_calibration_and_uncertainty(
     assert _bits(on_file.point_std) == _bits(replay_file.point_std)
 
     # Calibration node: the received samples (any arrival order) into its store, identified.
-    options = EvaluationOptions(**OPTIONS_KW)
+    options = EvaluationSettings(**OPTIONS_KW)
     store = SampleStore(paper_arm)
     for sample in reversed(received):
         assert store.add(sample)
@@ -220,10 +220,10 @@ def test_node_path_equals_replay_samples_calibration_and_uncertainty(
 
 def test_evaluate_of_the_recorded_6dof_campaign_equals_replay(replayed, paper_arm: RobotModel) -> None:
     """The command line's ``evaluate`` of the campaign file the replay wrote: the same numbers."""
-    from robocal_uncertainty.app import EvaluationOptions
+    from robocal_uncertainty.app import EvaluationSettings
 
     result, campaign_path = replayed
-    again = evaluate(paper_arm, read_campaign(campaign_path), EvaluationOptions(**OPTIONS_KW))
+    again = evaluate(paper_arm, read_campaign(campaign_path), EvaluationSettings(**OPTIONS_KW))
     ours = result.evaluation
     assert _bits(again.calibration.estimate) == _bits(ours.calibration.estimate)
     assert _bits(again.uncertainty.samples) == _bits(ours.uncertainty.samples)

@@ -44,7 +44,7 @@ def setup() -> Setup:
         model,
         sim.campaign,
         qt,
-        settings=UncertaintySettings(sources=("tracker", "encoder")),
+        uncertainty=UncertaintySettings(sources=("tracker", "encoder")),
         trials=TRIALS,
         seed=1,
     )

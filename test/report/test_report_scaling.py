@@ -34,7 +34,7 @@ def _evaluate(setup, n_test: int):
         setup.model,
         setup.campaign,
         q,
-        settings=UncertaintySettings(sources=("tracker", "encoder")),
+        uncertainty=UncertaintySettings(sources=("tracker", "encoder")),
         trials=200,
         seed=1,
     )

@@ -81,7 +81,7 @@ def test_between_session_source_adds_the_effect_covariance(sessions) -> None:
     test_q = sim.sessions[0].campaign.joint_positions[:3]
     settings = UncertaintySettings(sources=("between_session",), between_session=between)
     result = evaluate_uncertainty(
-        model, sim.sessions[0].campaign, test_q, settings=settings, calibration=cal, trials=20000, frame="base"
+        model, sim.sessions[0].campaign, test_q, uncertainty=settings, calibration=cal, trials=20000, frame="base"
     )
     params = cal.estimate.copy()
     b0 = cal.model.layout.base_index
@@ -95,7 +95,7 @@ def test_between_session_source_adds_the_effect_covariance(sessions) -> None:
         model,
         sim.sessions[0].campaign,
         test_q,
-        settings=UncertaintySettings(sources=("between_session",)),
+        uncertainty=UncertaintySettings(sources=("between_session",)),
         calibration=cal,
         trials=1000,
         frame="base",

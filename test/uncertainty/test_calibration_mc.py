@@ -18,6 +18,7 @@ from robocal_uncertainty.core import (
     simulate_campaign,
 )
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty import (
     BatchProblem,
     ChordSolver,
@@ -46,19 +47,18 @@ def test_same_seed_same_result_whatever_chunk_and_workers(paper) -> None:
             model,
             sim.campaign,
             TEST_JOINTS,
-            settings=settings,
+            uncertainty=settings,
             trials=1200,
             seed=5,
             block_size=500,
-            chunk_blocks=chunk,
-            workers=workers,
+            run=RunContext(chunk_blocks=chunk, workers=workers),
         )
         for chunk, workers in ((1, 1), (3, 1), (2, 2))
     ]
     for other in runs[1:]:
         np.testing.assert_array_equal(runs[0].samples, other.samples)
     different = evaluate_uncertainty(
-        model, sim.campaign, TEST_JOINTS, settings=settings, trials=1200, seed=6, block_size=500
+        model, sim.campaign, TEST_JOINTS, uncertainty=settings, trials=1200, seed=6, block_size=500
     )
     assert not np.array_equal(different.samples, runs[0].samples)
 
@@ -70,7 +70,7 @@ def test_chord_solver_matches_exact_gauss_newton(paper) -> None:
             model,
             sim.campaign,
             TEST_JOINTS,
-            settings=UncertaintySettings(sources=("tracker", "encoder", "pose_choice"), jacobian=jac),
+            uncertainty=UncertaintySettings(sources=("tracker", "encoder", "pose_choice"), jacobian=jac),
             trials=400,
             seed=3,
         )
@@ -116,7 +116,7 @@ def test_batched_reidentification_matches_scipy_least_squares(paper) -> None:
 def test_gum_agrees_with_monte_carlo_for_noise_sources(paper) -> None:
     model, sim = paper
     result = evaluate_uncertainty(
-        model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(), trials=20000, seed=2
+        model, sim.campaign, TEST_JOINTS, uncertainty=UncertaintySettings(), trials=20000, seed=2
     )
     pose = result.poses[0]
     u_mc = np.sqrt(np.diag(pose.covariance))
@@ -131,7 +131,7 @@ def test_gum_agrees_with_monte_carlo_for_noise_sources(paper) -> None:
 def test_nonsmooth_sources_mark_gum_not_applicable(paper) -> None:
     model, sim = paper
     result = evaluate_uncertainty(
-        model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(sources=("pose_choice",)), trials=300, seed=2
+        model, sim.campaign, TEST_JOINTS, uncertainty=UncertaintySettings(sources=("pose_choice",)), trials=300, seed=2
     )
     assert not result.poses[0].gum.applicable
     assert not any(result.poses[0].gum.validated)
@@ -178,11 +178,11 @@ def test_positions_are_in_the_identified_base_frame_for_tracker_campaigns() -> N
         ({"test_joint_positions": np.zeros(5)}, "test joints must have 6 values"),
         ({"test_joint_positions": np.zeros((0, 6))}, "at least one configuration"),
         (
-            {"settings": UncertaintySettings(sources=("lambda",), lambda_range=(10.0, 20.0))},
+            {"uncertainty": UncertaintySettings(sources=("lambda",), lambda_range=(10.0, 20.0))},
             "excludes the calibration's optimum",
         ),
         (
-            {"settings": UncertaintySettings(sources=("pose_choice",), subset_size=2)},
+            {"uncertainty": UncertaintySettings(sources=("pose_choice",), subset_size=2)},
             "subset_size = 2 must lie between",
         ),
     ],
@@ -241,8 +241,8 @@ def test_residual_source_reflects_real_robot_scatter() -> None:
     test_q = train.joint_positions[0]
     settings_noise = UncertaintySettings(sources=("tracker", "encoder"))
     settings_resid = UncertaintySettings(sources=("residual",))
-    noise = evaluate_uncertainty(model, train, test_q, settings=settings_noise, trials=500, seed=0)
-    resid = evaluate_uncertainty(model, train, test_q, settings=settings_resid, trials=500, seed=0)
+    noise = evaluate_uncertainty(model, train, test_q, uncertainty=settings_noise, trials=500, seed=0)
+    resid = evaluate_uncertainty(model, train, test_q, uncertainty=settings_resid, trials=500, seed=0)
     u_noise = np.sqrt(np.trace(noise.poses[0].covariance))
     u_resid = np.sqrt(np.trace(resid.poses[0].covariance))
     rms_after = noise.calibration.rms_after

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core import SimulationSettings, identify, load_robot_model, simulate_campaign
-from robocal_uncertainty.uncertainty import UncertaintySettings, calibration_mc, evaluate_uncertainty
+from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import trials as calibration_trials
 
 ROOT = Path(__file__).resolve().parents[2]
 TEST_JOINTS = np.radians([[-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]])
-DEFAULT_ELEMENTS = calibration_mc._TEST_ELEMENTS
+DEFAULT_ELEMENTS = calibration_trials._TEST_ELEMENTS
 
 
 @pytest.mark.parametrize(
@@ -39,9 +40,9 @@ def test_block_values_do_not_depend_on_the_slices_of_test_configurations(
     n = 700  # not a multiple of the 256-trial sub-batch
 
     def block(elements: int) -> tuple[np.ndarray, np.ndarray]:
-        monkeypatch.setattr(calibration_mc, "_TEST_ELEMENTS", elements)
+        monkeypatch.setattr(calibration_trials, "_TEST_ELEMENTS", elements)
         result = evaluate_uncertainty(
-            model, campaign, test_joints, settings=settings, calibration=calibration, trials=n, seed=4, block_size=n
+            model, campaign, test_joints, uncertainty=settings, calibration=calibration, trials=n, seed=4, block_size=n
         )
         assert result.rotation_samples is not None
         return np.asarray(result.samples), np.asarray(result.rotation_samples)

@@ -44,7 +44,7 @@ def coverage_experiment(n_campaigns: int, *, trials: int = 2000, seed: int = 202
         q_true = TEST_JOINTS + settings.encoder_noise.sample(rng, TEST_JOINTS.shape)
         truth = forward_points(model.layout, sim.true_model.parameter_vector(), q_true[None])[0]
         result = evaluate_uncertainty(
-            model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(), trials=trials, seed=i
+            model, sim.campaign, TEST_JOINTS, uncertainty=UncertaintySettings(), trials=trials, seed=i
         )
         pose = result.poses[0]
         hits += [pose.axes[j].probabilistically_symmetric.contains(float(truth[j])) for j in range(3)]

@@ -20,7 +20,7 @@ from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.memory import (
     available_memory,
     check_fits,

@@ -19,7 +19,9 @@ import pytest
 
 from robocal_uncertainty.core import SimulationSettings, forward_points, identify, load_robot_model, simulate_campaign
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
-from robocal_uncertainty.uncertainty import UncertaintySettings, calibration_mc, evaluate_uncertainty
+from robocal_uncertainty.montecarlo.executor import RunContext
+from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import preparation
 from robocal_uncertainty.uncertainty.model_error_draws import FieldEstimate, FieldNormal, standardised_innovations
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -53,10 +55,10 @@ def field_case():
 
 
 def _field_run(monkeypatch, model, campaign, calibration, q_c, **kw):
-    monkeypatch.setattr(calibration_mc, "estimate_field", lambda *a, **k: ESTIMATE)
+    monkeypatch.setattr(preparation, "estimate_field", lambda *a, **k: ESTIMATE)
     settings = UncertaintySettings(sources=("residual",), tracker_noise=TrackerNoise(a=1e-6), model_error="field")
     return evaluate_uncertainty(
-        model, campaign, q_c, settings=settings, calibration=calibration, trials=kw.pop("trials", 20_000), **kw
+        model, campaign, q_c, uncertainty=settings, calibration=calibration, trials=kw.pop("trials", 20_000), **kw
     )
 
 
@@ -107,8 +109,8 @@ def test_gum_matches_monte_carlo_with_the_field(field_case, monkeypatch) -> None
 def test_same_field_draws_whatever_chunks_and_workers(field_case, monkeypatch) -> None:
     model, campaign, calibration, q_c = field_case
     runs = [
-        _field_run(monkeypatch, model, campaign, calibration, q_c, trials=1200, block_size=500, seed=4, **kw)
-        for kw in ({"chunk_blocks": 1}, {"chunk_blocks": 3}, {"chunk_blocks": 2, "workers": 2})
+        _field_run(monkeypatch, model, campaign, calibration, q_c, trials=1200, block_size=500, seed=4, run=run)
+        for run in (RunContext(chunk_blocks=1), RunContext(chunk_blocks=3), RunContext(chunk_blocks=2, workers=2))
     ]
     for other in runs[1:]:
         np.testing.assert_array_equal(runs[0].samples, other.samples)

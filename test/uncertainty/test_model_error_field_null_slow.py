@@ -37,7 +37,7 @@ def test_no_model_error_no_change_over_many_seeds() -> None:
                 model,
                 sim.campaign,
                 TEST_JOINTS,
-                settings=UncertaintySettings(model_error=mode),
+                uncertainty=UncertaintySettings(model_error=mode),
                 calibration=calibration,
                 trials=400,
                 seed=seed,

@@ -101,7 +101,7 @@ def coverage_experiment(
         # The arm asked to go to the test joints sits within the encoder error of them.
         q_true = test_q + settings.encoder_noise.sample(rng, test_q.shape)
         p_true, r_true = forward_poses(sim.true_model, sim.true_model.parameter_vector(), q_true)
-        result = evaluate_uncertainty(model, sim.campaign, test_q, settings=unc, trials=trials, seed=i)
+        result = evaluate_uncertainty(model, sim.campaign, test_q, uncertainty=unc, trials=trials, seed=i)
         for k, pose in enumerate(result.poses):
             o = pose.orientation
             assert o is not None

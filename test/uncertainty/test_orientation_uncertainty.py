@@ -24,7 +24,7 @@ def on_axis():
     """Paper arm, tool point at the flange centre (on joint 6's axis): joint6.theta unseen."""
     model = load_robot_model(ROOT / "config/paper_arm.yaml")
     sim = simulate_campaign(model, SimulationSettings(), seed=11)
-    return model, sim, evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=NOISE, trials=4000, seed=3)
+    return model, sim, evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, uncertainty=NOISE, trials=4000, seed=3)
 
 
 @pytest.fixture(scope="module")
@@ -33,13 +33,13 @@ def off_axis():
     model = load_robot_model(ROOT / "config/paper_arm.yaml")
     model = dataclasses.replace(model, tool_point=np.array([0.08, 0.0, 0.05]))
     sim = simulate_campaign(model, SimulationSettings(), seed=12)
-    return model, sim, evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=NOISE, trials=4000, seed=4)
+    return model, sim, evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, uncertainty=NOISE, trials=4000, seed=4)
 
 
 def test_positions_and_parameters_are_bit_identical_without_orientation(on_axis) -> None:
     model, sim, with_rot = on_axis
     without = evaluate_uncertainty(
-        model, sim.campaign, TEST_JOINTS, settings=NOISE, trials=4000, seed=3, orientation=False
+        model, sim.campaign, TEST_JOINTS, uncertainty=NOISE, trials=4000, seed=3, orientation=False
     )
     np.testing.assert_array_equal(with_rot.samples, without.samples)
     for a, b in zip(with_rot.poses, without.poses):
@@ -115,7 +115,7 @@ def test_rotation_covariance_agrees_with_an_independent_linearisation(off_axis) 
     rotation columns); tracker noise only, so the test joints are exact."""
     model, sim, _ = off_axis
     result = evaluate_uncertainty(
-        model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(sources=("tracker",)), trials=4000, seed=6
+        model, sim.campaign, TEST_JOINTS, uncertainty=UncertaintySettings(sources=("tracker",)), trials=4000, seed=6
     )
     layout = model.layout
     est = np.array([layout.index(n) for n in result.parameter_names])
@@ -152,7 +152,7 @@ def test_undetermined_rotations_do_not_depend_on_the_output_frame(
     settings = SimulationSettings(frame="tracker", n_poses=30, orientation_std=orientation_std)
     sim = simulate_campaign(model, settings, seed=0)
     q = np.radians([[10.0, -60, 40, -30, 50, 20], [-40, -100, 70, 10, -30, 60]])
-    result = evaluate_uncertainty(model, sim.campaign, q, settings=NOISE, trials=200, seed=1, frame=frame)
+    result = evaluate_uncertainty(model, sim.campaign, q, uncertainty=NOISE, trials=200, seed=1, frame=frame)
     for pose in result.poses:
         assert pose.orientation.undetermined_directions.shape == (expected, 3)
         if expected:

@@ -55,7 +55,7 @@ def test_tilt_called_determined_holds_the_true_orientation(tool_point: tuple[flo
     # Tracker noise only (exact encoders), so the Monte Carlo's tracker source is the whole story.
     sim = simulate_campaign(model, SimulationSettings(encoder_noise=EncoderNoise(half_width=0.0)), seed=5)
     result = evaluate_uncertainty(
-        model, sim.campaign, TEST_JOINTS, settings=UncertaintySettings(sources=("tracker",)), trials=1000, seed=2
+        model, sim.campaign, TEST_JOINTS, uncertainty=UncertaintySettings(sources=("tracker",)), trials=1000, seed=2
     )
     _, r_true = forward_poses(sim.true_model, sim.true_model.parameter_vector(), TEST_JOINTS)
     assert result.rotation_samples is not None

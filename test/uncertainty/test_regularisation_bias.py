@@ -15,7 +15,9 @@ import pytest
 from robocal_uncertainty.core import SimulationSettings, forward_points, identify, load_robot_model, simulate_campaign
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty import UncertaintySettings
-from robocal_uncertainty.uncertainty.calibration_mc import _prepare, _regularisation_bias, evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration.gum import regularisation_bias
+from robocal_uncertainty.uncertainty.calibration.preparation import prepare
 
 ROOT = Path(__file__).resolve().parents[2]
 TEST_JOINTS = np.radians([[10.0, 20.0, -30.0, 40.0, 30.0, 50.0], [-60.0, -40.0, 70.0, 10.0, -20.0, 5.0]])
@@ -36,8 +38,8 @@ def test_a_large_lambda_is_flagged_with_the_bias_it_causes(campaigns) -> None:
     model, noisy, clean = campaigns
     lam = 0.1  # about 30 times the L-curve corner of this campaign
     result = evaluate_uncertainty(model, noisy.campaign, TEST_JOINTS, trials=300, seed=0, lambda_=lam)
-    prep = _prepare(model, noisy.campaign, TEST_JOINTS, UncertaintySettings(), result.calibration, lam, "measurement")
-    estimated = _regularisation_bias(prep)
+    prep = prepare(model, noisy.campaign, TEST_JOINTS, UncertaintySettings(), result.calibration, lam, "measurement")
+    estimated = regularisation_bias(prep)
     truth = forward_points(model.layout, clean.true_model.parameter_vector(), TEST_JOINTS)
     noise_free = (
         forward_points(model.layout, identify(model, clean.campaign, lambda_=lam).estimate, TEST_JOINTS) - truth

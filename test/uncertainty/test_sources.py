@@ -17,7 +17,7 @@ from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledEr
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import IndependentRectangular
 from robocal_uncertainty.montecarlo.engine import block_rng
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty, prepare_calibration_trials
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty, prepare_calibration_trials
 from robocal_uncertainty.uncertainty.sources import (
     SOURCE_REGISTRY,
     SOURCES,
@@ -105,7 +105,7 @@ def test_gum_from_source_distributions_equals_a_dense_first_order_propagation(tr
     model, campaign, calibration = tracker_campaign
     settings = UncertaintySettings(sources=("tracker", "encoder", "residual"))
     result = evaluate_uncertainty(
-        model, campaign, TEST_JOINTS, settings=settings, calibration=calibration, trials=200, seed=1, frame="base"
+        model, campaign, TEST_JOINTS, uncertainty=settings, calibration=calibration, trials=200, seed=1, frame="base"
     )
     assert not result.model_adequacy.adequate
     layout = model.layout

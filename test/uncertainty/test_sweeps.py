@@ -11,7 +11,7 @@ import pytest
 from robocal_uncertainty.core import SimulationSettings, load_robot_model, simulate_campaign
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty import (
-    EvaluationOptions,
+    EvaluationSettings,
     Sweep,
     UncertaintySettings,
     evaluate_sweeps,
@@ -30,7 +30,7 @@ def setup() -> SimpleNamespace:
     sim = simulate_campaign(model, SimulationSettings(), seed=1)
     qt = np.radians(SEED_JOINTS_DEG)
     settings = UncertaintySettings(sources=("tracker", "encoder"))
-    result = evaluate_uncertainty(model, sim.campaign, qt, settings=settings, trials=200, seed=1)
+    result = evaluate_uncertainty(model, sim.campaign, qt, uncertainty=settings, trials=200, seed=1)
     return SimpleNamespace(model=model, campaign=sim.campaign, test_joints=qt, result=result)
 
 
@@ -80,7 +80,7 @@ def test_sweep_bad_inputs(setup):
 def test_evaluate_sweeps_are_the_two_sweep_functions(setup):
     """The report's standard sweeps are sweep_lambda and sweep_equations on their grids."""
     cal = setup.result.calibration
-    options = EvaluationOptions(test_joints=setup.test_joints, seed=5, sweep_trials=60)
+    options = EvaluationSettings(test_joints=setup.test_joints, seed=5, sweep_trials=60)
     by_lambda, by_equations = evaluate_sweeps(setup.model, setup.campaign, cal, options)
     assert (by_lambda.name, by_equations.name) == ("lambda", "equations")
     assert by_lambda.values.shape == (9,) and by_lambda.reference == cal.lambda_
@@ -90,4 +90,4 @@ def test_evaluate_sweeps_are_the_two_sweep_functions(setup):
     )
     np.testing.assert_array_equal(again, by_equations.standard_uncertainty[:2])
     with pytest.raises(ConfigError, match="test joint"):
-        evaluate_sweeps(setup.model, setup.campaign, cal, EvaluationOptions())
+        evaluate_sweeps(setup.model, setup.campaign, cal, EvaluationSettings())

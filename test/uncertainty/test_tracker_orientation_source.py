@@ -10,7 +10,7 @@ import pytest
 
 from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import (
     SOURCE_REGISTRY,
     TrialBatch,
@@ -79,7 +79,7 @@ def test_monte_carlo_of_a_6dof_campaign_separates_the_two_inputs(
     sim = simulate_campaign(model, SimulationSettings(frame="tracker", orientation_std=1e-4), seed=3)
     q = np.array([[0.3, -1.2, 1.1, 0.2, 0.5, 0.1]])
     result = evaluate_uncertainty(
-        model, sim.campaign, q, settings=UncertaintySettings(sources=sources), trials=1000, block_size=1000
+        model, sim.campaign, q, uncertainty=UncertaintySettings(sources=sources), trials=1000, block_size=1000
     )
     assert "tool.rx" in result.parameter_names
     pose = result.poses[0]
@@ -99,7 +99,7 @@ def test_gum_of_a_six_dof_campaign_agrees_with_the_monte_carlo(sources: tuple[st
     sim = simulate_campaign(model, SimulationSettings(orientation_std=2e-4, n_poses=30), seed=4)
     q = np.radians([[-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451], [10, -200, -90, -80, -50, 30]])
     result = evaluate_uncertainty(
-        model, sim.campaign, q, settings=UncertaintySettings(sources=sources), trials=1500, seed=2
+        model, sim.campaign, q, uncertainty=UncertaintySettings(sources=sources), trials=1500, seed=2
     )
     for pose in result.poses:
         np.testing.assert_allclose(np.sqrt(np.diag(pose.covariance)), pose.gum.standard_uncertainty, rtol=0.12)

@@ -57,7 +57,7 @@ def test_base_parameters_centred_with_linearized_uncertainty(seed: int) -> None:
     model = load_robot_model(resolve_robot_config("paper_arm"))
     sim = simulate_campaign(model, SimulationSettings(frame="tracker"), seed=seed)
     settings = UncertaintySettings()
-    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, settings=settings, trials=6000, seed=seed)
+    result = evaluate_uncertainty(model, sim.campaign, TEST_JOINTS, uncertainty=settings, trials=6000, seed=seed)
     cal = result.calibration
     lin = _linear_parameter_std(cal, sim.campaign, settings)
     est = np.flatnonzero(cal.estimated)
@@ -86,7 +86,7 @@ def test_residual_source_vanishes_without_model_error() -> None:
             calibration=cal,
             trials=3000,
             seed=seed,
-            settings=UncertaintySettings(sources=("tracker", "encoder")),
+            uncertainty=UncertaintySettings(sources=("tracker", "encoder")),
         )
         resid = evaluate_uncertainty(
             model,
@@ -95,7 +95,7 @@ def test_residual_source_vanishes_without_model_error() -> None:
             calibration=cal,
             trials=3000,
             seed=seed,
-            settings=UncertaintySettings(sources=("residual",)),
+            uncertainty=UncertaintySettings(sources=("residual",)),
         )
         assert resid.model_adequacy.adequate
         u_noise = np.sqrt(np.trace(noise.poses[0].covariance))
@@ -128,7 +128,7 @@ def test_model_error_is_detected_and_carried() -> None:
     settings = SimulationSettings(frame="tracker", unmodelled=UnmodelledErrors(gear_amplitude=np.radians(0.01)))
     sim = simulate_campaign(model, settings, seed=4)
     result = evaluate_uncertainty(
-        model, sim.campaign, TEST_JOINTS, trials=3000, seed=4, settings=UncertaintySettings(sources=ALL_NOISE)
+        model, sim.campaign, TEST_JOINTS, trials=3000, seed=4, uncertainty=UncertaintySettings(sources=ALL_NOISE)
     )
     ad = result.model_adequacy
     assert not ad.adequate and ad.p_value < 1e-6
@@ -149,7 +149,7 @@ def test_ur10_monte_carlo_is_centred_on_the_calibrated_prediction(ur10) -> None:
     model, campaign = ur10
     train = campaign.subset(split_campaign(campaign.n_poses, n_train=53, seed=0)[0].train)
     result = evaluate_uncertainty(
-        model, train, UR10_TEST, trials=6000, seed=0, settings=UncertaintySettings(sources=ALL_NOISE)
+        model, train, UR10_TEST, trials=6000, seed=0, uncertainty=UncertaintySettings(sources=ALL_NOISE)
     )
     pose = result.poses[0]
     u = np.sqrt(np.diag(pose.covariance))

@@ -14,7 +14,7 @@ from robocal_uncertainty.core.robot_config import resolve_robot_config
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.executor import open_executor
 from robocal_uncertainty.report.map_report import weakest_region, write_map_report
-from robocal_uncertainty.uncertainty.calibration_mc import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 from robocal_uncertainty.uncertainty.workspace_map import (
     grid_configurations,
@@ -66,7 +66,7 @@ def test_map_equals_evaluate_uncertainty_at_the_same_configurations(paper_arm, c
         model, campaign, configurations[:4], settings=settings, calibration=calibration, regions=[2], **SMALL
     )
     result = evaluate_uncertainty(
-        model, campaign, configurations[:4], settings=settings, calibration=calibration, **SMALL
+        model, campaign, configurations[:4], uncertainty=settings, calibration=calibration, **SMALL
     )
     assert wmap.frame_id == result.frame_id
     for i, pose in enumerate(result.poses):
@@ -88,7 +88,7 @@ def test_one_configuration_of_the_map_equals_evaluate_alone(paper_arm, configura
     settings = UncertaintySettings(sources=("tracker",))
     wmap = map_workspace(model, campaign, configurations, settings=settings, calibration=calibration, **SMALL)
     alone = evaluate_uncertainty(
-        model, campaign, configurations[5], settings=settings, calibration=calibration, **SMALL
+        model, campaign, configurations[5], uncertainty=settings, calibration=calibration, **SMALL
     )
     np.testing.assert_allclose(wmap.covariance[5], alone.poses[0].covariance, rtol=1e-10, atol=1e-22)
 
