@@ -1263,7 +1263,7 @@ def parameter_covariance(
     cov_x = gain @ c_mat @ gain.T
     if include_bias and calibration.lambda_ > 0.0:
         # First-order Tikhonov shrinkage -(A^T A + P)^-1 P x, evaluated at x_hat: a systematic
-        # error of the estimate the sandwich does not hold (see calibration_mc._regularisation_bias).
+        # error of the estimate the sandwich does not hold (see uncertainty.calibration.gum.regularisation_bias).
         x_hat = (calibration.estimate - calibration.nominal)[est] * scale
         bias = -np.linalg.solve(a_mat.T @ a_mat + penalty, penalty @ x_hat)
         cov_x = cov_x + np.outer(bias, bias)
