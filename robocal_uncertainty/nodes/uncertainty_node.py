@@ -53,13 +53,11 @@ this node holds the evaluated campaign, its calibration and the statement's sett
 
 from __future__ import annotations
 
-import os
+from robocal_uncertainty._threads import limit_threads
 
-# Trials are batched into many small matrix products; BLAS threads only add synchronisation
-# there (see robocal_uncertainty/cli.py). Must precede the numpy import; a user's explicit
-# setting wins.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+# The command line's thread policy, so the node computes the command line's numbers; before
+# numpy loads its BLAS.
+limit_threads()
 
 import json
 import threading
