@@ -20,7 +20,7 @@ import argparse
 import numpy as np
 
 from robocal_uncertainty.inspection.coverage_rule import binomial_tail, coverage_verified, holm_adjusted
-from robocal_uncertainty.report.section_report import FAMILY_STUDY
+from robocal_uncertainty.inspection.stored_studies import FAMILY_STUDY
 
 
 def main() -> None:

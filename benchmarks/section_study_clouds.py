@@ -6,8 +6,8 @@ as ``x y z i j k`` in mm:
 
 - ``cascade_800.txt``: the DFVLR L030-4 cascade blade at a 100 mm chord, 800 points, the seed's CMM;
 - ``rotor37_400.txt`` and ``rotor37_5000.txt``: Rotor 37 at the seed's size, 400 and 5 000 points;
-- ``rotor37_1836_cmm09.txt``: Rotor 37, 1 836 points, measured with
-  ``config/instruments/cmm_0.9_400.yaml`` (MPE (0.9 + L/400) µm).
+- ``rotor37_1836_cmm09.txt`` and ``rotor37_400_cmm09.txt``: Rotor 37, 1 836 and 400 points,
+  measured with ``config/instruments/cmm_0.9_400.yaml`` (MPE (0.9 + L/400) µm).
 
 Run: ``python benchmarks/section_study_clouds.py [--out section_clouds] [--seed 1]``.
 """
@@ -31,6 +31,7 @@ CLOUDS = {
     "rotor37_400.txt": ("rotor37", 400, "cmm_seed"),
     "rotor37_5000.txt": ("rotor37", 5000, "cmm_seed"),
     "rotor37_1836_cmm09.txt": ("rotor37", 1836, "config/instruments/cmm_0.9_400.yaml"),
+    "rotor37_400_cmm09.txt": ("rotor37", 400, "config/instruments/cmm_0.9_400.yaml"),
 }
 
 

@@ -6,7 +6,8 @@ runs the batched Monte Carlo of the nine section parameters with the GUM compari
 bias-corrected intervals of the max/min-defined parameters. The default method ``denoised``
 samples the error around a denoised cloud (locally adaptive windows); every cloud gets the
 denoising's residual check (``result.check``), which flags a cloud whose form the denoising did
-not follow (its intervals are then not verified for it). Measured coverage: the report's
+not follow (its intervals are then not verified for it). Measured coverage: the stored studies
+(:mod:`~robocal_uncertainty.inspection.stored_studies`)
 ``COVERAGE_STUDY`` (demo scenario) and ``FAMILY_STUDY`` (scenario families with local features);
 ``seed`` perturbs the measured cloud as the seed does.
 :func:`section_demo` does the same on a simulated 1 836-point CMM scan of the shipped NASA

@@ -18,6 +18,7 @@ Each step is a pure function over arrays, SI units inside:
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import astuple, dataclass, fields, replace
 
 import numpy as np
@@ -209,15 +210,55 @@ def point_to_polyline(
     start = b[:-1]
     edge = b[1:] - start
     length2 = np.maximum((edge**2).sum(axis=1), 1e-300)
-    rel = a[:, np.newaxis, :] - start[np.newaxis, :, :]
-    t = np.clip((rel * edge).sum(axis=-1) / length2, 0.0, 1.0)
-    gap = rel - t[..., np.newaxis] * edge
+    candidates = _candidate_segments(a, b, float(np.sqrt(length2.max())))
+    rel = a[:, np.newaxis, :] - start[candidates]
+    t = np.clip((rel * edge[candidates]).sum(axis=-1) / length2[candidates], 0.0, 1.0)
+    gap = rel - t[..., np.newaxis] * edge[candidates]
     dist2 = (gap**2).sum(axis=-1)
-    segment = np.argmin(dist2, axis=1)
     rows = np.arange(a.shape[0])
-    foot = t[rows, segment]
+    # Candidates ascend along each row: the first minimum is the lowest segment index, as over all.
+    pick = np.argmin(dist2, axis=1)
+    segment = candidates[rows, pick]
+    foot = t[rows, pick]
     interior = ~(((segment == 0) & (foot <= 0.0)) | ((segment == edge.shape[0] - 1) & (foot >= 1.0)))
-    return np.sqrt(dist2[rows, segment]), segment, interior
+    return np.sqrt(dist2[rows, pick]), segment, interior
+
+
+_ALL_SEGMENTS = 20_000
+"""Point-segment pairs up to which every segment is tried (building a tree costs more)."""
+
+
+def _candidate_segments(points: NDArray[np.float64], polyline: NDArray[np.float64], longest: float) -> NDArray[np.intp]:
+    """Segments that can be nearest to each point, ascending per row (padded with the row's first).
+
+    A segment at distance d from a point has both vertices within d + (its length) of it, and
+    the nearest segment is no farther than the nearest vertex: every segment with a vertex within
+    (nearest-vertex distance + longest segment) of the point is a candidate, so the nearest one
+    (and every tie) is among them and the result equals the search over all segments.
+    """
+    n_segments = polyline.shape[0] - 1
+    if points.shape[0] * n_segments <= _ALL_SEGMENTS:
+        return np.broadcast_to(np.arange(n_segments), (points.shape[0], n_segments))
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(polyline)
+    nearest, _ = tree.query(points)
+    # The relative margin covers the rounding of the distances the bound compares.
+    radius = (nearest + longest) * (1.0 + 1e-9) + 1e-12
+    near = tree.query_ball_point(points, radius)
+    lengths = np.fromiter((len(v) for v in near), dtype=np.intp, count=len(near))
+    vertex = np.fromiter(itertools.chain.from_iterable(near), dtype=np.intp, count=int(lengths.sum()))
+    row = np.repeat(np.arange(points.shape[0]), lengths)
+    # The segments on either side of each vertex, sorted by row then segment, duplicates dropped.
+    key = np.unique(
+        np.concatenate([row, row]) * n_segments + np.clip(np.concatenate([vertex - 1, vertex]), 0, n_segments - 1)
+    )
+    row, segment = np.divmod(key, n_segments)
+    counts = np.bincount(row, minlength=points.shape[0])
+    first = np.cumsum(counts) - counts
+    out = np.repeat(segment[first][:, np.newaxis], int(counts.max()), axis=1)
+    out[row, np.arange(key.shape[0]) - first[row]] = segment
+    return out
 
 
 def max_thickness(pressure_side: ArrayLike, suction_side: ArrayLike) -> Thickness:

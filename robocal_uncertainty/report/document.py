@@ -16,12 +16,8 @@ the ``histograms`` argument of :func:`write_report`), and leave every configurat
 
 from __future__ import annotations
 
-import base64
-import html
 import math
-import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +31,16 @@ from robocal_uncertainty.report.configurations import (
     select_configurations,
     summarize_configurations,
     write_configurations_csv,
+)
+from robocal_uncertainty.report.document_tree import (
+    Block,
+    BulletList,
+    Figure,
+    Heading,
+    Paragraph,
+    render_html,
+    render_markdown,
+    table,
 )
 from robocal_uncertainty.report.json_report import merge_warnings, software_version, write_report_json
 from robocal_uncertainty.report.plots import (
@@ -74,41 +80,6 @@ _INTERVAL_NAMES = {
 }
 
 
-@dataclass(frozen=True)
-class _Heading:
-    level: int
-    text: str
-
-
-@dataclass(frozen=True)
-class _Para:
-    text: str
-
-
-@dataclass(frozen=True)
-class _List:
-    items: tuple[str, ...]
-
-
-@dataclass(frozen=True)
-class _Table:
-    header: tuple[str, ...]
-    rows: tuple[tuple[str, ...], ...]
-
-
-@dataclass(frozen=True)
-class _Image:
-    file: str
-    caption: str
-
-
-_Block = _Heading | _Para | _List | _Table | _Image
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> _Table:
-    return _Table(tuple(header), tuple(tuple(r) for r in rows))
-
-
 def _mm(value: float, u: float) -> str:
     return round_to_uncertainty(value * 1e3, u * 1e3)
 
@@ -145,7 +116,7 @@ def _overview(result: CalibrationUncertainty, cs: ConfigurationSummary) -> str:
     )
 
 
-def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_Block]:
+def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[Block]:
     items = []
     if len(result.poses) > DETAIL_LIMIT:
         items.append(_overview(result, cs))
@@ -202,18 +173,18 @@ def _summary(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_
         f"{_um(cal.rms_after)} µm after ({cal.n_poses} poses, λ = {cal.lambda_:.4g} by "
         f"{cal.lambda_method})."
     )
-    return [_Heading(2, "Summary"), _List(tuple(items))]
+    return [Heading(2, "Summary"), BulletList(tuple(items))]
 
 
-def _configurations(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[_Block]:
+def _configurations(result: CalibrationUncertainty, cs: ConfigurationSummary) -> list[Block]:
     """Worst configurations first; with many, statistics over all of them."""
     n = len(cs)
     shown = cs.order[:_WORST_ROWS]
     which = f"the {len(shown)} worst of {n}" if len(shown) < n else f"all {n}"
     pct = f"{100 * result.coverage_probability:g}"
-    blocks: list[_Block] = [
-        _Heading(2, "Test configurations"),
-        _Para(
+    blocks: list[Block] = [
+        Heading(2, "Test configurations"),
+        Paragraph(
             f"Sorted by u_pos = √(u_x² + u_y² + u_z²), worst first ({which}). Positions in frame "
             f"`{result.frame_id}`; reach = distance of the tool from the robot base; a₁ = largest "
             f"semi-axis of the JCGM 102 coverage ellipsoid at p = {pct} %. Every configuration, with "
@@ -236,14 +207,14 @@ def _configurations(result: CalibrationUncertainty, cs: ConfigurationSummary) ->
         )
     header = ("Config.", "x / mm", "y / mm", "z / mm", "reach / mm")
     header += ("u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm", "a₁ / µm", "GUM validated")
-    blocks.append(_table(header, rows))
+    blocks.append(table(header, rows))
     if n > DETAIL_LIMIT:
         columns = [*cs.standard_uncertainty.T, cs.position_uncertainty, cs.region_semi_axes[:, 0]]
         stats = []
         for label, fn in (("minimum", np.nanmin), ("median", np.nanmedian), ("maximum", np.nanmax)):
             stats.append((label, *(_um(float(fn(c))) if np.isfinite(c).any() else "n/a" for c in columns)))
         blocks.append(
-            _table(
+            table(
                 (f"Over {n} configurations", "u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm", "a₁ / µm"),
                 stats,
             )
@@ -251,31 +222,31 @@ def _configurations(result: CalibrationUncertainty, cs: ConfigurationSummary) ->
     return blocks
 
 
-def _detail_note(result: CalibrationUncertainty, indices: Sequence[int], worst: int) -> list[_Block]:
+def _detail_note(result: CalibrationUncertainty, indices: Sequence[int], worst: int) -> list[Block]:
     """Which configurations a per-configuration section shows, when not all."""
     if len(indices) == len(result.poses):
         return []
     if not indices:
-        return [_Para("No test configuration selected for detail; see `configurations.csv`.")]
+        return [Paragraph("No test configuration selected for detail; see `configurations.csv`.")]
     tail = f" ({worst + 1} is the worst)" if worst in indices else ""
     return [
-        _Para(
+        Paragraph(
             f"Shown for test configurations {_numbers(indices)}{tail} of {len(result.poses)}; "
             "every configuration is in `configurations.csv` and `report.json`."
         )
     ]
 
 
-def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) -> list[_Block]:
-    blocks: list[_Block] = [_Heading(2, f"Uncertainty of the tool position (layout of {ROBOT_PAPER} Table 2)")]
+def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) -> list[Block]:
+    blocks: list[Block] = [Heading(2, f"Uncertainty of the tool position (layout of {ROBOT_PAPER} Table 2)")]
     blocks += _detail_note(result, indices, worst)
     for i in indices:
         pose = result.poses[i]
         joints = ", ".join(f"{v:.4f}" for v in np.degrees(pose.joint_positions))
         kind = pose.axes[0].expanded_from
-        blocks.append(_Heading(3, f"Test configuration {i + 1}"))
+        blocks.append(Heading(3, f"Test configuration {i + 1}"))
         blocks.append(
-            _Para(
+            Paragraph(
                 f"Positions in frame `{result.frame_id}` ({result.frame} frame). Joints / deg: ({joints}). "
                 f"{result.n_trials} trials, coverage probability "
                 f"{100 * result.coverage_probability:g} %, {_INTERVAL_NAMES.get(kind, kind)} "
@@ -284,12 +255,12 @@ def _table2(result: CalibrationUncertainty, indices: Sequence[int], worst: int) 
             )
         )
         rows = [(label, *cells) for label, cells in table2_rows(pose, "mm")]
-        blocks.append(_table(("Quantity", "x", "y", "z"), rows))
-        blocks.append(_Para(RELATIVE_NOTE))
+        blocks.append(table(("Quantity", "x", "y", "z"), rows))
+        blocks.append(Paragraph(RELATIVE_NOTE))
         if pose.region is not None:
             r = pose.region
             blocks.append(
-                _Para(
+                Paragraph(
                     f"JCGM 102 coverage region (ellipsoid, p = {100 * r.coverage_probability:g} %): "
                     f"k_p = {r.coverage_factor:.3f} from the Monte Carlo values "
                     f"(a trivariate normal would give {r.normal_coverage_factor:.3f})."
@@ -303,7 +274,7 @@ def _mrad(value: float) -> str:
     return format_significant(value * 1e3)
 
 
-def _orientation(pose: PoseUncertainty) -> list[_Block]:
+def _orientation(pose: PoseUncertainty) -> list[Block]:
     """Orientation of one test configuration: mean quaternion, per-axis statement in mrad."""
     o = pose.orientation
     if o is None:
@@ -328,13 +299,13 @@ def _orientation(pose: PoseUncertainty) -> list[_Block]:
     )
     for label, cell in labels:
         rows.append((label, *(cell(j) if o.determined[j] else "undetermined" for j in range(3))))
-    return [_Para(text), _table(("Quantity", "rx", "ry", "rz"), rows)]
+    return [Paragraph(text), table(("Quantity", "rx", "ry", "rz"), rows)]
 
 
-def _budget(budget: Mapping[str, CalibrationUncertainty], indices: Sequence[int]) -> list[_Block]:
-    blocks: list[_Block] = [
-        _Heading(2, "Uncertainty budget"),
-        _Para("Each row is a Monte Carlo run with that source alone; u in µm."),
+def _budget(budget: Mapping[str, CalibrationUncertainty], indices: Sequence[int]) -> list[Block]:
+    blocks: list[Block] = [
+        Heading(2, "Uncertainty budget"),
+        Paragraph("Each row is a Monte Carlo run with that source alone; u in µm."),
     ]
     n_test = min(len(r.poses) for r in budget.values())
     if n_test > DETAIL_LIMIT:
@@ -343,16 +314,14 @@ def _budget(budget: Mapping[str, CalibrationUncertainty], indices: Sequence[int]
             u_pos = np.array([np.linalg.norm([a.standard_uncertainty for a in p.axes]) for p in res.poses[:n_test]])
             rows.append((name, _um(float(np.median(u_pos))), _um(float(u_pos.max())), str(int(np.argmax(u_pos)) + 1)))
         blocks.append(
-            _table(
-                (f"Source (over {n_test} configurations)", "median u_pos / µm", "max u_pos / µm", "at config."), rows
-            )
+            table((f"Source (over {n_test} configurations)", "median u_pos / µm", "max u_pos / µm", "at config."), rows)
         )
     indices = [i for i in indices if i < n_test] if n_test > DETAIL_LIMIT else list(range(n_test))
     for i in indices:
         if n_test > 1:
-            blocks.append(_Heading(3, f"Test configuration {i + 1}"))
+            blocks.append(Heading(3, f"Test configuration {i + 1}"))
         blocks.append(
-            _table(
+            table(
                 ("Source", "u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm"),
                 budget_rows(budget, i),
             )
@@ -360,10 +329,10 @@ def _budget(budget: Mapping[str, CalibrationUncertainty], indices: Sequence[int]
     return blocks
 
 
-def _gum(result: CalibrationUncertainty, indices: Sequence[int], cs: ConfigurationSummary) -> list[_Block]:
-    blocks: list[_Block] = [
-        _Heading(2, "Comparison with the GUM (JCGM 101 §8)"),
-        _Para(
+def _gum(result: CalibrationUncertainty, indices: Sequence[int], cs: ConfigurationSummary) -> list[Block]:
+    blocks: list[Block] = [
+        Heading(2, "Comparison with the GUM (JCGM 101 §8)"),
+        Paragraph(
             "First-order propagation (law of propagation of uncertainty) against the Monte "
             "Carlo probabilistically symmetric interval; validated when both endpoint "
             "differences d_low, d_high are within the numerical tolerance δ."
@@ -374,7 +343,7 @@ def _gum(result: CalibrationUncertainty, indices: Sequence[int], cs: Configurati
         failed = [i for i in range(n) if not cs.gum_validated[i]]
         listed = _numbers(failed[:30]) + (f" and {len(failed) - 30} more" if len(failed) > 30 else "")
         blocks.append(
-            _Para(
+            Paragraph(
                 f"Validated on all three axes at {n - len(failed)} of {n} test configurations"
                 + (f"; not at {listed}." if failed else ".")
             )
@@ -384,9 +353,9 @@ def _gum(result: CalibrationUncertainty, indices: Sequence[int], cs: Configurati
         pose = result.poses[i]
         g = pose.gum
         if len(result.poses) > 1:
-            blocks.append(_Heading(3, f"Test configuration {i + 1}"))
+            blocks.append(Heading(3, f"Test configuration {i + 1}"))
         if not g.applicable:
-            blocks.append(_Para("Not applicable: a non-smooth source (lambda, n_poses, pose_choice) is enabled."))
+            blocks.append(Paragraph("Not applicable: a non-smooth source (lambda, n_poses, pose_choice) is enabled."))
         rows = []
         for j, name in enumerate("xyz"):
             a = pose.axes[j]
@@ -406,7 +375,7 @@ def _gum(result: CalibrationUncertainty, indices: Sequence[int], cs: Configurati
                 )
             )
         blocks.append(
-            _table(
+            table(
                 (
                     "Axis",
                     "y MC / mm",
@@ -455,12 +424,12 @@ def _weighting_lines(cal: IdentificationResult) -> tuple[str, ...]:
     return (f"residuals weighted by {how}: {shown(used)}", f"stated instrument uncertainties: {shown(m.std.tolist())}")
 
 
-def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> list[_Block]:
+def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> list[Block]:
     kinds = dict(zip(cal.model.layout.names, cal.model.layout.kinds))
     mc = dict(zip(result.parameter_names, result.parameters))
-    blocks: list[_Block] = [
-        _Heading(2, "Calibration"),
-        _List(
+    blocks: list[Block] = [
+        Heading(2, "Calibration"),
+        BulletList(
             (
                 (
                     f"λ = {cal.lambda_:.4g} (scaled units), method {cal.lambda_method}; L-curve corner "
@@ -478,7 +447,7 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
                 *_weighting_lines(cal),
             )
         ),
-        _Para(
+        Paragraph(
             "Estimate rounded to its Monte Carlo standard uncertainty; lengths in mm with u in µm, "
             "angles in deg with u in mdeg. A parameter *held by regularisation* is one the data "
             f"alone determine more than {HELD_STD_RATIO:g} times less well than the regularised fit "
@@ -513,7 +482,7 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
             )
         )
     blocks.append(
-        _table(
+        table(
             (
                 "Parameter",
                 "Nominal",
@@ -532,11 +501,11 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
             why = [d for d in cal.dependencies if d.split(" ", 1)[0] == name]
             text = "; ".join(describe_dependency(d) for d in why)
             reasons.append(f"{name}: {text or 'not identifiable from position data'}")
-        blocks.append(_Heading(3, "Not identifiable (kept at nominal)"))
-        blocks.append(_List(tuple(reasons)))
+        blocks.append(Heading(3, "Not identifiable (kept at nominal)"))
+        blocks.append(BulletList(tuple(reasons)))
     others = [d for d in cal.dependencies if d.split(" ", 1)[0] not in missing]
     if others:
-        blocks.append(_Para("Other dependencies: " + "; ".join(describe_dependency(d) for d in others)))
+        blocks.append(Paragraph("Other dependencies: " + "; ".join(describe_dependency(d) for d in others)))
     return blocks
 
 
@@ -559,7 +528,7 @@ def _settings(
     campaign_source: str | None,
     extra_settings: Mapping[str, object] | None,
     robot_name: str,
-) -> list[_Block]:
+) -> list[Block]:
     s = result.settings
     lam_range = (
         "n/a" if result.lambda_range is None else f"[{result.lambda_range[0]:.4g}, {result.lambda_range[1]:.4g}]"
@@ -594,85 +563,16 @@ def _settings(
         )
     for key, value in (extra_settings or {}).items():
         items.append(f"{key}: {value}")
-    blocks: list[_Block] = [
-        _Heading(2, "Settings and reproducibility"),
-        _List(tuple(items)),
-        _Heading(3, "Uncertainty sources"),
-        _table(
+    blocks: list[Block] = [
+        Heading(2, "Settings and reproducibility"),
+        BulletList(tuple(items)),
+        Heading(3, "Uncertainty sources"),
+        table(
             ("Source", "Description"),
             [(name, SOURCE_DESCRIPTIONS.get(name, "")) for name in s.sources],
         ),
     ]
     return blocks
-
-
-def _render_md(blocks: Sequence[_Block]) -> str:
-    out: list[str] = []
-    for b in blocks:
-        if isinstance(b, _Heading):
-            out.append("#" * b.level + " " + b.text)
-        elif isinstance(b, _Para):
-            out.append(b.text)
-        elif isinstance(b, _List):
-            out.append("\n".join(f"- {item}" for item in b.items))
-        elif isinstance(b, _Table):
-            lines = [
-                "| " + " | ".join(b.header) + " |",
-                "|" + "|".join("---" for _ in b.header) + "|",
-            ]
-            lines.extend("| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in b.rows)
-            out.append("\n".join(lines))
-        else:
-            out.append(f"![{b.caption}]({b.file})\n\n*{b.caption}*")
-    return "\n\n".join(out) + "\n"
-
-
-_CSS = (
-    "body{font-family:sans-serif;max-width:70em;margin:2em auto;padding:0 1em;color:#222}"
-    "table{border-collapse:collapse;margin:1em 0}"
-    "th,td{border:1px solid #aaa;padding:.25em .6em;text-align:right;vertical-align:top}"
-    "th:first-child,td:first-child,td.text{text-align:left}th{background:#eee}"
-    "img{max-width:100%}figure{margin:1em 0}figcaption{font-style:italic}"
-)
-
-
-_NUMERIC = re.compile(r"^[\s(]*[-+−]?[0-9.]+([eE][-+]?[0-9]+)?([\s,/]+[-+−]?[0-9.]+)*[)\s]*[a-zµ%°]*$")
-
-
-def _html_cell(text: str) -> str:
-    """A table cell: numbers right-aligned (the CSS default), text such as descriptions left."""
-    style = "" if _NUMERIC.match(text) else ' class="text"'
-    return f"<td{style}>{html.escape(text)}</td>"
-
-
-def _render_html(blocks: Sequence[_Block], title: str, directory: Path, embed: bool) -> str:
-    e = html.escape
-    out = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>{e(title)}</title><style>{_CSS}</style></head><body>",
-    ]
-    for b in blocks:
-        if isinstance(b, _Heading):
-            out.append(f"<h{b.level}>{e(b.text)}</h{b.level}>")
-        elif isinstance(b, _Para):
-            out.append(f"<p>{e(b.text)}</p>")
-        elif isinstance(b, _List):
-            out.append("<ul>" + "".join(f"<li>{e(i)}</li>" for i in b.items) + "</ul>")
-        elif isinstance(b, _Table):
-            head = "".join(f"<th>{e(h)}</th>" for h in b.header)
-            body = "".join("<tr>" + "".join(_html_cell(c) for c in row) + "</tr>" for row in b.rows)
-            out.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
-        else:
-            src = b.file
-            if embed:
-                data = base64.b64encode((directory / b.file).read_bytes()).decode("ascii")
-                src = f"data:image/png;base64,{data}"
-            out.append(
-                f'<figure><img src="{e(src)}" alt="{e(b.caption)}"><figcaption>{e(b.caption)}</figcaption></figure>'
-            )
-    out.append("</body></html>")
-    return "\n".join(out) + "\n"
 
 
 def write_report(
@@ -768,11 +668,11 @@ def write_report(
         input_warnings=input_warnings,
     )
     write_configurations_csv(out / "configurations.csv", result, cs)
-    figures: list[_Image] = []
+    figures: list[Figure] = []
     if n_test > 1:
         plot_configuration_summary(result, out / "configurations.png", summary=cs)
         figures.append(
-            _Image(
+            Figure(
                 "configurations.png",
                 "Standard uncertainty per axis and u_pos per test configuration, worst ringed; "
                 "semi-axes of the JCGM 102 coverage ellipsoid",
@@ -780,7 +680,7 @@ def write_report(
         )
         plot_uncertainty_vs_reach(result, out / "uncertainty_vs_reach.png", summary=cs)
         figures.append(
-            _Image(
+            Figure(
                 "uncertainty_vs_reach.png",
                 "Standard uncertainty against the distance of the tool from the robot base",
             )
@@ -789,7 +689,7 @@ def write_report(
         name = f"histograms_{i + 1}.png"
         plot_axis_histograms(result, out / name, pose=i)
         figures.append(
-            _Image(
+            Figure(
                 name,
                 f"Tool position per axis, test configuration {i + 1}, with mean, "
                 f"coverage intervals and the GUM normal pdf (cf. {ROBOT_PAPER} Fig. 10)",
@@ -798,7 +698,7 @@ def write_report(
         name = f"position_error_{i + 1}.png"
         plot_position_error(result, out / name, pose=i)
         figures.append(
-            _Image(
+            Figure(
                 name,
                 f"Position error |p − p̄|, test configuration {i + 1} (cf. {ROBOT_PAPER} Fig. 11)",
             )
@@ -810,18 +710,18 @@ def write_report(
             name = f"rotation_histograms_{i + 1}.png"
             plot_rotation_histograms(result, out / name, pose=i)
             figures.append(
-                _Image(
+                Figure(
                     name,
                     f"Tool orientation per axis (rx, ry, rz about the fixed axes of {result.frame_id}, deviation "
                     f"from the mean, mrad), test configuration {i + 1}, with coverage intervals and the GUM normal pdf",
                 )
             )
     plot_lcurve(result.calibration, out / "lcurve.png")
-    figures.append(_Image("lcurve.png", "L-curve and GCV with the chosen λ"))
+    figures.append(Figure("lcurve.png", "L-curve and GCV with the chosen λ"))
     if result.parameter_names:
         plot_parameter_distributions(result, out / "parameters.png")
         figures.append(
-            _Image(
+            Figure(
                 "parameters.png",
                 f"Monte Carlo distributions of the identified parameter errors (cf. {ROBOT_PAPER} Fig. 5); "
                 "hatched panels marked 'held by regularisation': the Tikhonov term, not the data, fixes them",
@@ -837,9 +737,9 @@ def write_report(
             reference=sw.reference,
             log_x=sw.log_x,
         )
-        figures.append(_Image(name, f"Standard uncertainty vs {sw.xlabel} (cf. {ROBOT_PAPER} Figs. 7-9)"))
+        figures.append(Figure(name, f"Standard uncertainty vs {sw.xlabel} (cf. {ROBOT_PAPER} Figs. 7-9)"))
 
-    blocks: list[_Block] = [_Heading(1, title)]
+    blocks: list[Block] = [Heading(1, title)]
     blocks += _summary(result, cs)
     if n_test > 1:
         blocks += _configurations(result, cs)
@@ -849,20 +749,20 @@ def write_report(
     blocks += _gum(result, detail, cs)
     blocks += _calibration(result.calibration, result)
     if sweeps:
-        blocks.append(_Heading(2, "Sweeps"))
+        blocks.append(Heading(2, "Sweeps"))
         for sw in sweeps:
             rows = [
                 (f"{v:.4g}", *(_um(float(x)) for x in u), _um(float(np.linalg.norm(u))))
                 for v, u in zip(sw.values, sw.standard_uncertainty)
             ]
-            blocks.append(_Heading(3, f"{sw.name} ({sw.n_trials or '?'} trials per point)"))
-            blocks.append(_table((sw.xlabel, "u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm"), rows))
-    blocks.append(_Heading(2, "Figures"))
+            blocks.append(Heading(3, f"{sw.name} ({sw.n_trials or '?'} trials per point)"))
+            blocks.append(table((sw.xlabel, "u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm"), rows))
+    blocks.append(Heading(2, "Figures"))
     blocks += figures
     blocks += _settings(result, campaign_source, extra_settings, robot_name)
-    blocks.append(_Heading(2, "Warnings"))
-    blocks.append(_List(tuple(warnings)) if warnings else _Para("None."))
+    blocks.append(Heading(2, "Warnings"))
+    blocks.append(BulletList(tuple(warnings)) if warnings else Paragraph("None."))
 
-    (out / "report.md").write_text(_render_md(blocks), encoding="utf-8")
-    (out / "report.html").write_text(_render_html(blocks, title, out, embed_images), encoding="utf-8")
+    (out / "report.md").write_text(render_markdown(blocks), encoding="utf-8")
+    (out / "report.html").write_text(render_html(blocks, title, out, embed=embed_images), encoding="utf-8")
     return out

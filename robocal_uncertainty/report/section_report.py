@@ -5,12 +5,12 @@ lengths in mm (estimates) and µm (uncertainties, profiles), angles in degrees. 
 states, per parameter, the measured coverage of the interval it recommends and whether that
 coverage is verified *for this cloud*: the cloud passed the residual check of its denoising
 (:class:`~robocal_uncertainty.inspection.denoise.ResidualCheck`), and the interval's coverage was
-verified (:func:`coverage_verified`: at least 92 %, not significantly below 95 %, enough scans)
-over 200 simulated scans of the demo scenario
-(:data:`COVERAGE_STUDY`, slow test ``test_coverage_over_200_simulated_scans``) and over the
-scenario families of :mod:`~robocal_uncertainty.inspection.coverage_study` (:data:`FAMILY_STUDY`,
-``benchmarks/bench_section_coverage.py``). A cloud the check flags is never stated verified, nor
-one outside the studies' scope (:func:`outside_study_scope`: their point count, nominal, instrument).
+verified (:mod:`~robocal_uncertainty.inspection.coverage_rule`: at least 92 %, not significantly
+below 95 %, enough scans) by the stored studies of
+:mod:`~robocal_uncertainty.inspection.stored_studies` or by a study run for the cloud itself. A
+cloud the check flags is never stated verified, nor one outside the studies' scope. This module
+computes no statistic: the verdicts come from ``inspection``; it lays them out as one
+:mod:`~robocal_uncertainty.report.document_tree` rendered to Markdown and HTML.
 The table's §8 column is the JCGM 101 §8 validation of the GUM interval by the Monte Carlo one
 (whether the GUM framework reproduces the Monte Carlo interval), not a verdict on the part.
 With repeated scans (``gum_with_repeatability``) every report also gives the seed's GUM budget
@@ -20,64 +20,59 @@ of the chord length (u1 MPE, u2 thermal, u3 repeatability, the other sources, u_
 
 from __future__ import annotations
 
-import base64
 import csv
-import dataclasses
-import html
 import json
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.inspection.bias_correction import BiasCorrection
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument
-from robocal_uncertainty.inspection.coverage_rule import (
-    BINOMIAL_LEVEL,
-    COVERAGE_TOLERANCE,
-    MIN_STUDY_SCANS,
-    FamilyCounts,
-    FamilyCoverage,
-    binomial_tail,
-    coverage_verified,
-    family_cells,
-    holm_adjusted,
-)
+from robocal_uncertainty.inspection.coverage_rule import BINOMIAL_LEVEL, COVERAGE_TOLERANCE, MIN_STUDY_SCANS
 from robocal_uncertainty.inspection.coverage_study import ScenarioStudy
 from robocal_uncertainty.inspection.denoise import ResidualCheck
 from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS, ENVELOPE_STREAM
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, PARAMETER_UNITS
 from robocal_uncertainty.inspection.section_mc import SectionUncertainty
+from robocal_uncertainty.inspection.stored_studies import (
+    COVERAGE_STUDY,
+    FAMILY_CELLS,
+    FAMILY_STUDY,
+    FAMILY_STUDY_COMMAND,
+    STUDY_NOMINAL_LENGTH,
+    STUDY_POINTS,
+    outside_study_scope,
+    own_verdict,
+    stated_coverage,
+)
+from robocal_uncertainty.report.document_tree import (
+    Block,
+    BulletList,
+    Figure,
+    Heading,
+    Paragraph,
+    Preformatted,
+    Table,
+    render_html,
+    render_markdown,
+    table,
+)
 
 __all__ = [
-    "COVERAGE_STUDY",
-    "COVERAGE_TOLERANCE",
-    "DEMO_SCANS",
-    "FAMILY_STUDY",
-    "FAMILY_STUDY_COMMAND",
-    "MIN_STUDY_SCANS",
+    "GUM_CHECK_LEGEND",
     "SECTION_REPORT_FILES",
     "SECTION_REPORT_FORMAT",
-    "STUDY_NOMINAL_LENGTH",
-    "STUDY_POINTS",
-    "Coverage",
-    "FamilyCoverage",
+    "VERIFIED_OWN",
     "SectionReportFiles",
-    "binomial_tail",
     "coverage_summary",
-    "coverage_verified",
-    "family_coverage",
     "format_repeatability_budget",
     "format_section_table",
-    "holm_adjusted",
-    "outside_study_scope",
     "repeatability_budget",
+    "section_report_blocks",
     "section_report_dict",
-    "stated_coverage",
     "write_section_report",
 ]
 
@@ -86,141 +81,6 @@ SECTION_REPORT_FORMAT = "robocal_uncertainty/section_report/1"
 
 SECTION_REPORT_FILES = ("section.json", "section.md", "section.csv", "section_histograms.png", "section.html")
 """Files :func:`write_section_report` writes (always all of them, so ``--force`` leaves none stale)."""
-
-
-class Coverage(NamedTuple):
-    """Measured coverage of the 95 % intervals of one parameter, per interval kind."""
-
-    jcgm101: float
-    """Method ``seed``: the JCGM 101 interval of the measured cloud perturbed."""
-    reflected: float
-    """Method ``seed``: that interval reflected about the measured value (bias-corrected)."""
-    denoised: float
-    """Method ``denoised``: the interval of f(y) - Δ, Δ sampled around the denoised cloud."""
-
-
-COVERAGE_STUDY: dict[str, Coverage] = {
-    "max_thickness": Coverage(0.72, 0.89, 0.96),
-    "chord_length": Coverage(0.895, 0.905, 0.94),
-    "axial_offset": Coverage(0.935, 0.935, 0.935),
-    "circumferential_offset": Coverage(0.945, 0.945, 0.945),
-    "twist_angle": Coverage(0.945, 0.935, 0.935),
-    "profile_leading_edge": Coverage(0.0, 0.73, 0.965),
-    "profile_trailing_edge": Coverage(0.0, 0.585, 0.975),
-    "profile_pressure_side": Coverage(0.0, 0.075, 0.975),
-    "profile_suction_side": Coverage(0.0, 0.13, 0.96),
-}
-"""Measured coverage of the 95 % intervals over 200 simulated 1 836-point scans of the demo
-section with a known truth (one instrument-noise draw per scan; slow test
-``test/inspection/test_inspection_section_mc.py::test_coverage_over_200_simulated_scans``).
-One scan in 200 is 0.5 %; the binomial standard error at 95 % is 1.5 %."""
-
-DEMO_SCANS = 200
-"""Scans of the demo scenario's study (:data:`COVERAGE_STUDY`)."""
-
-
-FAMILY_STUDY_COMMAND = "python benchmarks/bench_section_coverage.py --scans 600 --workers 2"
-"""The command whose output :data:`FAMILY_STUDY` holds."""
-
-_FAMILY_COUNTS: dict[str, FamilyCounts] = {
-    # family: (scans, flagged, inside per parameter among the unflagged, inside among all)
-    "smooth": (600, 30, (550, 544, 538, 540, 534, 561, 553, 561, 554), (578, 573, 567, 569, 563, 591, 582, 591, 581)),
-    "side": (600, 93, (481, 474, 481, 482, 481, 496, 498, 487, 493), (568, 562, 570, 573, 571, 587, 591, 578, 581)),
-    "edge": (600, 122, (460, 453, 457, 451, 455, 473, 465, 459, 462), (577, 569, 573, 568, 574, 593, 584, 580, 579)),
-    "erosion": (600, 201, (384, 377, 375, 378, 381, 394, 384, 382, 382), (576, 567, 567, 566, 574, 591, 581, 572, 573)),
-}
-
-
-FAMILY_STUDY: dict[str, dict[str, FamilyCoverage]] = family_cells(_FAMILY_COUNTS, PARAMETER_NAMES)
-"""Coverage of method ``denoised`` per scenario family and parameter
-(:mod:`~robocal_uncertainty.inspection.coverage_study`: smooth forms of 2-13 waves; bumps and
-dents of 1-10 µm over 1-20 mm on the sides, at the edges; edge erosion), as printed by
-:data:`FAMILY_STUDY_COMMAND`. A cell is verified (:attr:`FamilyCoverage.consistent`) at its
-Holm-adjusted p-value: with 36 cells, a per-cell 5 % test would call some cell significantly
-below 95 % with probability about 0.8 even if every interval covered exactly 95 %."""
-
-STUDY_POINTS = 1836
-"""Points per scan in every coverage study (the seed's count, denser at the edges)."""
-
-STUDY_NOMINAL_LENGTH = 0.80977
-"""Contour length [m] of the studies' nominal: Rotor 37 surface 2 at the seed's size (x7.14)."""
-
-_STUDY_POINT_TOLERANCE = 0.10
-_STUDY_LENGTH_TOLERANCE = 0.01
-
-
-def outside_study_scope(result: SectionUncertainty) -> str | None:
-    """Why the coverage studies do not speak for this cloud, or None when they do.
-
-    Every study simulates the same kind of scan: :data:`STUDY_POINTS` points (± 10 % accepted)
-    of a section whose nominal contour is :data:`STUDY_NOMINAL_LENGTH` long (± 1 %), measured by
-    the seed's CMM (:class:`~robocal_uncertainty.inspection.cmm_model.CmmInstrument` defaults).
-    The denoising windows, the residual check's power and the roughness envelope all depend on
-    the point spacing, the contour and the noise, so a measured coverage is not carried to
-    another point density, blade or instrument: outside that scope no interval is stated
-    verified. The tolerances say what is taken as the same scan; they are not a measured range
-    of validity.
-    """
-    reasons = []
-    if abs(result.n_points - STUDY_POINTS) > _STUDY_POINT_TOLERANCE * STUDY_POINTS:
-        reasons.append(f"{result.n_points} points, the studies {STUDY_POINTS}")
-    if not abs(result.nominal_length - STUDY_NOMINAL_LENGTH) <= _STUDY_LENGTH_TOLERANCE * STUDY_NOMINAL_LENGTH:
-        reasons.append(
-            f"a nominal contour of {result.nominal_length * 1e3:.1f} mm, the studies' Rotor 37 section "
-            f"{STUDY_NOMINAL_LENGTH * 1e3:.1f} mm"
-        )
-    seed = CmmInstrument()
-    numeric = [f.name for f in dataclasses.fields(CmmInstrument) if f.name != "name"]
-    if not all(math.isclose(getattr(result.instrument, n), getattr(seed, n), rel_tol=1e-9) for n in numeric):
-        reasons.append("an instrument other than the seed's CMM the studies simulate")
-    return "; ".join(reasons) or None
-
-
-_FAMILY_CELLS = sum(1 for study in FAMILY_STUDY.values() for c in study.values() if c.scans > c.flagged)
-
-_LINEAR = ("axial_offset", "circumferential_offset", "twist_angle")
-
-
-def family_coverage(name: str) -> tuple[float, bool]:
-    """Lowest coverage over the scenario families' unflagged scans, and whether every family is consistent."""
-    rows = [study[name] for study in FAMILY_STUDY.values() if study[name].scans > study[name].flagged]
-    if not rows:
-        return math.nan, False
-    return min(r.coverage for r in rows), all(r.consistent for r in rows)
-
-
-def stated_coverage(
-    name: str, method: str, check: ResidualCheck | None = None, *, in_scope: bool = True
-) -> tuple[str, float, bool]:
-    """The interval a report recommends for parameter `name` under `method`, its measured
-    coverage and whether that is verified for the cloud whose residual check is `check`.
-
-    Returns
-    -------
-    tuple
-        ``(kind, coverage, verified)``: kind ``jcgm101`` (method ``seed``, offsets and twist),
-        ``reflected`` (method ``seed``, the max/min parameters) or ``denoised``; coverage the
-        lowest of the demo scenario's study and (``jcgm101``, ``denoised``: the offsets and twist
-        are linear in the errors, so both methods state the same interval) the scenario families'
-        unflagged scans; verified only when `check` is given and did not flag the cloud, the
-        cloud is within the studies' scope (`in_scope`, :func:`outside_study_scope`), and the
-        demo study and every family verify the coverage (:func:`coverage_verified`).
-    """
-    study = COVERAGE_STUDY[name]
-    if method == "denoised":
-        kind = "denoised"
-    elif method == "seed":
-        kind = "jcgm101" if name in _LINEAR else "reflected"
-    else:
-        msg = f"unknown method {method!r}"
-        raise ValueError(msg)
-    value = float(getattr(study, kind))
-    verified = coverage_verified(round(value * DEMO_SCANS), DEMO_SCANS)
-    if kind != "reflected":
-        lowest, consistent = family_coverage(name)
-        value = min(value, lowest) if math.isfinite(lowest) else value
-        verified = verified and consistent
-    return kind, value, verified and in_scope and check is not None and not check.flagged
 
 
 _LABELS = {
@@ -261,13 +121,6 @@ def _decimals(u_scaled_to_value_unit: float) -> int:
     if not (math.isfinite(u_scaled_to_value_unit) and u_scaled_to_value_unit > 0):
         return 6
     return max(0, 1 - math.floor(math.log10(u_scaled_to_value_unit)))
-
-
-def _own_verdict(name: str, result: SectionUncertainty, study: ScenarioStudy) -> tuple[float, bool]:
-    """Lowest coverage of `name` in this cloud's own study and whether it is verified for the cloud
-    (every family's cell passes the rule and the cloud's residual check did not flag it)."""
-    check = result.check
-    return study.lowest(name), study.verified(name) and check is not None and not check.flagged
 
 
 def _rows(
@@ -327,7 +180,7 @@ def _rows(
             }
         )
         if study is not None:
-            lowest, verified = _own_verdict(name, result, study)
+            lowest, verified = own_verdict(name, result, study)
             rows[-1]["coverage_measured"] = lowest
             rows[-1]["coverage_verified"] = verified
             rows[-1]["coverage_verified_by"] = "this cloud's coverage study"
@@ -657,7 +510,7 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
     rule = (
         f"at least {lo:.0%} and not significantly below 95 % (exact one-sided binomial test at "
         f"{BINOMIAL_LEVEL:.0%}, at least {MIN_STUDY_SCANS} scans) over {_DEMO_SCENARIO_TEXT} and over the unflagged "
-        f"scans of every scenario family (there the test is Holm-adjusted over the study's {_FAMILY_CELLS} cells)"
+        f"scans of every scenario family (there the test is Holm-adjusted over the study's {FAMILY_CELLS} cells)"
     )
     denoised = ", ".join(f"{_LABELS[n]} {v.denoised:.1%}" for n, v in COVERAGE_STUDY.items())
     seed = ", ".join(f"{_LABELS[n]} {v.jcgm101:.1%}" for n, v in COVERAGE_STUDY.items())
@@ -724,7 +577,7 @@ def _coverage_cell(name: str, result: SectionUncertainty, study: ScenarioStudy |
     if study is not None:
         if result.check is None or result.check.flagged:
             return "not verified for this cloud"
-        lowest, verified = _own_verdict(name, result, study)
+        lowest, verified = own_verdict(name, result, study)
         shown = f"{lowest:.1%}" if math.isfinite(lowest) else "-"
         return f"{shown} {VERIFIED_OWN}" if verified else f"{shown} NOT VERIFIED for this part (own study)"
     _, value, verified = stated_coverage(name, result.method, result.check)
@@ -810,114 +663,139 @@ def format_section_table(
     return "\n".join(lines)
 
 
-def _markdown(data: dict[str, Any], table: str) -> str:
-    out = [
-        "# Section inspection: parameters and their uncertainty",
-        "",
-        f"- cloud: {data.get('cloud', '')}",
-        f"- nominal: {data.get('nominal', '')}",
-        f"- instrument: {data['instrument']['name']} ({data.get('instrument_file', '')})",
-        f"- trials: {data['n_trials']}, random seed: {data['seed']}, block size {data['block_size']}, "
-        f"coverage probability {data['coverage_probability']}",
-        f"- sources: {', '.join(data['sources'])}; MPE/thermal reference point "
-        f"({', '.join(f'{v * 1e3:.3f}' for v in data['reference_point_m'])}) mm",
-        f"- method: {data['method']}"
-        + (
-            f" (denoising window half-width {data['denoise_half_width_m'] * 1e3:.1f} mm by Cp, "
-            f"{data['denoise_local_half_width_m'][0] * 1e3:.1f}-{data['denoise_local_half_width_m'][1] * 1e3:.1f} mm "
-            "along the contour)"
-            if data.get("denoise_half_width_m") is not None
-            else ""
+def section_report_blocks(data: dict[str, Any], console_table: str) -> list[Block]:
+    """``section.md`` and ``section.html`` as one document tree, from the JSON content `data`
+    (:func:`section_report_dict`) and the console table `console_table` (:func:`format_section_table`)."""
+    denoise = (
+        f" (denoising window half-width {data['denoise_half_width_m'] * 1e3:.1f} mm by Cp, "
+        f"{data['denoise_local_half_width_m'][0] * 1e3:.1f}-{data['denoise_local_half_width_m'][1] * 1e3:.1f} mm "
+        "along the contour)"
+        if data.get("denoise_half_width_m") is not None
+        else ""
+    )
+    blocks: list[Block] = [
+        Heading(1, "Section inspection: parameters and their uncertainty"),
+        BulletList(
+            (
+                f"cloud: {data.get('cloud', '')}",
+                f"nominal: {data.get('nominal', '')}",
+                f"instrument: {data['instrument']['name']} ({data.get('instrument_file', '')})",
+                f"trials: {data['n_trials']}, random seed: {data['seed']}, block size {data['block_size']}, "
+                f"coverage probability {data['coverage_probability']}",
+                f"sources: {', '.join(data['sources'])}; MPE/thermal reference point "
+                f"({', '.join(f'{v * 1e3:.3f}' for v in data['reference_point_m'])}) mm",
+                f"method: {data['method']}{denoise}",
+            )
         ),
-        "",
-        "## Results",
-        "",
-        "Estimates in mm (twist in degrees, profiles in µm), uncertainties in µm (twist in millidegrees). "
-        "GUM=MC(§8): the JCGM 101 §8 validation of the GUM interval by the Monte Carlo one (whether the GUM "
-        "framework reproduces it), not a verdict on the part.",
-        "",
-        "```",
-        table,
-        "```",
-        "",
-        "Shortest 95 % intervals, and the GUM interval:",
-        "",
-        "| parameter | shortest interval | GUM interval | d_low | d_high | δ |",
-        "|---|---|---|---|---|---|",
+        Heading(2, "Results"),
+        Paragraph(
+            "Estimates in mm (twist in degrees, profiles in µm), uncertainties in µm (twist in millidegrees). "
+            "GUM=MC(§8): the JCGM 101 §8 validation of the GUM interval by the Monte Carlo one (whether the GUM "
+            "framework reproduces it), not a verdict on the part."
+        ),
+        Preformatted(console_table),
+        Paragraph("Shortest 95 % intervals, and the GUM interval:"),
+        _interval_table(data),
+        Heading(2, "GUM budget per source (standard contributions)"),
+        _budget_table(data),
+        Heading(2, "Coverage of the intervals: this cloud's check and the simulated studies"),
+        Paragraph(data["coverage_note"]),
+        Paragraph("Demo scenario (200 simulated scans of one part):"),
+        _demo_study_table(data),
+        Paragraph(
+            f"Scenario families (method denoised; `{FAMILY_STUDY_COMMAND}`): coverage over the scans the residual "
+            "check did not flag, ± its binomial standard uncertainty; flagged scans per family in the header."
+        ),
+        _family_study_table(),
     ]
+    own = data.get("coverage_study_this_cloud")
+    if own is not None:
+        blocks += _own_study_blocks(own)
+    repeat = data.get("gum_with_repeatability")
+    if repeat is not None:
+        blocks += _repeatability_blocks(repeat, data.get("repeat_scans"))
+    blocks += [
+        Heading(2, "Histograms"),
+        Figure(
+            "section_histograms.png",
+            "Monte Carlo values of the nine parameters about the measured value; dashed: the stated 95 % interval",
+            caption_below=False,
+        ),
+    ]
+    return blocks
+
+
+def _interval_table(data: dict[str, Any]) -> Table:
+    rows = []
     for row in data["parameters"]:
         vu, vf, uu, uf = _display(row["name"])
         digits = _decimals(row["u"] * vf)
         s, g = row["shortest_interval"], row["gum_interval"]
-        out.append(
-            f"| {_LABELS[row['name']]} | [{s[0] * vf:.{digits}f}, {s[1] * vf:.{digits}f}] {vu} "
-            f"| [{g[0] * vf:.{digits}f}, {g[1] * vf:.{digits}f}] {vu} "
-            f"| {row['gum_d_low'] * uf:.3f} {uu} | {row['gum_d_high'] * uf:.3f} {uu} "
-            f"| {row['gum_delta'] * uf:.3f} {uu} |"
+        rows.append(
+            (
+                _LABELS[row["name"]],
+                f"[{s[0] * vf:.{digits}f}, {s[1] * vf:.{digits}f}] {vu}",
+                f"[{g[0] * vf:.{digits}f}, {g[1] * vf:.{digits}f}] {vu}",
+                f"{row['gum_d_low'] * uf:.3f} {uu}",
+                f"{row['gum_d_high'] * uf:.3f} {uu}",
+                f"{row['gum_delta'] * uf:.3f} {uu}",
+            )
         )
-    out += ["", "## GUM budget per source (standard contributions)", ""]
+    return table(("parameter", "shortest interval", "GUM interval", "d_low", "d_high", "δ"), rows)
+
+
+def _budget_table(data: dict[str, Any]) -> Table:
     sources = data["sources"]
-    out.append("| parameter | " + " | ".join(sources) + " | combined |")
-    out.append("|---" * (len(sources) + 2) + "|")
+    rows = []
     for row in data["parameters"]:
         _, _, uu, uf = _display(row["name"])
-        cells = " | ".join(f"{row['budget'][s] * uf:.3f}" for s in sources)
-        out.append(f"| {_LABELS[row['name']]} ({uu}) | {cells} | {row['gum_u'] * uf:.3f} |")
-    out += [
-        "",
-        "## Coverage of the intervals: this cloud's check and the simulated studies",
-        "",
-        data["coverage_note"],
-        "",
-        "Demo scenario (200 simulated scans of one part):",
-        "",
-        "| parameter | seed: JCGM 101 interval | seed: bias-corrected (reflected) | denoised | this report |",
-        "|---|---|---|---|---|",
-    ]
+        rows.append(
+            (
+                f"{_LABELS[row['name']]} ({uu})",
+                *(f"{row['budget'][s] * uf:.3f}" for s in sources),
+                f"{row['gum_u'] * uf:.3f}",
+            )
+        )
+    return table(("parameter", *sources, "combined"), rows)
+
+
+def _demo_study_table(data: dict[str, Any]) -> Table:
+    rows = []
     for row in data["parameters"]:
         study = COVERAGE_STUDY[row["name"]]
         flag = "verified" if row["coverage_verified"] else "NOT VERIFIED"
-        out.append(
-            f"| {_LABELS[row['name']]} | {study.jcgm101:.1%} | {study.reflected:.1%} | {study.denoised:.1%} "
-            f"| {row['stated_interval_kind']} {row['coverage_measured']:.1%} {flag} |"
+        rows.append(
+            (
+                _LABELS[row["name"]],
+                f"{study.jcgm101:.1%}",
+                f"{study.reflected:.1%}",
+                f"{study.denoised:.1%}",
+                f"{row['stated_interval_kind']} {row['coverage_measured']:.1%} {flag}",
+            )
         )
-    out += [
-        "",
-        f"Scenario families (method denoised; `{FAMILY_STUDY_COMMAND}`): coverage over the scans the residual "
-        "check did not flag, ± its binomial standard uncertainty; flagged scans per family in the header.",
-        "",
-        "| parameter | "
-        + " | ".join(
-            f"{family} ({next(iter(study.values())).flagged}/{next(iter(study.values())).scans} flagged)"
-            for family, study in FAMILY_STUDY.items()
-        )
-        + " |",
-        "|---" * (len(FAMILY_STUDY) + 1) + "|",
-    ]
-    for name in PARAMETER_NAMES:
-        cells = [
-            f"{study[name].coverage:.1%} ± {study[name].u:.1%}" if study[name].scans > study[name].flagged else "-"
-            for study in FAMILY_STUDY.values()
-        ]
-        out.append(f"| {_LABELS[name]} | " + " | ".join(cells) + " |")
-    own = data.get("coverage_study_this_cloud")
-    if own is not None:
-        out += _markdown_own_study(own)
-    repeat = data.get("gum_with_repeatability")
-    if repeat is not None:
-        out += _markdown_repeatability(repeat, data.get("repeat_scans"))
-    out += [
-        "",
-        "## Histograms",
-        "",
-        "![Monte Carlo values of the nine parameters about the measured value; dashed: the stated 95 % interval]"
-        "(section_histograms.png)",
-        "",
-    ]
-    return "\n".join(out)
+    header = ("parameter", "seed: JCGM 101 interval", "seed: bias-corrected (reflected)", "denoised", "this report")
+    return table(header, rows)
 
 
-def _markdown_own_study(own: dict[str, Any]) -> list[str]:
+def _family_study_table() -> Table:
+    header = ["parameter"]
+    for family, study in FAMILY_STUDY.items():
+        first = next(iter(study.values()))
+        header.append(f"{family} ({first.flagged}/{first.scans} flagged)")
+    rows = [
+        (
+            _LABELS[name],
+            *(
+                f"{study[name].coverage:.1%} ± {study[name].u:.1%}" if study[name].scans > study[name].flagged else "-"
+                for study in FAMILY_STUDY.values()
+            ),
+        )
+        for name in PARAMETER_NAMES
+    ]
+    return table(header, rows)
+
+
+def _own_study_blocks(own: dict[str, Any]) -> list[Block]:
     """The cloud's own coverage study: settings, then coverage per parameter and family and the verdict."""
     inst = own["instrument"]
     scale = (
@@ -926,30 +804,22 @@ def _markdown_own_study(own: dict[str, Any]) -> list[str]:
         else "stored amplitudes"
     )
     families = own["families"]
-    out = [
-        "",
-        "## Coverage study of this cloud (its part, layout and instrument)",
-        "",
-        f"- scenario: {own['scenario']}",
-        f"- {own['points']} points per scan (the cloud's layout"
-        + (", its probe vectors" if own["probe_vectors_from_cloud"] else "")
-        + f"), nominal contour {own['nominal_length_m'] * 1e3:.1f} mm, {scale}",
-        f"- instrument {inst['name']}: MPE ({inst['mpe_a_m'] * 1e6:.2f} + L/{inst['mpe_k']:g}) µm, probing "
-        f"{inst['probing_half_width_m'] * 1e6:.2f} µm, thermal {inst['thermal_expansion_half_width_per_degc']:g} /°C "
-        f"x {inst['temperature_deviation_degc']:g} °C",
-        f"- {own['scans_per_family']} scans per family ({', '.join(families)}), {own['scans_total']} in all, "
-        f"{own['trials_per_scan']} trials each, study seed {own['study_seed']}, {own['elapsed_s']:.0f} s on "
-        f"{own['workers']} worker(s)",
-        f"- rule: {own['rule']}",
-        "",
-        "Coverage over the scans the residual check did not flag, ± its binomial standard uncertainty "
-        "(flagged scans per family in the header); verdict per parameter over every family:",
-        "",
-        "| parameter | "
-        + " | ".join(f"{f} ({own['counts'][f]['flagged']}/{own['counts'][f]['scans']} flagged)" for f in families)
-        + " | study verdict |",
-        "|---" * (len(families) + 2) + "|",
-    ]
+    settings = BulletList(
+        (
+            f"scenario: {own['scenario']}",
+            f"{own['points']} points per scan (the cloud's layout"
+            + (", its probe vectors" if own["probe_vectors_from_cloud"] else "")
+            + f"), nominal contour {own['nominal_length_m'] * 1e3:.1f} mm, {scale}",
+            f"instrument {inst['name']}: MPE ({inst['mpe_a_m'] * 1e6:.2f} + L/{inst['mpe_k']:g}) µm, probing "
+            f"{inst['probing_half_width_m'] * 1e6:.2f} µm, thermal {inst['thermal_expansion_half_width_per_degc']:g} "
+            f"/°C x {inst['temperature_deviation_degc']:g} °C",
+            f"{own['scans_per_family']} scans per family ({', '.join(families)}), {own['scans_total']} in all, "
+            f"{own['trials_per_scan']} trials each, study seed {own['study_seed']}, {own['elapsed_s']:.0f} s on "
+            f"{own['workers']} worker(s)",
+            f"rule: {own['rule']}",
+        )
+    )
+    rows = []
     for j, name in enumerate(PARAMETER_NAMES):
         cells = []
         for f in families:
@@ -958,116 +828,65 @@ def _markdown_own_study(own: dict[str, Any]) -> list[str]:
             cells.append(
                 f"{c['inside_unflagged'][j] / kept:.1%} ± {math.sqrt(0.95 * 0.05 / kept):.1%}" if kept else "-"
             )
-        verdict = "verified for this part, layout and instrument" if own["verified"][name] else "NOT VERIFIED"
-        out.append(f"| {_LABELS[name]} | " + " | ".join(cells) + f" | {verdict} |")
-    return out
+        verdict = VERIFIED_OWN if own["verified"][name] else "NOT VERIFIED"
+        rows.append((_LABELS[name], *cells, verdict))
+    header = (
+        "parameter",
+        *(f"{f} ({own['counts'][f]['flagged']}/{own['counts'][f]['scans']} flagged)" for f in families),
+        "study verdict",
+    )
+    return [
+        Heading(2, "Coverage study of this cloud (its part, layout and instrument)"),
+        settings,
+        Paragraph(
+            "Coverage over the scans the residual check did not flag, ± its binomial standard uncertainty "
+            "(flagged scans per family in the header); verdict per parameter over every family:"
+        ),
+        table(header, rows),
+    ]
 
 
-def _markdown_repeatability(repeat: dict[str, Any], files: list[str] | None) -> list[str]:
+def _repeatability_blocks(repeat: dict[str, Any], files: list[str] | None) -> list[Block]:
     chord = repeat["parameters"][PARAMETER_NAMES.index("chord_length")]
     p = repeat["coverage_probability"]
     u_label = f"U{p * 100:.0f}"
-    out = [
-        "",
-        "## GUM budget with repeatability (seed's Table)",
-        "",
-        f"Chord length, {repeat['n_scans']} repeated scans"
-        + (f" ({', '.join(files)})" if files else "")
-        + f": u3 is the standard deviation (ddof 1) of their chord lengths, a Type A input with "
-        f"{repeat['repeatability_dof']:.0f} degrees of freedom; u_c the root sum of squares, k the Student t "
-        f"factor at ν_eff (Welch-Satterthwaite), {u_label} = k u_c.",
-        "",
-        "| source | standard contribution |",
-        "|---|---|",
-    ]
-    out += [
-        f"| {_SOURCE_LABELS.get(s, s)} | {chord['contributions'][s] * 1e6:.4f} µm |"
+    nu = chord["effective_dof"]
+    chord_rows = [
+        (_SOURCE_LABELS.get(s, s), f"{chord['contributions'][s] * 1e6:.4f} µm")
         for s in _budget_order(chord["contributions"])
     ]
-    nu = chord["effective_dof"]
-    out += [
-        f"| u_c | {chord['u_c'] * 1e6:.4f} µm |",
-        f"| k | {chord['k']:.4f} (ν_eff {'infinite' if nu is None else f'{nu:.1f}'}) |",
-        f"| {u_label} | {chord['U'] * 1e6:.4f} µm |",
-        "",
-        "Every parameter with repeatability:",
-        "",
-        f"| parameter | u3 repeatability | u_c | ν_eff | k | {u_label} |",
-        "|---|---|---|---|---|---|",
+    chord_rows += [
+        ("u_c", f"{chord['u_c'] * 1e6:.4f} µm"),
+        ("k", f"{chord['k']:.4f} (ν_eff {'infinite' if nu is None else f'{nu:.1f}'})"),
+        (u_label, f"{chord['U'] * 1e6:.4f} µm"),
     ]
+    rows = []
     for row in repeat["parameters"]:
         _, _, uu, uf = _display(row["name"])
         nu = row["effective_dof"]
-        out.append(
-            f"| {_LABELS[row['name']]} | {row['contributions']['repeatability'] * uf:.4f} {uu} "
-            f"| {row['u_c'] * uf:.4f} {uu} | {'inf' if nu is None else f'{nu:.1f}'} | {row['k']:.3f} "
-            f"| {row['U'] * uf:.4f} {uu} |"
-        )
-    return out
-
-
-_IMAGE = re.compile(r"^!\[(?P<alt>[^\]]*)\]\((?P<src>[^)]+)\)$")
-
-
-def _markdown_to_html(markdown: str, title: str, directory: Path) -> str:
-    """``section.md`` as a self-contained HTML page in the evaluate report's style: headings,
-    list items, paragraphs, pipe tables, fenced blocks as ``<pre>``, images embedded as base64."""
-    from robocal_uncertainty.report.document import _CSS, _html_cell
-
-    e = html.escape
-    out = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>{e(title)}</title><style>{_CSS}pre{{background:#f6f6f6;padding:.5em;overflow-x:auto}}</style>"
-        "</head><body>",
-    ]
-    lines = markdown.splitlines()
-    i = 0
-    while i < len(lines):
-        line = lines[i]
-        if not line.strip():
-            i += 1
-        elif line.startswith("```"):
-            end = i + 1
-            while end < len(lines) and not lines[end].startswith("```"):
-                end += 1
-            out.append("<pre>" + e("\n".join(lines[i + 1 : end])) + "</pre>")
-            i = end + 1
-        elif line.startswith("#"):
-            level = len(line) - len(line.lstrip("#"))
-            out.append(f"<h{level}>{e(line[level:].strip())}</h{level}>")
-            i += 1
-        elif line.startswith("- "):
-            items = []
-            while i < len(lines) and lines[i].startswith("- "):
-                items.append(f"<li>{e(lines[i][2:])}</li>")
-                i += 1
-            out.append("<ul>" + "".join(items) + "</ul>")
-        elif line.startswith("|"):
-            rows = []
-            while i < len(lines) and lines[i].startswith("|"):
-                rows.append([c.strip() for c in lines[i].strip().strip("|").split("|")])
-                i += 1
-            head = "".join(f"<th>{e(h)}</th>" for h in rows[0])
-            body = "".join("<tr>" + "".join(_html_cell(c) for c in row) + "</tr>" for row in rows[2:])
-            out.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
-        elif (image := _IMAGE.match(line)) is not None:
-            data = base64.b64encode((directory / image["src"]).read_bytes()).decode("ascii")
-            alt = image["alt"]
-            out.append(
-                f'<figure><img src="data:image/png;base64,{data}" alt="{e(alt)}">'
-                f"<figcaption>{e(alt)}</figcaption></figure>"
+        rows.append(
+            (
+                _LABELS[row["name"]],
+                f"{row['contributions']['repeatability'] * uf:.4f} {uu}",
+                f"{row['u_c'] * uf:.4f} {uu}",
+                "inf" if nu is None else f"{nu:.1f}",
+                f"{row['k']:.3f}",
+                f"{row['U'] * uf:.4f} {uu}",
             )
-            i += 1
-        else:
-            para = [line]
-            i += 1
-            while i < len(lines) and lines[i].strip() and not lines[i].startswith(("#", "- ", "|", "```", "![")):
-                para.append(lines[i])
-                i += 1
-            out.append(f"<p>{e(' '.join(para))}</p>")
-    out.append("</body></html>")
-    return "\n".join(out) + "\n"
+        )
+    return [
+        Heading(2, "GUM budget with repeatability (seed's Table)"),
+        Paragraph(
+            f"Chord length, {repeat['n_scans']} repeated scans"
+            + (f" ({', '.join(files)})" if files else "")
+            + f": u3 is the standard deviation (ddof 1) of their chord lengths, a Type A input with "
+            f"{repeat['repeatability_dof']:.0f} degrees of freedom; u_c the root sum of squares, k the Student t "
+            f"factor at ν_eff (Welch-Satterthwaite), {u_label} = k u_c."
+        ),
+        table(("source", "standard contribution"), chord_rows),
+        Paragraph("Every parameter with repeatability:"),
+        table(("parameter", "u3 repeatability", "u_c", "ν_eff", "k", u_label), rows),
+    ]
 
 
 def _stated_interval(name: str, result: SectionUncertainty, fix: BiasCorrection) -> Any:
@@ -1129,7 +948,8 @@ def write_section_report(
     files = SectionReportFiles(*(out / name for name in SECTION_REPORT_FILES))
     files.json.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
     table = format_section_table(result, corrections, truth=truth, study=study)
-    files.markdown.write_text(_markdown(data, table), encoding="utf-8")
+    blocks = section_report_blocks(data, table)
+    files.markdown.write_text(render_markdown(blocks), encoding="utf-8")
     with files.csv.open("w", newline="", encoding="utf-8") as stream:
         writer = csv.writer(stream)
         writer.writerow(
@@ -1171,8 +991,5 @@ def write_section_report(
                 ]
             )
     _plot(result, corrections, files.histograms)
-    files.html.write_text(
-        _markdown_to_html(files.markdown.read_text(encoding="utf-8"), "Section inspection report", out),
-        encoding="utf-8",
-    )
+    files.html.write_text(render_html(blocks, "Section inspection report", out), encoding="utf-8")
     return files

@@ -32,9 +32,9 @@ from robocal_uncertainty.inspection.section_mc import (
     source_generator,
 )
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
+from robocal_uncertainty.inspection.stored_studies import COVERAGE_STUDY
 from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, block_rng, run_trials
 from robocal_uncertainty.montecarlo.summary import summarize
-from robocal_uncertainty.report.section_report import COVERAGE_STUDY
 
 TRUE_OFFSET = (-0.1013e-3, 0.0538e-3)  # the seed's measured offsets [m]
 TRUE_TWIST = np.deg2rad(0.0512)  # the seed's measured twist [rad]
@@ -358,7 +358,7 @@ def test_coverage_over_200_simulated_scans() -> None:
       twice); reflected about the measured value (bias-corrected): 89, 90.5, 93.5, 94.5, 93.5,
       73, 58.5, 7.5, 13 % (73.5 % for the leading edge with the edge regions frozen).
 
-    The report quotes these numbers (``report.section_report.COVERAGE_STUDY``).
+    The report quotes these numbers (``inspection.stored_studies.COVERAGE_STUDY``).
     """
     scans = 200
     # Scans are independent: two processes (CI has two cores) halve the wall time; each scan's

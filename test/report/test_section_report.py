@@ -15,23 +15,23 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.app.section_inspection import SectionInspection, section_demo
+from robocal_uncertainty.inspection.coverage_rule import binomial_tail, coverage_verified, holm_adjusted
 from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES
-from robocal_uncertainty.report.section_report import (
+from robocal_uncertainty.inspection.stored_studies import (
     COVERAGE_STUDY,
     FAMILY_STUDY,
+    family_coverage,
+    outside_study_scope,
+    stated_coverage,
+)
+from robocal_uncertainty.report.section_report import (
     GUM_CHECK_LEGEND,
     SECTION_REPORT_FILES,
     SECTION_REPORT_FORMAT,
-    binomial_tail,
-    coverage_verified,
-    family_coverage,
     format_repeatability_budget,
     format_section_table,
-    holm_adjusted,
-    outside_study_scope,
     section_report_dict,
-    stated_coverage,
     write_section_report,
 )
 
