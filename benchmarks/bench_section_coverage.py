@@ -11,7 +11,7 @@ Run: ``python benchmarks/bench_section_coverage.py [--scans 60] [--workers 2] [-
 [--first 0]``.
 Prints per family and parameter the coverage over all scans and over the scans the check did
 not flag (± the binomial standard uncertainty at 95 %), the flagged count, the time, and the
-counts in the form of ``report.section_report._FAMILY_COUNTS``.
+counts in the form of ``inspection.stored_studies.FAMILY_COUNTS``.
 """
 
 from __future__ import annotations
