@@ -212,11 +212,11 @@ def assess_model_adequacy(
     penalty = calibration.lambda_**2 * np.diag(calibration.penalized[est].astype(np.float64))
     w = row_weights(measurement, n)
     if w is None:
-        gain = np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T)
+        gain: Array = np.asarray(np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T), dtype=np.float64)
         w_eq = np.ones(n_eq)
     else:
         a_w = stack_jacobian(measurement, jac, est) / calibration.column_scale[est]
-        gain = np.linalg.solve(a_w.T @ a_w + penalty, a_w.T * w)
+        gain = np.asarray(np.linalg.solve(a_w.T @ a_w + penalty, a_w.T * w), dtype=np.float64)
         w_eq = w
     sum_sq = float(np.sum((residuals.reshape(n_eq) * w_eq) ** 2))
     blocks, tr1, tr2 = _residual_noise_moments(a_mat, gain, noise, w_eq)
