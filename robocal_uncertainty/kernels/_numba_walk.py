@@ -415,7 +415,7 @@ def chord_solve(
     mask: np.ndarray,
     jacobian_t: np.ndarray,
     wcomp: np.ndarray,
-    joint_map_t: np.ndarray,
+    joint_jacobian: np.ndarray,
     pose_normal: np.ndarray,
     reference: np.ndarray,
     ref_joints: np.ndarray,
@@ -455,8 +455,10 @@ def chord_solve(
         scaling (k,) and penalty mask (k,).
     jacobian_t : (k, n_poses dimension)
         The whitened Jacobian, transposed; wcomp : (dimension,) the whitening.
-    joint_map_t : (k, n_poses n_joints)
-        ``joint_map`` transposed; pose_normal : (n_poses, k k)
+    joint_jacobian : (n_poses, dimension, n_joints)
+        Whitened ``J_q``: the first step's right-hand side is ``(r - J_q dQ) J``, which
+        equals the numpy iteration's ``r J - dQ @ joint_map``.
+    pose_normal : (n_poses, k k)
     reference : (n_poses, value_size); ref_joints : (n_poses, n_joints)
     factors
         :meth:`~robocal_uncertainty.uncertainty.reidentification.StepFactors.as_tuple`.
@@ -492,13 +494,12 @@ def chord_solve(
         pred = np.empty((n_poses, width))
         r = np.empty(n_poses * dim)
         rhs = np.empty(k)
-        acc = np.empty(k)
         step = np.empty(k)
         x = np.empty(k)
         rp = np.empty(k)
         rf = np.empty(k)
         y = np.empty(k)
-        dqs = np.empty(n_poses * nj)
+        dqs = np.empty(nj)
         params = np.empty(start.shape[0])
         normal = np.empty((k, k))
         flat_normal = normal.reshape(k * k)
@@ -517,15 +518,16 @@ def chord_solve(
             if not _residual(m, reference, poses, wcomp, pw, has_w, r):
                 failed[t] = True
                 continue
-            _times(r, jacobian_t, rhs)
             if qs.shape[0] > 1 or shared_dq:
                 for i in range(n_poses):
                     for j in range(nj):
-                        dq = q[i, j] - ref_joints[i, j]
-                        dqs[i * nj + j] = dq * pw[i] if has_w else dq
-                _times(dqs, joint_map_t, acc)
-                for c in range(k):
-                    rhs[c] -= acc[c]
+                        dqs[j] = q[i, j] - ref_joints[i, j]
+                    w_pose = pw[i] if has_w else 1.0
+                    jq = joint_jacobian[i]
+                    for c in range(dim):
+                        moved = _dot(jq[c], dqs[:nj])
+                        r[i * dim + c] -= moved * w_pose if has_w else moved
+            _times(r, jacobian_t, rhs)
             for c in range(k):
                 rhs[c] -= lam2 * (x[c] * mask[c])
             if has_w:

@@ -204,8 +204,9 @@ class CompiledMeasurement:
         """
         from robocal_uncertainty.kernels._numba_walk import chord_solve, chunk_count
 
+        if solver.joint_jacobian is None:  # a solver built without ChordSolver.at
+            return None
         walker = self.walker
-        problem = solver.problem
         n_trials = measured.shape[0]
         n_poses = walker.joints.shape[0]
         k = x_start.size
@@ -217,8 +218,7 @@ class CompiledMeasurement:
             if weights is None
             else _kernel_array(np.broadcast_to(np.asarray(weights, dtype=np.float64), (n_trials, n_poses)))
         )
-        comp = problem.measurement.weights
-        wcomp = np.ones(problem.measurement.dimension) if comp is None else _kernel_array(comp)
+        start, estimated, scale, mask, whitening, reference, ref_joints = solver.kernel_arrays
         x = np.empty((n_trials, k))
         steps = np.empty(n_trials, dtype=np.int64)
         failed = np.zeros(n_trials, dtype=np.bool_)
@@ -228,16 +228,16 @@ class CompiledMeasurement:
             w,
             _kernel_array(np.broadcast_to(np.asarray(lambdas, dtype=np.float64), (n_trials,))),
             _kernel_array(np.asarray(x_start, dtype=np.float64).reshape(k)),
-            _kernel_array(problem.start),
-            np.ascontiguousarray(problem.estimated, dtype=np.int64),
-            _kernel_array(problem.scale),
-            _kernel_array(problem.penalty_mask),
+            start,
+            estimated,
+            scale,
+            mask,
             solver.transposed_jacobian,
-            wcomp,
-            solver.transposed_joint_map,
+            whitening,
+            solver.joint_jacobian,
             _kernel_array(solver.pose_normal),
-            _kernel_array(solver.reference),
-            _kernel_array(solver.joints),
+            reference,
+            ref_joints,
             solver.step_factors.as_tuple(),
             walker.flat.joints,
             walker.flat.blocks,

@@ -231,7 +231,7 @@ def _warm_up_kernels() -> None:
         np.ones(1),
         np.zeros((1, 3)),
         np.ones(3),
-        np.zeros((1, 1)),
+        np.zeros((1, 3, 1)),
         np.zeros((1, 1)),
         np.zeros((1, 3)),
         np.zeros((1, 1)),

@@ -251,7 +251,12 @@ class ChordSolver:
     predictor : callable or None
         ``predictor(params, joint_positions)``: the measurement type's prediction near the
         calibration (:meth:`~robocal_uncertainty.core.measurement.MeasurementType.nearby_predictor`),
-        or None for its plain ``predict``.
+        or None for its plain ``predict``. A predictor with a ``solve_chord`` method (a
+        compiled backend's) is handed the whole iteration of :meth:`solve`.
+    joint_jacobian : ndarray, shape (n_poses, dimension, n_joints), or None
+        ``J_q`` pose by pose (whitened): a compiled iteration takes the first step's
+        right-hand side as ``(r - J_q dQ) J``, the same as ``r J - dQ @ joint_map`` with a
+        fraction of the products.
     """
 
     problem: BatchProblem
@@ -266,6 +271,7 @@ class ChordSolver:
     reference: Array
     joint_map: Array
     predictor: Callable[[Array, Array], Array] | None = None
+    joint_jacobian: Array | None = None
 
     @classmethod
     def at(cls, problem: BatchProblem, params: Array, joint_positions: Array) -> ChordSolver:
@@ -303,6 +309,7 @@ class ChordSolver:
             reference=reference,
             joint_map=np.ascontiguousarray(joint_map),
             predictor=predictor,
+            joint_jacobian=_contiguous(per_joint),
         )
 
     @cached_property
@@ -311,9 +318,22 @@ class ChordSolver:
         return _contiguous(self.jacobian.T)
 
     @cached_property
-    def transposed_joint_map(self) -> Array:
-        """:attr:`joint_map` transposed, shape (k, n_poses * n_joints), contiguous."""
-        return _contiguous(self.joint_map.T)
+    def kernel_arrays(self) -> tuple[Array, NDArray[np.int64], Array, Array, Array, Array, Array]:
+        """The problem's start (n_params,), estimated indices (k,), scaling (k,) and penalty
+        mask (k,), the whitening per component (dimension,; ones for none), the reference
+        prediction (n_poses, value_size) and readings (n_poses, n_joints): contiguous, for a
+        compiled iteration (built once per solver, not per sub-batch)."""
+        problem = self.problem
+        whitening = problem.measurement.weights
+        return (
+            _contiguous(problem.start),
+            np.array(problem.estimated, dtype=np.int64),
+            _contiguous(problem.scale),
+            _contiguous(problem.penalty_mask),
+            np.ones(problem.measurement.dimension) if whitening is None else _contiguous(whitening),
+            _contiguous(self.reference),
+            _contiguous(self.joints),
+        )
 
     @cached_property
     def step_factors(self) -> StepFactors:
