@@ -26,7 +26,7 @@ SERIES_LIMIT = 1.0e-3
 """Largest angle change [rad] from the reference taken by the series."""
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _cos_sin(b: float, cos_ref: float, sin_ref: float, angle: float) -> tuple[float, float]:
     if abs(b) <= SERIES_LIMIT:
         b2 = b * b
@@ -36,12 +36,20 @@ def _cos_sin(b: float, cos_ref: float, sin_ref: float, angle: float) -> tuple[fl
     return math.cos(angle), math.sin(angle)
 
 
-@numba.njit(cache=True, inline="always")
-def _rpy(p: np.ndarray, k: int, out: np.ndarray) -> None:
+@numba.njit(cache=True, error_model="numpy")
+def _trig(p: np.ndarray, i: int, p_ref: np.ndarray, cos_p: np.ndarray, sin_p: np.ndarray) -> tuple[float, float]:
+    """Cosine and sine of the angle p[i]: near the reference p_ref[i] (whose cosine and sine
+    are given) by the series of the change, as the joint angles; else directly."""
+    angle = p[i]
+    return _cos_sin(angle - p_ref[i], cos_p[i], sin_p[i], angle)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _rpy(p: np.ndarray, k: int, p_ref: np.ndarray, cos_p: np.ndarray, sin_p: np.ndarray, out: np.ndarray) -> None:
     """Row-major ``Rz(p[k+2]) Ry(p[k+1]) Rx(p[k])`` into out[0:9]."""
-    cr, sr = math.cos(p[k]), math.sin(p[k])
-    cp, sp = math.cos(p[k + 1]), math.sin(p[k + 1])
-    cy, sy = math.cos(p[k + 2]), math.sin(p[k + 2])
+    cr, sr = _trig(p, k, p_ref, cos_p, sin_p)
+    cp, sp = _trig(p, k + 1, p_ref, cos_p, sin_p)
+    cy, sy = _trig(p, k + 2, p_ref, cos_p, sin_p)
     out[0] = cy * cp
     out[1] = cy * sp * sr - sy * cr
     out[2] = cy * sp * cr + sy * sr
@@ -53,7 +61,7 @@ def _rpy(p: np.ndarray, k: int, out: np.ndarray) -> None:
     out[8] = cp * cr
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _turn(u: np.ndarray, v: np.ndarray, c: np.ndarray, s: np.ndarray) -> None:
     """``u, v = c u - s v, s u + c v`` elementwise, in place."""
     for i in range(u.shape[0]):
@@ -62,7 +70,7 @@ def _turn(u: np.ndarray, v: np.ndarray, c: np.ndarray, s: np.ndarray) -> None:
         v[i] = s[i] * a + c[i] * b
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _turn_fixed(u: np.ndarray, v: np.ndarray, c: float, s: float) -> None:
     """``u, v = c u - s v, s u + c v`` with constant c, s, in place."""
     for i in range(u.shape[0]):
@@ -71,7 +79,7 @@ def _turn_fixed(u: np.ndarray, v: np.ndarray, c: float, s: float) -> None:
         v[i] = s * a + c * b
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _walk_trial(
     p: np.ndarray,
     q: np.ndarray,
@@ -81,6 +89,9 @@ def _walk_trial(
     theta_ref: np.ndarray,
     cos_ref: np.ndarray,
     sin_ref: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
     poses: bool,
     rot: np.ndarray,
     v: np.ndarray,
@@ -95,17 +106,19 @@ def _walk_trial(
     contiguous arrays that the compiler vectorises), the per-joint choices (prismatic, beta,
     series or direct) taken once per joint; every pose's value is computed by the same
     operations whatever the other poses and trials, so batching never changes a value.
-    `rot` (27,), `v` (9, n_poses), `b`, `cos`, `sin` (n_poses,) are scratch.
+    The cosine and sine of a link angle (alpha, beta, the base, mount and tool rotations)
+    come from those of the reference parameters `p_ref` (`cos_p`, `sin_p`, each (n_params,)),
+    as the joint angles' do. `rot` (27,), `v` (9, n_poses), `b`, `cos`, `sin` (n_poses,) are scratch.
     """
     n_poses = o.shape[0]
     nj = joints.shape[0]
     t0, r0, m0, b0 = blocks[0], blocks[1], blocks[2], blocks[3]
     n_vec = 3 if poses else 1
-    _rpy(p, b0 + 3, rot[0:9])  # base, mount, tool rotations, row-major
+    _rpy(p, b0 + 3, p_ref, cos_p, sin_p, rot[0:9])  # base, mount, tool rotations, row-major
     if m0 >= 0:
-        _rpy(p, m0 + 3, rot[9:18])
+        _rpy(p, m0 + 3, p_ref, cos_p, sin_p, rot[9:18])
     if r0 >= 0:
-        _rpy(p, r0, rot[18:27])
+        _rpy(p, r0, p_ref, cos_p, sin_p, rot[18:27])
     # v[3 m + c]: component c of vector m (the point; the tool's x and z axes) per pose.
     v[0, :] = p[t0]
     v[1, :] = p[t0 + 1]
@@ -153,12 +166,10 @@ def _walk_trial(
         for m in range(n_vec):
             _turn(v[3 * m], v[3 * m + 1], cos, sin)
         if joints[j, 4] >= 0:
-            beta = p[joints[j, 4]]
-            cb_, sb_ = math.cos(beta), math.sin(beta)
+            cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p)
             for m in range(n_vec):
                 _turn_fixed(v[3 * m + 2], v[3 * m], cb_, sb_)
-        alpha = p[joints[j, 0]]
-        ca, sa = math.cos(alpha), math.sin(alpha)
+        ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
         for m in range(n_vec):
             _turn_fixed(v[3 * m + 1], v[3 * m + 2], ca, sa)
         a = p[joints[j, 1]]
@@ -199,7 +210,7 @@ def chunk_count(n_trials: int) -> int:
     return max(1, min(n_trials, 4 * numba.get_num_threads()))
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(parallel=True, cache=True, error_model="numpy")
 def walk(
     params: np.ndarray,
     qs: np.ndarray,
@@ -209,6 +220,9 @@ def walk(
     theta_ref: np.ndarray,
     cos_ref: np.ndarray,
     sin_ref: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
     poses: bool,
     out: np.ndarray,
     n_chunks: int,
@@ -223,6 +237,7 @@ def walk(
     blocks : (4,) int64
     q_ref : (n_joints, n_poses), reference readings, joint by joint; theta_ref : (n_joints,)
     cos_ref, sin_ref : (n_joints, n_poses), of the reference angles
+    p_ref, cos_p, sin_p : (n_params,), the reference parameters and their cosines and sines
     poses : bool
         Also the rotation: out[..., 3:12] is ``world_R_tool`` row by row.
     out : (n_trials, n_poses, 3 or 12)
@@ -240,7 +255,26 @@ def walk(
         for t in range(c * n_trials // n_chunks, (c + 1) * n_trials // n_chunks):
             p = params[0] if params.shape[0] == 1 else params[t]
             q = qs[0] if qs.shape[0] == 1 else qs[t]
-            _walk_trial(p, q, joints, blocks, q_ref, theta_ref, cos_ref, sin_ref, poses, rot, v, b, cos, sin, out[t])
+            _walk_trial(
+                p,
+                q,
+                joints,
+                blocks,
+                q_ref,
+                theta_ref,
+                cos_ref,
+                sin_ref,
+                p_ref,
+                cos_p,
+                sin_p,
+                poses,
+                rot,
+                v,
+                b,
+                cos,
+                sin,
+                out[t],
+            )
 
 
 # --- The whole chord re-identification of a trial (see ChordSolver.solve) -------------------
@@ -251,7 +285,7 @@ its series ``1 + s^2/6 + 3 s^4/40`` (the first term left out, ``5 s^6/112``, is 
 larger rotations use ``atan2`` as :meth:`PoseMeasurement.residual` does."""
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _residual(
     m: np.ndarray, pred: np.ndarray, poses: bool, wcomp: np.ndarray, pw: np.ndarray, has_pw: bool, r: np.ndarray
 ) -> bool:
@@ -307,7 +341,7 @@ multiply-adds, never the flags that assume no NaN or infinity. A sum's order the
 its length alone, never on the other trials."""
 
 
-@numba.njit(cache=True, fastmath=_SUMS)
+@numba.njit(cache=True, error_model="numpy", fastmath=_SUMS)
 def _dot(a: np.ndarray, b: np.ndarray) -> float:
     """``a @ b`` of two vectors of one length."""
     acc = 0.0
@@ -316,14 +350,14 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
     return acc
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _times(vector: np.ndarray, matrix_t: np.ndarray, out: np.ndarray) -> None:
     """``out = vector @ matrix`` for vector (n,) and the matrix transposed, matrix_t (k, n)."""
     for c in range(out.shape[0]):
         out[c] = _dot(vector, matrix_t[c])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _eigen_step(
     rhs: np.ndarray,
     lam2: float,
@@ -360,7 +394,7 @@ def _eigen_step(
             step[free_idx[f]] = _dot(y_free, free_inverse_t[f])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _cholesky(a: np.ndarray) -> bool:
     """Lower Cholesky factor of the symmetric `a` in place (its lower triangle); False when
     `a` is not numerically positive definite."""
@@ -381,7 +415,7 @@ def _cholesky(a: np.ndarray) -> bool:
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _cholesky_solve(factor: np.ndarray, rhs: np.ndarray, step: np.ndarray) -> None:
     """``L L^T step = rhs`` for the factor of :func:`_cholesky`."""
     k = rhs.shape[0]
@@ -397,12 +431,12 @@ def _cholesky_solve(factor: np.ndarray, rhs: np.ndarray, step: np.ndarray) -> No
         step[i] = s / factor[i, i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _norm(x: np.ndarray) -> float:
     return math.sqrt(_dot(x, x))
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(parallel=True, cache=True, error_model="numpy")
 def chord_solve(
     qs: np.ndarray,
     measured: np.ndarray,
@@ -426,6 +460,9 @@ def chord_solve(
     theta_ref: np.ndarray,
     cos_ref: np.ndarray,
     sin_ref: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
     poses: bool,
     max_iterations: int,
     relative_tolerance: float,
@@ -462,7 +499,7 @@ def chord_solve(
     reference : (n_poses, value_size); ref_joints : (n_poses, n_joints)
     factors
         :meth:`~robocal_uncertainty.uncertainty.reidentification.StepFactors.as_tuple`.
-    joints .. sin_ref
+    joints .. sin_p
         The walk's layout and reference (see :func:`walk`).
     poses : bool
         6-DOF values (12 per pose, 6 equations) instead of points.
@@ -525,7 +562,10 @@ def chord_solve(
                     w_pose = pw[i] if has_w else 1.0
                     jq = joint_jacobian[i]
                     for c in range(dim):
-                        moved = _dot(jq[c], dqs[:nj])
+                        row = jq[c]
+                        moved = 0.0
+                        for j in range(nj):
+                            moved += row[j] * dqs[j]
                         r[i * dim + c] -= moved * w_pose if has_w else moved
             _times(r, jacobian_t, rhs)
             for c in range(k):
@@ -556,7 +596,24 @@ def chord_solve(
                 for c in range(k):
                     params[estimated[c]] += x[c] / scale[c]
                 _walk_trial(
-                    params, q, joints, blocks, q_ref, theta_ref, cos_ref, sin_ref, poses, rot, v, b, cos, sin, pred
+                    params,
+                    q,
+                    joints,
+                    blocks,
+                    q_ref,
+                    theta_ref,
+                    cos_ref,
+                    sin_ref,
+                    p_ref,
+                    cos_p,
+                    sin_p,
+                    poses,
+                    rot,
+                    v,
+                    b,
+                    cos,
+                    sin,
+                    pred,
                 )
                 if not _residual(m, pred, poses, wcomp, pw, has_w, r):
                     failed[t] = True

@@ -71,6 +71,8 @@ class CompiledPredictor:
         Reference joint offsets.
     cos_ref, sin_ref : ndarray, shape (n_joints, n_poses)
         Of the reference angles, joint by joint (contiguous over the poses).
+    reference_params : ndarray, shape (n_params,)
+        The reference parameters (the link angles' cosines and sines are taken near them).
     """
 
     layout: ParameterLayout
@@ -79,6 +81,7 @@ class CompiledPredictor:
     theta: Array
     cos_ref: Array
     sin_ref: Array
+    reference_params: Array
 
     @classmethod
     def at(cls, layout: ParameterLayout, params: Array, joint_positions: Array) -> CompiledPredictor:
@@ -94,7 +97,14 @@ class CompiledPredictor:
             theta,
             np.ascontiguousarray(np.cos(angles)),
             np.ascontiguousarray(np.sin(angles)),
+            np.array(params, dtype=np.float64),
         )
+
+    @cached_property
+    def parameter_trig(self) -> tuple[Array, Array, Array]:
+        """The reference parameters, their cosines and their sines, each (n_params,)."""
+        p = np.array(self.reference_params, dtype=np.float64)
+        return p, np.cos(p), np.sin(p)
 
     @cached_property
     def reference_readings(self) -> Array:
@@ -124,6 +134,7 @@ class CompiledPredictor:
             self.theta,
             self.cos_ref,
             self.sin_ref,
+            *self.parameter_trig,
             poses,
             out,
             chunk_count(out.shape[0]),
@@ -146,7 +157,7 @@ class ArrayModulePredictor(CompiledPredictor):
     def on(cls, module: str, layout: ParameterLayout, params: Array, joint_positions: Array) -> ArrayModulePredictor:
         """Reference at `params` (n_params,) and readings (n_poses, n_joints), walked on `module`."""
         ref = CompiledPredictor.at(layout, params, joint_positions)
-        return cls(ref.layout, ref.flat, ref.joints, ref.theta, ref.cos_ref, ref.sin_ref, module)
+        return cls(ref.layout, ref.flat, ref.joints, ref.theta, ref.cos_ref, ref.sin_ref, ref.reference_params, module)
 
     def _run(self, params: Array, joint_positions: Array, *, poses: bool) -> Array:
         from robocal_uncertainty.kernels._walk_xp import as_numpy, walk_xp
@@ -245,6 +256,7 @@ class CompiledMeasurement:
             walker.theta,
             walker.cos_ref,
             walker.sin_ref,
+            *walker.parameter_trig,
             self.orientation,
             int(max_iterations),
             float(relative_tolerance),

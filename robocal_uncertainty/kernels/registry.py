@@ -195,6 +195,7 @@ def _warm_up_kernels() -> None:
     layout = ParameterLayout(n_joints=1, has_beta=(False,))
     flat = flat_layout(layout)
     one = np.zeros((1, 1))
+    trig = (np.zeros(layout.size), np.ones(layout.size), np.zeros(layout.size))
     walk(
         np.zeros((1, layout.size)),
         np.zeros((1, 1, 1)),
@@ -204,6 +205,7 @@ def _warm_up_kernels() -> None:
         np.zeros(1),
         one,
         one,
+        *trig,
         True,
         np.empty((1, 1, 12)),
         1,
@@ -242,6 +244,7 @@ def _warm_up_kernels() -> None:
         np.zeros(1),
         np.ones((1, 1)),
         np.zeros((1, 1)),
+        *trig,
         False,
         2,
         1e-3,
