@@ -152,17 +152,34 @@ def _walk_trial(
         cr = cos_ref[j]
         sr = sin_ref[j]
         if largest <= SERIES_LIMIT:
+            # The usual case (every change within the series): the joint's turns of every
+            # vector in one pass over the poses, the same operations in the same order as the
+            # passes below take them.
+            has_beta = joints[j, 4] >= 0
+            cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p) if has_beta else (1.0, 0.0)
+            ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
+            a = p[joints[j, 1]]
             for i in range(n_poses):
                 bi = b[i]
                 b2 = bi * bi
                 cb = 1.0 + b2 * (-0.5 + b2 * (1.0 / 24.0))
                 sb = bi * (1.0 + b2 * (-1.0 / 6.0 + b2 * (1.0 / 120.0)))
-                cos[i] = cr[i] * cb - sr[i] * sb
-                sin[i] = sr[i] * cb + cr[i] * sb
-        else:
-            for i in range(n_poses):
-                angle = theta if prismatic else q[i, j] + theta
-                cos[i], sin[i] = _cos_sin(b[i], cr[i], sr[i], angle)
+                c = cr[i] * cb - sr[i] * sb
+                s = sr[i] * cb + cr[i] * sb
+                for m in range(n_vec):
+                    x, y, z = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
+                    x, y = c * x - s * y, s * x + c * y
+                    if has_beta:
+                        z, x = cb_ * z - sb_ * x, sb_ * z + cb_ * x
+                    y, z = ca * y - sa * z, sa * y + ca * z
+                    v[3 * m, i] = x + a if m == 0 else x
+                    v[3 * m + 1, i] = y
+                    v[3 * m + 2, i] = z
+            continue
+        # A larger change somewhere: per pose the series or the angle's own cosine and sine.
+        for i in range(n_poses):
+            angle = theta if prismatic else q[i, j] + theta
+            cos[i], sin[i] = _cos_sin(b[i], cr[i], sr[i], angle)
         for m in range(n_vec):
             _turn(v[3 * m], v[3 * m + 1], cos, sin)
         if joints[j, 4] >= 0:
