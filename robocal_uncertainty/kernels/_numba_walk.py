@@ -1,18 +1,26 @@
-"""The chain walk compiled by numba: one fused loop per (trial, pose), trials in parallel.
+"""The trial kernels compiled by numba: the chain walk, and the whole chord re-identification.
 
-Imported only when numba is installed (the ``fast`` extra). The arithmetic is that of
+Imported only when numba is installed (the ``fast`` extra). The walk's arithmetic is that of
 :class:`~robocal_uncertainty.core.kinematics.NearbyPoints`: the point (and, for poses, the
 tool's x and z axes) is walked from the tool back to the base, and the cosine and sine of a
 joint angle near its reference come from ``cos(a0 + b) = cos a0 cos b - sin a0 sin b`` with
 ``cos b`` and ``sin b`` from their Taylor series. Here the choice is made per element: the
 series (three terms each, truncation below 2e-21 for ``|b| <= 1e-3`` rad) or, for a larger
-change, ``cos`` and ``sin`` of the angle itself. Either way the value is the angle's cosine to
-an ulp or two, so the result agrees with :func:`~robocal_uncertainty.core.kinematics.forward_points`
-to a few ulps, and a trial's values never depend on the other trials of its batch. Unlike the
-numpy walk it covers every layout (a URDF mount, prismatic joints).
+change, ``cos`` and ``sin`` of the angle itself; the link angles (alpha, beta, the base, mount
+and tool rotations) likewise near the reference parameters. Either way the value is the
+angle's cosine to an ulp or two, so the result agrees with
+:func:`~robocal_uncertainty.core.kinematics.forward_points` to a few ulps, and a trial's values
+never depend on the other trials of its batch. Unlike the numpy walk it covers every layout (a
+URDF mount, prismatic joints).
 
-The kernel is compiled on first use and cached on disk (``cache=True``): later processes
-load it in a fraction of a second.
+:func:`chord_solve` runs :meth:`~robocal_uncertainty.uncertainty.reidentification.ChordSolver.solve`
+for every trial start to end (trials spread over numba's threads), so a trial's cost is its
+pose count times a constant, with no temporaries of a whole batch.
+
+Every kernel lives in this one module: numba's disk cache is checked against the source file
+of the function it compiled, so a kernel calling a function of another module could outlive a
+change there. They are compiled on first use and cached on disk (``cache=True``): later
+processes load them in about a second.
 """
 
 from __future__ import annotations

@@ -130,7 +130,8 @@ def _kind(measurement: MeasurementType) -> str | None:
 
 
 class NumbaBackend:
-    """The compiled walk (:mod:`~robocal_uncertainty.kernels._numba_walk`)."""
+    """The compiled kernels (:mod:`~robocal_uncertainty.kernels._numba_walk`): the whole chord
+    re-identification of the built-in measurement types, and the walk."""
 
     name = "numba"
     _ready = False
