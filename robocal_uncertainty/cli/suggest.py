@@ -232,9 +232,10 @@ def run(args: argparse.Namespace) -> int:
     )
     print(_format_suggestions(result, unit))
     if result.trials:
+        backend = f"; backend {result.backend.describe()}" if result.backend is not None else ""
         print(
             f"Monte Carlo: {result.trials} trials, random seed {result.seed}, with suggestions 1..rank added as "
-            f"simulated measurements at the calibrated model's points; backend {result.backend.describe()}"
+            f"simulated measurements at the calibrated model's points{backend}"
         )
     if args.json:
         text = json.dumps(_suggestions_dict(result, model, args, test_q, settings), indent=2, allow_nan=False)
