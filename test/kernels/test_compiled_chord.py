@@ -139,3 +139,25 @@ def test_rotation_near_pi_is_handed_back_to_numpy() -> None:
     numpy_walk = dataclasses.replace(compiled, predictor=reference.predictor)  # type: ignore[call-overload]
     want, _ = numpy_walk.solve(q, values, None, lambdas, trials.x_hat)  # type: ignore[attr-defined]
     _assert_same_parameters(trials, x, want)
+
+
+def test_shared_measured_values_and_readings() -> None:
+    """A block without a tracker source passes every trial the same measured values (a broadcast
+    view) and, without an encoder source, the same readings: the kernel reads them once."""
+    compiled, reference, trials = _solvers("paper_arm", False, "tracker")
+    n = 9
+    values = np.broadcast_to(trials.points, (n, *trials.points.shape))  # type: ignore[attr-defined]
+    q = trials.joint_positions + np.random.default_rng(6).uniform(-2e-5, 2e-5, (n, *trials.joint_positions.shape))  # type: ignore[attr-defined]
+    lambdas = np.full(n, trials.lambda_star)  # type: ignore[attr-defined]
+    kernel = compiled.predictor.solve_chord  # type: ignore[attr-defined]
+    for readings in (q, trials.joint_positions):  # type: ignore[attr-defined]
+        direct = kernel(
+            compiled, readings, values, None, lambdas, trials.x_hat, max_iterations=6, relative_tolerance=1e-3
+        )  # type: ignore[attr-defined]
+        assert direct is not None
+        want, _ = reference.solve(readings, values, None, lambdas, trials.x_hat)  # type: ignore[attr-defined]
+        if readings.ndim == 2:
+            # Nothing perturbed: every trial stays at the calibration, as in the numpy iteration.
+            np.testing.assert_allclose(direct[0], want, rtol=0.0, atol=1e-12 * np.abs(want).max())
+        else:
+            _assert_same_parameters(trials, direct[0], want)
