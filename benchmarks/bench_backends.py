@@ -7,8 +7,10 @@ from the same draws with each backend:
   tracker, encoder and tracker_orientation;
 - numpy; numba on 1 thread; numba on all of numba's threads (``NUMBA_NUM_THREADS``);
 - per trial: everything, the sources' random draws alone (identical for every backend: the
-  part no kernel can remove without changing the random streams), and the rest (the
-  re-identification and the test configuration), with the ratios against numpy;
+  part no kernel can remove without changing the random streams), the rest (applying the
+  draws, the re-identification and the test configuration), and the re-identification alone
+  (``solver.solve`` on one sub-batch of the block's perturbed inputs: what the kernel
+  replaces), with the ratios against numpy;
 - the chain walk alone: one kinematics pass of the re-identification for 256 trials.
 With ``--series-d N``: :func:`evaluate_uncertainty` of the shipped UR10 series D (632 poses,
 default sources tracker, encoder, residual; orientation; the README's test joints), N trials,
@@ -103,6 +105,28 @@ def walk_per_trial(trials, threads: int, n: int = 256, repeats: int = 20) -> flo
     return best / n
 
 
+def reid_per_trial(trials, threads: int, n: int = 256, repeats: int = 10) -> float:
+    """Seconds per trial of the re-identification alone (``solver.solve`` of one sub-batch of
+    the block's own perturbed inputs): what the backend's kernel replaces."""
+    from robocal_uncertainty.uncertainty.sources import TrialBatch
+
+    rng = np.random.default_rng(0)
+    batch = TrialBatch(n_trials=n)
+    for source in trials.sources:
+        source.apply(source.draw(source_rng(rng, stream_id(source.name)), n), batch)
+    measurement = trials.problem.measurement
+    pts = measurement.perturb(trials.points[None], batch.points)
+    q = trials.joint_positions[None] + batch.joints
+    lambdas = np.full(n, trials.lambda_star)
+    trials.solver.solve(q, pts, batch.weights, lambdas, trials.x_hat)
+    best = np.inf
+    for _ in range(repeats):
+        start = _clock(threads)
+        trials.solver.solve(q, pts, batch.weights, lambdas, trials.x_hat)
+        best = min(best, _clock(threads) - start)
+    return best / n
+
+
 def _campaign(model, n_poses: int, six_dof: bool):
     settings = SimulationSettings(n_poses=n_poses, orientation_std=float(np.radians(0.01)) if six_dof else None)
     return simulate_campaign(model, settings, seed=1).campaign
@@ -115,11 +139,12 @@ def grid(args: argparse.Namespace, all_threads: int) -> None:
         configs += [("numba", 1)] + ([("numba", all_threads)] if all_threads > 1 else [])
     header = (
         f"{'case':<22}{'backend':<18}{'us/trial':>10}{'ratio':>8}{'w/o draws':>11}{'ratio':>8}"
-        f"{'walk us':>9}{'ratio':>8}"
+        f"{'re-id us':>10}{'ratio':>8}{'walk us':>9}{'ratio':>8}"
     )
     print(header)
     print("-" * len(header))
     point_cost: dict[tuple[int, str, int], float] = {}
+    reid_cost: dict[tuple[int, str, int], float] = {}
     for n_poses in (53, 632):
         for six_dof in (False, True):
             campaign = _campaign(model, n_poses, six_dof)
@@ -140,15 +165,19 @@ def grid(args: argparse.Namespace, all_threads: int) -> None:
                     draws = draws_per_trial(trials, n, args.repeats)
                 t = per_trial(trials, n, threads, args.repeats)
                 walk = walk_per_trial(trials, threads)
+                reid = reid_per_trial(trials, threads)
                 rest = t - draws
                 if base is None:
-                    base = (t, rest, walk)
+                    base = (t, rest, reid, walk)
                 kind = "6-DOF" if six_dof else "point"
-                point_cost[(n_poses, kind, threads if backend == "numba" else 0)] = t
+                key = (n_poses, kind, threads if backend == "numba" else 0)
+                point_cost[key] = t
+                reid_cost[key] = reid
                 label = f"{backend}, {threads} thread{'s' if threads > 1 else ''}"
                 print(
                     f"{n_poses:>3} poses, {kind:<12}{label:<18}{t * 1e6:>10.2f}{base[0] / t:>7.2f}x"
-                    f"{rest * 1e6:>11.2f}{base[1] / rest:>7.2f}x{walk * 1e6:>9.2f}{base[2] / walk:>7.2f}x"
+                    f"{rest * 1e6:>11.2f}{base[1] / rest:>7.2f}x{reid * 1e6:>10.2f}{base[2] / reid:>7.2f}x"
+                    f"{walk * 1e6:>9.2f}{base[3] / walk:>7.2f}x"
                 )
             print(f"{'':<22}random draws alone: {draws * 1e6:.2f} us/trial (the same for every backend)")
     print()
@@ -156,9 +185,15 @@ def grid(args: argparse.Namespace, all_threads: int) -> None:
         name = "numpy" if key == 0 else f"numba, {key} thread{'s' if key > 1 else ''}"
         six = [point_cost[(p, "6-DOF", key)] / point_cost[(p, "point", key)] for p in (53, 632)]
         growth = point_cost[(632, "point", key)] / point_cost[(53, "point", key)]
+        six_reid = [reid_cost[(p, "6-DOF", key)] / reid_cost[(p, "point", key)] for p in (53, 632)]
+        growth_reid = reid_cost[(632, "point", key)] / reid_cost[(53, "point", key)]
         print(
             f"{name}: 6-DOF / point per trial {six[0]:.2f}x (53 poses), {six[1]:.2f}x (632 poses); "
             f"point trial 632 / 53 poses {growth:.1f}x for {632 / 53:.1f}x the poses"
+        )
+        print(
+            f"{'':<{len(name) + 2}}re-identification alone: 6-DOF / point {six_reid[0]:.2f}x (53 poses), "
+            f"{six_reid[1]:.2f}x (632 poses); 632 / 53 poses {growth_reid:.1f}x"
         )
 
 

@@ -106,6 +106,7 @@ def test_printed_json_and_csv_numbers_are_those_of_suggest_poses(
         monte_carlo_check=2,
         trials=300,
         seed=7,
+        backend="auto",  # the command's default
     )
     assert len(direct.suggestions) == 3
     assert direct.suggestions[0].monte_carlo_u_m is not None and direct.suggestions[2].monte_carlo_u_m is None

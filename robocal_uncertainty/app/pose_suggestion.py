@@ -44,6 +44,7 @@ from robocal_uncertainty.core.measurement import joint_columns
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.simulation import draw_joint_positions
 from robocal_uncertainty.errors import ConvergenceError, InputError
+from robocal_uncertainty.kernels import BackendInfo, get_backend, resolve_backend
 from robocal_uncertainty.uncertainty.calibration import EvaluationSettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
@@ -160,6 +161,8 @@ class Suggestions:
     trials : int
         Monte Carlo trials per check (0: none).
     seed : int
+    backend : BackendInfo or None
+        The trial kernels of the Monte Carlo checks (None: no check ran).
     """
 
     suggestions: tuple[PoseSuggestion, ...]
@@ -171,6 +174,7 @@ class Suggestions:
     frame_id: str
     trials: int
     seed: int
+    backend: BackendInfo | None = None
 
 
 def _rms_u(covariances: Array) -> float:
@@ -364,6 +368,7 @@ def suggest_poses(
     seed: int = 0,
     margin_rad: float = 0.05,
     frame: str = "measurement",
+    backend: str = "numpy",
 ) -> Suggestions:
     """Rank candidate configurations by the uncertainty they would remove (module docstring).
 
@@ -395,6 +400,9 @@ def suggest_poses(
         so the checks differ by the added pose only).
     margin_rad : float [rad]
     frame : {"measurement", "base"}
+    backend : {"numpy", "numba", "cupy", "auto"}
+        Trial kernels of the Monte Carlo checks (see
+        :attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`).
 
     Returns
     -------
@@ -415,6 +423,7 @@ def suggest_poses(
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             msg = f"{name} must be an integer >= {low}, got {value!r}"
             raise InputError(msg)
+    get_backend(backend)  # an unknown or missing backend stops here, before any work
     rng = np.random.default_rng(seed)
     if candidates is None:
         q_c = draw_joint_positions(model, n_candidates, rng=rng, margin=margin_rad)
@@ -451,7 +460,9 @@ def suggest_poses(
                 model,
                 c,
                 q_test,
-                EvaluationSettings(uncertainty=settings, lambda_=lambda_, trials=trials, seed=seed, frame=frame),
+                EvaluationSettings(
+                    uncertainty=settings, lambda_=lambda_, trials=trials, seed=seed, frame=frame, backend=backend
+                ),
             )
             if result.not_converged:  # diverged trials: no statement to rank by
                 msg = f"the Monte Carlo check did not converge to a statement: {result.not_converged[0]}"
@@ -480,6 +491,7 @@ def suggest_poses(
         frame_id=lin.frame_id,
         trials=trials if monte_carlo_check else 0,
         seed=seed,
+        backend=resolve_backend(backend) if monte_carlo_check else None,
     )
 
 

@@ -21,6 +21,7 @@ from robocal_uncertainty.cli._common import (
 )
 from robocal_uncertainty.cli._evaluation import uncertainty_settings
 from robocal_uncertainty.cli._options import (
+    add_backend_arg,
     add_campaign_args,
     add_force_arg,
     add_frame_and_convergence_args,
@@ -88,6 +89,7 @@ def _suggestions_dict(
         },
         "seed": result.seed,
         "monte_carlo_trials": result.trials,
+        **({"monte_carlo_backend": _backend_dict(result.backend)} if result.backend is not None else {}),
         "current_rms_u_pos_m": result.current_u_m,
         "monte_carlo_current_rms_u_pos_m": result.monte_carlo_current_u_m,
         "suggestions": [
@@ -102,6 +104,10 @@ def _suggestions_dict(
             for rank, p in enumerate(s, start=1)
         ],
     }
+
+
+def _backend_dict(backend: Any) -> dict[str, str]:
+    return {"name": backend.name, "version": backend.version, "requested": backend.requested}
 
 
 def _suggestions_csv(result: Any, unit: str) -> str:
@@ -169,14 +175,17 @@ def register(sub: Any) -> None:
     add_force_arg(p, "the --json and --csv files")
     add_model_error_arg(p)
     add_frame_and_convergence_args(p)
+    add_backend_arg(p)
     p.set_defaults(func=run, lambda_range=None, min_poses=None, subset_size=None)
 
 
 def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import suggest_poses
     from robocal_uncertainty.core import identify
+    from robocal_uncertainty.kernels import get_backend
     from robocal_uncertainty.uncertainty import parse_sources
 
+    get_backend(args.backend)  # an unknown or missing backend stops here, before any work
     campaign, model = campaign_and_robot(args)
     campaign = campaign.reorder_joints(model.joint_names)
     test_q = read_test_joints(args, model)
@@ -208,6 +217,7 @@ def run(args: argparse.Namespace) -> int:
         trials=args.trials,
         seed=args.seed,
         frame=args.frame,
+        backend=args.backend,
     )
     unit = "deg" if args.degrees else "rad"
     source = (
@@ -222,9 +232,10 @@ def run(args: argparse.Namespace) -> int:
     )
     print(_format_suggestions(result, unit))
     if result.trials:
+        backend = f"; backend {result.backend.describe()}" if result.backend is not None else ""
         print(
             f"Monte Carlo: {result.trials} trials, random seed {result.seed}, with suggestions 1..rank added as "
-            "simulated measurements at the calibrated model's points"
+            f"simulated measurements at the calibrated model's points{backend}"
         )
     if args.json:
         text = json.dumps(_suggestions_dict(result, model, args, test_q, settings), indent=2, allow_nan=False)

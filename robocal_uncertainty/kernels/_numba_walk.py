@@ -1,18 +1,26 @@
-"""The chain walk compiled by numba: one fused loop per (trial, pose), trials in parallel.
+"""The trial kernels compiled by numba: the chain walk, and the whole chord re-identification.
 
-Imported only when numba is installed (the ``fast`` extra). The arithmetic is that of
+Imported only when numba is installed (the ``fast`` extra). The walk's arithmetic is that of
 :class:`~robocal_uncertainty.core.kinematics.NearbyPoints`: the point (and, for poses, the
 tool's x and z axes) is walked from the tool back to the base, and the cosine and sine of a
 joint angle near its reference come from ``cos(a0 + b) = cos a0 cos b - sin a0 sin b`` with
 ``cos b`` and ``sin b`` from their Taylor series. Here the choice is made per element: the
 series (three terms each, truncation below 2e-21 for ``|b| <= 1e-3`` rad) or, for a larger
-change, ``cos`` and ``sin`` of the angle itself. Either way the value is the angle's cosine to
-an ulp or two, so the result agrees with :func:`~robocal_uncertainty.core.kinematics.forward_points`
-to a few ulps, and a trial's values never depend on the other trials of its batch. Unlike the
-numpy walk it covers every layout (a URDF mount, prismatic joints).
+change, ``cos`` and ``sin`` of the angle itself; the link angles (alpha, beta, the base, mount
+and tool rotations) likewise near the reference parameters. Either way the value is the
+angle's cosine to an ulp or two, so the result agrees with
+:func:`~robocal_uncertainty.core.kinematics.forward_points` to a few ulps, and a trial's values
+never depend on the other trials of its batch. Unlike the numpy walk it covers every layout (a
+URDF mount, prismatic joints).
 
-The kernel is compiled on first use and cached on disk (``cache=True``): later processes
-load it in a fraction of a second.
+:func:`chord_solve` runs :meth:`~robocal_uncertainty.uncertainty.reidentification.ChordSolver.solve`
+for every trial start to end (trials spread over numba's threads), so a trial's cost is its
+pose count times a constant, with no temporaries of a whole batch.
+
+Every kernel lives in this one module: numba's disk cache is checked against the source file
+of the function it compiled, so a kernel calling a function of another module could outlive a
+change there. They are compiled on first use and cached on disk (``cache=True``): later
+processes load them in about a second.
 """
 
 from __future__ import annotations
@@ -26,7 +34,7 @@ SERIES_LIMIT = 1.0e-3
 """Largest angle change [rad] from the reference taken by the series."""
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _cos_sin(b: float, cos_ref: float, sin_ref: float, angle: float) -> tuple[float, float]:
     if abs(b) <= SERIES_LIMIT:
         b2 = b * b
@@ -36,12 +44,20 @@ def _cos_sin(b: float, cos_ref: float, sin_ref: float, angle: float) -> tuple[fl
     return math.cos(angle), math.sin(angle)
 
 
-@numba.njit(cache=True, inline="always")
-def _rpy(p: np.ndarray, k: int, out: np.ndarray) -> None:
+@numba.njit(cache=True, error_model="numpy")
+def _trig(p: np.ndarray, i: int, p_ref: np.ndarray, cos_p: np.ndarray, sin_p: np.ndarray) -> tuple[float, float]:
+    """Cosine and sine of the angle p[i]: near the reference p_ref[i] (whose cosine and sine
+    are given) by the series of the change, as the joint angles; else directly."""
+    angle = p[i]
+    return _cos_sin(angle - p_ref[i], cos_p[i], sin_p[i], angle)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _rpy(p: np.ndarray, k: int, p_ref: np.ndarray, cos_p: np.ndarray, sin_p: np.ndarray, out: np.ndarray) -> None:
     """Row-major ``Rz(p[k+2]) Ry(p[k+1]) Rx(p[k])`` into out[0:9]."""
-    cr, sr = math.cos(p[k]), math.sin(p[k])
-    cp, sp = math.cos(p[k + 1]), math.sin(p[k + 1])
-    cy, sy = math.cos(p[k + 2]), math.sin(p[k + 2])
+    cr, sr = _trig(p, k, p_ref, cos_p, sin_p)
+    cp, sp = _trig(p, k + 1, p_ref, cos_p, sin_p)
+    cy, sy = _trig(p, k + 2, p_ref, cos_p, sin_p)
     out[0] = cy * cp
     out[1] = cy * sp * sr - sy * cr
     out[2] = cy * sp * cr + sy * sr
@@ -53,7 +69,7 @@ def _rpy(p: np.ndarray, k: int, out: np.ndarray) -> None:
     out[8] = cp * cr
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _turn(u: np.ndarray, v: np.ndarray, c: np.ndarray, s: np.ndarray) -> None:
     """``u, v = c u - s v, s u + c v`` elementwise, in place."""
     for i in range(u.shape[0]):
@@ -62,7 +78,7 @@ def _turn(u: np.ndarray, v: np.ndarray, c: np.ndarray, s: np.ndarray) -> None:
         v[i] = s[i] * a + c[i] * b
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _turn_fixed(u: np.ndarray, v: np.ndarray, c: float, s: float) -> None:
     """``u, v = c u - s v, s u + c v`` with constant c, s, in place."""
     for i in range(u.shape[0]):
@@ -71,7 +87,155 @@ def _turn_fixed(u: np.ndarray, v: np.ndarray, c: float, s: float) -> None:
         v[i] = s * a + c * b
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(cache=True, error_model="numpy")
+def _walk_trial(
+    p: np.ndarray,
+    q: np.ndarray,
+    joints: np.ndarray,
+    blocks: np.ndarray,
+    q_ref: np.ndarray,
+    theta_ref: np.ndarray,
+    cos_ref: np.ndarray,
+    sin_ref: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
+    poses: bool,
+    rot: np.ndarray,
+    v: np.ndarray,
+    b: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    o: np.ndarray,
+) -> None:
+    """One trial's tool points (and rotations) at every pose into `o` (n_poses, 3 or 12).
+
+    Within the trial the loops run over the poses joint by joint (each a short loop over
+    contiguous arrays that the compiler vectorises), the per-joint choices (prismatic, beta,
+    series or direct) taken once per joint; every pose's value is computed by the same
+    operations whatever the other poses and trials, so batching never changes a value.
+    The cosine and sine of a link angle (alpha, beta, the base, mount and tool rotations)
+    come from those of the reference parameters `p_ref` (`cos_p`, `sin_p`, each (n_params,)),
+    as the joint angles' do. `rot` (27,), `v` (9, n_poses), `b`, `cos`, `sin` (n_poses,) are scratch.
+    """
+    n_poses = o.shape[0]
+    nj = joints.shape[0]
+    t0, r0, m0, b0 = blocks[0], blocks[1], blocks[2], blocks[3]
+    n_vec = 3 if poses else 1
+    _rpy(p, b0 + 3, p_ref, cos_p, sin_p, rot[0:9])  # base, mount, tool rotations, row-major
+    if m0 >= 0:
+        _rpy(p, m0 + 3, p_ref, cos_p, sin_p, rot[9:18])
+    if r0 >= 0:
+        _rpy(p, r0, p_ref, cos_p, sin_p, rot[18:27])
+    # v[3 m + c]: component c of vector m (the point; the tool's x and z axes) per pose.
+    v[0, :] = p[t0]
+    v[1, :] = p[t0 + 1]
+    v[2, :] = p[t0 + 2]
+    if poses:
+        if r0 >= 0:
+            for c in range(3):
+                v[3 + c, :] = rot[18 + 3 * c]  # tool x axis: column 0
+                v[6 + c, :] = rot[20 + 3 * c]  # tool z axis: column 2
+        else:
+            v[3:9, :] = 0.0
+            v[3, :] = 1.0
+            v[8, :] = 1.0
+    for j in range(nj - 1, -1, -1):
+        theta = p[joints[j, 2]]
+        dtheta = theta - theta_ref[j]
+        prismatic = joints[j, 5] != 0
+        d = p[joints[j, 3]]
+        largest = 0.0
+        if prismatic:
+            for i in range(n_poses):
+                v[2, i] += d + q[i, j]
+                b[i] = dtheta
+            largest = abs(dtheta)
+        else:
+            for i in range(n_poses):
+                v[2, i] += d
+                b[i] = (q[i, j] - q_ref[j, i]) + dtheta
+            for i in range(n_poses):
+                largest = max(largest, abs(b[i]))
+        cr = cos_ref[j]
+        sr = sin_ref[j]
+        if largest <= SERIES_LIMIT:
+            # The usual case (every change within the series): the joint's turns of every
+            # vector in one pass over the poses, the same operations in the same order as the
+            # passes below take them.
+            has_beta = joints[j, 4] >= 0
+            cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p) if has_beta else (1.0, 0.0)
+            ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
+            a = p[joints[j, 1]]
+            for i in range(n_poses):
+                bi = b[i]
+                b2 = bi * bi
+                cb = 1.0 + b2 * (-0.5 + b2 * (1.0 / 24.0))
+                sb = bi * (1.0 + b2 * (-1.0 / 6.0 + b2 * (1.0 / 120.0)))
+                c = cr[i] * cb - sr[i] * sb
+                s = sr[i] * cb + cr[i] * sb
+                for m in range(n_vec):
+                    x, y, z = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
+                    x, y = c * x - s * y, s * x + c * y
+                    if has_beta:
+                        z, x = cb_ * z - sb_ * x, sb_ * z + cb_ * x
+                    y, z = ca * y - sa * z, sa * y + ca * z
+                    v[3 * m, i] = x + a if m == 0 else x
+                    v[3 * m + 1, i] = y
+                    v[3 * m + 2, i] = z
+            continue
+        # A larger change somewhere: per pose the series or the angle's own cosine and sine.
+        for i in range(n_poses):
+            angle = theta if prismatic else q[i, j] + theta
+            cos[i], sin[i] = _cos_sin(b[i], cr[i], sr[i], angle)
+        for m in range(n_vec):
+            _turn(v[3 * m], v[3 * m + 1], cos, sin)
+        if joints[j, 4] >= 0:
+            cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p)
+            for m in range(n_vec):
+                _turn_fixed(v[3 * m + 2], v[3 * m], cb_, sb_)
+        ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
+        for m in range(n_vec):
+            _turn_fixed(v[3 * m + 1], v[3 * m + 2], ca, sa)
+        a = p[joints[j, 1]]
+        for i in range(n_poses):
+            v[0, i] += a
+    for i in range(n_poses):
+        for m in range(n_vec):
+            x, y, z = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
+            if m0 >= 0:
+                x, y, z = (
+                    rot[9] * x + rot[10] * y + rot[11] * z,
+                    rot[12] * x + rot[13] * y + rot[14] * z,
+                    rot[15] * x + rot[16] * y + rot[17] * z,
+                )
+                if m == 0:
+                    x, y, z = x + p[m0], y + p[m0 + 1], z + p[m0 + 2]
+            v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i] = x, y, z
+        oi = o[i]
+        vx, vy, vz = v[0, i], v[1, i], v[2, i]
+        for r in range(3):
+            e0, e1, e2 = rot[3 * r], rot[3 * r + 1], rot[3 * r + 2]
+            oi[r] = e0 * vx + e1 * vy + e2 * vz + p[b0 + r]
+        if poses:
+            xx, xy, xz = v[3, i], v[4, i], v[5, i]
+            zx, zy, zz = v[6, i], v[7, i], v[8, i]
+            yx, yy, yz = zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx
+            for r in range(3):
+                e0, e1, e2 = rot[3 * r], rot[3 * r + 1], rot[3 * r + 2]
+                # world_R_tool row r: columns x, y = z cross x, z.
+                oi[3 + 3 * r] = e0 * xx + e1 * xy + e2 * xz
+                oi[4 + 3 * r] = e0 * yx + e1 * yy + e2 * yz
+                oi[5 + 3 * r] = e0 * zx + e1 * zy + e2 * zz
+
+
+def chunk_count(n_trials: int) -> int:
+    """Trial chunks for numba's threads: a few per thread, each chunk's scratch allocated once
+    (a trial's values never depend on the chunks)."""
+    return max(1, min(n_trials, 4 * numba.get_num_threads()))
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
 def walk(
     params: np.ndarray,
     qs: np.ndarray,
@@ -81,15 +245,14 @@ def walk(
     theta_ref: np.ndarray,
     cos_ref: np.ndarray,
     sin_ref: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
     poses: bool,
     out: np.ndarray,
+    n_chunks: int,
 ) -> None:
     """Tool points (and rotations) of every trial at every pose, in the measurement frame.
-
-    Within a trial the loops run over the poses joint by joint (each a short loop over
-    contiguous arrays that the compiler vectorises), the per-joint choices (prismatic, beta,
-    series or direct) taken once per joint; every pose's value is computed by the same
-    operations whatever the other poses and trials, so batching never changes a value.
 
     Parameters
     ----------
@@ -99,110 +262,397 @@ def walk(
     blocks : (4,) int64
     q_ref : (n_joints, n_poses), reference readings, joint by joint; theta_ref : (n_joints,)
     cos_ref, sin_ref : (n_joints, n_poses), of the reference angles
+    p_ref, cos_p, sin_p : (n_params,), the reference parameters and their cosines and sines
     poses : bool
         Also the rotation: out[..., 3:12] is ``world_R_tool`` row by row.
     out : (n_trials, n_poses, 3 or 12)
+    n_chunks : int
+        Chunks of trials spread over the threads (:func:`chunk_count`).
     """
     n_trials = out.shape[0]
     n_poses = out.shape[1]
-    nj = joints.shape[0]
-    t0, r0, m0, b0 = blocks[0], blocks[1], blocks[2], blocks[3]
-    n_vec = 3 if poses else 1
-    for t in numba.prange(n_trials):
-        p = params[0] if params.shape[0] == 1 else params[t]
-        q = qs[0] if qs.shape[0] == 1 else qs[t]
-        rot = np.empty(27)  # base, mount, tool rotations, row-major
-        _rpy(p, b0 + 3, rot[0:9])
-        if m0 >= 0:
-            _rpy(p, m0 + 3, rot[9:18])
-        if r0 >= 0:
-            _rpy(p, r0, rot[18:27])
-        # v[3 m + c]: component c of vector m (the point; the tool's x and z axes) per pose.
-        v = np.empty((3 * n_vec, n_poses))
-        v[0, :] = p[t0]
-        v[1, :] = p[t0 + 1]
-        v[2, :] = p[t0 + 2]
-        if poses:
-            if r0 >= 0:
-                for c in range(3):
-                    v[3 + c, :] = rot[18 + 3 * c]  # tool x axis: column 0
-                    v[6 + c, :] = rot[20 + 3 * c]  # tool z axis: column 2
-            else:
-                v[3:9, :] = 0.0
-                v[3, :] = 1.0
-                v[8, :] = 1.0
+    for c in numba.prange(n_chunks):
+        rot = np.empty(27)
+        v = np.empty((9, n_poses))
         b = np.empty(n_poses)
         cos = np.empty(n_poses)
         sin = np.empty(n_poses)
-        for j in range(nj - 1, -1, -1):
-            theta = p[joints[j, 2]]
-            dtheta = theta - theta_ref[j]
-            prismatic = joints[j, 5] != 0
-            d = p[joints[j, 3]]
-            largest = 0.0
-            if prismatic:
-                for i in range(n_poses):
-                    v[2, i] += d + q[i, j]
-                    b[i] = dtheta
-                largest = abs(dtheta)
+        for t in range(c * n_trials // n_chunks, (c + 1) * n_trials // n_chunks):
+            p = params[0] if params.shape[0] == 1 else params[t]
+            q = qs[0] if qs.shape[0] == 1 else qs[t]
+            _walk_trial(
+                p,
+                q,
+                joints,
+                blocks,
+                q_ref,
+                theta_ref,
+                cos_ref,
+                sin_ref,
+                p_ref,
+                cos_p,
+                sin_p,
+                poses,
+                rot,
+                v,
+                b,
+                cos,
+                sin,
+                out[t],
+            )
+
+
+# --- The whole chord re-identification of a trial (see ChordSolver.solve) -------------------
+
+POSE_SERIES_SINE = 2.0e-3
+"""Largest ``sin(theta)`` of a residual rotation for which ``theta / sin(theta)`` is taken from
+its series ``1 + s^2/6 + 3 s^4/40`` (the first term left out, ``5 s^6/112``, is below 3e-18);
+larger rotations use ``atan2`` as :meth:`PoseMeasurement.residual` does."""
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _residual(
+    m: np.ndarray, pred: np.ndarray, poses: bool, wcomp: np.ndarray, pw: np.ndarray, has_pw: bool, r: np.ndarray
+) -> bool:
+    """Whitened, pose-weighted residual ``measured - predicted`` of one trial into r (n_eq,).
+
+    Points: the difference. Poses: the difference of the positions and ``log(R_m R_p^T)``
+    by :meth:`~robocal_uncertainty.core.pose_measurement.PoseMeasurement.residual`'s
+    formulas; False (and nothing usable in r) when a residual rotation comes within ~0.14 rad
+    of pi, where that method switches to another formula (the caller then takes the numpy path).
+    """
+    n_poses = pred.shape[0]
+    dim = 6 if poses else 3
+    for i in range(n_poses):
+        mi = m[i]
+        pi = pred[i]
+        base = i * dim
+        w_pose = pw[i] if has_pw else 1.0
+        for c in range(3):
+            value = (mi[c] - pi[c]) * wcomp[c]
+            r[base + c] = value * w_pose if has_pw else value
+        if poses:
+            e00 = mi[3] * pi[3] + mi[4] * pi[4] + mi[5] * pi[5]
+            e01 = mi[3] * pi[6] + mi[4] * pi[7] + mi[5] * pi[8]
+            e02 = mi[3] * pi[9] + mi[4] * pi[10] + mi[5] * pi[11]
+            e10 = mi[6] * pi[3] + mi[7] * pi[4] + mi[8] * pi[5]
+            e11 = mi[6] * pi[6] + mi[7] * pi[7] + mi[8] * pi[8]
+            e12 = mi[6] * pi[9] + mi[7] * pi[10] + mi[8] * pi[11]
+            e20 = mi[9] * pi[3] + mi[10] * pi[4] + mi[11] * pi[5]
+            e21 = mi[9] * pi[6] + mi[10] * pi[7] + mi[11] * pi[8]
+            e22 = mi[9] * pi[9] + mi[10] * pi[10] + mi[11] * pi[11]
+            w0, w1, w2 = e21 - e12, e02 - e20, e10 - e01
+            cosine = 0.5 * (e00 + e11 + e22 - 1.0)
+            if cosine < -0.99:
+                return False
+            s = 0.5 * math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            if s <= POSE_SERIES_SINE and cosine > 0.0:
+                s2 = s * s
+                half = 0.5 * (1.0 + s2 * (1.0 / 6.0 + s2 * (3.0 / 40.0)))
             else:
-                for i in range(n_poses):
-                    v[2, i] += d
-                    b[i] = (q[i, j] - q_ref[j, i]) + dtheta
-                for i in range(n_poses):
-                    largest = max(largest, abs(b[i]))
-            cr = cos_ref[j]
-            sr = sin_ref[j]
-            if largest <= SERIES_LIMIT:
-                for i in range(n_poses):
-                    bi = b[i]
-                    b2 = bi * bi
-                    cb = 1.0 + b2 * (-0.5 + b2 * (1.0 / 24.0))
-                    sb = bi * (1.0 + b2 * (-1.0 / 6.0 + b2 * (1.0 / 120.0)))
-                    cos[i] = cr[i] * cb - sr[i] * sb
-                    sin[i] = sr[i] * cb + cr[i] * sb
-            else:
-                for i in range(n_poses):
-                    angle = theta if prismatic else q[i, j] + theta
-                    cos[i], sin[i] = _cos_sin(b[i], cr[i], sr[i], angle)
-            for m in range(n_vec):
-                _turn(v[3 * m], v[3 * m + 1], cos, sin)
-            if joints[j, 4] >= 0:
-                beta = p[joints[j, 4]]
-                cb_, sb_ = math.cos(beta), math.sin(beta)
-                for m in range(n_vec):
-                    _turn_fixed(v[3 * m + 2], v[3 * m], cb_, sb_)
-            alpha = p[joints[j, 0]]
-            ca, sa = math.cos(alpha), math.sin(alpha)
-            for m in range(n_vec):
-                _turn_fixed(v[3 * m + 1], v[3 * m + 2], ca, sa)
-            a = p[joints[j, 1]]
-            for i in range(n_poses):
-                v[0, i] += a
+                half = 0.5 * (math.atan2(s, cosine) / s)
+            r[base + 3] = (half * w0) * wcomp[3]
+            r[base + 4] = (half * w1) * wcomp[4]
+            r[base + 5] = (half * w2) * wcomp[5]
+            if has_pw:
+                for c in range(3, 6):
+                    r[base + c] *= w_pose
+    return True
+
+
+_SUMS = {"reassoc", "contract"}
+"""The fast-math flags of the kernel's sums: reassociation (vectorised sums) and fused
+multiply-adds, never the flags that assume no NaN or infinity. A sum's order then depends on
+its length alone, never on the other trials."""
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a @ b`` of two vectors of one length."""
+    acc = 0.0
+    for i in range(a.shape[0]):
+        acc += a[i] * b[i]
+    return acc
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _times(vector: np.ndarray, matrix_t: np.ndarray, out: np.ndarray) -> None:
+    """``out = vector @ matrix`` for vector (n,) and the matrix transposed, matrix_t (k, n)."""
+    for c in range(out.shape[0]):
+        out[c] = _dot(vector, matrix_t[c])
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _eigen_step(
+    rhs: np.ndarray,
+    lam2: float,
+    factors: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    rp: np.ndarray,
+    rf: np.ndarray,
+    y: np.ndarray,
+    step: np.ndarray,
+) -> None:
+    """``(N + lam2 M) step = rhs`` by the Schur complement's eigen-decomposition, as
+    :meth:`ChordSolver._step`; `factors` as :meth:`StepFactors.as_tuple` gives them."""
+    pen_idx, free_idx, coupling, evecs, evecs_t, evals, normal_fp, free_inverse_t = factors
+    n_pen = pen_idx.shape[0]
+    n_free = free_idx.shape[0]
+    r_pen = rp[:n_pen]
+    r_free = rf[:n_free]
+    for f in range(n_free):
+        r_free[f] = rhs[free_idx[f]]
+    for a in range(n_pen):
+        r_pen[a] = rhs[pen_idx[a]]
+        if n_free:
+            r_pen[a] -= _dot(r_free, coupling[a])
+    y_pen = y[:n_pen]
+    for e in range(n_pen):
+        y_pen[e] = _dot(r_pen, evecs_t[e]) / (evals[e] + lam2)
+    for a in range(n_pen):
+        r_pen[a] = _dot(y_pen, evecs[a])
+        step[pen_idx[a]] = r_pen[a]
+    if n_free:
+        y_free = y[:n_free]
+        for f in range(n_free):
+            y_free[f] = rhs[free_idx[f]] - _dot(r_pen, normal_fp[f])
+        for f in range(n_free):
+            step[free_idx[f]] = _dot(y_free, free_inverse_t[f])
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _cholesky(a: np.ndarray) -> bool:
+    """Lower Cholesky factor of the symmetric `a` in place (its lower triangle); False when
+    `a` is not numerically positive definite."""
+    k = a.shape[0]
+    for j in range(k):
+        s = a[j, j]
+        for m in range(j):
+            s -= a[j, m] * a[j, m]
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        a[j, j] = d
+        for i in range(j + 1, k):
+            s = a[i, j]
+            for m in range(j):
+                s -= a[i, m] * a[j, m]
+            a[i, j] = s / d
+    return True
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _cholesky_solve(factor: np.ndarray, rhs: np.ndarray, step: np.ndarray) -> None:
+    """``L L^T step = rhs`` for the factor of :func:`_cholesky`."""
+    k = rhs.shape[0]
+    for i in range(k):
+        s = rhs[i]
+        for m in range(i):
+            s -= factor[i, m] * step[m]
+        step[i] = s / factor[i, i]
+    for i in range(k - 1, -1, -1):
+        s = step[i]
+        for m in range(i + 1, k):
+            s -= factor[m, i] * step[m]
+        step[i] = s / factor[i, i]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _norm(x: np.ndarray) -> float:
+    return math.sqrt(_dot(x, x))
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def chord_solve(
+    qs: np.ndarray,
+    measured: np.ndarray,
+    weights: np.ndarray,
+    lambdas: np.ndarray,
+    x_start: np.ndarray,
+    start: np.ndarray,
+    estimated: np.ndarray,
+    scale: np.ndarray,
+    mask: np.ndarray,
+    jacobian_t: np.ndarray,
+    wcomp: np.ndarray,
+    joint_jacobian: np.ndarray,
+    pose_normal: np.ndarray,
+    reference: np.ndarray,
+    ref_joints: np.ndarray,
+    factors: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    joints: np.ndarray,
+    blocks: np.ndarray,
+    q_ref: np.ndarray,
+    theta_ref: np.ndarray,
+    cos_ref: np.ndarray,
+    sin_ref: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
+    poses: bool,
+    max_iterations: int,
+    relative_tolerance: float,
+    x_out: np.ndarray,
+    steps: np.ndarray,
+    failed: np.ndarray,
+    n_chunks: int,
+) -> None:
+    """The chord re-identification of every trial, each trial start to end in one pass.
+
+    The iteration of :meth:`~robocal_uncertainty.uncertainty.reidentification.ChordSolver.solve`
+    with ``linear_start``: the first step from the first-order prediction (residual at the
+    reference, the reading errors through ``joint_map``), then exact steps (the chain walked
+    at the trial's parameters and readings) until a step is below `relative_tolerance` of the
+    first or `max_iterations` steps are taken; the Jacobian frozen at the calibration. The
+    same operations as the numpy solver in another order, so the results agree to rounding.
+
+    Parameters
+    ----------
+    qs : (n_q, n_poses, n_joints), n_q 1 or n_trials
+    measured : (n_m, n_poses, value_size), n_m 1 or n_trials
+    weights : (n_w, n_poses), n_w 0 (every pose) or n_trials
+    lambdas : (n_trials,)
+    x_start : (k,)
+    start, estimated, scale, mask
+        The problem's nominal parameters (n_params,), estimated indices (k,), column
+        scaling (k,) and penalty mask (k,).
+    jacobian_t : (k, n_poses dimension)
+        The whitened Jacobian, transposed; wcomp : (dimension,) the whitening.
+    joint_jacobian : (n_poses, dimension, n_joints)
+        Whitened ``J_q``: the first step's right-hand side is ``(r - J_q dQ) J``, which
+        equals the numpy iteration's ``r J - dQ @ joint_map``.
+    pose_normal : (n_poses, k k)
+    reference : (n_poses, value_size); ref_joints : (n_poses, n_joints)
+    factors
+        :meth:`~robocal_uncertainty.uncertainty.reidentification.StepFactors.as_tuple`.
+    joints .. sin_p
+        The walk's layout and reference (see :func:`walk`).
+    poses : bool
+        6-DOF values (12 per pose, 6 equations) instead of points.
+    x_out : (n_trials, k); steps : (n_trials,) int64; failed : (n_trials,) bool
+        Results: the trial's parameters, steps taken, and whether the trial needs the numpy
+        path (a residual rotation near pi, or a weighted normal matrix that is not positive definite).
+    n_chunks : int
+        See :func:`walk`.
+    """
+    n_trials = x_out.shape[0]
+    n_poses = reference.shape[0]
+    nj = ref_joints.shape[1]
+    k = x_start.shape[0]
+    dim = 6 if poses else 3
+    width = 12 if poses else 3
+    has_w = weights.shape[0] > 0
+    shared_dq = False  # shared readings that differ from the reference (numpy: np.any(dq))
+    if qs.shape[0] == 1:
         for i in range(n_poses):
-            for m in range(n_vec):
-                x, y, z = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
-                if m0 >= 0:
-                    x, y, z = (
-                        rot[9] * x + rot[10] * y + rot[11] * z,
-                        rot[12] * x + rot[13] * y + rot[14] * z,
-                        rot[15] * x + rot[16] * y + rot[17] * z,
-                    )
-                    if m == 0:
-                        x, y, z = x + p[m0], y + p[m0 + 1], z + p[m0 + 2]
-                v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i] = x, y, z
-            o = out[t, i]
-            vx, vy, vz = v[0, i], v[1, i], v[2, i]
-            for r in range(3):
-                e0, e1, e2 = rot[3 * r], rot[3 * r + 1], rot[3 * r + 2]
-                o[r] = e0 * vx + e1 * vy + e2 * vz + p[b0 + r]
-            if poses:
-                xx, xy, xz = v[3, i], v[4, i], v[5, i]
-                zx, zy, zz = v[6, i], v[7, i], v[8, i]
-                yx, yy, yz = zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx
-                for r in range(3):
-                    e0, e1, e2 = rot[3 * r], rot[3 * r + 1], rot[3 * r + 2]
-                    # world_R_tool row r: columns x, y = z cross x, z.
-                    o[3 + 3 * r] = e0 * xx + e1 * xy + e2 * xz
-                    o[4 + 3 * r] = e0 * yx + e1 * yy + e2 * yz
-                    o[5 + 3 * r] = e0 * zx + e1 * zy + e2 * zz
+            for j in range(nj):
+                if qs[0, i, j] != ref_joints[i, j]:
+                    shared_dq = True
+    for ch in numba.prange(n_chunks):
+        rot = np.empty(27)
+        v = np.empty((9, n_poses))
+        b = np.empty(n_poses)
+        cos = np.empty(n_poses)
+        sin = np.empty(n_poses)
+        pred = np.empty((n_poses, width))
+        r = np.empty(n_poses * dim)
+        rhs = np.empty(k)
+        step = np.empty(k)
+        x = np.empty(k)
+        rp = np.empty(k)
+        rf = np.empty(k)
+        y = np.empty(k)
+        dqs = np.empty(nj)
+        params = np.empty(start.shape[0])
+        normal = np.empty((k, k))
+        flat_normal = normal.reshape(k * k)
+        pw = np.ones(n_poses)
+        for t in range(ch * n_trials // n_chunks, (ch + 1) * n_trials // n_chunks):
+            q = qs[0] if qs.shape[0] == 1 else qs[t]
+            m = measured[0] if measured.shape[0] == 1 else measured[t]
+            if has_w:
+                pw[:] = weights[t]
+            lam = lambdas[t]
+            lam2 = lam * lam
+            x[:] = x_start
+            failed[t] = False
+            steps[t] = 1
+            # Step 1: the first-order prediction at the start.
+            if not _residual(m, reference, poses, wcomp, pw, has_w, r):
+                failed[t] = True
+                continue
+            if qs.shape[0] > 1 or shared_dq:
+                for i in range(n_poses):
+                    for j in range(nj):
+                        dqs[j] = q[i, j] - ref_joints[i, j]
+                    w_pose = pw[i] if has_w else 1.0
+                    jq = joint_jacobian[i]
+                    for c in range(dim):
+                        row = jq[c]
+                        moved = 0.0
+                        for j in range(nj):
+                            moved += row[j] * dqs[j]
+                        r[i * dim + c] -= moved * w_pose if has_w else moved
+            _times(r, jacobian_t, rhs)
+            for c in range(k):
+                rhs[c] -= lam2 * (x[c] * mask[c])
+            if has_w:
+                # Every trial its own normal matrix (its poses), factorised once for its steps.
+                flat_normal[:] = 0.0
+                for i in range(n_poses):
+                    wi = pw[i]
+                    if wi != 0.0:
+                        contribution = pose_normal[i]
+                        for e in range(k * k):
+                            flat_normal[e] += wi * contribution[e]
+                for c in range(k):
+                    normal[c, c] += lam2 * mask[c]
+                if not _cholesky(normal):
+                    failed[t] = True
+                    continue
+                _cholesky_solve(normal, rhs, step)
+            else:
+                _eigen_step(rhs, lam2, factors, rp, rf, y, step)
+            for c in range(k):
+                x[c] += step[c]
+            first = max(_norm(step), 2.2250738585072014e-308)
+            # Exact steps until one is small enough.
+            for it in range(2, max_iterations + 1):
+                params[:] = start
+                for c in range(k):
+                    params[estimated[c]] += x[c] / scale[c]
+                _walk_trial(
+                    params,
+                    q,
+                    joints,
+                    blocks,
+                    q_ref,
+                    theta_ref,
+                    cos_ref,
+                    sin_ref,
+                    p_ref,
+                    cos_p,
+                    sin_p,
+                    poses,
+                    rot,
+                    v,
+                    b,
+                    cos,
+                    sin,
+                    pred,
+                )
+                if not _residual(m, pred, poses, wcomp, pw, has_w, r):
+                    failed[t] = True
+                    break
+                _times(r, jacobian_t, rhs)
+                for c in range(k):
+                    rhs[c] -= lam2 * (x[c] * mask[c])
+                if has_w:
+                    _cholesky_solve(normal, rhs, step)
+                else:
+                    _eigen_step(rhs, lam2, factors, rp, rf, y, step)
+                for c in range(k):
+                    x[c] += step[c]
+                steps[t] = it
+                if not _norm(step) > relative_tolerance * first:
+                    break
+            x_out[t] = x

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.robot_model import ParameterLayout
 from robocal_uncertainty.kernels._layout import FlatLayout, flat_layout, reference_angles
 
-__all__ = ["ArrayModulePredictor", "CompiledPredictor"]
+__all__ = ["ArrayModulePredictor", "CompiledMeasurement", "CompiledPredictor"]
 
 Array = NDArray[np.float64]
 
@@ -70,6 +71,8 @@ class CompiledPredictor:
         Reference joint offsets.
     cos_ref, sin_ref : ndarray, shape (n_joints, n_poses)
         Of the reference angles, joint by joint (contiguous over the poses).
+    reference_params : ndarray, shape (n_params,)
+        The reference parameters (the link angles' cosines and sines are taken near them).
     """
 
     layout: ParameterLayout
@@ -78,6 +81,7 @@ class CompiledPredictor:
     theta: Array
     cos_ref: Array
     sin_ref: Array
+    reference_params: Array
 
     @classmethod
     def at(cls, layout: ParameterLayout, params: Array, joint_positions: Array) -> CompiledPredictor:
@@ -93,7 +97,19 @@ class CompiledPredictor:
             theta,
             np.ascontiguousarray(np.cos(angles)),
             np.ascontiguousarray(np.sin(angles)),
+            np.array(params, dtype=np.float64),
         )
+
+    @cached_property
+    def parameter_trig(self) -> tuple[Array, Array, Array]:
+        """The reference parameters, their cosines and their sines, each (n_params,)."""
+        p = np.array(self.reference_params, dtype=np.float64)
+        return p, np.cos(p), np.sin(p)
+
+    @cached_property
+    def reference_readings(self) -> Array:
+        """The reference readings joint by joint, shape (n_joints, n_poses), contiguous."""
+        return np.ascontiguousarray(self.joints.T)
 
     def __call__(self, params: Array, joint_positions: Array) -> Array:
         """Tool points (..., n_poses, 3) [m]."""
@@ -104,13 +120,25 @@ class CompiledPredictor:
         return self._run(params, joint_positions, poses=True)
 
     def _run(self, params: Array, joint_positions: Array, *, poses: bool) -> Array:
-        from robocal_uncertainty.kernels._numba_walk import walk
+        from robocal_uncertainty.kernels._numba_walk import chunk_count, walk
 
         n_poses = self.joints.shape[0]
         p, q, batch = _batched(self.layout, params, joint_positions, n_poses)
         out = np.empty((max(p.shape[0], q.shape[0]), n_poses, 12 if poses else 3))
-        q_ref = np.ascontiguousarray(self.joints.T)
-        walk(p, q, self.flat.joints, self.flat.blocks, q_ref, self.theta, self.cos_ref, self.sin_ref, poses, out)
+        walk(
+            p,
+            q,
+            self.flat.joints,
+            self.flat.blocks,
+            self.reference_readings,
+            self.theta,
+            self.cos_ref,
+            self.sin_ref,
+            *self.parameter_trig,
+            poses,
+            out,
+            chunk_count(out.shape[0]),
+        )
         return out.reshape(*batch, n_poses, out.shape[-1])
 
 
@@ -129,7 +157,7 @@ class ArrayModulePredictor(CompiledPredictor):
     def on(cls, module: str, layout: ParameterLayout, params: Array, joint_positions: Array) -> ArrayModulePredictor:
         """Reference at `params` (n_params,) and readings (n_poses, n_joints), walked on `module`."""
         ref = CompiledPredictor.at(layout, params, joint_positions)
-        return cls(ref.layout, ref.flat, ref.joints, ref.theta, ref.cos_ref, ref.sin_ref, module)
+        return cls(ref.layout, ref.flat, ref.joints, ref.theta, ref.cos_ref, ref.sin_ref, ref.reference_params, module)
 
     def _run(self, params: Array, joint_positions: Array, *, poses: bool) -> Array:
         from robocal_uncertainty.kernels._walk_xp import as_numpy, walk_xp
@@ -140,3 +168,110 @@ class ArrayModulePredictor(CompiledPredictor):
         reference = tuple(xp.asarray(a) for a in (self.joints.T, self.theta, self.cos_ref, self.sin_ref))
         out = as_numpy(walk_xp(xp, self.flat, xp.asarray(p), xp.asarray(q), reference, poses=poses))
         return out.reshape(*batch, n_poses, out.shape[-1])
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledMeasurement:
+    """The measurement type's prediction near the calibration by the numba walk, and the whole
+    chord re-identification of a block of trials in the compiled kernel.
+
+    Called, it predicts like :class:`CompiledPredictor` (points, or with `orientation` the
+    stored 6-DOF values); :meth:`solve_chord` is what
+    :meth:`~robocal_uncertainty.uncertainty.reidentification.ChordSolver.solve` hands its
+    iteration to.
+
+    Attributes
+    ----------
+    walker : CompiledPredictor
+        The reference (the calibration's parameters and readings).
+    orientation : bool
+        6-DOF measurements (12 stored values and 6 equations per pose) instead of points.
+    """
+
+    walker: CompiledPredictor
+    orientation: bool
+
+    def __call__(self, params: Array, joint_positions: Array) -> Array:
+        """Predicted values (..., n_poses, 3 or 12)."""
+        return self.walker._run(params, joint_positions, poses=self.orientation)
+
+    def solve_chord(
+        self,
+        solver: Any,
+        joint_positions: Array,
+        measured: Array,
+        weights: Array | None,
+        lambdas: Array,
+        x_start: Array,
+        *,
+        max_iterations: int,
+        relative_tolerance: float,
+    ) -> tuple[Array, int] | None:
+        """:meth:`ChordSolver.solve` (its ``linear_start`` iteration) for every trial, compiled.
+
+        Parameters as there (`solver` the :class:`ChordSolver`). Returns None, for the
+        solver's own numpy iteration on this block, where a trial needs what the kernel does
+        not do (a residual rotation near pi, a normal matrix that is not positive definite).
+        """
+        from robocal_uncertainty.kernels._numba_walk import chord_solve, chunk_count
+
+        if solver.joint_jacobian is None:  # a solver built without ChordSolver.at
+            return None
+        walker = self.walker
+        n_trials = measured.shape[0]
+        n_poses = walker.joints.shape[0]
+        k = x_start.size
+        q = np.asarray(joint_positions, dtype=np.float64)
+        q = _kernel_array(q.reshape(1, *q.shape) if q.ndim == 2 else _shared(q))
+        values = _kernel_array(_shared(np.asarray(measured, dtype=np.float64)))
+        w = (
+            np.empty((0, n_poses))
+            if weights is None
+            else _kernel_array(np.broadcast_to(np.asarray(weights, dtype=np.float64), (n_trials, n_poses)))
+        )
+        start, estimated, scale, mask, whitening, reference, ref_joints = solver.kernel_arrays
+        x = np.empty((n_trials, k))
+        steps = np.empty(n_trials, dtype=np.int64)
+        failed = np.zeros(n_trials, dtype=np.bool_)
+        chord_solve(
+            q,
+            values,
+            w,
+            _kernel_array(np.broadcast_to(np.asarray(lambdas, dtype=np.float64), (n_trials,))),
+            _kernel_array(np.asarray(x_start, dtype=np.float64).reshape(k)),
+            start,
+            estimated,
+            scale,
+            mask,
+            solver.transposed_jacobian,
+            whitening,
+            solver.joint_jacobian,
+            _kernel_array(solver.pose_normal),
+            reference,
+            ref_joints,
+            solver.step_factors.as_tuple(),
+            walker.flat.joints,
+            walker.flat.blocks,
+            walker.reference_readings,
+            walker.theta,
+            walker.cos_ref,
+            walker.sin_ref,
+            *walker.parameter_trig,
+            self.orientation,
+            int(max_iterations),
+            float(relative_tolerance),
+            x,
+            steps,
+            failed,
+            chunk_count(n_trials),
+        )
+        if failed.any():
+            return None
+        return x, int(steps.max()) if n_trials else 1
+
+
+def _shared(values: Array) -> Array:
+    """`values` (n_trials, ...) as (1, ...) when every trial holds the same (a broadcast view)."""
+    if values.shape[0] > 1 and values.strides[0] == 0:
+        return values[:1]
+    return values

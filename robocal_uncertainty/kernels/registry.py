@@ -130,7 +130,8 @@ def _kind(measurement: MeasurementType) -> str | None:
 
 
 class NumbaBackend:
-    """The compiled walk (:mod:`~robocal_uncertainty.kernels._numba_walk`)."""
+    """The compiled kernels (:mod:`~robocal_uncertainty.kernels._numba_walk`): the whole chord
+    re-identification of the built-in measurement types, and the walk."""
 
     name = "numba"
     _ready = False
@@ -148,59 +149,111 @@ class NumbaBackend:
         return str(numba.__version__)
 
     def warm_up(self) -> float:
-        """Compile (or load from the disk cache) the kernel; return the seconds it took.
+        """Compile (or load from the disk cache) the kernels; return the seconds it took.
 
-        The first time a process compiles it, the time is printed on stderr.
+        The first time a process compiles them, the time is printed on stderr.
         """
-        from robocal_uncertainty.kernels._numba_walk import walk
-
         start = time.perf_counter()
-        if not NumbaBackend._ready:
-            from robocal_uncertainty.kernels._layout import flat_layout
+        if NumbaBackend._ready:
+            return time.perf_counter() - start
+        from robocal_uncertainty.kernels import _numba_walk
 
-            layout = ParameterLayout(n_joints=1, has_beta=(False,))
-            flat = flat_layout(layout)
-            one = np.zeros((1, 1))
-            walk(
-                np.zeros((1, layout.size)),
-                np.zeros((1, 1, 1)),
-                flat.joints,
-                flat.blocks,
-                one,
-                np.zeros(1),
-                one,
-                one,
-                True,
-                np.empty((1, 1, 12)),
-            )
-            NumbaBackend._ready = True
-            stats = getattr(walk, "stats", None)  # cache statistics of the dispatcher
-            misses = 1 if stats is None else sum(stats.cache_misses.values())
-            elapsed = time.perf_counter() - start
-            if misses:
-                print(
-                    f"numba: trial kernels compiled in {elapsed:.1f} s (cached on disk for later runs)", file=sys.stderr
-                )
-            return elapsed
-        return time.perf_counter() - start
+        _warm_up_kernels()
+        NumbaBackend._ready = True
+        misses = 0
+        for kernel in (_numba_walk.walk, _numba_walk.chord_solve):
+            stats = getattr(kernel, "stats", None)  # cache statistics of the dispatcher
+            misses += 1 if stats is None else sum(stats.cache_misses.values())
+        elapsed = time.perf_counter() - start
+        if misses:
+            print(f"numba: trial kernels compiled in {elapsed:.1f} s (cached on disk for later runs)", file=sys.stderr)
+        return elapsed
 
     def measurement_predictor(
         self, measurement: MeasurementType, layout: ParameterLayout, params: Array, joint_positions: Array
     ) -> Predictor | None:
-        from robocal_uncertainty.kernels.predictors import CompiledPredictor
+        from robocal_uncertainty.kernels.predictors import CompiledMeasurement, CompiledPredictor
 
         kind = _kind(measurement)
         if kind is None:
             return measurement.nearby_predictor(layout, params, joint_positions)
         self.warm_up()
-        predictor = CompiledPredictor.at(layout, params, joint_positions)
-        return predictor if kind == "points" else predictor.poses
+        return CompiledMeasurement(CompiledPredictor.at(layout, params, joint_positions), orientation=kind == "poses")
 
     def tool_predictor(self, layout: ParameterLayout, params: Array, joint_positions: Array) -> ToolPredictor | None:
         from robocal_uncertainty.kernels.predictors import CompiledPredictor
 
         self.warm_up()
         return CompiledPredictor.at(layout, params, joint_positions)
+
+
+def _warm_up_kernels() -> None:
+    """Run every compiled kernel once on a one-joint, one-pose problem, with the argument
+    types of a real run (C-contiguous, writeable arrays): compiled once per process type."""
+    from robocal_uncertainty.kernels._layout import flat_layout
+    from robocal_uncertainty.kernels._numba_walk import chord_solve, walk
+
+    layout = ParameterLayout(n_joints=1, has_beta=(False,))
+    flat = flat_layout(layout)
+    one = np.zeros((1, 1))
+    trig = (np.zeros(layout.size), np.ones(layout.size), np.zeros(layout.size))
+    walk(
+        np.zeros((1, layout.size)),
+        np.zeros((1, 1, 1)),
+        flat.joints,
+        flat.blocks,
+        one,
+        np.zeros(1),
+        one,
+        one,
+        *trig,
+        True,
+        np.empty((1, 1, 12)),
+        1,
+    )
+    index = np.zeros(1, dtype=np.int64)
+    factors = (
+        index,
+        np.zeros(0, dtype=np.int64),
+        np.zeros((1, 0)),
+        np.ones((1, 1)),
+        np.ones((1, 1)),
+        np.ones(1),
+        np.zeros((0, 1)),
+        np.zeros((0, 0)),
+    )
+    chord_solve(
+        np.zeros((1, 1, 1)),
+        np.zeros((1, 1, 3)),
+        np.empty((0, 1)),
+        np.ones(1),
+        np.zeros(1),
+        np.zeros(layout.size),
+        index,
+        np.ones(1),
+        np.ones(1),
+        np.zeros((1, 3)),
+        np.ones(3),
+        np.zeros((1, 3, 1)),
+        np.zeros((1, 1)),
+        np.zeros((1, 3)),
+        np.zeros((1, 1)),
+        factors,
+        flat.joints,
+        flat.blocks,
+        np.zeros((1, 1)),
+        np.zeros(1),
+        np.ones((1, 1)),
+        np.zeros((1, 1)),
+        *trig,
+        False,
+        2,
+        1e-3,
+        np.empty((1, 1)),
+        np.empty(1, dtype=np.int64),
+        np.zeros(1, dtype=np.bool_),
+        1,
+    )
 
 
 class CupyBackend:

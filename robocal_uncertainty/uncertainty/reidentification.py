@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +30,7 @@ from robocal_uncertainty.core.measurement import (
 )
 from robocal_uncertainty.core.robot_model import ParameterLayout
 
-__all__ = ["BatchProblem", "ChordSolver", "reidentify_batch"]
+__all__ = ["BatchProblem", "ChordSolver", "StepFactors", "reidentify_batch"]
 
 Array = NDArray[np.float64]
 
@@ -154,6 +155,48 @@ def reidentify_batch(
 
 
 @dataclass(frozen=True, eq=False)
+class StepFactors:
+    """:meth:`ChordSolver._step`'s factors, contiguous, as a compiled kernel takes them (each
+    product a dot product of contiguous rows).
+
+    Attributes
+    ----------
+    penalized, free : ndarray of int64, shape (k_pen,), (k_free,)
+        Indices of the penalised and the free estimated parameters.
+    coupling : ndarray, shape (k_pen, k_free)
+    eigenvectors, eigenvectors_t : ndarray, shape (k_pen, k_pen)
+        The Schur complement's eigenvectors as columns, and as rows.
+    eigenvalues : ndarray, shape (k_pen,)
+    normal_fp : ndarray, shape (k_free, k_pen)
+        ``N_pf`` transposed.
+    free_inverse_t : ndarray, shape (k_free, k_free)
+        ``N_ff^-1`` transposed.
+    """
+
+    penalized: NDArray[np.int64]
+    free: NDArray[np.int64]
+    coupling: Array
+    eigenvectors: Array
+    eigenvectors_t: Array
+    eigenvalues: Array
+    normal_fp: Array
+    free_inverse_t: Array
+
+    def as_tuple(self) -> tuple[NDArray[np.int64], NDArray[np.int64], Array, Array, Array, Array, Array, Array]:
+        """In the order the kernel unpacks them."""
+        return (
+            self.penalized,
+            self.free,
+            self.coupling,
+            self.eigenvectors,
+            self.eigenvectors_t,
+            self.eigenvalues,
+            self.normal_fp,
+            self.free_inverse_t,
+        )
+
+
+@dataclass(frozen=True, eq=False)
 class ChordSolver:
     """Re-identification by the chord (simplified Newton) method, all trials at once.
 
@@ -208,7 +251,12 @@ class ChordSolver:
     predictor : callable or None
         ``predictor(params, joint_positions)``: the measurement type's prediction near the
         calibration (:meth:`~robocal_uncertainty.core.measurement.MeasurementType.nearby_predictor`),
-        or None for its plain ``predict``.
+        or None for its plain ``predict``. A predictor with a ``solve_chord`` method (a
+        compiled backend's) is handed the whole iteration of :meth:`solve`.
+    joint_jacobian : ndarray, shape (n_poses, dimension, n_joints), or None
+        ``J_q`` pose by pose (whitened): a compiled iteration takes the first step's
+        right-hand side as ``(r - J_q dQ) J``, the same as ``r J - dQ @ joint_map`` with a
+        fraction of the products.
     """
 
     problem: BatchProblem
@@ -223,6 +271,7 @@ class ChordSolver:
     reference: Array
     joint_map: Array
     predictor: Callable[[Array, Array], Array] | None = None
+    joint_jacobian: Array | None = None
 
     @classmethod
     def at(cls, problem: BatchProblem, params: Array, joint_positions: Array) -> ChordSolver:
@@ -260,6 +309,45 @@ class ChordSolver:
             reference=reference,
             joint_map=np.ascontiguousarray(joint_map),
             predictor=predictor,
+            joint_jacobian=_contiguous(per_joint),
+        )
+
+    @cached_property
+    def transposed_jacobian(self) -> Array:
+        """:attr:`jacobian` transposed, shape (k, dimension * n_poses), contiguous."""
+        return _contiguous(self.jacobian.T)
+
+    @cached_property
+    def kernel_arrays(self) -> tuple[Array, NDArray[np.int64], Array, Array, Array, Array, Array]:
+        """The problem's start (n_params,), estimated indices (k,), scaling (k,) and penalty
+        mask (k,), the whitening per component (dimension,; ones for none), the reference
+        prediction (n_poses, value_size) and readings (n_poses, n_joints): contiguous, for a
+        compiled iteration (built once per solver, not per sub-batch)."""
+        problem = self.problem
+        whitening = problem.measurement.weights
+        return (
+            _contiguous(problem.start),
+            np.array(problem.estimated, dtype=np.int64),
+            _contiguous(problem.scale),
+            _contiguous(problem.penalty_mask),
+            np.ones(problem.measurement.dimension) if whitening is None else _contiguous(whitening),
+            _contiguous(self.reference),
+            _contiguous(self.joints),
+        )
+
+    @cached_property
+    def step_factors(self) -> StepFactors:
+        """The pieces of :meth:`_step` as contiguous arrays, for a compiled iteration."""
+        pen = self.problem.penalty_mask > 0
+        return StepFactors(
+            penalized=np.flatnonzero(pen).astype(np.int64),
+            free=np.flatnonzero(~pen).astype(np.int64),
+            coupling=_contiguous(self.coupling),
+            eigenvectors=_contiguous(self.eigenvectors),
+            eigenvectors_t=_contiguous(self.eigenvectors.T),
+            eigenvalues=_contiguous(self.eigenvalues),
+            normal_fp=_contiguous(self.normal[np.ix_(pen, ~pen)].T),
+            free_inverse_t=_contiguous(self.free_inverse.T),
         )
 
     def _step(self, rhs: Array, lam2: Array) -> Array:
@@ -324,6 +412,22 @@ class ChordSolver:
         iterations_run : int
             The most steps any trial took.
         """
+        kernel = getattr(self.predictor, "solve_chord", None)
+        if kernel is not None and linear_start:
+            # A backend's compiled iteration (the same steps, trial by trial start to end);
+            # None where it defers to this one for the block.
+            solved: tuple[Array, int] | None = kernel(
+                self,
+                joint_positions,
+                measured,
+                weights,
+                lambdas,
+                x_start,
+                max_iterations=max_iterations,
+                relative_tolerance=relative_tolerance,
+            )
+            if solved is not None:
+                return solved
         measurement = self.problem.measurement
         n_trials = measured.shape[0]
         k = x_start.size
@@ -388,3 +492,8 @@ class ChordSolver:
         if normal is not None:
             return np.asarray(np.linalg.solve(normal, rhs[..., None])[..., 0], dtype=np.float64)
         return self._step(rhs, lam2)
+
+
+def _contiguous(values: Array) -> Array:
+    """A C-contiguous, writeable float64 copy (what a compiled kernel is compiled for)."""
+    return np.array(values, dtype=np.float64, order="C")
