@@ -191,7 +191,9 @@ def select_configurations(histograms: HistogramSelection, n_test: int, worst: in
     return tuple(sorted(chosen))
 
 
-def _num(value: float, scale: float) -> str:
+def _num(value: float | None, scale: float) -> str:
+    if value is None:  # e.g. no coverage factor where the standard uncertainty is zero
+        return ""
     v = float(value) * scale
     return f"{v:.9g}" if math.isfinite(v) else ""
 
@@ -226,8 +228,8 @@ def write_configurations_csv(
     header += [f"{a}_mm" for a in "xyz"] + ["reach_mm"]
     header += [f"u_{a}_um" for a in "xyz"] + ["u_pos_um"]
     header += [f"U_{a}_um" for a in "xyz"] + [f"k_{a}" for a in "xyz"]
-    for a in "xyz":
-        header += [f"sym_low_{a}_mm", f"sym_high_{a}_mm", f"short_low_{a}_mm", f"short_high_{a}_mm"]
+    for axis in "xyz":
+        header += [f"sym_low_{axis}_mm", f"sym_high_{axis}_mm", f"short_low_{axis}_mm", f"short_high_{axis}_mm"]
     header += ["region_k_p", "region_a1_um", "region_a2_um", "region_a3_um"]
     header += [f"gum_u_{a}_um" for a in "xyz"] + [f"gum_validated_{a}" for a in "xyz"]
     out = Path(path)

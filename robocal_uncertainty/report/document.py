@@ -17,8 +17,9 @@ the ``histograms`` argument of :func:`write_report`), and leave every configurat
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -205,7 +206,7 @@ def _configurations(result: CalibrationUncertainty, cs: ConfigurationSummary) ->
                 gum_verdict(result.poses[i]),
             )
         )
-    header = ("Config.", "x / mm", "y / mm", "z / mm", "reach / mm")
+    header: tuple[str, ...] = ("Config.", "x / mm", "y / mm", "z / mm", "reach / mm")
     header += ("u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm", "a₁ / µm", "GUM validated")
     blocks.append(table(header, rows))
     if n > DETAIL_LIMIT:
@@ -291,7 +292,7 @@ def _orientation(pose: PoseUncertainty) -> list[Block]:
             "measurements see moves it, so the axes that overlap it are reported as undetermined."
         )
     rows: list[tuple[str, ...]] = []
-    labels = (
+    labels: tuple[tuple[str, Callable[[int], str]], ...] = (
         ("u / mrad", lambda j: _mrad(o.axes[j].standard_uncertainty)),
         ("U / mrad", lambda j: _mrad(o.axes[j].expanded_uncertainty)),
         ("interval / mrad", lambda j: f"[{_mrad(o.axes[j].interval.low)}, {_mrad(o.axes[j].interval.high)}]"),
@@ -421,7 +422,10 @@ def _weighting_lines(cal: IdentificationResult) -> tuple[str, ...]:
             f"{cal.weighting_iterations} fits; never below the stated values)"
         ),
     }.get(cal.weighting, cal.weighting)
-    return (f"residuals weighted by {how}: {shown(used)}", f"stated instrument uncertainties: {shown(m.std.tolist())}")
+    return (
+        f"residuals weighted by {how}: {shown(used)}",
+        f"stated instrument uncertainties: {shown(np.asarray(cast(Any, m).std, dtype=np.float64).tolist())}",
+    )
 
 
 def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> list[Block]:

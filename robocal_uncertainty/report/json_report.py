@@ -22,7 +22,7 @@ import re
 from collections.abc import Mapping, Sequence
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -357,7 +357,8 @@ def _measurement(calibration: IdentificationResult) -> dict[str, Any]:
         else _WEIGHTING_TEXT.get(calibration.weighting, calibration.weighting),
         "weighting_method": calibration.weighting,
         "std": None if weights is None else (1.0 / weights).tolist(),
-        "stated_std": None if weights is None else m.std.tolist(),
+        # Point std is a tuple, pose std an array: both have a std where they have weights.
+        "stated_std": None if weights is None else np.asarray(cast(Any, m).std, dtype=np.float64).tolist(),
         "variance_component_fits": calibration.weighting_iterations,
     }
     if m.measures_orientation:
@@ -568,7 +569,8 @@ def uncertainty_to_dict(
         "sweeps": None if sweeps is None else _sweeps(sweeps),
         "warnings": merge_warnings(input_warnings, result.warnings, [trust] if trust else []),
     }
-    return to_json_value(report)
+    out: dict[str, Any] = to_json_value(report)
+    return out
 
 
 def write_report_json(

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -563,7 +564,7 @@ def _headroom(ax: Axes, values: Array) -> None:
         ax.set_ylim(0.0, 1.2 * top)
 
 
-def _points_style(n: int) -> dict[str, object]:
+def _points_style(n: int) -> dict[str, Any]:
     """Markers joined by thin lines for a few points, bare small markers for many."""
     if n <= 60:
         return {"marker": "o", "ms": 3.5, "lw": 0.8}
