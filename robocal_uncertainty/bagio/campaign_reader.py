@@ -235,7 +235,7 @@ def _nearest_gaps_ms(joint_stamps: NDArray[np.int64], point_stamps: NDArray[np.i
     right = np.searchsorted(ordered, point_stamps).clip(0, ordered.size - 1)
     left = (right - 1).clip(0, ordered.size - 1)
     gap = np.minimum(np.abs(ordered[right] - point_stamps), np.abs(ordered[left] - point_stamps))
-    return gap / 1e6
+    return np.asarray(gap / 1e6, dtype=np.float64)
 
 
 def _pair(

@@ -330,7 +330,8 @@ def read_campaign_checked(args: argparse.Namespace, path: str) -> Any:
             accept_damaged=bool(getattr(args, "accept_damaged", False)),
         )
     refuse_raw_recording(path, campaign)
-    notes = [str(w) for w in campaign.metadata.get("warnings") or ()]
+    stored: Any = campaign.metadata.get("warnings") or ()  # a list of strings in the file's metadata
+    notes = [str(w) for w in stored]
     notes += [str(w.message) for w in caught if str(w.message) not in notes]
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)

@@ -110,8 +110,9 @@ def session_lines(state: Any) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
 
+    from robocal_uncertainty.app.campaign_checks import check_campaign_joints
     from robocal_uncertainty.app.verification import calibrate_session
-    from robocal_uncertainty.cli._common import check_campaign_joints, read_campaign_checked
+    from robocal_uncertainty.cli._common import read_campaign_checked
     from robocal_uncertainty.core import TrackerNoise
     from robocal_uncertainty.core.calibration_file import write_calibration
     from robocal_uncertainty.errors import ConfigError

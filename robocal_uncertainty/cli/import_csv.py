@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         orientation_convention=args.orientation_convention,
     )
     write_campaign(args.out, campaign, overwrite=args.force)
-    skipped = campaign.metadata.get("skipped_rows") or []
+    skipped: Any = campaign.metadata.get("skipped_rows") or []  # row numbers in the metadata
     print(
         f"wrote {args.out}: {count(campaign.n_poses, 'pose')}, joints {', '.join(campaign.joint_names)}, "
         f"points in the {campaign.frame} frame ({campaign.frame_id})"

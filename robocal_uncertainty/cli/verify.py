@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from robocal_uncertainty.cli._common import check_campaign_joints, load_robot, read_campaign_checked
+from robocal_uncertainty.app.campaign_checks import check_campaign_joints
+from robocal_uncertainty.cli._common import load_robot, read_campaign_checked
 from robocal_uncertainty.cli._options import add_force_arg, add_urdf_chain_args
 
 DRIFTED_EXIT_STATUS = 3

@@ -239,7 +239,7 @@ class CalibrationNode(Node):
         self.robot_config = p["robot_config"]
         # A URDF in `robot_description` (as robot_state_publisher takes it) replaces robot_config.
         self._description = str(self.declare_parameter("robot_description", "").value)
-        chain = {k: str(self.declare_parameter(k, "").value) or None for k in ("base_link", "tip_link")}
+        chain: dict[str, Any] = {k: str(self.declare_parameter(k, "").value) or None for k in ("base_link", "tip_link")}
         point = p["tool_point_m"]
         tool_point = None if point is None else [float(v) for v in point]
         base_known = False if p["base_unknown"] else None

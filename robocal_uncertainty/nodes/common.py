@@ -91,7 +91,7 @@ def stamp_ns(header: Any) -> int:
     return int(header.stamp.sec) * _NS_PER_S + int(header.stamp.nanosec)
 
 
-def to_ros(source: Any, ros_type: type) -> Any:
+def to_ros(source: Any, ros_type: Any) -> Any:
     """Copy a rosbags message (see :mod:`robocal_uncertainty.bagio.messages`) into the
     rosidl-generated class `ros_type`, field by field (nested messages recursively)."""
     out = ros_type()

@@ -103,10 +103,12 @@ _NS_PER_S = 1_000_000_000
 def _floats(values: ArrayLike) -> list[float]:
     """`values` flattened to Python floats, as ``np.asarray(values, float64).reshape(-1)`` gives them."""
     if isinstance(values, np.ndarray) and values.dtype == np.float64:
-        return values.reshape(-1).tolist()  # type: ignore[no-any-return]
+        floats: list[float] = values.reshape(-1).tolist()
+        return floats
     if isinstance(values, (tuple, list)) and all(type(v) is float for v in values):
         return list(values)
-    return np.asarray(values, dtype=np.float64).reshape(-1).tolist()  # type: ignore[no-any-return]
+    converted: list[float] = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
+    return converted
 
 
 def _seconds_to_ns(name: str, value: float, *, positive: bool) -> int:

@@ -75,7 +75,7 @@ class StillIntervals:
     @property
     def durations_s(self) -> np.ndarray:
         """Durations, shape (n,) [s]."""
-        return (self.ends_ns - self.starts_ns) / _NS_PER_S
+        return np.asarray((self.ends_ns - self.starts_ns) / _NS_PER_S, dtype=np.float64)
 
     def typical_dwell_s(self) -> float:
         """Median duration of the dwells: the intervals at least a quarter as long as the
