@@ -71,6 +71,13 @@ def main() -> int:
     ap.add_argument("--held-out", type=int, default=200, help="held-out poses predicted per split (random)")
     ap.add_argument("--trials", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--modes",
+        nargs="+",
+        default=["independent", "field"],
+        choices=["independent", "field"],
+        help="model errors compared (default both)",
+    )
     args = ap.parse_args()
     model = load_robot_model(resolve_robot_config("ur10"))
     paths = {"D": SERIES_D, "B": args.series_b}
@@ -91,7 +98,8 @@ def main() -> int:
                 n_held = min(args.held_out, campaign.n_poses - n_train)
                 splits = _splits(campaign.n_poses, n_train, n_held, args.splits, args.seed)
                 print(f"series {name} ({campaign.n_poses} poses), {kind}, {n_train} training poses:", flush=True)
-                for label, mode in (("independent", "independent"), ("field", "field")):
+                for mode in args.modes:
+                    label = mode
                     t0 = time.perf_counter()
                     v = validate_holdout(
                         model,

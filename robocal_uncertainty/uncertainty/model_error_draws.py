@@ -31,8 +31,17 @@ per-pose covariance ``Sigma_m = diag(f) S diag(f)`` (``S`` the shape of the resi
 covariance) from their leave-one-out prediction errors, component by component: the spread a
 prediction at a configuration the fit did not see has, which a misstated kernel cannot make too
 small. The draws resample the standardised residuals (the field's covariance, the residuals'
-distribution). A field whose scale the poses do not determine (fewer than 32 effective degrees
-of freedom) is not drawn: the residual source then draws the independent model error. No
+distribution).
+
+That scale is an estimate: a smooth error is seen by a few independent patches of the
+workspace, so a 53-pose campaign fixes it with 15-40 effective degrees of freedom
+(Satterthwaite under the fitted field, fewer for heavy tails), and a statement that plugs it in
+as known is too narrow, most visibly in the joint (JCGM 102) region of several components. The
+draws therefore take the scale as uncertain as its estimate: per draw and component a factor
+``sqrt(nu_j / chi2(nu_j))`` (Student-t marginals, the predictive distribution of a normal
+quantity with an estimated variance, JCGM 101 6.4.9), and the GUM propagates the covariance of
+the same draws. A field whose scale has fewer than :data:`MIN_SCALE_DOF` degrees of freedom in a
+component is not drawn: the residual source then draws the independent model error. No
 constant is tuned to a data set.
 """
 
@@ -54,6 +63,7 @@ __all__ = [
     "FIELD_LENGTH_BOUNDS",
     "FIELD_MAX_EQUATIONS",
     "JOINT_TEST_MAX",
+    "MIN_SCALE_DOF",
     "FieldEstimate",
     "FieldNormal",
     "central_hessian",
@@ -73,6 +83,11 @@ FIELD_LENGTH_BOUNDS = (0.02, 20.0)
 """Range [rad] of the field's correlation length searched by the likelihood (shared with the
 session field of :mod:`.sessions`)."""
 _JITTER = 1e-10
+MIN_SCALE_DOF = 4.0
+"""Fewest effective degrees of freedom of a component's scale for the field to be drawn (a
+Student-t with ``nu <= 4`` has no finite fourth moment)."""
+_T_DOF_MAX = 1e6
+"""Beyond these degrees of freedom the scale is drawn as known (the t is the normal)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,6 +111,18 @@ class FieldEstimate:
         Effective degrees of freedom of the scale (``2 / var(log s)`` from the curvature).
     poses_used : int
         Poses the hyperparameters were estimated from.
+    scale_dof : ndarray, shape (d,), or None
+        ``nu_j``: effective degrees of freedom of each component's leave-one-out scale
+        (:func:`_leave_one_out_dof`); the draws take its uncertainty with them.
+    tail_dof : float
+        Degrees of freedom of the multivariate t whose kurtosis the leave-one-out prediction
+        errors have (inf: normal tails); the field is drawn as that t-process (a Gaussian field
+        with a random scale per draw, same covariance).
+    hyper_covariance : ndarray, shape (3, 3)
+        Covariance of the estimates of ``(log s, c, log l)`` (``s`` the likelihood's scale),
+        the inverse curvature of the restricted likelihood; zero rows for those at a bound.
+    contrasts : int
+        Residual equations orthogonal to the fit the likelihood is made of.
     """
 
     correlated_fraction: float
@@ -108,24 +135,55 @@ class FieldEstimate:
     poses_used: int = 0
     kernel: str = FIELD_KERNEL
     metric: str = FIELD_METRIC
+    scale_dof: Array | None = None
+    tail_dof: float = float("inf")
+    hyper_covariance: Array = field(default_factory=lambda: np.zeros((3, 3)))
+    contrasts: int = 0
 
     @property
     def identified(self) -> bool:
-        """Whether the data determine the field well enough to state it (``dof >= 32``).
+        """Whether the field's per-component scale is determined well enough to state it.
 
-        The rule of :data:`~robocal_uncertainty.uncertainty.model_adequacy.MIN_RESIDUAL_DOF_PER_COMPONENT`
-        for one variance: with fewer effective degrees of freedom the scale is uncertain by more
-        than 25 % and a 95 % interval's coverage by more than 4 %. A correlated field's scale has
-        far fewer than ``d n`` (a 53-pose UR10 campaign: 1-30), and then the correlation length
-        and the scale trade off against each other; the residual source then draws the
-        independent model error (the field's ``c = 0`` case), whose covariance has ``d n - p``.
+        The statement takes the scale from the leave-one-out prediction errors and draws its
+        uncertainty (``nu_j``, :attr:`scale_dof`) with it (:class:`FieldNormal`: a Student-t
+        predictive distribution per component), so a scale from few effective degrees of
+        freedom widens the statement by what it is uncertain, instead of being refused or stated
+        as known. A scale with ``nu_j <`` :data:`MIN_SCALE_DOF` (the t's fourth moment, and with it
+        the spread of its own variance, is infinite) is not drawn: the residual source then draws
+        the independent model error (the field's ``c = 0`` case). Without :attr:`scale_dof`
+        (an estimate made elsewhere) the likelihood's ``dof >= 32`` (the project's one-variance
+        rule, :data:`~robocal_uncertainty.uncertainty.model_adequacy.MIN_RESIDUAL_DOF_PER_COMPONENT`).
         """
-        return bool(self.dof >= MIN_RESIDUAL_DOF_PER_COMPONENT)
+        if self.scale_dof is None:
+            return bool(self.dof >= MIN_RESIDUAL_DOF_PER_COMPONENT)
+        return bool(np.all(np.asarray(self.scale_dof) >= MIN_SCALE_DOF))
 
     @property
     def standard_uncertainty(self) -> Array:
         """Per-component standard uncertainty of the model error at one configuration, shape (d,)."""
         return np.sqrt(np.clip(np.diag(self.per_pose_covariance), 0.0, None))
+
+    def describe(self) -> str:
+        """One line for the console: how the residual source draws the model error."""
+        fu = self.standard_uncertainty
+        text = f"({', '.join(f'{v * 1e6:.1f}' for v in fu[:3])}) um"
+        if len(fu) > 3:
+            text = f"position {text}, rotation ({', '.join(f'{v * 1e6:.1f}' for v in fu[3:])}) urad"
+        dof = "" if self.scale_dof is None else ", ".join(f"{v:.0f}" for v in np.asarray(self.scale_dof))
+        if not self.identified:
+            why = (
+                f"its scale has ({dof}) effective degrees of freedom, fewer than {MIN_SCALE_DOF:.0f}"
+                if self.scale_dof is not None
+                else f"{self.dof:.0f} effective degrees of freedom, fewer than {MIN_RESIDUAL_DOF_PER_COMPONENT:.0f}"
+            )
+            head = "drawn independently from pose to pose: the correlated field is not identified by these poses"
+            return f"{head} ({why})"
+        scale = "" if self.scale_dof is None else f", its scale's uncertainty drawn with it ({dof} degrees of freedom)"
+        return (
+            f"drawn as a field over the joint configurations (restricted maximum likelihood): u = {text}, "
+            f"{self.correlated_fraction * 100:.0f} % correlated over {self.length_scale:.2f} rad, jointly over the "
+            f"calibration poses and the test configurations{scale}"
+        )
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready record (reports, ``calibrate --json``)."""
@@ -144,6 +202,8 @@ class FieldEstimate:
             "dof": float(self.dof),
             "identified": self.identified,
             "poses_used": int(self.poses_used),
+            "scale_dof": None if self.scale_dof is None else np.asarray(self.scale_dof).tolist(),
+            "tail_dof": float(self.tail_dof) if np.isfinite(self.tail_dof) else None,
         }
 
 
@@ -170,6 +230,7 @@ def estimate_field(
     *,
     max_equations: int = FIELD_MAX_EQUATIONS,
     seed: int = 0,
+    leave_one_out: bool = True,
 ) -> FieldEstimate:
     """The model-error field of a calibration by restricted maximum likelihood.
 
@@ -196,6 +257,10 @@ def estimate_field(
         Campaigns with more residual equations use a seeded subset of their poses.
     seed : int
         Seed of that subset.
+    leave_one_out : bool
+        False: the per-pose covariance is the likelihood's (``verify``'s session field, whose
+        checks re-register and test against the validated level), without the leave-one-out
+        scale and its degrees of freedom.
     """
     from scipy import linalg, optimize
 
@@ -269,12 +334,29 @@ def estimate_field(
     fun, log_s, c, log_l = best
     free = [0] if c <= 1e-6 else ([0, 1, 2] if c < 1.0 - 1e-6 else [0, 2])
     hess = central_hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
+    hyper = np.zeros((3, 3))
     try:
-        var_log_s = float(np.linalg.inv(hess)[0, 0])
+        inv = np.linalg.inv(hess)
     except np.linalg.LinAlgError:
-        var_log_s = float("nan")
+        inv = np.full_like(hess, np.nan)
+    var_log_s = float(inv[0, 0])
+    if np.all(np.isfinite(inv)) and np.all(np.linalg.eigvalsh(0.5 * (inv + inv.T)) > 0):
+        hyper[np.ix_(free, free)] = 0.5 * (inv + inv.T)
     dof = 2.0 / var_log_s if np.isfinite(var_log_s) and var_log_s > 0 else float(m)
     const = 0.5 * m * np.log(2 * np.pi)
+    common = {
+        "correlated_fraction": float(c),
+        "length_scale": float(np.exp(log_l)),
+        "likelihood_per_pose_covariance": float(np.exp(log_s)) * shape,
+        "log_likelihood": -fun - const,
+        "independent_log_likelihood": -float(independent.fun) - const,
+        "dof": float(min(max(dof, 1.0), m)),
+        "poses_used": int(n),
+        "hyper_covariance": hyper,
+        "contrasts": int(m),
+    }
+    if not leave_one_out:
+        return FieldEstimate(per_pose_covariance=float(np.exp(log_s)) * shape, **common)
     unit: Array = np.asarray((1.0 - c) * white, dtype=np.float64)
     if c > 0.0:
         rho = kernel_correlation(distance, float(np.exp(log_l)))
@@ -283,15 +365,9 @@ def estimate_field(
     if scale is None:  # no scale explains the prediction errors (a degenerate shape): the likelihood's
         scale = float(np.exp(log_s))
     factors = _leave_one_out_components(r, fit, n_cov, unit, d, scale)
+    scale_dof, tail_dof = _leave_one_out_dof(r, fit, n_cov, unit, d, factors)
     return FieldEstimate(
-        correlated_fraction=float(c),
-        length_scale=float(np.exp(log_l)),
-        per_pose_covariance=shape * np.outer(factors, factors),
-        likelihood_per_pose_covariance=float(np.exp(log_s)) * shape,
-        log_likelihood=-fun - const,
-        independent_log_likelihood=-float(independent.fun) - const,
-        dof=float(min(max(dof, 1.0), m)),
-        poses_used=int(n),
+        per_pose_covariance=shape * np.outer(factors, factors), scale_dof=scale_dof, tail_dof=tail_dof, **common
     )
 
 
@@ -374,6 +450,64 @@ def _leave_one_out_components(
     return np.asarray(factors, dtype=np.float64)
 
 
+def _leave_one_out_dof(
+    r: Array, fit: Array, noise: Array, unit: Array, d: int, factors: Array, *, heavy_tails: bool = True
+) -> tuple[Array, float]:
+    """Effective degrees of freedom of each component's leave-one-out scale, shape (d,), and
+    of the prediction errors' tails (a float, inf for normal tails).
+
+    Component ``j``'s factor makes the mean of ``z_ij^2`` one (:func:`_leave_one_out_components`),
+    ``z_ij = e_ij / sqrt(M_i,jj)`` the standardised leave-one-out prediction errors. Under the
+    fitted field ``z = G r`` is normal with covariance ``C = G P V P G^T``, so the mean of the
+    ``n`` squares has variance ``2 tr(C_j^2) / n^2`` and (Satterthwaite) ``nu_j = tr(C_j)^2 /
+    tr(C_j^2)`` degrees of freedom (``C_j`` the component's ``n x n`` block): far fewer than
+    ``n`` when the field correlates the poses' errors, as the scale of a smooth error is seen
+    by a few independent patches of the workspace only. Heavier tails than the normal's make
+    a mean of squares more variable: ``nu_j`` is multiplied by ``2 / (kappa_j - 1)`` (``kappa_j``
+    the kurtosis of the observed ``z_ij``; the normal's 3 leaves it), never raised by it.
+
+    The tails: a real model error is larger in some regions of the workspace than in others, so
+    the prediction errors pooled over configurations are a scale mixture of normals, heavier
+    tailed jointly over the components than one normal (most visibly in a region of several
+    components). Their multivariate kurtosis (Mardia's ``b = mean((w_i^T w_i)^2)``, ``w_i`` the
+    leave-one-out errors whitened by their stated covariance) is that of a multivariate t with
+    ``nu = (4 rho - 2) / (rho - 1)`` degrees of freedom, ``rho = b / (d (d + 2))`` (``rho <= 1``:
+    normal tails, ``nu`` infinite).
+    """
+    n = r.size // d
+    proj = np.eye(r.size) - fit @ fit.T
+    idx = np.arange(n)
+    lever = (fit @ fit.T).reshape(n, d, n, d)[idx, :, idx, :]
+    inv = np.linalg.pinv(np.eye(d)[None] - lever)
+    scaled = unit * np.outer(np.tile(factors, n), np.tile(factors, n))
+    cov_r = proj @ (noise + scaled) @ proj
+    # G: (I - H_ii)^-1 per pose, then every component divided by its stated standard deviation.
+    block_inv = np.zeros((r.size, r.size))
+    for i in range(n):
+        block_inv[i * d : (i + 1) * d, i * d : (i + 1) * d] = inv[i]
+    cov_e = block_inv @ cov_r @ block_inv.T
+    sd = np.sqrt(np.maximum(np.diag(cov_e), np.finfo(float).tiny))
+    cov_z = cov_e / np.outer(sd, sd)
+    z = (block_inv @ (proj @ r)) / sd
+    out = np.empty(d)
+    for j in range(d):
+        cj = cov_z[j::d, j::d]
+        tr2 = float(np.sum(cj * cj))
+        nu = float(np.trace(cj)) ** 2 / tr2 if tr2 > 0.0 else float(n)
+        zj = z[j::d]
+        kurtosis = float(np.mean(zj**4)) / max(float(np.mean(zj**2)) ** 2, np.finfo(float).tiny)
+        out[j] = nu * min(1.0, 2.0 / max(kurtosis - 1.0, np.finfo(float).tiny)) if heavy_tails else nu
+    e = (block_inv @ (proj @ r)).reshape(n, d)
+    quad = np.empty(n)
+    for i in range(n):
+        block = cov_e[i * d : (i + 1) * d, i * d : (i + 1) * d]
+        quad[i] = float(e[i] @ np.linalg.pinv(block, hermitian=True) @ e[i])
+    mean = float(np.mean(quad)) / d
+    rho = float(np.mean(quad**2)) / max(mean**2, np.finfo(float).tiny) / (d * (d + 2))
+    tail = (4.0 * rho - 2.0) / (rho - 1.0) if rho > 1.0 + 1e-9 else float("inf")
+    return np.asarray(out, dtype=np.float64), float(tail)
+
+
 def standardised_innovations(residuals: Array) -> Array | None:
     """The residuals centred and whitened to identity covariance, shape (n, d); None when their
     covariance is singular (a direction without scatter: normal innovations then).
@@ -389,6 +523,21 @@ def standardised_innovations(residuals: Array) -> Array | None:
     if evals[0] <= 1e-12 * max(float(evals[-1]), np.finfo(float).tiny):
         return None
     return np.asarray(centred @ (evecs / np.sqrt(evals)) @ evecs.T, dtype=np.float64)
+
+
+def _scale_moments(dof: Array) -> Array:
+    """``M_jk = E[g_j g_k]`` of independent ``g_j = sqrt(nu_j / chi2(nu_j))``, shape (d, d):
+    ``nu_j / (nu_j - 2)`` on the diagonal, ``E[g_j] E[g_k]`` off it (``E[g] = sqrt(nu / 2)
+    Gamma((nu - 1) / 2) / Gamma(nu / 2)``); 1 where ``nu`` is infinite."""
+    from scipy.special import gammaln
+
+    nu = np.asarray(dof, dtype=np.float64)
+    finite = nu < _T_DOF_MAX
+    nu = np.where(finite, nu, 3.0)
+    mean = np.where(finite, np.sqrt(nu / 2.0) * np.exp(gammaln((nu - 1.0) / 2.0) - gammaln(nu / 2.0)), 1.0)
+    moments = np.outer(mean, mean)
+    np.fill_diagonal(moments, np.where(finite, nu / (nu - 2.0), 1.0))
+    return np.asarray(moments, dtype=np.float64)
 
 
 def _psd_factor(matrix: Array) -> Array:
@@ -429,6 +578,8 @@ class FieldNormal:
     _ct: Array = field(init=False, repr=False)
     _cc: Array = field(init=False, repr=False)
     _root: Array = field(init=False, repr=False)
+    _dof: Array | None = field(init=False, repr=False)
+    _gum_root: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         qt = np.asarray(self.calibration_joints, dtype=np.float64)
@@ -449,11 +600,17 @@ class FieldNormal:
             cc = _psd_factor(c_cc - b @ b.T + _JITTER * np.eye(qc.shape[0]))
         else:
             cc = np.sqrt(np.clip(1.0 - np.sum(b * b, axis=1), 0.0, None))
-        root = _psd_factor(np.asarray(self.estimate.per_pose_covariance, dtype=np.float64))
+        sigma = np.asarray(self.estimate.per_pose_covariance, dtype=np.float64)
+        root = _psd_factor(sigma)
+        dof = None if self.estimate.scale_dof is None else np.asarray(self.estimate.scale_dof, dtype=np.float64)
+        if dof is not None and (dof.shape != (root.shape[0],) or bool(np.all(dof >= _T_DOF_MAX))):
+            dof = None
         object.__setattr__(self, "_tt", l_tt)
         object.__setattr__(self, "_ct", b)
         object.__setattr__(self, "_cc", cc)
         object.__setattr__(self, "_root", root)
+        object.__setattr__(self, "_dof", dof)
+        object.__setattr__(self, "_gum_root", root if dof is None else _psd_factor(_scale_moments(dof) * sigma))
 
     @property
     def dimension(self) -> int:
@@ -462,7 +619,7 @@ class FieldNormal:
 
     @property
     def size(self) -> int:
-        return (self._tt.shape[0] + self._ct.shape[0]) * self.dimension
+        return int(self._tt.shape[0] + self._ct.shape[0]) * self.dimension
 
     def mean_vector(self) -> Array:
         return np.zeros(self.size)
@@ -476,8 +633,9 @@ class FieldNormal:
         return np.asarray(np.vstack((top, bottom)), dtype=np.float64)
 
     def covariance(self) -> Array:
-        """Covariance of the drawn vector, shape (size, size) (the GUM's input covariance)."""
-        root = self._root
+        """Covariance of the drawn vector, shape (size, size) (the GUM's input covariance):
+        ``C_s (x) (M o Sigma_m)``, ``M`` the second moments of the drawn scale factors."""
+        root = self._gum_root
         return np.asarray(np.kron(self.scalar_covariance(), root @ root.T), dtype=np.float64)
 
     def _instances(self, values: Array) -> Array:
@@ -493,14 +651,31 @@ class FieldNormal:
         return np.asarray(np.concatenate((e_t, -e_c), axis=1), dtype=np.float64)
 
     def sample(self, rng: np.random.Generator, n: int) -> Array:
-        """``n`` draws, shape (n, size): ``(F_s (x) Sigma_m^(1/2)) z`` with one standard normal
-        vector ``z`` per draw, consumed in a fixed order."""
+        """``n`` draws, shape (n, size): ``(F_s (x) diag(g) Sigma_m^(1/2)) z`` with one standard
+        normal vector ``z`` per draw and, where the scale is estimated (``nu_j`` finite), per draw
+        and component ``g_j = sqrt(nu_j / chi2(nu_j))``: the scale as uncertain as its estimate
+        (Student-t marginals, the predictive distribution of a normal quantity whose variance is
+        estimated with ``nu_j`` degrees of freedom; JCGM 101 6.4.9). Where the prediction errors
+        are heavier tailed than normal (:attr:`FieldEstimate.tail_dof` finite) ``z`` is normal and
+        every draw is scaled by ``w = sqrt((nu - 2) / chi2(nu))`` (a Student-t process: the field's
+        covariance, a multivariate t at every configuration, the tails kept however many
+        calibration poses a test configuration's error is conditioned on; resampled innovations
+        would average out there). Consumed in a fixed order."""
         n_t, n_c, d = self._tt.shape[0], self._ct.shape[0], self.dimension
-        if self.innovations is None:
+        tail = float(self.estimate.tail_dof)
+        if self.innovations is None or tail < _T_DOF_MAX:
             z = rng.standard_normal((int(n), n_t + n_c, d))
         else:
             z = self.innovations[rng.integers(0, self.innovations.shape[0], size=(int(n), n_t + n_c))]
         values = self._instances(z) @ self._root.T
+        if tail < _T_DOF_MAX:
+            # The t-process: one scale per draw, E[w^2] = 1 (the covariance is the field's).
+            values = values * np.sqrt((tail - 2.0) / rng.chisquare(tail, size=int(n)))[:, None, None]
+        if self._dof is not None:
+            finite = self._dof < _T_DOF_MAX
+            dof = np.where(finite, self._dof, 3.0)
+            factor = np.where(finite, np.sqrt(dof / rng.chisquare(dof, size=(int(n), d))), 1.0)
+            values = values * factor[:, None, :]
         return np.asarray(values.reshape(int(n), self.size), dtype=np.float64)
 
     def whitened_sensitivities(self, sensitivities: Array) -> Array:
@@ -515,7 +690,7 @@ class FieldNormal:
         """
         n_out = sensitivities.shape[0]
         n_inst, d = self.size // self.dimension, self.dimension
-        per_component = sensitivities.reshape(n_out, n_inst, d) @ self._root  # (o, N, d)
+        per_component = sensitivities.reshape(n_out, n_inst, d) @ self._gum_root  # (o, N, d)
         n_t = self._tt.shape[0]
         head, tail = per_component[:, :n_t], per_component[:, n_t:]
         # (S F)_t = S_t L_tt - S_c B, (S F)_c = -S_c L_cc.

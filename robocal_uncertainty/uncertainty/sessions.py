@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
-from robocal_uncertainty.core.model_error_field import ModelErrorField, chordal_distance, kernel_correlation
+from robocal_uncertainty.core.model_error_field import ModelErrorField
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.session import (
     BASE_NAMES,
@@ -38,7 +38,7 @@ from robocal_uncertainty.core.session import (
 )
 from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy, pose_noise_covariances
-from robocal_uncertainty.uncertainty.model_error_draws import FIELD_LENGTH_BOUNDS, central_hessian
+from robocal_uncertainty.uncertainty.model_error_draws import estimate_field
 
 __all__ = [
     "FIELD_MAX_POSES",
@@ -356,17 +356,6 @@ FIELD_MAX_POSES = 200
 """Most poses the field's hyperparameters are estimated from (a seeded subset of larger campaigns)."""
 
 
-def _fit_space(calibration: IdentificationResult, q: Array) -> Array:
-    """Orthonormal basis of the space the fit spans (its Jacobian's columns), shape (3 n, rank)."""
-    layout = calibration.model.layout
-    est = np.flatnonzero(calibration.estimated)
-    _, jac = forward_points_and_jacobian(layout, calibration.estimate, q)
-    a_mat = jac.reshape(3 * q.shape[0], layout.size)[:, est] / calibration.column_scale[est]
-    u, s, _ = np.linalg.svd(a_mat, full_matrices=False)
-    rank = int(np.sum(s > 1e-10 * s[0]))
-    return np.asarray(u[:, :rank], dtype=np.float64)
-
-
 def estimate_model_error_field(
     calibration: IdentificationResult,
     joint_positions: Array,
@@ -378,14 +367,11 @@ def estimate_model_error_field(
 ) -> tuple[ModelErrorField, float]:
     """The correlated model error of a point calibration by restricted maximum likelihood.
 
-    The calibration residuals are, to first order, the part of ``e + eps`` (model error plus
-    stated noise) the fit leaves: their projection ``z = Q^T r`` on the ``m = 3 n - rank``
-    directions orthogonal to the Jacobian depends on neither the parameters nor their
-    estimate, and is normal with covariance ``Q^T (N + V(s, c, l)) Q`` (evaluated without
-    forming ``Q``, by Harville's identity) (``N`` the stated noise,
-    ``V = [c rho(d / l) + (1 - c) I] (x) s S``, see
-    :mod:`~robocal_uncertainty.core.model_error_field`). ``s``, ``c``, ``l`` maximise that
-    (restricted) likelihood; with ``c = 0`` it is the independent model error.
+    The estimator every statement uses (:func:`~robocal_uncertainty.uncertainty.model_error_draws.estimate_field`:
+    the likelihood of the residuals' contrasts orthogonal to the fit, ``V = [c rho(d / l) +
+    (1 - c) I] (x) s S``, see :mod:`~robocal_uncertainty.core.model_error_field`), here with the
+    likelihood's scale ``s``: a check re-registers and is tested against the validated level,
+    and the session records the field with what a check needs to use it.
 
     Parameters
     ----------
@@ -408,90 +394,27 @@ def estimate_model_error_field(
         The field (without its gain: :func:`session_state` adds it) and ``s`` [m^2]: the
         per-pose model-error covariance is ``s S``.
     """
-    from scipy import linalg, optimize
-
     q_all = np.asarray(joint_positions, dtype=np.float64)
-    n_all = q_all.shape[0]
-    idx = np.arange(n_all)
-    if n_all > max_poses:
-        idx = np.sort(np.random.default_rng(seed).choice(n_all, size=max_poses, replace=False))
-    q = q_all[idx]
-    fit = _fit_space(calibration, q)
-    r = np.asarray(calibration.residuals, dtype=np.float64)[idx].reshape(-1)
-    m = r.size - fit.shape[1]
-    layout = calibration.model.layout
-    b0 = layout.base_index
+    b0 = calibration.model.layout.base_index
     r_wb = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6])
     shape = np.asarray(shape_base, dtype=np.float64)
     shape = 3.0 * shape / np.trace(shape) if np.trace(shape) > 0 else np.eye(3)
-    s_meas = r_wb @ shape @ r_wb.T
-    n_all_cov = linalg.block_diag(*noise[idx])
-    w_white = np.kron(np.eye(q.shape[0]), s_meas)
-    distance = chordal_distance(q, q)
-    noise_level = float(np.trace(n_all_cov)) / r.size
-    mean_square = float(r @ r) / m
-
-    def nll(log_s: float, c: float, log_l: float) -> float:
-        # -log of the likelihood of the contrasts Q^T r (Q orthonormal, orthogonal to the fit
-        # space U), by Harville's identity: log|Q^T V Q| = log|V| + log|U^T V^-1 U| and
-        # r^T Q (Q^T V Q)^-1 Q^T r = r^T (V^-1 - V^-1 U (U^T V^-1 U)^-1 U^T V^-1) r.
-        s = float(np.exp(log_s))
-        cov = n_all_cov + s * (1.0 - c) * w_white
-        if c > 0.0:
-            cov = cov + s * c * np.kron(kernel_correlation(distance, float(np.exp(log_l))), s_meas)
-        try:
-            chol = linalg.cholesky(cov, lower=True)
-            vi_u = linalg.cho_solve((chol, True), fit)
-            vi_r = linalg.cho_solve((chol, True), r)
-            chol_u = linalg.cholesky(fit.T @ vi_u, lower=True)
-        except linalg.LinAlgError:
-            return float("inf")
-        w = linalg.solve_triangular(chol_u, fit.T @ vi_r, lower=True)
-        quad = float(r @ vi_r - w @ w)
-        return float(np.sum(np.log(np.diag(chol))) + np.sum(np.log(np.diag(chol_u))) + 0.5 * quad)
-
-    s0 = max(mean_square - noise_level, 1e-3 * noise_level)
-    lo_s, hi_s = np.log(1e-6 * noise_level), np.log(1e4 * max(mean_square, noise_level))
-    lo_l, hi_l = np.log(FIELD_LENGTH_BOUNDS[0]), np.log(FIELD_LENGTH_BOUNDS[1])
-    independent = optimize.minimize_scalar(lambda a: nll(a, 0.0, 0.0), bounds=(lo_s, hi_s), method="bounded")
-    best = (float(independent.fun), float(independent.x), 0.0, float(np.log(0.5)))
-    for length in (0.1, 0.5, 2.0):
-        res = optimize.minimize(
-            lambda t: nll(t[0], t[1], t[2]),
-            x0=np.array([np.log(s0), 0.5, np.log(length)]),
-            method="L-BFGS-B",
-            bounds=[(lo_s, hi_s), (0.0, 1.0), (lo_l, hi_l)],
-        )
-        if res.fun < best[0]:
-            best = (float(res.fun), float(res.x[0]), float(res.x[1]), float(res.x[2]))
-    fun, log_s, c, log_l = best
-    # Degrees of freedom of s: 2 / var(log s), var from the curvature of the likelihood in the
-    # free hyperparameters (log s, and c and log l where c is inside (0, 1)).
-    free = [0] if c <= 1e-6 else ([0, 1, 2] if c < 1.0 - 1e-6 else [0, 2])
-    hess = central_hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
-    hyper = np.zeros((3, 3))
-    try:
-        inv = np.linalg.inv(hess)
-    except np.linalg.LinAlgError:
-        inv = np.full_like(hess, np.nan)
-    var_log_s = float(inv[0, 0])
-    if np.all(np.isfinite(inv)) and np.all(np.linalg.eigvalsh(0.5 * (inv + inv.T)) > 0):
-        hyper[np.ix_(free, free)] = 0.5 * (inv + inv.T)
-    dof = 2.0 / var_log_s if np.isfinite(var_log_s) and var_log_s > 0 else float(m)
-    dof = float(min(max(dof, 1.0), m))
+    estimate = estimate_field(
+        calibration, q_all, noise, r_wb @ shape @ r_wb.T, max_equations=3 * max_poses, seed=seed, leave_one_out=False
+    )
     field = ModelErrorField(
-        correlated_fraction=c,
-        length_scale=float(np.exp(log_l)),
+        correlated_fraction=estimate.correlated_fraction,
+        length_scale=estimate.length_scale,
         joint_positions=q_all.copy(),
         gain_names=(),
-        gain=np.zeros((0, 3 * n_all)),
-        dof=dof,
-        log_likelihood=-fun - 0.5 * m * np.log(2 * np.pi),
-        independent_log_likelihood=-float(independent.fun) - 0.5 * m * np.log(2 * np.pi),
-        hyper_covariance=hyper,
-        extra={"poses_used": int(q.shape[0]), "contrasts": int(m)},
+        gain=np.zeros((0, 3 * q_all.shape[0])),
+        dof=estimate.dof,
+        log_likelihood=estimate.log_likelihood,
+        independent_log_likelihood=estimate.independent_log_likelihood,
+        hyper_covariance=estimate.hyper_covariance,
+        extra={"poses_used": estimate.poses_used, "contrasts": estimate.contrasts},
     )
-    return field, float(np.exp(log_s))
+    return field, float(np.trace(estimate.per_pose_covariance)) / 3.0
 
 
 LEVEL_FOLDS = 5

@@ -62,13 +62,13 @@ def test_no_model_error_no_change_over_many_seeds() -> None:
 
 
 @pytest.mark.slow
-def test_field_estimated_on_noise_alone_is_small_and_not_identified() -> None:
+def test_field_estimated_on_noise_alone_is_small() -> None:
     """The estimator itself, run whatever the adequacy test says: on noise alone its model error
-    stays well below the noise (median 0.009 of the noise's u over 30 seeds) and an estimate is
-    mostly not identified (it would not be drawn); those identified stay far below the noise."""
+    stays well below the noise. (Whether it is drawn depends on its scale's degrees of freedom
+    only, which noise alone gives plenty of: a field this small changes no statement, the test
+    above.)"""
     model = load_robot_model(ROOT / "config/paper_arm.yaml")
     ratios = []
-    identified = []
     for seed in range(30):
         sim = simulate_campaign(model, SimulationSettings(), seed=seed)
         calibration = identify(model, sim.campaign)
@@ -78,10 +78,12 @@ def test_field_estimated_on_noise_alone_is_small_and_not_identified() -> None:
         noise = pose_noise_covariances(calibration, q, TrackerNoise(), EncoderNoise(), distances)
         estimate = estimate_field(calibration, q, noise, adequacy.residual_covariance)
         ratios.append(estimate.standard_uncertainty / np.sqrt(np.diag(adequacy.noise_covariance)))
-        identified.append(estimate.identified)
     ratios_max = np.max(ratios, axis=1)
+    print(
+        f"median {np.median(ratios):.3g}, above 0.6: {int(np.sum(ratios_max > 0.6))} of 30, max {ratios_max.max():.3g}"
+    )
     assert np.median(ratios) < 0.2  # measured 0.009
-    assert sum(identified) <= 3  # measured 2 of 30
-    # A component may come out near the noise from the noise's own fluctuation (measured: one of
-    # 90 at 1.26), never in an estimate identified enough to be drawn.
-    assert np.all(ratios_max[np.array(identified)] < 0.6)
+    # A component may come out near the noise from the noise's own fluctuation (measured: 2 of 30
+    # seeds above 0.6, the largest 1.26); the residual source draws it only where the adequacy
+    # test rejects the model, and then changes the statement by a few per cent (the test above).
+    assert np.sum(ratios_max > 0.6) <= 4
