@@ -113,7 +113,7 @@ class Linearization:
         """C_k for `information` (default: the campaign's), shape (n_test, 3, 3) [m^2]."""
         cov = self.covariance if information is None else np.linalg.inv(information)
         g = self.test_jacobian
-        return np.einsum("kan,nm,kbm->kab", g, cov, g) + self.test_encoder_covariance
+        return np.asarray(np.einsum("kan,nm,kbm->kab", g, cov, g) + self.test_encoder_covariance, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -324,7 +324,7 @@ def rank_candidates(
     b_mat = cov @ gtg @ cov
     s = r_c + np.einsum("can,nm,cbm->cab", a_c, cov, a_c)
     t = np.einsum("can,nm,cbm->cab", a_c, b_mat, a_c)
-    return np.trace(np.linalg.solve(s, t), axis1=1, axis2=2)
+    return np.asarray(np.trace(np.linalg.solve(s, t), axis1=1, axis2=2), dtype=np.float64)
 
 
 def with_simulated_pose(campaign: Campaign, model: RobotModel, estimate: Array, joints: ArrayLike) -> Campaign:
