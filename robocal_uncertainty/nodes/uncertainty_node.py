@@ -120,6 +120,7 @@ from robocal_uncertainty.uncertainty import (
     sources_help,
 )
 from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings, build_uncertainty_settings
+from robocal_uncertainty.uncertainty.sources import source_parameters
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
 
@@ -140,15 +141,7 @@ _MONTE_CARLO = frozenset(
         "n_dig",
         "seed",
         "coverage",
-        "tracker_noise_um",
-        "tracker_noise_um_per_m",
-        "encoder_noise_deg",
-        "linear_encoder_noise_um",
-        "lambda_range_low",
-        "lambda_range_high",
-        "min_poses",
-        "subset_size",
-        "model_error_field",
+        *(parameter.name for parameter in source_parameters()),
         "tracker_xyz_m",
         "output_frame",
         "accept_unconverged",
@@ -242,45 +235,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("n_dig", 2, "Significant digits of the adaptive procedure", "digits", low=1, high=4),
     ParamSpec("seed", 0, "Root seed of the random streams (same seed, same numbers)", low=0, high=2**62),
     ParamSpec("coverage", 0.95, "Coverage probability p of the intervals", "", low=0.5, high=0.9999),
-    ParamSpec("tracker_noise_um", 5.0, "Tracker error half-width a per coordinate (uniform)", "um", low=0.0, high=1e6),
-    ParamSpec(
-        "tracker_noise_um_per_m",
-        0.0,
-        "Distance-proportional part b of the tracker MPE a + b L",
-        "um/m",
-        low=0.0,
-        high=1e6,
-    ),
-    ParamSpec("encoder_noise_deg", 0.005, "Encoder error half-width (uniform)", "deg", low=0.0, high=10.0),
-    ParamSpec(
-        "linear_encoder_noise_um",
-        5.0,
-        "Reading error half-width of a prismatic joint (uniform)",
-        "um",
-        low=0.0,
-        high=1e6,
-    ),
-    ParamSpec(
-        "lambda_range_low",
-        0.0,
-        "Low end of lambda for the 'lambda' source; 0 and 0 = lambda*/5 .. 5 lambda*",
-        "dimensionless",
-        low=0.0,
-        high=1e12,
-    ),
-    ParamSpec(
-        "lambda_range_high", 0.0, "High end of lambda for the 'lambda' source", "dimensionless", low=0.0, high=1e12
-    ),
-    ParamSpec(
-        "min_poses", 0, "Smallest pose count of the 'n_poses' source; 0 = automatic", "poses", low=0, high=100_000
-    ),
-    ParamSpec("subset_size", 0, "Pose count of the 'pose_choice' source; 0 = automatic", "poses", low=0, high=100_000),
-    ParamSpec(
-        "model_error_field",
-        False,
-        "Draw the residual source's model error as a field over the joint configurations instead of "
-        "independently from pose to pose",
-        "",
+    # The settings of every registered source (noise models, lambda range, pose counts, model error).
+    *(
+        ParamSpec(
+            parameter.name,
+            parameter.default,
+            parameter.description,
+            parameter.unit,
+            low=parameter.low,
+            high=parameter.high,
+        )
+        for parameter in source_parameters()
     ),
     ParamSpec(
         "tracker_xyz_m",
