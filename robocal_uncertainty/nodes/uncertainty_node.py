@@ -119,8 +119,8 @@ from robocal_uncertainty.uncertainty import (
     parse_sources,
     sources_help,
 )
-from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings, build_uncertainty_settings
-from robocal_uncertainty.uncertainty.sources import source_parameters
+from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings, build_source_settings
+from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY, SourceOption, source_parameters
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
 
@@ -151,6 +151,11 @@ _MONTE_CARLO = frozenset(
         "sweep_trials",
     }
 )
+
+
+def source_options_all() -> tuple[SourceOption, ...]:
+    """The options of every registered source (each gives its value from the node's parameters)."""
+    return tuple(option for spec in SOURCE_REGISTRY.values() for option in spec.options)
 
 
 def _sources(value: Any) -> str | None:
@@ -448,17 +453,11 @@ class UncertaintyNode(Node):
         def get(name: str) -> Any:
             return self.get_parameter(name).value
 
-        low, high = float(get("lambda_range_low")), float(get("lambda_range_high"))
-        settings = build_uncertainty_settings(
+        # Every registered source's options from its parameters (each source turns its own into settings).
+        parameters = {parameter.name: get(parameter.name) for parameter in source_parameters()}
+        settings = build_source_settings(
             sources=self._sources_for(measures_orientation),
-            tracker_noise_um=get("tracker_noise_um"),
-            tracker_noise_um_per_m=get("tracker_noise_um_per_m"),
-            encoder_noise_deg=get("encoder_noise_deg"),
-            linear_encoder_noise_um=float(get("linear_encoder_noise_um")),
-            model_error_field=bool(get("model_error_field")),
-            lambda_range=None if low == high == 0.0 else (low, high),
-            min_poses=int(get("min_poses")) or None,
-            subset_size=int(get("subset_size")) or None,
+            values={option.dest: option.from_parameters(parameters) for option in source_options_all()},
             tracker_xyz_m=get("tracker_xyz_m"),
         )
         trials = int(get("trials"))

@@ -142,3 +142,53 @@ def test_a_registered_source_brings_its_option_and_parameter_everywhere() -> Non
     finally:
         del SOURCE_REGISTRY["test_drift"]
     assert "--test-drift-um" not in _parser(add_noise_args).format_help()
+
+
+def _all_options() -> tuple[SourceOption, ...]:
+    return tuple(option for spec in SOURCE_REGISTRY.values() for option in spec.options)
+
+
+def test_node_parameters_give_the_settings_the_command_line_gives() -> None:
+    from robocal_uncertainty.uncertainty.calibration.settings import build_source_settings, build_uncertainty_settings
+
+    # Defaults: the node's zeros stand for the options left unset.
+    node = {p.name: p.default for p in source_parameters()}
+    from_node = {o.dest: o.from_parameters(node) for o in _all_options()}
+    cli = vars(_parser(lambda q: add_uncertainty_args(q, trials_default="auto")).parse_args([]))
+    from_cli = {o.dest: cli[o.dest] for o in _all_options()}
+    assert from_node == from_cli
+    assert build_source_settings(sources="all", values=from_node) == build_source_settings(
+        sources="all", values=from_cli
+    )
+    # Set values (the node's integer YAML values included), against the keyword builder.
+    node.update(
+        tracker_noise_um=7,
+        tracker_noise_um_per_m=1.5,
+        encoder_noise_deg=0.01,
+        linear_encoder_noise_um=3,
+        lambda_range_low=0.001,
+        lambda_range_high=2.0,
+        min_poses=20,
+        subset_size=30,
+        model_error_field=True,
+    )
+    built = build_source_settings(sources="all", values={o.dest: o.from_parameters(node) for o in _all_options()})
+    expected = build_uncertainty_settings(
+        sources="all",
+        tracker_noise_um=7.0,
+        tracker_noise_um_per_m=1.5,
+        encoder_noise_deg=0.01,
+        linear_encoder_noise_um=3.0,
+        model_error_field=True,
+        lambda_range=(0.001, 2.0),
+        min_poses=20,
+        subset_size=30,
+    )
+    assert built == expected
+    assert built.tracker_noise.a == 7e-6 and built.encoder_noise.half_width == np.radians(0.01)
+    assert (built.lambda_range, built.min_poses, built.subset_size, built.model_error) == (
+        (0.001, 2.0),
+        20,
+        30,
+        "field",
+    )

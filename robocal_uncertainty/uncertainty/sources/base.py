@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -209,6 +209,25 @@ class SourceOption:
     flag_only: bool = False
     parameters: tuple[NodeParameter, ...] = ()
 
+    @property
+    def dest(self) -> str:
+        """Key of the option's value: the argparse destination (``--min-poses``: ``min_poses``)."""
+        return self.flag.lstrip("-").replace("-", "_")
+
+    def from_parameters(self, values: Mapping[str, Any]) -> Any:
+        """The option's value, as the command line gives it, from the node's parameter `values`.
+
+        A range (two parameters) of zeros and a count of 0 stand for the option left unset
+        (None); otherwise the parameters' values in the option's type.
+        """
+        convert: Callable[[Any], Any] = bool if self.flag_only or self.type is None else self.type
+        given = [convert(values[parameter.name]) for parameter in self.parameters]
+        if self.nargs is not None:
+            return None if all(v == 0 for v in given) else tuple(given)
+        if self.default is None and not self.flag_only and given[0] == 0:
+            return None
+        return given[0]
+
     def argparse_kwargs(self) -> dict[str, object]:
         """Keyword arguments of ``ArgumentParser.add_argument(self.flag, **kwargs)``."""
         if self.flag_only:
@@ -330,6 +349,10 @@ class SourceSpec:
     options : tuple of SourceOption
         The settings of the source a user sets (command-line options, node parameters),
         with their units, ranges and defaults.
+    to_settings : callable, optional
+        ``to_settings(values) -> {field: value}``: the :class:`UncertaintySettings` fields
+        (SI units) of the option values (keyed by :attr:`SourceOption.dest`, in the options'
+        units), so the command line and the node build the settings without naming them.
     """
 
     name: str
@@ -339,6 +362,7 @@ class SourceSpec:
     role: SourceRole | None = None
     in_sweeps: bool = False
     options: tuple[SourceOption, ...] = ()
+    to_settings: Callable[[Mapping[str, Any]], Mapping[str, object]] | None = None
 
     @property
     def stream_id(self) -> int:

@@ -6,10 +6,12 @@ distributions, so the GUM variance and the Monte Carlo samples come from one def
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.montecarlo.distributions import (
     IndependentCopies,
     IndependentNormal,
@@ -132,8 +134,28 @@ ENCODER_OPTIONS = (
 )
 """Encoder reading half-widths, revolute and prismatic (settings: ``encoder_noise``)."""
 
+
+def _tracker_settings(values: Mapping[str, Any]) -> Mapping[str, object]:
+    return {
+        "tracker_noise": TrackerNoise(a=values["tracker_noise_um"] * 1e-6, b=values["tracker_noise_um_per_m"] * 1e-6)
+    }
+
+
+def _encoder_settings(values: Mapping[str, Any]) -> Mapping[str, object]:
+    half_width = float(np.radians(values["encoder_noise_deg"]))
+    return {
+        "encoder_noise": EncoderNoise(half_width=half_width, linear_half_width=values["linear_encoder_noise_um"] * 1e-6)
+    }
+
+
 TRACKER = SourceSpec(
-    "tracker", "laser-tracker noise on every measured point", True, _tracker, in_sweeps=True, options=TRACKER_OPTIONS
+    "tracker",
+    "laser-tracker noise on every measured point",
+    True,
+    _tracker,
+    in_sweeps=True,
+    options=TRACKER_OPTIONS,
+    to_settings=_tracker_settings,
 )
 ENCODER = SourceSpec(
     "encoder",
@@ -142,6 +164,7 @@ ENCODER = SourceSpec(
     _encoder,
     in_sweeps=True,
     options=ENCODER_OPTIONS,
+    to_settings=_encoder_settings,
 )
 TRACKER_ORIENTATION = SourceSpec(
     "tracker_orientation",

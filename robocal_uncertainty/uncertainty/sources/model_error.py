@@ -46,6 +46,7 @@ RESIDUAL = SourceSpec(
     _residual,
     role="model_error",
     in_sweeps=True,
+    to_settings=lambda values: {"model_error": "field" if values["model_error_field"] else "independent"},
     options=(
         SourceOption(
             "--model-error-field",

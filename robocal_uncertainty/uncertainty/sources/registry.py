@@ -8,7 +8,7 @@ in all of them.
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.sources.base import (
@@ -39,6 +39,7 @@ __all__ = [
     "register_source",
     "source_options",
     "source_parameters",
+    "source_settings_fields",
     "source_with_role",
     "sources_help",
     "sources_in_sweeps",
@@ -190,3 +191,24 @@ def source_parameters() -> tuple[NodeParameter, ...]:
     return tuple(
         parameter for spec in SOURCE_REGISTRY.values() for option in spec.options for parameter in option.parameters
     )
+
+
+def source_settings_fields(values: Mapping[str, Any]) -> dict[str, object]:
+    """The :class:`UncertaintySettings` fields of every registered source's option `values`.
+
+    Parameters
+    ----------
+    values : mapping
+        Option values by :attr:`SourceOption.dest`, in the options' units (as the command
+        line parses them, or :meth:`SourceOption.from_parameters` of the node's parameters).
+
+    Raises
+    ------
+    KeyError
+        A registered source's option has no value in `values`.
+    """
+    fields: dict[str, object] = {}
+    for spec in SOURCE_REGISTRY.values():
+        if spec.to_settings is not None:
+            fields.update(spec.to_settings(values))
+    return fields

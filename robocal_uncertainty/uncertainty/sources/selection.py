@@ -6,8 +6,9 @@ act on the batch's ``lambdas`` and ``weights`` instead of adding to a field.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -109,12 +110,18 @@ def _pose_choice(settings: UncertaintySettings, ctx: TrialContext) -> Source:
     return PoseChoiceSource(ctx.subset_size, ctx.min_poses, ctx.n_poses)
 
 
+def _lambda_settings(values: Mapping[str, Any]) -> Mapping[str, object]:
+    given = values["lambda_range"]
+    return {"lambda_range": None if given is None else (given[0], given[1])}
+
+
 LAMBDA = SourceSpec(
     "lambda",
     "regularisation parameter drawn over its valid range around the L-curve optimum",
     False,
     _lambda,
     role="lambda",
+    to_settings=_lambda_settings,
     options=(
         SourceOption(
             "--lambda-range",
@@ -146,6 +153,7 @@ N_POSES = SourceSpec(
     False,
     _n_poses,
     role="pose_count",
+    to_settings=lambda values: {"min_poses": values["min_poses"]},
     options=(
         SourceOption(
             "--min-poses",
@@ -168,6 +176,7 @@ POSE_CHOICE = SourceSpec(
     False,
     _pose_choice,
     role="pose_subset",
+    to_settings=lambda values: {"subset_size": values["subset_size"]},
     options=(
         SourceOption(
             "--subset-size",
