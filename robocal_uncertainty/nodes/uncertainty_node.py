@@ -442,8 +442,9 @@ class UncertaintyNode(Node):
         (``tracker_orientation``), as ``evaluate``, ``validate`` and ``replay`` do."""
         given = str(self.get_parameter("sources").value)
         default = next(spec.default for spec in PARAMETERS if spec.name == "sources")
-        if given == default and measures_orientation and "tracker_orientation" not in given.split(","):
-            return given + ",tracker_orientation"
+        if given == default and measures_orientation:
+            # The registry's default set of a campaign with orientations (as the commands use).
+            return ",".join(default_sources(measures_orientation=True))
         return given
 
     def _options(self, msg: CalibrationResultMsg, *, measures_orientation: bool = False) -> EvaluationSettings:
