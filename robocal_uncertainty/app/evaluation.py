@@ -31,6 +31,7 @@ from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_unce
 from robocal_uncertainty.uncertainty.calibration.results import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 from robocal_uncertainty.uncertainty.memory import check_fits, evaluation_bytes
+from robocal_uncertainty.uncertainty.sources import sources_with_role
 from robocal_uncertainty.uncertainty.statement_check import interval_trial_floor, recommended_trials
 from robocal_uncertainty.uncertainty.sweeps import Sweep, evaluate_sweeps
 
@@ -102,21 +103,23 @@ def small_campaign_options(
     notes: list[str] = []
     changes: dict[str, Any] = {}
     default_min = max(math.ceil(40 / dim), math.ceil(1.5 * k / dim))
-    uses_min = "n_poses" in sources or "pose_choice" in sources or options.sweeps
+    counts = sources_with_role(sources, "pose_count")
+    subsets = sources_with_role(sources, "pose_subset")
+    uses_min = bool(counts or subsets) or options.sweeps
     if settings.min_poses is None and uses_min and default_min > n_poses:
         changes["min_poses"] = fewest
-        if "n_poses" in sources:
+        if counts:
             notes.append(
-                f"the campaign's {n_poses} poses are fewer than the {default_min} the n_poses source starts from "
+                f"the campaign's {n_poses} poses are fewer than the {default_min} the {counts[0]} source starts from "
                 f"by default (40 equations or 1.5 x the {k} identifiable parameters): it draws {fewest} to "
                 f"{n_poses} poses ({fewest} = identifiable parameters / {dim}); set min_poses to choose"
             )
     default_subset = round(33 / 53 * n_poses)
-    if settings.subset_size is None and "pose_choice" in sources and default_subset < fewest:
+    if settings.subset_size is None and subsets and default_subset < fewest:
         changes["subset_size"] = fewest
         notes.append(
             f"33/53 of the campaign's {n_poses} poses ({default_subset}) cannot identify the {k} parameters: "
-            f"the pose_choice source draws subsets of {fewest} poses; set subset_size to choose"
+            f"the {subsets[0]} source draws subsets of {fewest} poses; set subset_size to choose"
         )
     if not changes:
         return options, ()

@@ -156,25 +156,21 @@ def print_adequacy(result: Any) -> None:
 def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Sequence[str]) -> Any:
     """The :class:`UncertaintySettings` of the parsed noise and source arguments (the node's
     parameters go through the same :func:`build_uncertainty_settings`)."""
-    from robocal_uncertainty.uncertainty.calibration.settings import build_uncertainty_settings
+    from robocal_uncertainty.uncertainty.calibration.settings import build_source_settings
+    from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY
 
     between = None
     if getattr(args, "between_session", None):
         from robocal_uncertainty.uncertainty.between_sessions import between_sessions_from_file
 
         between = between_sessions_from_file(args.between_session)
-    return build_uncertainty_settings(
-        sources=tuple(sources),
-        tracker_noise_um=args.tracker_noise_um,
-        tracker_noise_um_per_m=args.tracker_noise_um_per_m,
-        encoder_noise_deg=args.encoder_noise_deg,
-        linear_encoder_noise_um=args.linear_encoder_noise_um,
-        model_error_field=bool(getattr(args, "model_error_field", False)),
-        lambda_range=None if args.lambda_range is None else (args.lambda_range[0], args.lambda_range[1]),
-        min_poses=args.min_poses,
-        subset_size=args.subset_size,
-        between_session=between,
-    )
+    # Every registered source's options, as parsed (each source turns its own into settings).
+    values = {
+        option.dest: getattr(args, option.dest, False if option.flag_only else option.default)
+        for spec in SOURCE_REGISTRY.values()
+        for option in spec.options
+    }
+    return build_source_settings(sources=tuple(sources), values=values, between_session=between)
 
 
 def evaluation_options(

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from robocal_uncertainty.cli._common import DEFAULT_PAIRING_TOLERANCE_MS
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.uncertainty.sources import OptionGroup
 
 
 def add_force_arg(p: argparse.ArgumentParser, what: str) -> None:
@@ -57,32 +60,19 @@ def add_test_joint_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_source_args(p: argparse.ArgumentParser, group: OptionGroup) -> None:
+    """The options of the registered uncertainty sources in `group` (generated from the registry:
+    a source's options appear in every command that takes its group, with its help and unit)."""
+    from robocal_uncertainty.uncertainty.sources import source_options
+
+    for option in source_options(group):
+        kwargs: dict[str, Any] = option.argparse_kwargs()
+        p.add_argument(option.flag, **kwargs)
+
+
 def add_noise_args(p: argparse.ArgumentParser) -> None:
     """The tracker and encoder noise models, shared by simulate and the Monte Carlo commands."""
-    p.add_argument(
-        "--tracker-noise-um",
-        type=float,
-        default=5.0,
-        help="tracker error half-width a per coordinate, um (default %(default)s, uniform)",
-    )
-    p.add_argument(
-        "--tracker-noise-um-per-m",
-        type=float,
-        default=0.0,
-        help="distance-proportional part b of the MPE a + b L, um/m (default %(default)s)",
-    )
-    p.add_argument(
-        "--encoder-noise-deg",
-        type=float,
-        default=0.005,
-        help="encoder error half-width, deg (default %(default)s, uniform); revolute joints",
-    )
-    p.add_argument(
-        "--linear-encoder-noise-um",
-        type=float,
-        default=5.0,
-        help="reading error half-width of a prismatic joint, um (default %(default)s, uniform)",
-    )
+    add_source_args(p, "noise")
 
 
 def encoder_noise(args: argparse.Namespace) -> Any:
@@ -113,24 +103,7 @@ def add_uncertainty_args(p: argparse.ArgumentParser, *, trials_default: str) -> 
         default="auto",
         help="auto (L-curve corner), gcv, or a fixed value (default %(default)s)",
     )
-    p.add_argument(
-        "--lambda-range",
-        type=float,
-        nargs=2,
-        metavar=("LOW", "HIGH"),
-        help="range of lambda for the 'lambda' source (default lambda*/5 .. 5 lambda*)",
-    )
-    p.add_argument(
-        "--min-poses",
-        type=int,
-        help="smallest pose count of the 'n_poses' source (default: 40 equations or 1.5 x the identifiable "
-        "parameters, whichever is more; lowered for a smaller campaign)",
-    )
-    p.add_argument(
-        "--subset-size",
-        type=int,
-        help="pose count of the 'pose_choice' source (default: 33/53 of the campaign's poses)",
-    )
+    add_source_args(p, "selection")
     add_noise_args(p)
     add_model_error_arg(p)
     p.add_argument(
@@ -180,14 +153,8 @@ def histogram_count(text: str) -> int | str:
 
 
 def add_model_error_arg(p: argparse.ArgumentParser) -> None:
-    """--model-error-field: the residual source's model error as a field over the configurations."""
-    p.add_argument(
-        "--model-error-field",
-        action="store_true",
-        help="draw the model error as a Gaussian field over the joint configurations, jointly over the "
-        "calibration poses and the test configurations, instead of the default residual bootstrap, "
-        "independent from pose to pose (the field states 53-pose UR10 campaigns too narrow; see README)",
-    )
+    """The model-error options (--model-error-field: the residual source's model error as a field)."""
+    add_source_args(p, "model")
 
 
 def add_frame_and_convergence_args(p: argparse.ArgumentParser) -> None:

@@ -117,7 +117,8 @@ from robocal_uncertainty.uncertainty import (
     parse_sources,
     sources_help,
 )
-from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings, build_uncertainty_settings
+from robocal_uncertainty.uncertainty.calibration.settings import build_evaluation_settings, build_source_settings
+from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY, SourceOption, source_parameters
 
 __all__ = ["PARAMETERS", "UncertaintyNode", "main"]
 
@@ -138,15 +139,7 @@ _MONTE_CARLO = frozenset(
         "n_dig",
         "seed",
         "coverage",
-        "tracker_noise_um",
-        "tracker_noise_um_per_m",
-        "encoder_noise_deg",
-        "linear_encoder_noise_um",
-        "lambda_range_low",
-        "lambda_range_high",
-        "min_poses",
-        "subset_size",
-        "model_error_field",
+        *(parameter.name for parameter in source_parameters()),
         "tracker_xyz_m",
         "output_frame",
         "accept_unconverged",
@@ -156,6 +149,11 @@ _MONTE_CARLO = frozenset(
         "sweep_trials",
     }
 )
+
+
+def source_options_all() -> tuple[SourceOption, ...]:
+    """The options of every registered source (each gives its value from the node's parameters)."""
+    return tuple(option for spec in SOURCE_REGISTRY.values() for option in spec.options)
 
 
 def _sources(value: Any) -> str | None:
@@ -240,45 +238,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("n_dig", 2, "Significant digits of the adaptive procedure", "digits", low=1, high=4),
     ParamSpec("seed", 0, "Root seed of the random streams (same seed, same numbers)", low=0, high=2**62),
     ParamSpec("coverage", 0.95, "Coverage probability p of the intervals", "", low=0.5, high=0.9999),
-    ParamSpec("tracker_noise_um", 5.0, "Tracker error half-width a per coordinate (uniform)", "um", low=0.0, high=1e6),
-    ParamSpec(
-        "tracker_noise_um_per_m",
-        0.0,
-        "Distance-proportional part b of the tracker MPE a + b L",
-        "um/m",
-        low=0.0,
-        high=1e6,
-    ),
-    ParamSpec("encoder_noise_deg", 0.005, "Encoder error half-width (uniform)", "deg", low=0.0, high=10.0),
-    ParamSpec(
-        "linear_encoder_noise_um",
-        5.0,
-        "Reading error half-width of a prismatic joint (uniform)",
-        "um",
-        low=0.0,
-        high=1e6,
-    ),
-    ParamSpec(
-        "lambda_range_low",
-        0.0,
-        "Low end of lambda for the 'lambda' source; 0 and 0 = lambda*/5 .. 5 lambda*",
-        "dimensionless",
-        low=0.0,
-        high=1e12,
-    ),
-    ParamSpec(
-        "lambda_range_high", 0.0, "High end of lambda for the 'lambda' source", "dimensionless", low=0.0, high=1e12
-    ),
-    ParamSpec(
-        "min_poses", 0, "Smallest pose count of the 'n_poses' source; 0 = automatic", "poses", low=0, high=100_000
-    ),
-    ParamSpec("subset_size", 0, "Pose count of the 'pose_choice' source; 0 = automatic", "poses", low=0, high=100_000),
-    ParamSpec(
-        "model_error_field",
-        False,
-        "Draw the residual source's model error as a field over the joint configurations instead of "
-        "independently from pose to pose",
-        "",
+    # The settings of every registered source (noise models, lambda range, pose counts, model error).
+    *(
+        ParamSpec(
+            parameter.name,
+            parameter.default,
+            parameter.description,
+            parameter.unit,
+            low=parameter.low,
+            high=parameter.high,
+        )
+        for parameter in source_parameters()
     ),
     ParamSpec(
         "tracker_xyz_m",
@@ -470,8 +440,9 @@ class UncertaintyNode(Node):
         (``tracker_orientation``), as ``evaluate``, ``validate`` and ``replay`` do."""
         given = str(self.get_parameter("sources").value)
         default = next(spec.default for spec in PARAMETERS if spec.name == "sources")
-        if given == default and measures_orientation and "tracker_orientation" not in given.split(","):
-            return given + ",tracker_orientation"
+        if given == default and measures_orientation:
+            # The registry's default set of a campaign with orientations (as the commands use).
+            return ",".join(default_sources(measures_orientation=True))
         return given
 
     def _options(self, msg: CalibrationResultMsg, *, measures_orientation: bool = False) -> EvaluationSettings:
@@ -481,17 +452,11 @@ class UncertaintyNode(Node):
         def get(name: str) -> Any:
             return self.get_parameter(name).value
 
-        low, high = float(get("lambda_range_low")), float(get("lambda_range_high"))
-        settings = build_uncertainty_settings(
+        # Every registered source's options from its parameters (each source turns its own into settings).
+        parameters = {parameter.name: get(parameter.name) for parameter in source_parameters()}
+        settings = build_source_settings(
             sources=self._sources_for(measures_orientation),
-            tracker_noise_um=get("tracker_noise_um"),
-            tracker_noise_um_per_m=get("tracker_noise_um_per_m"),
-            encoder_noise_deg=get("encoder_noise_deg"),
-            linear_encoder_noise_um=float(get("linear_encoder_noise_um")),
-            model_error_field=bool(get("model_error_field")),
-            lambda_range=None if low == high == 0.0 else (low, high),
-            min_poses=int(get("min_poses")) or None,
-            subset_size=int(get("subset_size")) or None,
+            values={option.dest: option.from_parameters(parameters) for option in source_options_all()},
             tracker_xyz_m=get("tracker_xyz_m"),
         )
         trials = int(get("trials"))

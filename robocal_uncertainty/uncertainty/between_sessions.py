@@ -46,15 +46,6 @@ from robocal_uncertainty.core.session import (
     verify_session,
 )
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.montecarlo.distributions import CorrelatedNormal, IndependentRectangular
-from robocal_uncertainty.uncertainty.sources import (
-    AdditiveSource,
-    Source,
-    SourceSpec,
-    TrialContext,
-    UncertaintySettings,
-    register_source,
-)
 
 __all__ = [
     "BetweenSessions",
@@ -373,31 +364,3 @@ def with_between_sessions(state: SessionState, between: BetweenSessions) -> Sess
         scope="future sessions",
         extra=extra,
     )
-
-
-def _between_session_source(settings: UncertaintySettings, ctx: TrialContext) -> Source:
-    """A future session's effects (joint offsets, length scale) added to every prediction.
-
-    One draw per trial moves every test configuration together (the same session); zeros when
-    the settings carry no between-session component or the measurement holds orientations.
-    """
-    d = ctx.measurement_dimension
-    segments = (("predictions", (ctx.n_test, d)),)
-    between = settings.between_session
-    g = ctx.test_effect_jacobian
-    if between is None or g is None or d != 3:
-        return AdditiveSource("between_session", IndependentRectangular(np.zeros(ctx.n_test * d)), segments)
-    flat = g.reshape(ctx.n_test * 3, -1)
-    cov = flat @ between.covariance @ flat.T
-    return AdditiveSource("between_session", CorrelatedNormal(np.zeros(ctx.n_test * 3), 0.5 * (cov + cov.T)), segments)
-
-
-register_source(
-    SourceSpec(
-        "between_session",
-        "between-session reproducibility: a future session's joint offsets and link length scale "
-        "(estimated from several sessions; calibrate --sessions), one draw per trial for every prediction",
-        True,
-        _between_session_source,
-    )
-)

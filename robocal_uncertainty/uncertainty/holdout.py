@@ -41,7 +41,8 @@ from robocal_uncertainty.uncertainty.calibration import (
     evaluate_uncertainty,
 )
 from robocal_uncertainty.uncertainty.memory import check_fits, validation_bytes
-from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+from robocal_uncertainty.uncertainty.sources import UncertaintySettings, sources_with_role
+from robocal_uncertainty.uncertainty.sources.instrument import TRACKER, TRACKER_ORIENTATION
 
 __all__ = [
     "HOLDOUT_POSE_TRIALS",
@@ -278,7 +279,7 @@ def _orientation_fold(
         raise InputError("the Monte Carlo gave no orientation for the held-out configurations")
     dev = result.rotation_samples.reshape(-1, n_held, 3)
     measurement = held.measurement
-    if isinstance(measurement, PoseMeasurement) and "tracker_orientation" in settings.sources:
+    if isinstance(measurement, PoseMeasurement) and TRACKER_ORIENTATION.name in settings.sources:
         dev = dev + rng.normal(0.0, 1.0, dev.shape) * np.asarray(measurement.rotation_std)
     reference = np.stack([pose.orientation.calibrated_rotation for pose in result.poses if pose.orientation])
     if reference.shape[0] != n_held:
@@ -335,7 +336,7 @@ def _chunk_statistics(
     key = [seed, fold, 0xB0B] if chunk == 0 else [seed, fold, 0xB0B, chunk]
     rng = np.random.default_rng(np.random.SeedSequence(key))
     dist = _tracker_distances(held_points, held, settings)
-    if "tracker" in settings.sources:
+    if TRACKER.name in settings.sources:
         pred = pred + settings.tracker_noise.sample(rng, np.broadcast_to(dist, pred.shape[:2]))
     mean = pred.mean(axis=0)
     std = pred.std(axis=0, ddof=1)
@@ -352,7 +353,7 @@ def _chunk_statistics(
 
 def _model_error_kind(result: CalibrationUncertainty) -> str:
     """``field``, ``independent`` or ``none``: what the residual source drew in `result`."""
-    if "residual" not in result.settings.sources or result.model_adequacy.adequate:
+    if not sources_with_role(result.settings.sources, "model_error") or result.model_adequacy.adequate:
         return "none"
     me_field = result.model_error_field
     return "field" if me_field is not None and me_field.identified else "independent"

@@ -26,7 +26,13 @@ from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
-from robocal_uncertainty.uncertainty.sources import UncertaintySettings
+from robocal_uncertainty.uncertainty.sources import (
+    UncertaintySettings,
+    source_with_role,
+    sources_in_sweeps,
+    sources_with_role,
+)
+from robocal_uncertainty.uncertainty.sources.instrument import ENCODER, TRACKER
 
 __all__ = ["DEFAULT_SWEEP_TRIALS", "Sweep", "evaluate_sweeps", "sweep_equations", "sweep_lambda"]
 
@@ -150,7 +156,9 @@ def sweep_lambda(
         raise ConfigError(msg)
     _check_pose(pose, test_joints)
     settings = settings or UncertaintySettings()
-    sources = tuple(s for s in settings.sources if s != "lambda") or ("tracker",)
+    # lambda is the swept variable: the source that draws it is off at every point.
+    swept = sources_with_role(settings.sources, "lambda")
+    sources = tuple(s for s in settings.sources if s not in swept) or (TRACKER.name,)
     fixed = dataclasses.replace(settings, sources=sources)
     out = np.empty((lams.size, 3))
     for i, lam in enumerate(lams):
@@ -238,9 +246,12 @@ def sweep_equations(
         raise ConfigError(msg)
     _check_pose(pose, test_joints)
     settings = settings or UncertaintySettings()
-    sources = tuple(s for s in settings.sources if s != "n_poses")
-    if "pose_choice" not in sources:
-        sources = (*sources, "pose_choice")
+    # Each point draws subsets of its pose count: the pose-subset source on, the pose-count one off.
+    swept = sources_with_role(settings.sources, "pose_count")
+    sources = tuple(s for s in settings.sources if s not in swept)
+    subsets = source_with_role("pose_subset")
+    if subsets not in sources:
+        sources = (*sources, subsets)
     if calibration is None:
         calibration = identify(model, campaign)
     out = np.empty((counts_f.size, 3))
@@ -300,7 +311,7 @@ def evaluate_sweeps(
     settings = options.uncertainty
     noise = dataclasses.replace(
         settings,
-        sources=tuple(s for s in settings.sources if s in ("tracker", "encoder", "residual")) or ("tracker", "encoder"),
+        sources=sources_in_sweeps(settings.sources) or (TRACKER.name, ENCODER.name),
     )
     lam = calibration.lambda_
     lambdas, counts = _sweep_points(calibration, campaign.n_poses)

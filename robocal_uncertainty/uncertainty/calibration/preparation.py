@@ -38,7 +38,7 @@ from robocal_uncertainty.uncertainty.model_error_draws import (
     standardised_innovations,
 )
 from robocal_uncertainty.uncertainty.reidentification import BatchProblem, ChordSolver
-from robocal_uncertainty.uncertainty.sources import TrialContext, UncertaintySettings, build_sources
+from robocal_uncertainty.uncertainty.sources import TrialContext, UncertaintySettings, build_sources, sources_with_role
 
 __all__ = ["Prepared", "prepare", "prepare_calibration_trials", "test_effect_jacobian", "validate_inputs"]
 
@@ -150,7 +150,7 @@ def test_effect_jacobian(
 def _lambda_range(settings: UncertaintySettings, calibration: IdentificationResult) -> tuple[float, float] | None:
     """Range of the ``lambda`` source (None when it is off): [lambda*/5, 5 lambda*] by default."""
     lam_star = calibration.lambda_
-    if "lambda" not in settings.sources:
+    if not sources_with_role(settings.sources, "lambda"):
         return None
     if settings.lambda_range is None:
         return (lam_star / 5.0, lam_star * 5.0)
@@ -170,7 +170,7 @@ def _pose_counts(settings: UncertaintySettings, n_poses: int, dim: int, k: int) 
     min_poses = settings.min_poses or max(math.ceil(40 / dim), math.ceil(1.5 * k / dim))
     subset_size = settings.subset_size or round(33 / 53 * n_poses)
     for name, value in (("min_poses", min_poses), ("subset_size", subset_size)):
-        if "n_poses" in settings.sources or "pose_choice" in settings.sources:
+        if sources_with_role(settings.sources, "pose_count", "pose_subset"):
             if value < min_identifiable or value > n_poses:
                 msg = (
                     f"{name} = {value} must lie between {min_identifiable} (identifiable "
@@ -189,7 +189,8 @@ def _model_error_field(
     distances: Array,
 ) -> tuple[FieldEstimate | None, FieldNormal | None]:
     """The model-error field of the ``residual`` source and its draws (None, None: not asked or adequate)."""
-    if not ("residual" in settings.sources and not adequacy.adequate and settings.model_error == "field"):
+    drawn = bool(sources_with_role(settings.sources, "model_error"))
+    if not (drawn and not adequacy.adequate and settings.model_error == "field"):
         return None, None
     noise = pose_noise_covariances(
         calibration, campaign.joint_positions, settings.tracker_noise, settings.encoder_noise, distances

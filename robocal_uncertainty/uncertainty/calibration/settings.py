@@ -12,18 +12,17 @@ progress) never changes the result and travels apart, in a
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.sources import UncertaintySettings, parse_sources
+from robocal_uncertainty.uncertainty.sources import UncertaintySettings, parse_sources, source_settings_fields
 
-__all__ = ["EvaluationSettings", "build_evaluation_settings", "build_uncertainty_settings"]
+__all__ = ["EvaluationSettings", "build_evaluation_settings", "build_source_settings", "build_uncertainty_settings"]
 
 Array = NDArray[np.float64]
 
@@ -189,20 +188,56 @@ def build_uncertainty_settings(
     ConfigError
         Unknown sources, or a value outside its range.
     """
-    extra: dict[str, Any] = {} if tracker_xyz_m is None else {"tracker_xyz": tuple(float(v) for v in tracker_xyz_m)}
-    return UncertaintySettings(
-        between_session=between_session,
-        sources=parse_sources(sources),
-        tracker_noise=TrackerNoise(a=tracker_noise_um * 1e-6, b=tracker_noise_um_per_m * 1e-6),
-        encoder_noise=EncoderNoise(
-            half_width=float(np.radians(encoder_noise_deg)), linear_half_width=linear_encoder_noise_um * 1e-6
-        ),
-        lambda_range=None if lambda_range is None else (lambda_range[0], lambda_range[1]),
-        min_poses=min_poses,
-        subset_size=subset_size,
-        model_error="field" if model_error_field else "independent",
-        **extra,
+    values = {
+        "tracker_noise_um": tracker_noise_um,
+        "tracker_noise_um_per_m": tracker_noise_um_per_m,
+        "encoder_noise_deg": encoder_noise_deg,
+        "linear_encoder_noise_um": linear_encoder_noise_um,
+        "model_error_field": model_error_field,
+        "lambda_range": lambda_range,
+        "min_poses": min_poses,
+        "subset_size": subset_size,
+    }
+    return build_source_settings(
+        sources=sources, values=values, tracker_xyz_m=tracker_xyz_m, between_session=between_session
     )
+
+
+def build_source_settings(
+    *,
+    sources: str | tuple[str, ...] | list[str],
+    values: Mapping[str, Any],
+    tracker_xyz_m: Sequence[float] | None = None,
+    between_session: Any = None,
+) -> UncertaintySettings:
+    """The sources and their models of the option values of every registered source.
+
+    The command line passes its parsed options, the uncertainty node its parameters (through
+    :meth:`~robocal_uncertainty.uncertainty.sources.SourceOption.from_parameters`); each
+    source turns its own values into settings
+    (:func:`~robocal_uncertainty.uncertainty.sources.source_settings_fields`), so neither
+    names a source's settings.
+
+    Parameters
+    ----------
+    sources : str or sequence of str
+        ``"tracker,encoder"``, ``"all"`` or names.
+    values : mapping
+        Option values by option destination (``tracker_noise_um``, ``lambda_range``, ...), in
+        the options' units (µm, degrees); None for an option left unset.
+    tracker_xyz_m : sequence of 3 float or None
+        Tracker position in the base frame [m] (base-frame campaigns); None: the default.
+    between_session : BetweenSessions or None
+        Between-session component of the ``between_session`` source.
+
+    Raises
+    ------
+    ConfigError
+        Unknown sources, or a value outside its range.
+    """
+    extra: dict[str, Any] = {} if tracker_xyz_m is None else {"tracker_xyz": tuple(float(v) for v in tracker_xyz_m)}
+    fields = source_settings_fields(values)
+    return UncertaintySettings(between_session=between_session, sources=parse_sources(sources), **fields, **extra)  # type: ignore[arg-type]
 
 
 def build_evaluation_settings(uncertainty: UncertaintySettings, **fields: Any) -> EvaluationSettings:
