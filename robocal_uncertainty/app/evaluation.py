@@ -187,7 +187,8 @@ def evaluate(
     _check_memory(model, campaign, calibration, settings, run)
     uncertainty = evaluate_uncertainty(model, campaign, test_joints, settings, calibration=calibration, run=run)
     budget, sweeps, sweep_notes = _phases(model, campaign, calibration, settings, run, phase_progress)
-    inputs = _merge(campaign.metadata.get(READ_WARNINGS_KEY) or (), input_warnings)
+    read_warnings: Any = campaign.metadata.get(READ_WARNINGS_KEY) or ()  # strings the reader stored
+    inputs = _merge(read_warnings, input_warnings)
     return Evaluation(
         calibration=calibration,
         uncertainty=uncertainty,
@@ -228,7 +229,7 @@ def _check_memory(
     traceback after minutes (the adaptive procedure is bounded by its own cap)."""
     if settings.trials == "auto":
         return
-    n_test = int(np.atleast_2d(settings.test_joints).shape[0])
+    n_test = 0 if settings.test_joints is None else int(np.atleast_2d(settings.test_joints).shape[0])
     check_fits(
         evaluation_bytes(
             int(settings.trials),

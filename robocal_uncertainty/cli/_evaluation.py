@@ -128,21 +128,7 @@ def print_adequacy(result: Any) -> None:
         )
         me_field = getattr(result, "model_error_field", None)
         if me_field is not None:
-            fu = me_field.standard_uncertainty
-            text = f"({', '.join(f'{v * 1e6:.1f}' for v in fu[:3])}) um"
-            if len(fu) > 3:
-                text = f"position {text}, rotation ({', '.join(f'{v * 1e6:.1f}' for v in fu[3:])}) urad"
-            if me_field.identified:
-                print(
-                    f"  drawn as a field over the joint configurations (restricted maximum likelihood): u = {text}, "
-                    f"{me_field.correlated_fraction * 100:.0f} % correlated over {me_field.length_scale:.2f} rad, "
-                    "jointly over the calibration poses and the test configurations"
-                )
-            else:
-                print(
-                    f"  drawn independently from pose to pose: the correlated field is not identified by these "
-                    f"poses ({me_field.dof:.0f} effective degrees of freedom, fewer than 32)"
-                )
+            print(f"  {me_field.describe()}")
     repeated = getattr(ad, "repeated_poses", 0)
     if repeated:
         print(

@@ -517,6 +517,7 @@ class UncertaintyNode(Node):
                 if self._stop:
                     return
                 job, self._pending = self._pending, None
+            assert job is not None  # the wait above ends with a job or with _stop
             try:
                 self._run(job)
             except Exception as err:
@@ -556,7 +557,7 @@ class UncertaintyNode(Node):
                 "(playing a recording? use `ros2 bag play --clock` and use_sim_time:=true)",
             )
             return None
-        return latency
+        return float(latency)
 
     def _run(self, job: _Job) -> None:
         n = len(job.samples)
@@ -565,14 +566,16 @@ class UncertaintyNode(Node):
         self._status({"state": "running", "done": 0, "target": job.options.trials, "sample_count": n})
         pipeline = SampleStore.pipeline_of(self.model, job.samples, options=job.options)
         try:
-            if pipeline.campaign is not None:
+            campaign = pipeline.campaign
+            if campaign is not None:
                 # The command line's check of a campaign file, on the samples: readings outside
                 # the joint limits (degrees sent as radians) are refused, not calibrated.
-                check_campaign_joints(self.model, pipeline.campaign, f"the {n}-sample campaign")
+                check_campaign_joints(self.model, campaign, f"the {n}-sample campaign")
             calibration = pipeline.calibrate()
+            assert campaign is not None  # calibrate() refuses a pipeline without samples
             evaluation = evaluate(
                 self.model,
-                pipeline.campaign,
+                campaign,
                 job.options,
                 calibration=calibration,
                 run=RunContext(executor=self._pool.executor(), progress=progress),
@@ -735,6 +738,7 @@ class UncertaintyNode(Node):
                 calibration=calibration,
                 lambda_=options.lambda_,
                 frame=options.frame,
+                backend=options.backend,  # the node's trial kernels for the Monte Carlo checks
                 **arguments,  # type: ignore[arg-type]
             )
         except CalibError as err:
