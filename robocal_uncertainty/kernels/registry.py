@@ -296,8 +296,6 @@ class CupyBackend:
 
 _REGISTRY: dict[str, Backend] = {}
 _AUTO_ORDER = ("numba", "numpy")
-BACKEND_CHOICES: tuple[str, ...] = ("auto", "numpy", "numba", "cupy")
-"""What ``--backend`` and the node parameter ``backend`` accept."""
 
 
 def register_backend(backend: Backend) -> None:
@@ -348,3 +346,7 @@ def resolve_backend(name: str) -> BackendInfo:
 register_backend(NumpyBackend())
 register_backend(NumbaBackend())
 register_backend(CupyBackend())
+
+BACKEND_CHOICES: tuple[str, ...] = ("auto", *_REGISTRY)
+"""What ``--backend`` and the node parameter ``backend`` accept: ``auto`` and every backend
+registered above (a new backend is one more line there)."""
