@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import robocal_uncertainty
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_formats import (
     EXPORT_FORMATS,
@@ -24,8 +25,9 @@ from robocal_uncertainty.core.robot_formats import (
 from robocal_uncertainty.core.robot_formats.protocol import KinematicChain
 from robocal_uncertainty.errors import ConfigError
 
-PACKAGE = Path(__file__).resolve().parents[2] / "robocal_uncertainty"
-UR10_URDF = PACKAGE / "data" / "ur10.urdf"
+PACKAGE = Path(__file__).resolve().parents[2] / "robocal_uncertainty"  # the source tree, for its text
+# The package under test's own data: in CI's matrix that is the installed copy, not the checkout.
+UR10_URDF = Path(robocal_uncertainty.__file__).resolve().parent / "data" / "ur10.urdf"
 
 
 def test_the_format_of_a_name_is_decided_by_its_suffix() -> None:
