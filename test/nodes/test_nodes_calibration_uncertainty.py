@@ -368,3 +368,47 @@ def test_too_few_trials_for_the_interval_are_refused(ros_context, tmp_path, mode
         executor.shutdown()
         peer.destroy_node()
         node.destroy_node()
+
+
+def test_samples_outside_the_joint_limits_are_refused(ros_context, tmp_path, model, replay) -> None:
+    # One sample's readings sent in degrees instead of radians: the node refuses the campaign
+    # with the command line's message (campaign pose, joint limits, the degrees hint) in its
+    # status and publishes nothing, as `evaluate` refuses such a campaign file.
+    import dataclasses
+    import json
+
+    from std_msgs.msg import String
+
+    samples = list(replay.samples)
+    first = samples[0]
+    samples[0] = dataclasses.replace(first, joint_positions=np.degrees(np.asarray(first.joint_positions)))
+    node = _node(
+        UncertaintyNode,
+        ros_context,
+        node_name="uncertainty_degrees_as_radians",
+        campaign_path=str(tmp_path / "none.mcap"),
+        test_joints_deg=TEST_JOINTS_DEG,
+        trials=TRIALS,
+    )
+    peer = rclpy.create_node("listener_degrees_as_radians", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(peer)
+    status: list[dict] = []
+    got: list[PoseUncertaintyMsg] = []
+    peer.create_subscription(String, "robocal/uncertainty_status", lambda m: status.append(json.loads(m.data)), 10)
+    peer.create_subscription(PoseUncertaintyMsg, "robocal/uncertainty", got.append, latched_qos(2))
+    try:
+        for sample in samples:
+            node._on_sample(to_ros(sample_to_msg(sample), CalibrationSampleMsg))
+        node._on_calibration(
+            to_ros(calibration_to_msg(identify(model, replay.campaign), stamp_ns=1), CalibrationResultMsg)
+        )
+        assert spin_until(executor, lambda: any(s["state"] == "failed" for s in status), timeout_s=60.0)
+        error = next(s for s in status if s["state"] == "failed")["error"]
+        assert "campaign pose 1 of" in error and "limit" in error and "degrees" in error, error
+        assert got == []
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
