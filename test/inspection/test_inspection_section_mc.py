@@ -14,9 +14,9 @@ import pytest
 from inspection_data import ROTOR37, ROTOR37_SCALE
 from numpy.typing import NDArray
 
+from robocal_uncertainty.core.instruments.cmm import SOURCE_NAMES, CmmInstrument, ErrorSource, point_displacements
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.bias_correction import bias_corrections
-from robocal_uncertainty.inspection.cmm_model import SOURCE_NAMES, CmmInstrument, ErrorSource, point_displacements
 from robocal_uncertainty.inspection.coverage_study import FAMILIES, run_study
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud, read_rotor37_section
