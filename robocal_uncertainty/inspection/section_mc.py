@@ -86,6 +86,7 @@ from robocal_uncertainty.montecarlo.engine import (
     run_trials,
 )
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
 
 __all__ = [
@@ -100,7 +101,6 @@ __all__ = [
     "prepare_trials",
     "section_sources",
     "section_uncertainty",
-    "source_generator",
 ]
 
 METHODS: tuple[str, ...] = ("seed", "denoised")
@@ -630,23 +630,6 @@ def build_frozen_model(
         pair_edges=None if growth is None else growth[1],
         edge_tolerance=opts.edge_tolerance,
     )
-
-
-def source_generator(rng: np.random.Generator, source_index: int) -> np.random.Generator:
-    """The generator of source ``source_index`` inside the block whose generator is ``rng``.
-
-    ``default_rng(SeedSequence(entropy, spawn_key=block_key + (source_index,)))`` from the
-    block's SeedSequence; a generator not built from a SeedSequence seeds it from its own
-    first draws instead.
-    """
-    bit_generator = rng.bit_generator
-    sequence = getattr(bit_generator, "seed_seq", None) or getattr(bit_generator, "_seed_seq", None)
-    if not isinstance(sequence, np.random.SeedSequence):
-        sequence = np.random.SeedSequence(rng.integers(0, 2**63, size=4))
-    child = np.random.SeedSequence(
-        sequence.entropy, spawn_key=(*sequence.spawn_key, int(source_index)), pool_size=sequence.pool_size
-    )
-    return np.random.default_rng(child)
 
 
 @dataclass(frozen=True, eq=False)

@@ -29,11 +29,11 @@ from robocal_uncertainty.inspection.section_mc import (
     prepare_trials,
     section_sources,
     section_uncertainty,
-    source_generator,
 )
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 from robocal_uncertainty.inspection.stored_studies import COVERAGE_STUDY
 from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, block_rng, run_trials
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.montecarlo.summary import summarize
 
 TRUE_OFFSET = (-0.1013e-3, 0.0538e-3)  # the seed's measured offsets [m]

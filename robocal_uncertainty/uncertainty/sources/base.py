@@ -33,7 +33,6 @@ __all__ = [
     "SourceSpec",
     "TrialBatch",
     "TrialContext",
-    "source_rng",
     "stream_id",
 ]
 
@@ -367,14 +366,3 @@ class SourceSpec:
     @property
     def stream_id(self) -> int:
         return stream_id(self.name)
-
-
-def source_rng(block_rng: np.random.Generator, stream: int) -> np.random.Generator:
-    """Generator of one source in one block: ``SeedSequence(seed, spawn_key=(block, stream))``.
-
-    Derived from the block generator's own SeedSequence, so a worker needs nothing more
-    than the engine gives it.
-    """
-    bit_generator = block_rng.bit_generator
-    seq = getattr(bit_generator, "seed_seq", None) or bit_generator._seed_seq  # type: ignore[attr-defined]  # numpy < 1.25
-    return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, int(stream))))
