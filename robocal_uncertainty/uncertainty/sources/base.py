@@ -135,7 +135,7 @@ class TrialBatch:
         setattr(self, name, deviations.copy() if current is None else current + deviations)
 
 
-OptionGroup = Literal["noise", "selection", "model"]
+OptionGroup = Literal["noise", "selection", "model", "session"]
 
 
 @dataclass(frozen=True)
@@ -179,13 +179,14 @@ class SourceOption:
         Command-line option, e.g. ``--tracker-noise-um``.
     help : str
         Its help text (argparse; may use ``%(default)s``), the unit included.
-    group : {"noise", "selection", "model"}
+    group : {"noise", "selection", "model", "session"}
         Where the option appears: ``noise`` with the instrument models (also in commands that
-        simulate or calibrate), ``selection`` and ``model`` with the Monte Carlo options.
+        simulate or calibrate), ``selection`` and ``model`` with the Monte Carlo options,
+        ``session`` in the commands that state for a future session (evaluate).
     unit : str
         Unit the user gives the value in ("" for none).
-    type : {float, int} or None
-        Value type (None for a flag).
+    type : {float, int, str} or None
+        Value type (None for a flag; str for a file).
     default : object
         Default of the option (None: unset, the source chooses).
     nargs : int or None
@@ -194,7 +195,8 @@ class SourceOption:
     flag_only : bool
         A switch (``store_true``) without a value.
     parameters : tuple of NodeParameter
-        The uncertainty node's parameters for this setting (two for a range).
+        The uncertainty node's parameters for this setting (two for a range); none for an
+        option of the command line only (the node leaves it unset).
     """
 
     flag: str
@@ -219,6 +221,8 @@ class SourceOption:
         A range (two parameters) of zeros and a count of 0 stand for the option left unset
         (None); otherwise the parameters' values in the option's type.
         """
+        if not self.parameters:
+            return False if self.flag_only else None
         convert: Callable[[Any], Any] = bool if self.flag_only or self.type is None else self.type
         given = [convert(values[parameter.name]) for parameter in self.parameters]
         if self.nargs is not None:
