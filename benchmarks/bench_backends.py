@@ -43,13 +43,14 @@ from robocal_uncertainty.core import SimulationSettings, identify, load_robot_mo
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.kernels import NumbaBackend, resolve_backend
 from robocal_uncertainty.montecarlo.engine import run_trials
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.uncertainty import (
     EvaluationSettings,
     UncertaintySettings,
     evaluate_uncertainty,
     prepare_calibration_trials,
 )
-from robocal_uncertainty.uncertainty.sources import source_rng, stream_id
+from robocal_uncertainty.uncertainty.sources import stream_id
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_JOINTS = np.radians([-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451])
@@ -85,7 +86,7 @@ def draws_per_trial(trials, n: int, repeats: int, block: int = 10_000) -> float:
         for b in range(0, n, block):
             rng = np.random.default_rng(root.spawn(1)[0])
             for source in trials.sources:
-                source.draw(source_rng(rng, stream_id(source.name)), min(block, n - b))
+                source.draw(source_generator(rng, stream_id(source.name)), min(block, n - b))
         best = min(best, time.process_time() - start)
     return best / n
 
@@ -113,7 +114,7 @@ def reid_per_trial(trials, threads: int, n: int = 256, repeats: int = 10) -> flo
     rng = np.random.default_rng(0)
     batch = TrialBatch(n_trials=n)
     for source in trials.sources:
-        source.apply(source.draw(source_rng(rng, stream_id(source.name)), n), batch)
+        source.apply(source.draw(source_generator(rng, stream_id(source.name)), n), batch)
     measurement = trials.problem.measurement
     pts = measurement.perturb(trials.points[None], batch.points)
     q = trials.joint_positions[None] + batch.joints

@@ -46,13 +46,14 @@ from robocal_uncertainty.core import (
 )
 from robocal_uncertainty.montecarlo.engine import run_trials
 from robocal_uncertainty.montecarlo.executor import RunContext
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.uncertainty import (
     EvaluationSettings,
     UncertaintySettings,
     evaluate_uncertainty,
     prepare_calibration_trials,
 )
-from robocal_uncertainty.uncertainty.sources import source_rng, stream_id
+from robocal_uncertainty.uncertainty.sources import stream_id
 
 TEST_JOINTS = np.radians([-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451])
 clock = time.process_time
@@ -112,7 +113,7 @@ def draw_rate(trials, n_trials: int, seed: int, block: int = 10_000) -> float:
     for b in range(0, n_trials, block):
         rng = np.random.default_rng(root.spawn(1)[0])
         for source in trials.sources:
-            source.draw(source_rng(rng, stream_id(source.name)), min(block, n_trials - b))
+            source.draw(source_generator(rng, stream_id(source.name)), min(block, n_trials - b))
     return n_trials / (clock() - start)
 
 

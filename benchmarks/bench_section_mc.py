@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_uncertainty.inspection.cmm_model import load_instrument
+from robocal_uncertainty.core.instruments.cmm import load_instrument
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import read_rotor37_section
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES

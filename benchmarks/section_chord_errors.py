@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from robocal_uncertainty.app.section_inspection import load_section_nominal, resolve_instrument
+from robocal_uncertainty.core.instruments.cmm import point_displacements
 from robocal_uncertainty.inspection import coverage_study as cs
-from robocal_uncertainty.inspection.cmm_model import point_displacements
 from robocal_uncertainty.inspection.point_cloud import PointCloud, read_point_cloud
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
 from robocal_uncertainty.inspection.section_mc import section_sources

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal_uncertainty.app.section_inspection import load_section_nominal, resolve_instrument
-from robocal_uncertainty.inspection.cmm_model import point_displacements
+from robocal_uncertainty.core.instruments.cmm import point_displacements
 from robocal_uncertainty.inspection.section import evaluate_section
 from robocal_uncertainty.inspection.section_mc import section_sources
 from robocal_uncertainty.inspection.simulate import simulate_section_scan

@@ -98,7 +98,7 @@ def test_section_from_a_point_cloud2_bag(scan: PointCloud, tmp_path: Path, capsy
 def test_a_cloud_the_check_flags_is_not_verified(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # A 1 836-point scan with an 8 µm dent 3 mm wide on the pressure side (narrower than the
     # narrowest smoothing window) and one draw of the seed's CMM errors.
-    from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
+    from robocal_uncertainty.core.instruments.cmm import CmmInstrument, point_displacements
     from robocal_uncertainty.inspection.coverage_study import Feature, feature_deviation
     from robocal_uncertainty.inspection.section_mc import section_sources
 
@@ -301,7 +301,7 @@ def test_coverage_study_of_the_cloud(cloud_file: Path, tmp_path: Path, capsys: p
 def test_a_study_that_verifies_says_so(cloud_file: Path) -> None:
     """The verdict of a study whose every cell passes the rule, rendered for a cloud the check passed."""
     from robocal_uncertainty.app.section_inspection import inspect_section
-    from robocal_uncertainty.inspection.cmm_model import CmmInstrument
+    from robocal_uncertainty.core.instruments.cmm import CmmInstrument
     from robocal_uncertainty.inspection.coverage_rule import family_cells
     from robocal_uncertainty.inspection.coverage_study import ScenarioStudy
     from robocal_uncertainty.inspection.section import PARAMETER_NAMES

@@ -34,9 +34,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.bagio.point_cloud2 import read_point_cloud2
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument, load_instrument
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.inspection.bias_correction import BiasCorrection, bias_corrections
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument, load_instrument
 from robocal_uncertainty.inspection.coverage_study import ScenarioStudy, run_scenario_study, scenario_from_cloud
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import (
@@ -375,7 +375,7 @@ def section_demo(
     scanned and one draw of the instrument errors (seeded by `seed`) is added, as a real scan
     would carry. ``truth`` holds the true parameters (those of the noise-free scan).
     """
-    from robocal_uncertainty.inspection.cmm_model import point_displacements
+    from robocal_uncertainty.core.instruments.cmm import point_displacements
     from robocal_uncertainty.inspection.section_mc import section_sources
 
     curve = load_section_nominal("rotor37")

@@ -24,10 +24,10 @@ import numpy as np
 from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration, read_session_state
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, verify_session
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import CalibError, ConfigError
 from robocal_uncertainty.uncertainty.between_sessions import (
     estimate_between_sessions,

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 from robocal_uncertainty.cli._common import DEFAULT_PAIRING_TOLERANCE_MS
 
 if TYPE_CHECKING:
+    from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
     from robocal_uncertainty.uncertainty.sources import OptionGroup
 
 
@@ -60,29 +61,62 @@ def add_test_joint_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-def add_source_args(p: argparse.ArgumentParser, group: OptionGroup) -> None:
+def add_source_args(p: argparse.ArgumentParser, group: OptionGroup, *, unset_means: str | None = None) -> None:
     """The options of the registered uncertainty sources in `group` (generated from the registry:
-    a source's options appear in every command that takes its group, with its help and unit)."""
+    a source's options appear in every command that takes its group, with its help and unit).
+
+    `unset_means`: every option is unset by default (None) and its help says what an unset
+    option means instead of the registry's default (verify: "the calibration's").
+    """
     from robocal_uncertainty.uncertainty.sources import source_options
 
     for option in source_options(group):
         kwargs: dict[str, Any] = option.argparse_kwargs()
+        if unset_means is not None and not option.flag_only:
+            kwargs["default"] = None
+            text = option.help.replace("default %(default)s", f"default: {unset_means}")
+            kwargs["help"] = text if text != option.help else f"{option.help} (default: {unset_means})"
         p.add_argument(option.flag, **kwargs)
 
 
-def add_noise_args(p: argparse.ArgumentParser) -> None:
-    """The tracker and encoder noise models, shared by simulate and the Monte Carlo commands."""
-    add_source_args(p, "noise")
+def add_noise_args(p: argparse.ArgumentParser, *, unset_means: str | None = None) -> None:
+    """The tracker and encoder noise models, shared by simulate, map, verify and the Monte Carlo
+    commands (see :func:`add_source_args` for `unset_means`)."""
+    add_source_args(p, "noise", unset_means=unset_means)
 
 
 def encoder_noise(args: argparse.Namespace) -> Any:
     """The :class:`EncoderNoise` of --encoder-noise-deg and --linear-encoder-noise-um (SI)."""
     import numpy as np
 
-    from robocal_uncertainty.core import EncoderNoise
+    from robocal_uncertainty.core.instruments import EncoderNoise
 
     return EncoderNoise(
         half_width=float(np.radians(args.encoder_noise_deg)), linear_half_width=args.linear_encoder_noise_um * 1e-6
+    )
+
+
+def given_noise(
+    args: argparse.Namespace, tracker: TrackerNoise, encoder: EncoderNoise
+) -> tuple[TrackerNoise | None, EncoderNoise | None]:
+    """The instruments of noise options parsed with ``unset_means``: each value given replaces
+    the one of `tracker` / `encoder` (SI), the others are kept exactly; None for an instrument
+    none of whose options was given."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    a, b = args.tracker_noise_um, args.tracker_noise_um_per_m
+    revolute, linear = args.encoder_noise_deg, args.linear_encoder_noise_um
+    tracker_fields = {k: v * 1e-6 for k, v in (("a", a), ("b", b)) if v is not None}
+    encoder_fields: dict[str, float] = {}
+    if revolute is not None:
+        encoder_fields["half_width"] = float(np.radians(revolute))
+    if linear is not None:
+        encoder_fields["linear_half_width"] = linear * 1e-6
+    return (
+        replace(tracker, **tracker_fields) if tracker_fields else None,
+        replace(encoder, **encoder_fields) if encoder_fields else None,
     )
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -12,13 +12,26 @@ from robocal_uncertainty.cli._common import load_robot
 from robocal_uncertainty.cli._evaluation import evaluate_and_report
 from robocal_uncertainty.cli._options import add_force_arg, add_uncertainty_args
 
+if TYPE_CHECKING:
+    from robocal_uncertainty.uncertainty.sources import SourceRole
+
 PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
 """The robot seed's test configuration (Table 2), degrees."""
 
 
-DEMO_SOURCES = ("tracker", "encoder", "lambda", "n_poses", "pose_choice")
-"""The paper's five sources, kept: the demo reproduces its Table 2 scenario, a simulated campaign
-with no model error, where the adequacy test finds none and ``residual`` would add nothing."""
+DEMO_ROLES: tuple[SourceRole, ...] = ("lambda", "pose_count", "pose_subset")
+"""Roles of the paper's selection sources: its regularisation parameter, pose count and pose choice."""
+
+
+def demo_sources() -> tuple[str, ...]:
+    """The paper's five sources, kept: the demo reproduces its Table 2 scenario, a simulated
+    campaign with no model error, where the adequacy test finds none and the model-error source
+    would add nothing. The validated default's instrument sources, then the sources of
+    :data:`DEMO_ROLES`, named by the registry (the demo tests no source name)."""
+    from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY, default_sources, source_with_role
+
+    instruments = tuple(name for name in default_sources() if SOURCE_REGISTRY[name].role != "model_error")
+    return (*instruments, *(source_with_role(role) for role in DEMO_ROLES))
 
 
 def register(sub: Any) -> None:
@@ -37,15 +50,16 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.core import SimulationSettings, simulate_campaign
 
+    sources = demo_sources()
     model = load_robot("paper_arm")
     sim = simulate_campaign(model, SimulationSettings(n_poses=53), seed=args.seed)
     print("Demo: the arm of Jiang et al. (Table 1), a simulated 53-pose campaign with tracker noise +-5 um and")
     print("encoder noise +-0.005 deg (uniform), evaluated at their test joints")
-    print(f"({', '.join(f'{v:g}' for v in PAPER_TEST_JOINTS_DEG)}) deg. Sources: {', '.join(DEMO_SOURCES)}.")
+    print(f"({', '.join(f'{v:g}' for v in PAPER_TEST_JOINTS_DEG)}) deg. Sources: {', '.join(sources)}.")
     print()
     test_q = np.radians(np.array(PAPER_TEST_JOINTS_DEG))[None, :]
     result = evaluate_and_report(
-        model, sim.campaign, test_q, sources=DEMO_SOURCES, args=args, out_dir=Path(args.out), label="demo"
+        model, sim.campaign, test_q, sources=sources, args=args, out_dir=Path(args.out), label="demo"
     )
     from robocal_uncertainty.core import forward_points
 

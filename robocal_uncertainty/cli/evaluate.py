@@ -12,6 +12,7 @@ from robocal_uncertainty.cli._options import (
     add_campaign_args,
     add_dask_arg,
     add_force_arg,
+    add_source_args,
     add_test_joint_args,
     add_uncertainty_args,
 )
@@ -28,12 +29,7 @@ def register(sub: Any) -> None:
         default=None,
         help=f"comma list of {sources_help()} ({SOURCES_DEFAULT_HELP})",
     )
-    p.add_argument(
-        "--between-session",
-        metavar="CAL.json",
-        help="a calibration written by calibrate --sessions: add its between-session component (source "
-        "between_session) so the statement holds for a future session",
-    )
+    add_source_args(p, "session")
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
     add_uncertainty_args(p, trials_default="auto")

@@ -22,6 +22,7 @@ from robocal_uncertainty.cli._options import (
     add_force_arg,
     add_frame_and_convergence_args,
     add_model_error_arg,
+    add_noise_args,
 )
 from robocal_uncertainty.uncertainty.sources import sources_help
 
@@ -52,12 +53,7 @@ def register(sub: Any) -> None:
     p.add_argument("--regions", type=int, default=0, help="first N configurations keep samples for a JCGM 102 region")
     p.add_argument("--block-size", type=int, default=1000, help="trials per random stream (default %(default)s)")
     p.add_argument("--lambda", dest="lambda_", default="auto", help="auto (L-curve corner), gcv, or a fixed value")
-    p.add_argument("--tracker-noise-um", type=float, default=5.0, help="tracker half-width a, um (uniform)")
-    p.add_argument("--tracker-noise-um-per-m", type=float, default=0.0, help="MPE distance part b, um/m")
-    p.add_argument("--encoder-noise-deg", type=float, default=0.005, help="encoder half-width, deg (uniform)")
-    p.add_argument(
-        "--linear-encoder-noise-um", type=float, default=5.0, help="prismatic joint reading half-width, um (uniform)"
-    )
+    add_noise_args(p)
     p.add_argument("--base-unknown", action="store_true", help="identify the base transform even if known")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (never changes the result)")
     add_backend_arg(p)

@@ -8,11 +8,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-import numpy as np
-
 from robocal_uncertainty.app.campaign_checks import check_campaign_joints
 from robocal_uncertainty.cli._common import load_robot, read_campaign_checked
-from robocal_uncertainty.cli._options import add_force_arg, add_urdf_chain_args
+from robocal_uncertainty.cli._options import add_force_arg, add_noise_args, add_urdf_chain_args, given_noise
 
 DRIFTED_EXIT_STATUS = 3
 """Exit status of a check that says drifted."""
@@ -45,24 +43,7 @@ def register(sub: Any) -> None:
         help="Monte Carlo draws of the test statistic when nothing changed (default %(default)s)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of those draws (default 0)")
-    p.add_argument(
-        "--tracker-noise-um",
-        type=float,
-        default=None,
-        help="the new session's tracker half-width a, um (default: the calibration's)",
-    )
-    p.add_argument(
-        "--tracker-noise-um-per-m",
-        type=float,
-        default=None,
-        help="the new session's tracker b of a + b L, um/m (default: the calibration's)",
-    )
-    p.add_argument(
-        "--encoder-noise-deg",
-        type=float,
-        default=None,
-        help="encoder half-width, deg (default: the calibration's)",
-    )
+    add_noise_args(p, unset_means="the calibration's")  # the new session's instruments
     p.add_argument(
         "--effects",
         action="store_true",
@@ -76,7 +57,6 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app.output_paths import check_report_directory
     from robocal_uncertainty.app.verification import load_session_calibration, verify
-    from robocal_uncertainty.core import EncoderNoise, TrackerNoise
     from robocal_uncertainty.errors import ConfigError
     from robocal_uncertainty.report.verification_report import verification_lines, write_verification_report
 
@@ -92,16 +72,7 @@ def run(args: argparse.Namespace) -> int:
     _, state, _ = load_session_calibration(model, args.calibration)  # a bad file is named before the campaign
     check = read_campaign_checked(args, args.check_campaign)
     check_campaign_joints(model, check, args.check_campaign)
-    tracker = encoder = None
-    if args.tracker_noise_um is not None or args.tracker_noise_um_per_m is not None:
-        a = state.tracker_noise.a if args.tracker_noise_um is None else args.tracker_noise_um * 1e-6
-        b = state.tracker_noise.b if args.tracker_noise_um_per_m is None else args.tracker_noise_um_per_m * 1e-6
-        tracker = TrackerNoise(a=a, b=b)
-    if args.encoder_noise_deg is not None:
-        encoder = EncoderNoise(
-            half_width=float(np.radians(args.encoder_noise_deg)),
-            linear_half_width=state.encoder_noise.linear_half_width,
-        )
+    tracker, encoder = given_noise(args, state.tracker_noise, state.encoder_noise)
     run_ = verify(
         model,
         args.calibration,

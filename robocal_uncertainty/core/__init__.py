@@ -1,4 +1,4 @@
-"""ROS-free numerical core: robot model, kinematics, identification, campaigns, simulation.
+"""ROS-free numerical core: robot model, kinematics, identification, campaigns, instruments, simulation.
 
 Imports numpy, scipy and PyYAML only; a test forbids any ROS import here.
 """
@@ -15,6 +15,7 @@ if TYPE_CHECKING:
         identify,
         residual_stats,
     )
+    from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
     from robocal_uncertainty.core.joint_limits import check_joint_limits
     from robocal_uncertainty.core.kinematics import (
         forward_points,
@@ -36,11 +37,9 @@ if TYPE_CHECKING:
     )
     from robocal_uncertainty.core.sample import CalibrationSample
     from robocal_uncertainty.core.simulation import (
-        EncoderNoise,
         ParameterErrorRanges,
         SimulatedCampaign,
         SimulationSettings,
-        TrackerNoise,
         UnmodelledErrors,
         simulate_campaign,
         simulate_measurements,

@@ -77,10 +77,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.instruments import LINEAR_ENCODER_HALF_WIDTH, EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.model_error_field import FIELD_KERNEL, FIELD_METRIC, ModelErrorField
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, SessionState, ValidatedLevel
-from robocal_uncertainty.core.simulation import LINEAR_ENCODER_HALF_WIDTH, EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [

@@ -52,12 +52,12 @@ from scipy import linalg, stats
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, fit_rigid_base
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.measurement import joint_columns
 from robocal_uncertainty.core.model_error_field import ModelErrorField
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import rotation_log
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError, IdentifiabilityError, InputError
 
 __all__ = [

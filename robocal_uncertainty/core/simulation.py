@@ -1,14 +1,12 @@
 """Simulated calibration campaigns with known truth, for tests, demos and coverage checks.
 
-Noise models follow the seeds: tracker noise uniform within +-a per coordinate (the robot
-seed's +-5 um) or within the manufacturer's MPE +-(a + b L) with L the tracker-to-target
-distance (the blade seed's form); encoder noise uniform within +-0.005 deg.
+The instruments' error models (tracker MPE +-(a + b L), encoder half-widths) are those of
+:mod:`robocal_uncertainty.core.instruments`, the ones the calibration sources draw from.
 """
 
 from __future__ import annotations
 
 import numbers
-from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -16,6 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.instruments.encoders import EncoderNoise
+from robocal_uncertainty.core.instruments.laser_tracker import TrackerNoise
 from robocal_uncertainty.core.kinematics import forward_points, forward_poses
 from robocal_uncertainty.core.measurement import POINT, MeasurementType
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values
@@ -24,15 +24,12 @@ from robocal_uncertainty.core.rotation import rotation_exp
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
-    "LINEAR_ENCODER_HALF_WIDTH",
-    "EncoderNoise",
     "ParameterErrorRanges",
     "SessionChange",
     "SessionSimulationSettings",
     "SimulatedCampaign",
     "SimulatedSessions",
     "SimulationSettings",
-    "TrackerNoise",
     "UnmodelledErrors",
     "draw_joint_positions",
     "draw_session_change",
@@ -50,104 +47,6 @@ Array = NDArray[np.float64]
 def _real(value: object) -> bool:
     """A real number (not a bool): what the finiteness checks below may compare."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-
-
-@dataclass(frozen=True)
-class TrackerNoise:
-    """Tracker error per coordinate, uniform within +-(a + b * L).
-
-    Parameters
-    ----------
-    a : float [m]
-        Constant part of the half-width (the seed's 5 um).
-    b : float [m/m]
-        Distance-proportional part; 0 for the plain +-a model.
-    """
-
-    a: float = 5e-6
-    b: float = 0.0
-
-    def __post_init__(self) -> None:
-        if (
-            not (_real(self.a) and _real(self.b))
-            or not (np.isfinite(self.a) and np.isfinite(self.b))
-            or min(self.a, self.b) < 0
-        ):
-            msg = f"tracker noise a and b must be finite and >= 0, got a={self.a}, b={self.b}"
-            raise ConfigError(msg)
-
-    @property
-    def kind(self) -> Literal["uniform", "mpe"]:
-        """``uniform`` for +-a, ``mpe`` when the half-width grows with distance."""
-        return "mpe" if self.b > 0 else "uniform"
-
-    def half_width(self, distance: Array) -> Array:
-        """Half-width [m] of the uniform error for targets at `distance` [m]."""
-        return self.a + self.b * np.asarray(distance, dtype=np.float64)
-
-    def std(self, distance: Array) -> Array:
-        """Standard deviation [m] per coordinate: half-width / sqrt(3)."""
-        return np.asarray(self.half_width(distance) / np.sqrt(3.0), dtype=np.float64)
-
-    def sample(self, rng: np.random.Generator, distance: Array) -> Array:
-        """Errors of shape (*distance.shape, 3) [m]."""
-        half = self.half_width(distance)[..., None]
-        return rng.uniform(-1.0, 1.0, size=(*np.shape(distance), 3)) * half
-
-
-LINEAR_ENCODER_HALF_WIDTH = 5e-6
-"""Default reading error half-width of a prismatic joint [m]: a linear scale of accuracy class
-±5 µm (no source paper states one; give the axis's own value)."""
-
-
-@dataclass(frozen=True)
-class EncoderNoise:
-    """Joint reading error, uniform within ±`half_width` [rad] for a revolute joint (seed: 0.005
-    deg) and ±`linear_half_width` [m] for a prismatic one (default
-    :data:`LINEAR_ENCODER_HALF_WIDTH`)."""
-
-    half_width: float = float(np.radians(0.005))
-    linear_half_width: float = LINEAR_ENCODER_HALF_WIDTH
-
-    def __post_init__(self) -> None:
-        for name, what in (("half_width", "encoder noise half-width"), ("linear_half_width", "linear encoder")):
-            value = getattr(self, name)
-            if not _real(value) or not np.isfinite(value) or value < 0:
-                msg = f"{what} noise half-width must be finite and >= 0, got {value}"
-                raise ConfigError(msg)
-
-    def sample(self, rng: np.random.Generator, shape: tuple[int, ...]) -> Array:
-        """Errors of the given shape [rad] (revolute joints)."""
-        return rng.uniform(-self.half_width, self.half_width, size=shape)
-
-    def half_widths(self, prismatic: Sequence[bool]) -> Array:
-        """Half-width of each joint, shape (n_joints,) [rad; m where `prismatic`]."""
-        linear = np.asarray(prismatic, dtype=bool)
-        return np.where(linear, self.linear_half_width, self.half_width).astype(np.float64)
-
-    def variances(self, prismatic: Sequence[bool]) -> Array:
-        """Variance of each joint's reading error, shape (n_joints,) [rad^2; m^2 where `prismatic`]."""
-        return np.asarray(self.half_widths(prismatic) ** 2 / 3.0, dtype=np.float64)
-
-    def covariance(self, joint_jacobian: Array, prismatic: Sequence[bool]) -> Array:
-        """``J diag(var) J^T`` of the reading errors through `joint_jacobian`, shape (..., d, d).
-
-        `joint_jacobian` has shape (..., d, n_joints) [m/rad; m/m in prismatic columns]. Without a
-        prismatic joint it is ``half_width^2 / 3 J J^T``, computed as such.
-        """
-        jq = np.asarray(joint_jacobian, dtype=np.float64)
-        if not any(prismatic):
-            return np.asarray((self.half_width**2 / 3.0) * np.einsum("...ij,...kj->...ik", jq, jq), dtype=np.float64)
-        return np.asarray(np.einsum("...ij,j,...kj->...ik", jq, self.variances(prismatic), jq), dtype=np.float64)
-
-    def sample_joints(self, rng: np.random.Generator, shape: tuple[int, ...], prismatic: Sequence[bool]) -> Array:
-        """Errors of readings of shape ``(..., n_joints)`` [rad; m in the prismatic columns].
-
-        Without a prismatic joint the same draws as :meth:`sample`.
-        """
-        if not any(prismatic):
-            return self.sample(rng, shape)
-        return rng.uniform(-1.0, 1.0, size=shape) * self.half_widths(prismatic)
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,7 @@ from typing import TYPE_CHECKING
 from robocal_uncertainty._lazy import lazy_exports
 
 if TYPE_CHECKING:
-    from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS, BiasCorrection, bias_corrections
-    from robocal_uncertainty.inspection.cmm_model import (
+    from robocal_uncertainty.core.instruments.cmm import (
         SOURCE_NAMES,
         CmmInstrument,
         ErrorSource,
@@ -24,6 +23,7 @@ if TYPE_CHECKING:
         point_error_sources,
         seed_instrument,
     )
+    from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS, BiasCorrection, bias_corrections
     from robocal_uncertainty.inspection.denoise import DenoisedCloud, ResidualCheck, denoise_section
     from robocal_uncertainty.inspection.nominal_curve import ClosestPoints, NominalCurve
     from robocal_uncertainty.inspection.point_cloud import (

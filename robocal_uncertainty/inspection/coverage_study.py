@@ -42,7 +42,7 @@ user's measured cloud, so that a study speaks for *that* part, layout and instru
 - layout: the registered nominal-curve parameters of the measured points (their feet on the
   nominal, in contour order) and, when the cloud has them, its probe vectors, which then also
   orient the probing error and are passed to the method as the user's export passes them;
-- instrument: the user's :class:`~.cmm_model.CmmInstrument` (noise draw and method alike);
+- instrument: the user's :class:`~robocal_uncertainty.core.instruments.cmm.CmmInstrument` (noise draw and method alike);
 - offsets and twist: the measured cloud's (the part sits where the user's part sits);
 - form scale: ``max(1, r / STUDY_FORM_RMS)``, ``r`` the root mean square of the cloud's
   denoised normal deviations (:attr:`~.denoise.DenoisedCloud.deviation`, the form the
@@ -66,9 +66,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument, point_displacements
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
 from robocal_uncertainty.inspection.coverage_rule import FamilyCounts, FamilyCoverage, family_cells
 from robocal_uncertainty.inspection.denoise import denoise_section
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve

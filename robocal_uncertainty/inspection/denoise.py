@@ -57,8 +57,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 
+from robocal_uncertainty.core.instruments.cmm import ErrorSource
 from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.inspection.cmm_model import ErrorSource
 from robocal_uncertainty.inspection.section import SectionEvaluation
 
 __all__ = [

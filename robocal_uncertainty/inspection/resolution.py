@@ -56,8 +56,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal_uncertainty.core.instruments.cmm import ErrorSource
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.inspection.cmm_model import ErrorSource
 from robocal_uncertainty.inspection.section import (
     PARAMETER_NAMES,
     SectionEvaluation,

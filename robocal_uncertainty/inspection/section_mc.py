@@ -2,7 +2,7 @@
 
 Batched model
 -------------
-Every trial perturbs every measured point by the CMM sources (:mod:`.cmm_model`) and
+Every trial perturbs every measured point by the CMM sources (:mod:`~robocal_uncertainty.core.instruments.cmm`) and
 re-evaluates the nine section parameters. Many trials are evaluated at once with the
 registration correspondences and the side regions frozen at the unperturbed solution:
 
@@ -33,7 +33,7 @@ Random streams
 The block contract of :func:`~robocal_uncertainty.montecarlo.engine.run_trials` holds (results
 bit-identical whatever ``chunk_blocks`` and ``workers``; the internal ``batch`` keeps the draws
 and changes the values only by round-off). Inside block ``b``
-source ``s`` (index in :data:`~.cmm_model.SOURCE_NAMES`) draws from
+source ``s`` (index in :data:`~robocal_uncertainty.core.instruments.cmm.SOURCE_NAMES`) draws from
 ``default_rng(SeedSequence(seed, spawn_key=(b, s)))``, the ``s``-th child of the block's
 sequence, so switching a source off leaves the other sources' draws unchanged.
 """
@@ -49,14 +49,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
-from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.inspection.cmm_model import (
+from robocal_uncertainty.core.instruments.cmm import (
     SOURCE_NAMES,
     CmmInstrument,
     ErrorSource,
     draw_bound,
     point_error_sources,
 )
+from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.denoise import DenoisedCloud, ResidualCheck, denoise_section
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud
@@ -86,6 +86,7 @@ from robocal_uncertainty.montecarlo.engine import (
     run_trials,
 )
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
 
 __all__ = [
@@ -100,7 +101,6 @@ __all__ = [
     "prepare_trials",
     "section_sources",
     "section_uncertainty",
-    "source_generator",
 ]
 
 METHODS: tuple[str, ...] = ("seed", "denoised")
@@ -402,7 +402,7 @@ def section_sources(
     Returns
     -------
     tuple of ErrorSource
-        In :data:`~.cmm_model.SOURCE_NAMES` order.
+        In :data:`~robocal_uncertainty.core.instruments.cmm.SOURCE_NAMES` order.
     """
     points = evaluation.points
     ref = points[evaluation.segmentation.leading_edge_point] if reference is None else reference
@@ -632,23 +632,6 @@ def build_frozen_model(
     )
 
 
-def source_generator(rng: np.random.Generator, source_index: int) -> np.random.Generator:
-    """The generator of source ``source_index`` inside the block whose generator is ``rng``.
-
-    ``default_rng(SeedSequence(entropy, spawn_key=block_key + (source_index,)))`` from the
-    block's SeedSequence; a generator not built from a SeedSequence seeds it from its own
-    first draws instead.
-    """
-    bit_generator = rng.bit_generator
-    sequence = getattr(bit_generator, "seed_seq", None) or getattr(bit_generator, "_seed_seq", None)
-    if not isinstance(sequence, np.random.SeedSequence):
-        sequence = np.random.SeedSequence(rng.integers(0, 2**63, size=4))
-    child = np.random.SeedSequence(
-        sequence.entropy, spawn_key=(*sequence.spawn_key, int(source_index)), pool_size=sequence.pool_size
-    )
-    return np.random.default_rng(child)
-
-
 @dataclass(frozen=True, eq=False)
 class SectionTrials:
     """Trial block for :func:`~robocal_uncertainty.montecarlo.engine.run_trials`.
@@ -660,7 +643,7 @@ class SectionTrials:
     sources : tuple of ErrorSource
         Enabled sources.
     source_indices : tuple of int
-        Stream key of each source (its index in :data:`~.cmm_model.SOURCE_NAMES`).
+        Stream key of each source (its index in :data:`~robocal_uncertainty.core.instruments.cmm.SOURCE_NAMES`).
     batch : int
         Trials evaluated per vectorised step (memory knob): the same draws whatever its value,
         the model values equal up to round-off of the regrouped matrix products (~1e-21 m).
@@ -1035,7 +1018,7 @@ def section_uncertainty(
     instrument : CmmInstrument, optional
         Source magnitudes; default the seed's.
     sources : sequence of str
-        Enabled sources, a subset of :data:`~.cmm_model.SOURCE_NAMES`.
+        Enabled sources, a subset of :data:`~robocal_uncertainty.core.instruments.cmm.SOURCE_NAMES`.
     options : SectionOptions, optional
         Evaluation settings.
     reference : array_like, shape (2,) [m], optional

@@ -6,7 +6,7 @@ deviation function of u (local features: :mod:`.coverage_study`), then rotated b
 twist about the stacking point and shifted by the offset. Points are spaced along the nominal
 parameter with a density ``1 + edge_density·|κ|/max|κ|`` (κ the curvature), so the edges get
 denser scanning than the sides, as CMM blade scans do. Probe vectors are the outward normals.
-Instrument errors are added separately (:func:`~robocal_uncertainty.inspection.cmm_model.point_displacements`).
+Instrument errors are added separately (:func:`~robocal_uncertainty.core.instruments.cmm.point_displacements`).
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ import dataclasses
 import math
 from typing import NamedTuple
 
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument
 from robocal_uncertainty.inspection.coverage_rule import FamilyCounts, FamilyCoverage, coverage_verified, family_cells
 from robocal_uncertainty.inspection.coverage_study import ScenarioStudy
 from robocal_uncertainty.inspection.denoise import ResidualCheck
@@ -106,7 +106,7 @@ def outside_study_scope(result: SectionUncertainty) -> str | None:
 
     Every study simulates the same kind of scan: :data:`STUDY_POINTS` points (± 10 % accepted)
     of a section whose nominal contour is :data:`STUDY_NOMINAL_LENGTH` long (± 1 %), measured by
-    the seed's CMM (:class:`~robocal_uncertainty.inspection.cmm_model.CmmInstrument` defaults).
+    the seed's CMM (:class:`~robocal_uncertainty.core.instruments.cmm.CmmInstrument` defaults).
     The denoising windows, the residual check's power and the roughness envelope all depend on
     the point spacing, the contour and the noise, so a measured coverage is not carried to
     another point density, blade or instrument: outside that scope no interval is stated

@@ -66,9 +66,9 @@ from robocal_uncertainty.app.verification import VerificationRun, calibrate_sess
 from robocal_uncertainty.bagio.messages import calibration_to_msg, msg_to_sample
 from robocal_uncertainty.core.calibration_file import calibration_to_dict, write_calibration
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.robot_formats import load_robot_source, robot_format_of, robot_source_from_description
 from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import CalibError, ConfigError, InputError
 from robocal_uncertainty.msg import CalibrationResult as CalibrationResultMsg
 from robocal_uncertainty.msg import CalibrationSample as CalibrationSampleMsg

@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.measurement import row_weights, stack_jacobian
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 
 __all__ = ["MIN_RESIDUAL_DOF_PER_COMPONENT", "ModelAdequacy", "assess_model_adequacy", "pose_noise_covariances"]
 

@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
 from robocal_uncertainty.core.model_error_field import ModelErrorField
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
@@ -36,7 +37,6 @@ from robocal_uncertainty.core.session import (
     parameter_gain,
     verify_session,
 )
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy, assess_model_adequacy, pose_noise_covariances
 from robocal_uncertainty.uncertainty.model_error_draws import estimate_field
 

@@ -339,7 +339,8 @@ def test_invalid_step_tolerance(model, campaign: Campaign, tol: object) -> None:
 
 
 def test_simulation_settings_reject_non_numbers() -> None:
-    from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise, UnmodelledErrors
+    from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
+    from robocal_uncertainty.core.simulation import UnmodelledErrors
 
     for make in (
         lambda: SimulationSettings(orientation_std="1e-4"),  # type: ignore[arg-type]

@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.inspection.cmm_model import (
+from robocal_uncertainty.core.instruments.cmm import (
     SOURCE_NAMES,
     CmmInstrument,
     draw_bound,
@@ -17,6 +16,7 @@ from robocal_uncertainty.inspection.cmm_model import (
     point_error_sources,
     seed_instrument,
 )
+from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.distributions import Normal, Rectangular
 
 SHIPPED = Path(__file__).resolve().parents[2] / "config" / "instruments" / "cmm_seed.yaml"

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument, point_displacements
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
 from robocal_uncertainty.inspection.denoise import (
     _hat_matrix,
     _smoother_rows,

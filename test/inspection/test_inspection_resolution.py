@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument
 from robocal_uncertainty.inspection.denoise import normal_noise_variance
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.resolution import ENVELOPE_PARAMETERS, ENVELOPE_STREAM, resolution_envelope

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.app.section_inspection import load_section_nominal
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument, point_displacements
 from robocal_uncertainty.inspection import coverage_study as cs
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud
 from robocal_uncertainty.inspection.section import evaluate_section

@@ -7,8 +7,8 @@ import pytest
 from inspection_data import CASCADE, ellipse, stadium
 from scipy.spatial import Voronoi, cKDTree
 
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument, point_displacements, point_error_sources
 from robocal_uncertainty.errors import InputError
-from robocal_uncertainty.inspection.cmm_model import CmmInstrument, point_displacements, point_error_sources
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import NominalSection, read_cascade_profile
 from robocal_uncertainty.inspection.registration import polygon_centroid, register_to_nominal, rotation

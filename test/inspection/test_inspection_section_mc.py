@@ -14,9 +14,9 @@ import pytest
 from inspection_data import ROTOR37, ROTOR37_SCALE
 from numpy.typing import NDArray
 
+from robocal_uncertainty.core.instruments.cmm import SOURCE_NAMES, CmmInstrument, ErrorSource, point_displacements
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.bias_correction import bias_corrections
-from robocal_uncertainty.inspection.cmm_model import SOURCE_NAMES, CmmInstrument, ErrorSource, point_displacements
 from robocal_uncertainty.inspection.coverage_study import FAMILIES, run_study
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud, read_rotor37_section
@@ -29,11 +29,11 @@ from robocal_uncertainty.inspection.section_mc import (
     prepare_trials,
     section_sources,
     section_uncertainty,
-    source_generator,
 )
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 from robocal_uncertainty.inspection.stored_studies import COVERAGE_STUDY
 from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, block_rng, run_trials
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.montecarlo.summary import summarize
 
 TRUE_OFFSET = (-0.1013e-3, 0.0538e-3)  # the seed's measured offsets [m]

@@ -302,7 +302,7 @@ def test_family_rule_rarely_fails_a_study_whose_intervals_all_cover_95_percent()
 def test_clouds_outside_the_studies_scope_are_never_stated_verified(demo: SectionInspection) -> None:
     """The studies simulate 1 836-point scans of Rotor 37 at the seed's size on the seed's CMM;
     their coverage is not carried to another point density, blade or instrument."""
-    from robocal_uncertainty.inspection.cmm_model import CmmInstrument
+    from robocal_uncertainty.core.instruments.cmm import CmmInstrument
 
     assert outside_study_scope(demo.result) is None
     assert demo.result.n_points == 1836 and demo.result.nominal_length == pytest.approx(0.80977, abs=1e-5)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core import SimulationSettings, forward_points, identify, load_robot_model, simulate_campaign
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.calibration import preparation

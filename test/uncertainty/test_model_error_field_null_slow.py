@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core import SimulationSettings, identify, load_robot_model, simulate_campaign
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.model_adequacy import assess_model_adequacy, pose_noise_covariances
 from robocal_uncertainty.uncertainty.model_error_draws import estimate_field

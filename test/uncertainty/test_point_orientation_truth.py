@@ -29,9 +29,9 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core import SimulationSettings, load_robot_model, simulate_campaign
+from robocal_uncertainty.core.instruments import EncoderNoise
 from robocal_uncertainty.core.kinematics import forward_poses
 from robocal_uncertainty.core.rotation import rotation_exp, rotation_log
-from robocal_uncertainty.core.simulation import EncoderNoise
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core import SimulationSettings, forward_points, identify, load_robot_model, simulate_campaign
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.uncertainty import UncertaintySettings
 from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.calibration.gum import regularisation_bias

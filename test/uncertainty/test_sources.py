@@ -17,6 +17,7 @@ from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledEr
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.distributions import IndependentRectangular
 from robocal_uncertainty.montecarlo.engine import block_rng
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty, prepare_calibration_trials
 from robocal_uncertainty.uncertainty.sources import (
     SOURCE_REGISTRY,
@@ -26,7 +27,6 @@ from robocal_uncertainty.uncertainty.sources import (
     UncertaintySettings,
     parse_sources,
     register_source,
-    source_rng,
     stream_id,
 )
 
@@ -85,7 +85,7 @@ def test_each_source_draws_from_its_own_seed_sequence(tracker_campaign) -> None:
     tracker = trials.sources[0]
     expected_rng = np.random.default_rng(np.random.SeedSequence(9, spawn_key=(4, stream_id("tracker"))))
     expected = expected_rng.uniform(-1.0, 1.0, size=(50, tracker.distribution.size)) * tracker.distribution.half_widths
-    np.testing.assert_array_equal(tracker.draw(source_rng(block_rng(9, 4), stream_id("tracker")), 50), expected)
+    np.testing.assert_array_equal(tracker.draw(source_generator(block_rng(9, 4), stream_id("tracker")), 50), expected)
     # Removing a source from the selection leaves the others' draws alone.
     both = prepare_calibration_trials(
         model,
@@ -95,7 +95,9 @@ def test_each_source_draws_from_its_own_seed_sequence(tracker_campaign) -> None:
         calibration=calibration,
     )
     assert [s.name for s in both.sources] == ["tracker", "encoder"]
-    np.testing.assert_array_equal(both.sources[0].draw(source_rng(block_rng(9, 4), stream_id("tracker")), 50), expected)
+    np.testing.assert_array_equal(
+        both.sources[0].draw(source_generator(block_rng(9, 4), stream_id("tracker")), 50), expected
+    )
 
 
 def test_gum_from_source_distributions_equals_a_dense_first_order_propagation(tracker_campaign) -> None:

@@ -20,9 +20,10 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.kinematics import forward_points, forward_poses
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.kernels import ToolPredictor
+from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.uncertainty.calibration.results import N_AXES
 from robocal_uncertainty.uncertainty.reidentification import BatchProblem, ChordSolver, reidentify_batch
-from robocal_uncertainty.uncertainty.sources import Source, TrialBatch, source_rng, stream_id
+from robocal_uncertainty.uncertainty.sources import Source, TrialBatch, stream_id
 
 __all__ = ["CalibrationTrials"]
 
@@ -39,7 +40,7 @@ class CalibrationTrials:
     """Picklable trial block: perturb, re-identify, evaluate at the test configurations.
 
     Every source draws its values for the block from its own stream (see
-    :func:`~robocal_uncertainty.uncertainty.sources.source_rng`); the block's values are
+    :func:`~robocal_uncertainty.montecarlo.streams.source_generator`); the block's values are
     then applied and re-identified in fixed sub-batches.
     """
 
@@ -74,7 +75,7 @@ class CalibrationTrials:
         # Draw every input of the block first, each source from its own stream, so a
         # source's values depend on the block and the source alone; the sub-batches
         # below only bound memory.
-        values = [source.draw(source_rng(rng, stream_id(source.name)), n) for source in self.sources]
+        values = [source.draw(source_generator(rng, stream_id(source.name)), n) for source in self.sources]
         n_test = self.test_joints.shape[0]
         k = self.x_hat.size
         out = np.empty((n, self.n_outputs))

@@ -29,7 +29,6 @@ from robocal_uncertainty.uncertainty.sources.base import (
     SourceSpec,
     TrialBatch,
     TrialContext,
-    source_rng,
     stream_id,
 )
 from robocal_uncertainty.uncertainty.sources.registry import (
@@ -77,7 +76,6 @@ __all__ = [
     "register_source",
     "source_options",
     "source_parameters",
-    "source_rng",
     "source_settings_fields",
     "source_with_role",
     "sources_help",

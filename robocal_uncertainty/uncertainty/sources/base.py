@@ -33,7 +33,6 @@ __all__ = [
     "SourceSpec",
     "TrialBatch",
     "TrialContext",
-    "source_rng",
     "stream_id",
 ]
 
@@ -136,7 +135,7 @@ class TrialBatch:
         setattr(self, name, deviations.copy() if current is None else current + deviations)
 
 
-OptionGroup = Literal["noise", "selection", "model"]
+OptionGroup = Literal["noise", "selection", "model", "session"]
 
 
 @dataclass(frozen=True)
@@ -180,13 +179,14 @@ class SourceOption:
         Command-line option, e.g. ``--tracker-noise-um``.
     help : str
         Its help text (argparse; may use ``%(default)s``), the unit included.
-    group : {"noise", "selection", "model"}
+    group : {"noise", "selection", "model", "session"}
         Where the option appears: ``noise`` with the instrument models (also in commands that
-        simulate or calibrate), ``selection`` and ``model`` with the Monte Carlo options.
+        simulate or calibrate), ``selection`` and ``model`` with the Monte Carlo options,
+        ``session`` in the commands that state for a future session (evaluate).
     unit : str
         Unit the user gives the value in ("" for none).
-    type : {float, int} or None
-        Value type (None for a flag).
+    type : {float, int, str} or None
+        Value type (None for a flag; str for a file).
     default : object
         Default of the option (None: unset, the source chooses).
     nargs : int or None
@@ -195,7 +195,8 @@ class SourceOption:
     flag_only : bool
         A switch (``store_true``) without a value.
     parameters : tuple of NodeParameter
-        The uncertainty node's parameters for this setting (two for a range).
+        The uncertainty node's parameters for this setting (two for a range); none for an
+        option of the command line only (the node leaves it unset).
     """
 
     flag: str
@@ -220,6 +221,8 @@ class SourceOption:
         A range (two parameters) of zeros and a count of 0 stand for the option left unset
         (None); otherwise the parameters' values in the option's type.
         """
+        if not self.parameters:
+            return False if self.flag_only else None
         convert: Callable[[Any], Any] = bool if self.flag_only or self.type is None else self.type
         given = [convert(values[parameter.name]) for parameter in self.parameters]
         if self.nargs is not None:
@@ -367,14 +370,3 @@ class SourceSpec:
     @property
     def stream_id(self) -> int:
         return stream_id(self.name)
-
-
-def source_rng(block_rng: np.random.Generator, stream: int) -> np.random.Generator:
-    """Generator of one source in one block: ``SeedSequence(seed, spawn_key=(block, stream))``.
-
-    Derived from the block generator's own SeedSequence, so a worker needs nothing more
-    than the engine gives it.
-    """
-    bit_generator = block_rng.bit_generator
-    seq = getattr(bit_generator, "seed_seq", None) or bit_generator._seed_seq  # type: ignore[attr-defined]  # numpy < 1.25
-    return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, int(stream))))

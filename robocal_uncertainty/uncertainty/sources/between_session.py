@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robocal_uncertainty.montecarlo.distributions import CorrelatedNormal, IndependentRectangular
-from robocal_uncertainty.uncertainty.sources.base import AdditiveSource, Source, SourceSpec, TrialContext
+from robocal_uncertainty.uncertainty.sources.base import AdditiveSource, Source, SourceOption, SourceSpec, TrialContext
 
 if TYPE_CHECKING:
     from robocal_uncertainty.uncertainty.sources.settings import UncertaintySettings
@@ -43,4 +43,14 @@ BETWEEN_SESSION = SourceSpec(
     "(estimated from several sessions; calibrate --sessions), one draw per trial for every prediction",
     True,
     _between_session_source,
+    options=(
+        SourceOption(
+            "--between-session",
+            "a calibration written by calibrate --sessions: add its between-session component (source "
+            "between_session) so the statement holds for a future session",
+            "session",
+            type=str,
+            metavar=("CAL.json",),
+        ),
+    ),
 )

@@ -1,7 +1,8 @@
 """Instrument sources: laser-tracker position and orientation noise, encoder noise.
 
-Smooth and additive: their noise models are :mod:`robocal_uncertainty.montecarlo`
-distributions, so the GUM variance and the Monte Carlo samples come from one definition.
+Smooth and additive. The tracker and encoder sources take their distribution from the
+instrument (:mod:`robocal_uncertainty.core.instruments`): the GUM variance and the Monte Carlo
+samples come from the definition the simulation draws from too.
 """
 
 from __future__ import annotations
@@ -11,13 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
-from robocal_uncertainty.montecarlo.distributions import (
-    IndependentCopies,
-    IndependentNormal,
-    IndependentRectangular,
-    Rectangular,
-)
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
+from robocal_uncertainty.montecarlo.distributions import IndependentNormal, IndependentRectangular
 from robocal_uncertainty.uncertainty.sources.base import (
     AdditiveSource,
     NodeParameter,
@@ -35,14 +31,11 @@ __all__ = ["ENCODER", "TRACKER", "TRACKER_ORIENTATION"]
 
 def _tracker(settings: UncertaintySettings, ctx: TrialContext) -> Source:
     d = ctx.measurement_dimension
-    half = np.repeat(settings.tracker_noise.half_width(ctx.distances), d)
-    rotations = list(ctx.rotation_components)
-    if rotations:
-        # Position components only: the orientation noise is the tracker_orientation source.
-        per_pose = half.reshape(ctx.n_poses, d)
-        per_pose[:, rotations] = 0.0
-        half = per_pose.reshape(-1)
-    return AdditiveSource("tracker", IndependentRectangular(half), (("points", (ctx.n_poses, d)),))
+    # Position components only: the orientation noise is the tracker_orientation source.
+    noise = settings.tracker_noise.distribution(
+        ctx.distances, dimension=d, rotation_components=tuple(ctx.rotation_components)
+    )
+    return AdditiveSource("tracker", noise, (("points", (ctx.n_poses, d)),))
 
 
 def _tracker_orientation(settings: UncertaintySettings, ctx: TrialContext) -> Source:
@@ -58,14 +51,9 @@ def _tracker_orientation(settings: UncertaintySettings, ctx: TrialContext) -> So
 
 def _encoder(settings: UncertaintySettings, ctx: TrialContext) -> Source:
     segments = (("joints", (ctx.n_poses, ctx.n_joints)), ("test_joints", (ctx.n_test, ctx.n_joints)))
-    if any(ctx.prismatic):
-        # Revolute readings in rad, prismatic ones in m: one half-width per joint.
-        half = np.tile(settings.encoder_noise.half_widths(ctx.prismatic), ctx.n_poses + ctx.n_test)
-        return AdditiveSource("encoder", IndependentRectangular(half), segments)
-    h = settings.encoder_noise.half_width
-    count = (ctx.n_poses + ctx.n_test) * ctx.n_joints
-    one = Rectangular(-h, h) if h > 0 else IndependentRectangular([0.0])
-    return AdditiveSource("encoder", IndependentCopies(one, count), segments)
+    prismatic = ctx.prismatic or (False,) * ctx.n_joints  # empty: all revolute
+    noise = settings.encoder_noise.distribution(prismatic, ctx.n_poses + ctx.n_test)
+    return AdditiveSource("encoder", noise, segments)
 
 
 TRACKER_OPTIONS = (

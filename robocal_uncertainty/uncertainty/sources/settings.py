@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from robocal_uncertainty.core.simulation import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.sources.registry import default_sources, parse_sources
 

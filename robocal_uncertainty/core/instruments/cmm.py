@@ -1,4 +1,4 @@
-"""The CMM's measurement error model per point (seed §1.2), as Monte Carlo / GUM sources.
+"""Coordinate measuring machine: the error model of each measured point (blade seed §1.2).
 
 Four independent sources displace each measured point in the section plane (z errors leave the
 in-plane parameters unchanged to first order and are not simulated):
@@ -19,7 +19,8 @@ in-plane parameters unchanged to first order and are not simulated):
 
 Each source is an :class:`ErrorSource`: a ``montecarlo`` distribution for its draws and a fixed
 linear map from draws to point displacements, so one definition gives both the Monte Carlo
-samples and the GUM variances.
+samples and the GUM variances. It lives with the other instruments (not in ``inspection``) so
+that section inspection and any later robot check measured on a CMM share one model.
 """
 
 from __future__ import annotations
@@ -34,7 +35,6 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.errors import ConfigError, InputError
-from robocal_uncertainty.inspection.point_cloud import as_points
 from robocal_uncertainty.montecarlo.distributions import Distribution, Normal, Rectangular
 
 __all__ = [
@@ -118,6 +118,19 @@ class CmmInstrument:
     def mpe(self, length: ArrayLike) -> NDArray[np.float64]:
         """MPE E = A + L/K [m] at distances ``length`` [m] (L/K with L in mm gives µm)."""
         return self.mpe_a + np.asarray(length, dtype=np.float64) * 1e-3 / self.mpe_k
+
+
+def _as_points(values: ArrayLike, name: str) -> NDArray[np.float64]:
+    """``values`` as a finite (n, 2) float array [m], or an InputError naming ``name``."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 2:
+        msg = f"{name} must have shape (n, 2), got {array.shape}"
+        raise InputError(msg)
+    bad = ~np.isfinite(array)
+    if bad.any():
+        msg = f"{name} contain {int(bad.sum())} NaN/inf values"
+        raise InputError(msg)
+    return array
 
 
 def seed_instrument() -> CmmInstrument:
@@ -293,8 +306,8 @@ def point_error_sources(
     tuple of ErrorSource
         In :data:`SOURCE_NAMES` order. A source of zero magnitude is kept (its draws are zero).
     """
-    p = as_points(points, "points")
-    n = as_points(normals, "normals")
+    p = _as_points(points, "points")
+    n = _as_points(normals, "normals")
     if n.shape != p.shape:
         msg = f"normals must have shape {p.shape}, got {n.shape}"
         raise InputError(msg)
