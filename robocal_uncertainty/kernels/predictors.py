@@ -233,12 +233,7 @@ class CompiledMeasurement:
         x = np.empty((n_trials, k))
         steps = np.empty(n_trials, dtype=np.int64)
         failed = np.zeros(n_trials, dtype=np.bool_)
-        chord_solve(
-            q,
-            values,
-            w,
-            _kernel_array(np.broadcast_to(np.asarray(lambdas, dtype=np.float64), (n_trials,))),
-            _kernel_array(np.asarray(x_start, dtype=np.float64).reshape(k)),
+        problem = (
             start,
             estimated,
             scale,
@@ -249,14 +244,25 @@ class CompiledMeasurement:
             _kernel_array(solver.pose_normal),
             reference,
             ref_joints,
-            solver.step_factors.as_tuple(),
-            walker.flat.joints,
-            walker.flat.blocks,
+        )
+        flat = walker.flat
+        walk_reference = (
+            flat.joints,
+            flat.blocks,
             walker.reference_readings,
             walker.theta,
             walker.cos_ref,
             walker.sin_ref,
-            *walker.parameter_trig,
+        )
+        chord_solve(
+            q,
+            values,
+            w,
+            _kernel_array(np.broadcast_to(np.asarray(lambdas, dtype=np.float64), (n_trials,))),
+            _kernel_array(np.asarray(x_start, dtype=np.float64).reshape(k)),
+            problem,
+            solver.step_factors.as_tuple(),
+            (*walk_reference, *walker.parameter_trig),
             self.orientation,
             int(max_iterations),
             float(relative_tolerance),
