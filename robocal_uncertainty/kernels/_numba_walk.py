@@ -460,7 +460,7 @@ def _times(vector: np.ndarray, matrix_t: np.ndarray, out: np.ndarray) -> None:
 def _eigen_step(
     rhs: np.ndarray,
     lam2: float,
-    factors: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    factors: tuple[np.ndarray, ...],
     rp: np.ndarray,
     rf: np.ndarray,
     y: np.ndarray,
