@@ -412,57 +412,97 @@ class ChordSolver:
         iterations_run : int
             The most steps any trial took.
         """
-        kernel = getattr(self.predictor, "solve_chord", None)
-        if kernel is not None and linear_start:
+        if linear_start:
             # A backend's compiled iteration (the same steps, trial by trial start to end);
-            # None where it defers to this one for the block.
-            solved: tuple[Array, int] | None = kernel(
-                self,
-                joint_positions,
-                measured,
-                weights,
-                lambdas,
-                x_start,
-                max_iterations=max_iterations,
-                relative_tolerance=relative_tolerance,
+            # None where there is none, or it defers to this one for the block.
+            solved = self._compiled(
+                joint_positions, measured, weights, lambdas, x_start, max_iterations, relative_tolerance
             )
             if solved is not None:
                 return solved
-        measurement = self.problem.measurement
         n_trials = measured.shape[0]
-        k = x_start.size
         lam2 = np.asarray(lambdas, dtype=np.float64)[:, None] ** 2
         x = np.repeat(x_start[None, :], n_trials, axis=0)
-        w_rows = None if weights is None else np.repeat(weights, measurement.dimension, axis=1)
-        mask = self.problem.penalty_mask
+        w_rows = None if weights is None else np.repeat(weights, self.problem.measurement.dimension, axis=1)
         normal = None
         if weights is not None:
-            normal = (weights @ self.pose_normal).reshape(n_trials, k, k)
-            normal += lam2[:, :, None] * np.diag(mask)
+            normal = (weights @ self.pose_normal).reshape(n_trials, x_start.size, x_start.size)
+            normal += lam2[:, :, None] * np.diag(self.problem.penalty_mask)
         q = np.asarray(joint_positions, dtype=np.float64)
         # Step 1: at the start, from the first-order prediction or the exact one.
         if linear_start:
-            r = stack_residual(measurement, measurement.residual(measured, self.reference))
-            if w_rows is not None:
-                r = r * w_rows
-            rhs = r @ self.jacobian
-            dq = q - self.joints
-            if dq.ndim == 3 or np.any(dq):
-                dq = np.broadcast_to(dq, (n_trials, *self.joints.shape))
-                if weights is not None:
-                    dq = dq * weights[:, :, None]
-                rhs -= dq.reshape(n_trials, -1) @ self.joint_map
+            rhs = self._linear_rhs(q, measured, weights, w_rows)
         else:
             pred = initial_prediction if initial_prediction is not None else self._predict(x, q)
-            r = stack_residual(measurement, measurement.residual(measured, pred))
+            r = stack_residual(self.problem.measurement, self.problem.measurement.residual(measured, pred))
             if w_rows is not None:
                 r = r * w_rows
             rhs = r @ self.jacobian
-        rhs -= lam2 * (x * mask)
+        rhs -= lam2 * (x * self.problem.penalty_mask)
         step = self._solve(rhs, lam2, normal)
         x += step
         first = np.maximum(np.linalg.norm(step, axis=1), np.finfo(float).tiny)
-        # Exact steps, each for the trials whose last step was not yet small enough.
+        done = self._exact_steps(x, q, measured, w_rows, (lam2, normal, first), max_iterations, relative_tolerance)
+        return x, done
+
+    def _compiled(
+        self,
+        joint_positions: Array,
+        measured: Array,
+        weights: Array | None,
+        lambdas: Array,
+        x_start: Array,
+        max_iterations: int,
+        relative_tolerance: float,
+    ) -> tuple[Array, int] | None:
+        """:meth:`solve` by the predictor's compiled iteration (``solve_chord``), or None."""
+        kernel = getattr(self.predictor, "solve_chord", None)
+        if kernel is None:
+            return None
+        solved: tuple[Array, int] | None = kernel(
+            self,
+            joint_positions,
+            measured,
+            weights,
+            lambdas,
+            x_start,
+            max_iterations=max_iterations,
+            relative_tolerance=relative_tolerance,
+        )
+        return solved
+
+    def _linear_rhs(self, q: Array, measured: Array, weights: Array | None, w_rows: Array | None) -> Array:
+        """The first step's right-hand side from the first-order prediction ``reference + J_q dQ``."""
+        measurement = self.problem.measurement
+        n_trials = measured.shape[0]
+        r = stack_residual(measurement, measurement.residual(measured, self.reference))
+        if w_rows is not None:
+            r = r * w_rows
+        rhs: Array = r @ self.jacobian
+        dq = q - self.joints
+        if dq.ndim == 3 or np.any(dq):
+            dq = np.broadcast_to(dq, (n_trials, *self.joints.shape))
+            if weights is not None:
+                dq = dq * weights[:, :, None]
+            rhs -= dq.reshape(n_trials, -1) @ self.joint_map
+        return rhs
+
+    def _exact_steps(
+        self,
+        x: Array,
+        q: Array,
+        measured: Array,
+        w_rows: Array | None,
+        state: tuple[Array, Array | None, Array],
+        max_iterations: int,
+        relative_tolerance: float,
+    ) -> int:
+        """Exact steps on x (T, k) in place, each for the trials whose last step was not yet
+        below `relative_tolerance` of their first; `state` is lambda^2 (T, 1), the per-trial
+        normal matrices (or None) and the first steps' norms (T,). Returns the most steps."""
+        lam2, normal, first = state
+        measurement = self.problem.measurement
+        mask = self.problem.penalty_mask
         active: slice | NDArray[np.intp] = slice(None)  # all trials, without copying their data
         done = 1
         for done in range(2, max_iterations + 1):
@@ -477,8 +517,8 @@ class ChordSolver:
             more = np.linalg.norm(step, axis=1) > relative_tolerance * first[active]
             if not more.any():
                 break
-            active = np.arange(n_trials)[active][more]
-        return x, done
+            active = np.arange(x.shape[0])[active][more]
+        return done
 
     def _predict(self, x: Array, joint_positions: Array) -> Array:
         """The measurement type's prediction at scaled deviations x (T, k) and the readings."""
