@@ -539,6 +539,7 @@ def _norm(x: np.ndarray) -> float:
 def chord_solve(
     qs: np.ndarray,
     measured: np.ndarray,
+    deviations: np.ndarray,
     weights: np.ndarray,
     lambdas: np.ndarray,
     x_start: np.ndarray,
@@ -556,16 +557,16 @@ def chord_solve(
     """The chord re-identification of every trial, each trial start to end in one pass.
 
     The iteration of :meth:`~robocal_uncertainty.uncertainty.reidentification.ChordSolver.solve`
-    with ``linear_start``: the first step from the first-order prediction (residual at the
-    reference, the reading errors through ``joint_map``), then exact steps (the chain walked
-    at the trial's parameters and readings) until a step is below `relative_tolerance` of the
-    first or `max_iterations` steps are taken; the Jacobian frozen at the calibration. The
-    same operations as the numpy solver in another order, so the results agree to rounding.
+    with ``linear_start`` (first-order first step, then exact steps, the Jacobian frozen at
+    the calibration): the numpy solver's operations in another order (equal to rounding).
 
     Parameters
     ----------
     qs : (n_q, n_poses, n_joints), n_q 1 or n_trials
     measured : (n_m, n_poses, value_size), n_m 1 or n_trials
+    deviations : (n_d, n_poses, dimension), n_d 0 or n_trials
+        The trials' measurement errors, applied here to the shared `measured` (n_m 1) by
+        :func:`_perturb`; n_d 0: `measured` are the trials' values.
     weights : (n_w, n_poses), n_w 0 (every pose) or n_trials
     lambdas : (n_trials,); x_start : (k,)
     problem : tuple
@@ -602,11 +603,15 @@ def chord_solve(
         scratch = _trial_scratch(n_poses, nj, x_start.shape[0], problem[0].shape[0], poses)
         pw = scratch[-1]
         pw[:] = 1.0
+        perturbed = np.empty((n_poses, measured.shape[2]))
         for t in range(ch * n_trials // n_chunks, (ch + 1) * n_trials // n_chunks):
             if has_w:
                 pw[:] = weights[t]
             q = qs[0] if qs.shape[0] == 1 else qs[t]
             m = measured[0] if measured.shape[0] == 1 else measured[t]
+            if deviations.shape[0] > 0:
+                _perturb(m, deviations[t], poses, perturbed)
+                m = perturbed
             settings = (poses, has_w, correct, max_iterations, relative_tolerance)
             steps[t], failed[t] = _solve_trial(q, m, lambdas[t], x_start, problem, factors, walker, settings, scratch)
             x_out[t] = scratch[9]
@@ -766,3 +771,62 @@ def _weighted_normal(
     for c in range(k):
         normal[c, c] += lam2 * mask[c]
     return _cholesky(normal)
+
+
+POSE_SERIES_THETA2 = 1.0e-6
+"""Squared angle [rad^2] of a trial's orientation errors below which :func:`_perturb` takes
+``sin(t) / t`` and ``(1 - cos t) / t^2`` from their series, as
+:meth:`~robocal_uncertainty.core.pose_measurement.PoseMeasurement.perturb` does."""
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _perturb(values: np.ndarray, errors: np.ndarray, poses: bool, out: np.ndarray) -> None:
+    """One trial's measured values moved by its errors into `out` (n_poses, value_size).
+
+    Points: ``values + errors``. Poses: the position plus its error and ``exp([e]x) R`` by
+    :meth:`~robocal_uncertainty.core.pose_measurement.PoseMeasurement.perturb`'s formulas,
+    operation by operation. That method takes the series for a whole batch when every angle
+    of the batch is small; here the choice is the trial's own (its every angle below 1e-3
+    rad: the series; else per pose as there), so where a batch holds a larger angle the two
+    differ by rounding alone, and a trial's values never depend on the other trials.
+    """
+    n_poses = values.shape[0]
+    if not poses:
+        for i in range(n_poses):
+            for c in range(values.shape[1]):
+                out[i, c] = values[i, c] + errors[i, c]
+        return
+    largest = 0.0
+    for i in range(n_poses):
+        e = errors[i]
+        largest = max(largest, e[3] * e[3] + e[4] * e[4] + e[5] * e[5])
+    for i in range(n_poses):
+        _perturb_pose(values[i], errors[i], largest < POSE_SERIES_THETA2, out[i])
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _perturb_pose(v: np.ndarray, e: np.ndarray, series: bool, out: np.ndarray) -> None:
+    """One pose's 12 values moved by its 6 errors (see :func:`_perturb`)."""
+    for c in range(3):
+        out[c] = v[c] + e[c]
+    e0, e1, e2 = e[3], e[4], e[5]
+    theta2 = e0 * e0 + e1 * e1 + e2 * e2
+    if series or theta2 < 1e-8:
+        a = 1.0 - theta2 / 6.0 + (theta2 * theta2) / 120.0
+        b = 0.5 - theta2 / 24.0 + (theta2 * theta2) / 720.0
+    else:
+        t = math.sqrt(theta2)
+        a = math.sin(t) / t
+        b = (1.0 - math.cos(t)) / (t * t)
+    diagonal = 1.0 - b * theta2
+    be0, be1, be2 = b * e0, b * e1, b * e2
+    ae0, ae1, ae2 = a * e0, a * e1, a * e2
+    for i in range(3):
+        if i == 0:
+            x, y, z = diagonal + be0 * e0, be0 * e1 - ae2, be0 * e2 + ae1
+        elif i == 1:
+            x, y, z = be1 * e0 + ae2, diagonal + be1 * e1, be1 * e2 - ae0
+        else:
+            x, y, z = be2 * e0 - ae1, be2 * e1 + ae0, diagonal + be2 * e2
+        for j in range(3):
+            out[3 + 3 * i + j] = x * v[3 + j] + y * v[6 + j] + z * v[9 + j]

@@ -238,6 +238,7 @@ def _warm_up_kernels() -> None:
     chord_solve(
         np.zeros((1, 1, 1)),
         np.zeros((1, 1, 3)),
+        np.empty((0, 1, 3)),
         np.empty((0, 1)),
         np.ones(1),
         np.zeros(1),

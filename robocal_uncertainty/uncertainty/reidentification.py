@@ -376,35 +376,37 @@ class ChordSolver:
         max_iterations: int = 6,
         relative_tolerance: float = 1e-3,
         linear_start: bool = True,
+        deviations: Array | None = None,
     ) -> tuple[Array, int]:
         """Solve T regularised identifications.
 
         Parameters
         ----------
         joint_positions : ndarray, shape (T, n_poses, n_joints) or (n_poses, n_joints) [rad]
-        measured : ndarray, shape (T, n_poses, value_size) [m for points]
-            Measured values of each trial (the problem's measurement type).
+        measured : ndarray, shape (T, n_poses, value_size) [m for points]: each trial's values
         weights : ndarray, shape (T, n_poses), or None
             Pose weights (0/1 for subsets); None uses every pose.
         lambdas : ndarray, shape (T,)
             Regularisation parameter per trial (scaled units).
         x_start : ndarray, shape (k,)
-            Calibration's scaled deviation from nominal (the parameters the Jacobian is
-            frozen at).
+            Calibration's scaled deviation from nominal (where the Jacobian is frozen).
         initial_prediction : ndarray, shape (n_poses, value_size) [m for points], optional
             ``F(p_start, Q)`` (the measurement type's prediction) when every trial shares
             the readings Q and `linear_start` is false (saves one kinematics pass).
         max_iterations : int
             Steps per trial at most, the first included.
         relative_tolerance : float
-            A trial stops when its step is below this fraction of its first step. The
-            chord iteration contracts by ~1e-4 per step here, so two steps usually suffice
-            and the error left is ~3e-8 of the trial's deviation (about 1e-12 m on the
-            seed's case, measured against a 14-digit solution).
+            A trial stops when its step is below this fraction of its first step (the chord
+            iteration contracts by ~1e-4 per step: two steps usually suffice, leaving ~3e-8
+            of the trial's deviation, ~1e-12 m on the seed's case against a 14-digit solution).
         linear_start : bool
             Take the first step from the first-order prediction ``reference + J_q dQ`` (no
             kinematics, see the class docstring); false evaluates the prediction at the
             start exactly (the method before this option, kept as its reference).
+        deviations : ndarray, shape (T, n_poses, dimension), optional
+            Measurement errors: the trials measure ``perturb(measured, deviations)`` (the
+            measurement type's), `measured` (1, n_poses, value_size); a compiled iteration
+            applies them itself.
 
         Returns
         -------
@@ -413,21 +415,19 @@ class ChordSolver:
             The most steps any trial took.
         """
         if linear_start:
-            # A backend's compiled iteration (the same steps, trial by trial start to end);
-            # None where there is none, or it defers to this one for the block.
+            # A backend's compiled iteration (the same steps, trial by trial), if it takes the block.
             solved = self._compiled(
-                joint_positions, measured, weights, lambdas, x_start, max_iterations, relative_tolerance
+                joint_positions, measured, weights, lambdas, x_start, (max_iterations, relative_tolerance, deviations)
             )
             if solved is not None:
                 return solved
+        if deviations is not None:
+            measured = self.problem.measurement.perturb(measured, deviations)
         n_trials = measured.shape[0]
         lam2 = np.asarray(lambdas, dtype=np.float64)[:, None] ** 2
         x = np.repeat(x_start[None, :], n_trials, axis=0)
         w_rows = None if weights is None else np.repeat(weights, self.problem.measurement.dimension, axis=1)
-        normal = None
-        if weights is not None:
-            normal = (weights @ self.pose_normal).reshape(n_trials, x_start.size, x_start.size)
-            normal += lam2[:, :, None] * np.diag(self.problem.penalty_mask)
+        normal = self._weighted_normals(weights, lam2, x_start.size)
         q = np.asarray(joint_positions, dtype=np.float64)
         # Step 1: at the start, from the first-order prediction or the exact one.
         if linear_start:
@@ -452,10 +452,11 @@ class ChordSolver:
         weights: Array | None,
         lambdas: Array,
         x_start: Array,
-        max_iterations: int,
-        relative_tolerance: float,
+        settings: tuple[int, float, Array | None],
     ) -> tuple[Array, int] | None:
-        """:meth:`solve` by the predictor's compiled iteration (``solve_chord``), or None."""
+        """:meth:`solve` by the predictor's compiled iteration (``solve_chord``), or None;
+        `settings` the most steps, the relative tolerance and the deviations."""
+        max_iterations, relative_tolerance, deviations = settings
         kernel = getattr(self.predictor, "solve_chord", None)
         if kernel is None:
             return None
@@ -468,8 +469,17 @@ class ChordSolver:
             x_start,
             max_iterations=max_iterations,
             relative_tolerance=relative_tolerance,
+            **({} if deviations is None else {"deviations": deviations}),
         )
         return solved
+
+    def _weighted_normals(self, weights: Array | None, lam2: Array, k: int) -> Array | None:
+        """Per-trial normal matrices ``sum_i w_i J_i^T J_i + lam^2 M`` (T, k, k); None without weights."""
+        if weights is None:
+            return None
+        normal: Array = (weights @ self.pose_normal).reshape(weights.shape[0], k, k)
+        normal += lam2[:, :, None] * np.diag(self.problem.penalty_mask)
+        return normal
 
     def _linear_rhs(self, q: Array, measured: Array, weights: Array | None, w_rows: Array | None) -> Array:
         """The first step's right-hand side from the first-order prediction ``reference + J_q dQ``."""

@@ -106,16 +106,22 @@ class CalibrationTrials:
             # Every source perturbs the measured points with zero-mean errors, so the trials
             # stay centred on the calibration.
             # Source deviations are in the residual coordinates of the measurement type.
-            pts = (
-                measurement.perturb(self.points[None], batch.points)
-                if batch.points is not None
-                else np.broadcast_to(self.points, (t, *self.points.shape))
-            )
             q = self.joint_positions[None] + batch.joints if batch.joints is not None else self.joint_positions
             lambdas = batch.lambdas if batch.lambdas is not None else np.full(t, self.lambda_star)
-            if self.solver is not None:
+            if self.solver is not None and batch.points is not None:
+                # The solver perturbs (a compiled one inside its kernel, without a copy).
+                x, _ = self.solver.solve(
+                    q, self.points[None], batch.weights, lambdas, self.x_hat, deviations=batch.points
+                )
+            elif self.solver is not None:
+                pts = np.broadcast_to(self.points, (t, *self.points.shape))
                 x, _ = self.solver.solve(q, pts, batch.weights, lambdas, self.x_hat)
             else:
+                pts = (
+                    measurement.perturb(self.points[None], batch.points)
+                    if batch.points is not None
+                    else np.broadcast_to(self.points, (t, *self.points.shape))
+                )
                 x, _ = reidentify_batch(
                     self.problem,
                     q,
