@@ -538,6 +538,7 @@ def _norm(x: np.ndarray) -> float:
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def chord_solve(
     qs: np.ndarray,
+    reading_errors: np.ndarray,
     measured: np.ndarray,
     deviations: np.ndarray,
     weights: np.ndarray,
@@ -563,6 +564,8 @@ def chord_solve(
     Parameters
     ----------
     qs : (n_q, n_poses, n_joints), n_q 1 or n_trials
+    reading_errors : (n_e, n_poses, n_joints), n_e 0 or n_trials
+        The trials' reading errors, added here to the shared `qs` (n_q 1); n_e 0: none.
     measured : (n_m, n_poses, value_size), n_m 1 or n_trials
     deviations : (n_d, n_poses, dimension), n_d 0 or n_trials
         The trials' measurement errors, applied here to the shared `measured` (n_m 1) by
@@ -591,23 +594,22 @@ def chord_solve(
     n_trials = x_out.shape[0]
     ref_joints = problem[9]
     n_poses, nj = ref_joints.shape
-    shared_dq = False  # shared readings that differ from the reference (numpy: np.any(dq))
-    if qs.shape[0] == 1:
-        for i in range(n_poses):
-            for j in range(nj):
-                if qs[0, i, j] != ref_joints[i, j]:
-                    shared_dq = True
-    correct = qs.shape[0] > 1 or shared_dq
+    # The first step corrects for readings that differ from the reference (numpy: np.any(dq)).
+    correct = qs.shape[0] > 1 or reading_errors.shape[0] > 0 or _differs(qs[0], ref_joints)
     has_w = weights.shape[0] > 0
     for ch in numba.prange(n_chunks):
         scratch = _trial_scratch(n_poses, nj, x_start.shape[0], problem[0].shape[0], poses)
         pw = scratch[-1]
         pw[:] = 1.0
         perturbed = np.empty((n_poses, measured.shape[2]))
+        read = np.empty((n_poses, nj))
         for t in range(ch * n_trials // n_chunks, (ch + 1) * n_trials // n_chunks):
             if has_w:
                 pw[:] = weights[t]
             q = qs[0] if qs.shape[0] == 1 else qs[t]
+            if reading_errors.shape[0] > 0:
+                _add(q, reading_errors[t], read)
+                q = read
             m = measured[0] if measured.shape[0] == 1 else measured[t]
             if deviations.shape[0] > 0:
                 _perturb(m, deviations[t], poses, perturbed)
@@ -830,3 +832,21 @@ def _perturb_pose(v: np.ndarray, e: np.ndarray, series: bool, out: np.ndarray) -
             x, y, z = be2 * e0 - ae1, be2 * e1 + ae0, diagonal + be2 * e2
         for j in range(3):
             out[3 + 3 * i + j] = x * v[3 + j] + y * v[6 + j] + z * v[9 + j]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _add(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out = a + b`` for 2-D arrays of one shape."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            out[i, j] = a[i, j] + b[i, j]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _differs(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two 2-D arrays of one shape differ anywhere."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            if a[i, j] != b[i, j]:
+                return True
+    return False

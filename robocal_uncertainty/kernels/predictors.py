@@ -207,12 +207,14 @@ class CompiledMeasurement:
         max_iterations: int,
         relative_tolerance: float,
         deviations: Array | None = None,
+        reading_errors: Array | None = None,
     ) -> tuple[Array, int] | None:
         """:meth:`ChordSolver.solve` (its ``linear_start`` iteration) for every trial, compiled.
 
         Parameters as there (`solver` the :class:`ChordSolver`; with `deviations`, the
         measurement errors (T, n_poses, dimension) that the kernel applies to the shared
-        `measured` itself, as the measurement type's ``perturb`` does). Returns None, for the
+        `measured` itself, as the measurement type's ``perturb`` does; with `reading_errors`
+        (T, n_poses, n_joints), those it adds to the shared readings). Returns None, for the
         solver's own numpy iteration on this block, where a trial needs what the kernel does
         not do (a residual rotation near pi, a normal matrix that is not positive definite).
         """
@@ -221,11 +223,16 @@ class CompiledMeasurement:
         if solver.joint_jacobian is None:  # a solver built without ChordSolver.at
             return None
         walker = self.walker
-        n_trials = measured.shape[0] if deviations is None else deviations.shape[0]
+        n_trials = max([measured.shape[0], *(len(e) for e in (deviations, reading_errors) if e is not None)])
         n_poses = walker.joints.shape[0]
         k = x_start.size
         q = np.asarray(joint_positions, dtype=np.float64)
         q = _kernel_array(q.reshape(1, *q.shape) if q.ndim == 2 else _shared(q))
+        read_errors = np.empty((0, *walker.joints.shape))
+        if reading_errors is not None:
+            if q.shape[0] != 1:
+                return None  # errors for readings that differ from trial to trial: the numpy path
+            read_errors = _kernel_array(reading_errors)
         values = _kernel_array(_shared(np.asarray(measured, dtype=np.float64)))
         if deviations is None:
             errors = np.empty((0, n_poses, solver.problem.measurement.dimension))
@@ -243,6 +250,7 @@ class CompiledMeasurement:
         failed = np.zeros(n_trials, dtype=np.bool_)
         chord_solve(
             q,
+            read_errors,
             values,
             errors,
             w,

@@ -237,6 +237,7 @@ def _warm_up_kernels() -> None:
     walker = (flat.joints, flat.blocks, np.zeros((1, 1)), np.zeros(1), np.ones((1, 1)), np.zeros((1, 1)), *trig)
     chord_solve(
         np.zeros((1, 1, 1)),
+        np.empty((0, 1, 1)),
         np.zeros((1, 1, 3)),
         np.empty((0, 1, 3)),
         np.empty((0, 1)),

@@ -377,6 +377,7 @@ class ChordSolver:
         relative_tolerance: float = 1e-3,
         linear_start: bool = True,
         deviations: Array | None = None,
+        reading_errors: Array | None = None,
     ) -> tuple[Array, int]:
         """Solve T regularised identifications.
 
@@ -403,10 +404,10 @@ class ChordSolver:
             Take the first step from the first-order prediction ``reference + J_q dQ`` (no
             kinematics, see the class docstring); false evaluates the prediction at the
             start exactly (the method before this option, kept as its reference).
-        deviations : ndarray, shape (T, n_poses, dimension), optional
-            Measurement errors: the trials measure ``perturb(measured, deviations)`` (the
-            measurement type's), `measured` (1, n_poses, value_size); a compiled iteration
-            applies them itself.
+        deviations, reading_errors : ndarray, shape (T, n_poses, dimension), (T, n_poses, n_joints)
+            Errors: the trials measure ``perturb(measured (1, n_poses, value_size), deviations)``
+            at ``joint_positions (n_poses, n_joints) + reading_errors`` (a compiled iteration
+            applies them itself, without copies).
 
         Returns
         -------
@@ -417,12 +418,16 @@ class ChordSolver:
         if linear_start:
             # A backend's compiled iteration (the same steps, trial by trial), if it takes the block.
             solved = self._compiled(
-                joint_positions, measured, weights, lambdas, x_start, (max_iterations, relative_tolerance, deviations)
+                joint_positions,
+                measured,
+                weights,
+                lambdas,
+                x_start,
+                (max_iterations, relative_tolerance, deviations, reading_errors),
             )
             if solved is not None:
                 return solved
-        if deviations is not None:
-            measured = self.problem.measurement.perturb(measured, deviations)
+        joint_positions, measured = self._with_errors(joint_positions, measured, deviations, reading_errors)
         n_trials = measured.shape[0]
         lam2 = np.asarray(lambdas, dtype=np.float64)[:, None] ** 2
         x = np.repeat(x_start[None, :], n_trials, axis=0)
@@ -452,11 +457,11 @@ class ChordSolver:
         weights: Array | None,
         lambdas: Array,
         x_start: Array,
-        settings: tuple[int, float, Array | None],
+        settings: tuple[int, float, Array | None, Array | None],
     ) -> tuple[Array, int] | None:
         """:meth:`solve` by the predictor's compiled iteration (``solve_chord``), or None;
-        `settings` the most steps, the relative tolerance and the deviations."""
-        max_iterations, relative_tolerance, deviations = settings
+        `settings` the most steps, the relative tolerance and the measurement and reading errors."""
+        max_iterations, relative_tolerance, deviations, reading_errors = settings
         kernel = getattr(self.predictor, "solve_chord", None)
         if kernel is None:
             return None
@@ -470,8 +475,19 @@ class ChordSolver:
             max_iterations=max_iterations,
             relative_tolerance=relative_tolerance,
             **({} if deviations is None else {"deviations": deviations}),
+            **({} if reading_errors is None else {"reading_errors": reading_errors}),
         )
         return solved
+
+    def _with_errors(
+        self, joint_positions: Array, measured: Array, deviations: Array | None, reading_errors: Array | None
+    ) -> tuple[Array, Array]:
+        """The trials' readings and measured values, the errors (when given) applied."""
+        if deviations is not None:
+            measured = self.problem.measurement.perturb(measured, deviations)
+        if reading_errors is not None:
+            joint_positions = joint_positions[None] + reading_errors
+        return joint_positions, measured
 
     def _weighted_normals(self, weights: Array | None, lam2: Array, k: int) -> Array | None:
         """Per-trial normal matrices ``sum_i w_i J_i^T J_i + lam^2 M`` (T, k, k); None without weights."""
