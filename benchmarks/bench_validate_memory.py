@@ -16,7 +16,11 @@ Printed: held-out poses, wall time of ``validate_holdout``, peak RSS, and the me
 held-out pose (the slope of peak RSS between two sizes) before and after. Nothing here is a
 pass/fail test.
 
+With ``--streamed-only``: the streamed run alone, once per backend of ``--backend`` (e.g.
+``--backend numpy numba``), to time ``validate`` of ``--held-out`` poses per backend.
+
 Usage: python benchmarks/bench_validate_memory.py [--held-out 12000] [--trials 5000]
+       [--streamed-only --backend numpy numba]
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _child(n_held: int, trials: int, one_chunk: bool) -> None:
+def _child(n_held: int, trials: int, one_chunk: bool, backend: str) -> None:
     sys.path.insert(0, str(ROOT))
     import numpy as np
 
@@ -53,7 +57,9 @@ def _child(n_held: int, trials: int, one_chunk: bool) -> None:
     train, held = sim.subset(np.arange(53)), sim.subset(np.arange(53, 53 + n_held))
     settings = UncertaintySettings(sources=("tracker", "encoder", "residual"))
     start = time.perf_counter()
-    result = holdout.validate_holdout(model, train, validation_campaign=held, settings=settings, trials=trials)
+    result = holdout.validate_holdout(
+        model, train, validation_campaign=held, settings=settings, trials=trials, backend=backend
+    )
     elapsed = time.perf_counter() - start
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     x = result.axes[0]
@@ -71,8 +77,8 @@ def _child(n_held: int, trials: int, one_chunk: bool) -> None:
     )
 
 
-def _run(n_held: int, trials: int, one_chunk: bool) -> dict[str, float]:
-    cmd = [sys.executable, __file__, "--child", str(n_held), "--trials", str(trials)]
+def _run(n_held: int, trials: int, one_chunk: bool, backend: str = "numpy") -> dict[str, float]:
+    cmd = [sys.executable, __file__, "--child", str(n_held), "--trials", str(trials), "--backend", backend]
     if one_chunk:
         cmd.append("--one-chunk")
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
@@ -85,9 +91,23 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=5_000)
     parser.add_argument("--child", type=int)
     parser.add_argument("--one-chunk", action="store_true")
+    parser.add_argument("--backend", nargs="+", default=["numpy"], help="trial backends (default numpy)")
+    parser.add_argument("--streamed-only", action="store_true", help="time the streamed run per backend only")
     args = parser.parse_args()
     if args.child is not None:
-        _child(args.child, args.trials, args.one_chunk)
+        _child(args.child, args.trials, args.one_chunk, args.backend[0])
+        return
+    if args.streamed_only:
+        base = None
+        for backend in args.backend:
+            r = _run(args.held_out, args.trials, False, backend)
+            base = base or r["seconds"]
+            print(
+                f"{backend:<6} {args.held_out:>6} held-out poses, {args.trials} trials: {r['seconds']:8.1f} s wall "
+                f"({base / r['seconds']:.2f}x), peak RSS {r['peak_rss'] / 2**20:6.0f} MiB "
+                f"(x inside {100 * r['inside_x']:.1f} %)",
+                flush=True,
+            )
         return
     mib = 2**20
     rows = []

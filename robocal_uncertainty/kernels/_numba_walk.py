@@ -87,6 +87,46 @@ def _turn_fixed(u: np.ndarray, v: np.ndarray, c: float, s: float) -> None:
         v[i] = s * a + c * b
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _series_turns(
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    has_beta: bool,
+    link: tuple[float, float, float, float],
+    a: float,
+    translate: bool,
+) -> None:
+    """One joint's turns of one vector (components x, y, z, each (n_poses,)) at every pose, in
+    place: about z by the joint angle (`cos`, `sin` per pose), about y by beta (when
+    `has_beta`), about x by alpha (`link` = cos beta, sin beta, cos alpha, sin alpha), then
+    (with `translate`, the point) along x by `a`. One loop per case without a branch inside,
+    so that the compiler vectorises it; the operations per pose are those of the pass over
+    larger changes in :func:`_walk_trial`."""
+    cb_, sb_, ca, sa = link
+    if has_beta:
+        for i in range(x.shape[0]):
+            c, s = cos[i], sin[i]
+            xi, yi, zi = x[i], y[i], z[i]
+            xi, yi = c * xi - s * yi, s * xi + c * yi
+            zi, xi = cb_ * zi - sb_ * xi, sb_ * zi + cb_ * xi
+            yi, zi = ca * yi - sa * zi, sa * yi + ca * zi
+            x[i] = xi + a if translate else xi
+            y[i] = yi
+            z[i] = zi
+    else:
+        for i in range(x.shape[0]):
+            c, s = cos[i], sin[i]
+            xi, yi, zi = x[i], y[i], z[i]
+            xi, yi = c * xi - s * yi, s * xi + c * yi
+            yi, zi = ca * yi - sa * zi, sa * yi + ca * zi
+            x[i] = xi + a if translate else xi
+            y[i] = yi
+            z[i] = zi
+
+
 @numba.njit(cache=True, error_model="numpy")
 def _walk_trial(
     p: np.ndarray,
@@ -119,87 +159,11 @@ def _walk_trial(
     as the joint angles' do. `rot` (27,), `v` (9, n_poses), `b`, `cos`, `sin` (n_poses,) are scratch.
     """
     n_poses = o.shape[0]
-    nj = joints.shape[0]
-    t0, r0, m0, b0 = blocks[0], blocks[1], blocks[2], blocks[3]
     n_vec = 3 if poses else 1
-    _rpy(p, b0 + 3, p_ref, cos_p, sin_p, rot[0:9])  # base, mount, tool rotations, row-major
-    if m0 >= 0:
-        _rpy(p, m0 + 3, p_ref, cos_p, sin_p, rot[9:18])
-    if r0 >= 0:
-        _rpy(p, r0, p_ref, cos_p, sin_p, rot[18:27])
-    # v[3 m + c]: component c of vector m (the point; the tool's x and z axes) per pose.
-    v[0, :] = p[t0]
-    v[1, :] = p[t0 + 1]
-    v[2, :] = p[t0 + 2]
-    if poses:
-        if r0 >= 0:
-            for c in range(3):
-                v[3 + c, :] = rot[18 + 3 * c]  # tool x axis: column 0
-                v[6 + c, :] = rot[20 + 3 * c]  # tool z axis: column 2
-        else:
-            v[3:9, :] = 0.0
-            v[3, :] = 1.0
-            v[8, :] = 1.0
-    for j in range(nj - 1, -1, -1):
-        theta = p[joints[j, 2]]
-        dtheta = theta - theta_ref[j]
-        prismatic = joints[j, 5] != 0
-        d = p[joints[j, 3]]
-        largest = 0.0
-        if prismatic:
-            for i in range(n_poses):
-                v[2, i] += d + q[i, j]
-                b[i] = dtheta
-            largest = abs(dtheta)
-        else:
-            for i in range(n_poses):
-                v[2, i] += d
-                b[i] = (q[i, j] - q_ref[j, i]) + dtheta
-            for i in range(n_poses):
-                largest = max(largest, abs(b[i]))
-        cr = cos_ref[j]
-        sr = sin_ref[j]
-        if largest <= SERIES_LIMIT:
-            # The usual case (every change within the series): the joint's turns of every
-            # vector in one pass over the poses, the same operations in the same order as the
-            # passes below take them.
-            has_beta = joints[j, 4] >= 0
-            cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p) if has_beta else (1.0, 0.0)
-            ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
-            a = p[joints[j, 1]]
-            for i in range(n_poses):
-                bi = b[i]
-                b2 = bi * bi
-                cb = 1.0 + b2 * (-0.5 + b2 * (1.0 / 24.0))
-                sb = bi * (1.0 + b2 * (-1.0 / 6.0 + b2 * (1.0 / 120.0)))
-                c = cr[i] * cb - sr[i] * sb
-                s = sr[i] * cb + cr[i] * sb
-                for m in range(n_vec):
-                    x, y, z = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
-                    x, y = c * x - s * y, s * x + c * y
-                    if has_beta:
-                        z, x = cb_ * z - sb_ * x, sb_ * z + cb_ * x
-                    y, z = ca * y - sa * z, sa * y + ca * z
-                    v[3 * m, i] = x + a if m == 0 else x
-                    v[3 * m + 1, i] = y
-                    v[3 * m + 2, i] = z
-            continue
-        # A larger change somewhere: per pose the series or the angle's own cosine and sine.
-        for i in range(n_poses):
-            angle = theta if prismatic else q[i, j] + theta
-            cos[i], sin[i] = _cos_sin(b[i], cr[i], sr[i], angle)
-        for m in range(n_vec):
-            _turn(v[3 * m], v[3 * m + 1], cos, sin)
-        if joints[j, 4] >= 0:
-            cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p)
-            for m in range(n_vec):
-                _turn_fixed(v[3 * m + 2], v[3 * m], cb_, sb_)
-        ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
-        for m in range(n_vec):
-            _turn_fixed(v[3 * m + 1], v[3 * m + 2], ca, sa)
-        a = p[joints[j, 1]]
-        for i in range(n_poses):
-            v[0, i] += a
+    _start_vectors(p, blocks, p_ref, cos_p, sin_p, poses, rot, v)
+    for j in range(joints.shape[0] - 1, -1, -1):
+        _joint_turns(p, q, j, joints, q_ref, theta_ref, cos_ref, sin_ref, p_ref, cos_p, sin_p, n_vec, v, b, cos, sin)
+    m0, b0 = blocks[2], blocks[3]
     for i in range(n_poses):
         for m in range(n_vec):
             x, y, z = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
@@ -227,6 +191,116 @@ def _walk_trial(
                 oi[3 + 3 * r] = e0 * xx + e1 * xy + e2 * xz
                 oi[4 + 3 * r] = e0 * yx + e1 * yy + e2 * yz
                 oi[5 + 3 * r] = e0 * zx + e1 * zy + e2 * zz
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _start_vectors(
+    p: np.ndarray,
+    blocks: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
+    poses: bool,
+    rot: np.ndarray,
+    v: np.ndarray,
+) -> None:
+    """The base, mount and tool rotations into `rot`, and the vectors at the tool into `v`
+    (see :func:`_walk_trial`)."""
+    t0, r0, m0, b0 = blocks[0], blocks[1], blocks[2], blocks[3]
+    _rpy(p, b0 + 3, p_ref, cos_p, sin_p, rot[0:9])  # base, mount, tool rotations, row-major
+    if m0 >= 0:
+        _rpy(p, m0 + 3, p_ref, cos_p, sin_p, rot[9:18])
+    if r0 >= 0:
+        _rpy(p, r0, p_ref, cos_p, sin_p, rot[18:27])
+    # v[3 m + c]: component c of vector m (the point; the tool's x and z axes) per pose.
+    v[0, :] = p[t0]
+    v[1, :] = p[t0 + 1]
+    v[2, :] = p[t0 + 2]
+    if poses:
+        if r0 >= 0:
+            for c in range(3):
+                v[3 + c, :] = rot[18 + 3 * c]  # tool x axis: column 0
+                v[6 + c, :] = rot[20 + 3 * c]  # tool z axis: column 2
+        else:
+            v[3:9, :] = 0.0
+            v[3, :] = 1.0
+            v[8, :] = 1.0
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _joint_turns(
+    p: np.ndarray,
+    q: np.ndarray,
+    j: int,
+    joints: np.ndarray,
+    q_ref: np.ndarray,
+    theta_ref: np.ndarray,
+    cos_ref: np.ndarray,
+    sin_ref: np.ndarray,
+    p_ref: np.ndarray,
+    cos_p: np.ndarray,
+    sin_p: np.ndarray,
+    n_vec: int,
+    v: np.ndarray,
+    b: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+) -> None:
+    """Joint j's offset, turns and link length applied to the `n_vec` vectors of `v` at every
+    pose (see :func:`_walk_trial`)."""
+    n_poses = v.shape[1]
+    theta = p[joints[j, 2]]
+    dtheta = theta - theta_ref[j]
+    prismatic = joints[j, 5] != 0
+    d = p[joints[j, 3]]
+    largest = 0.0
+    if prismatic:
+        for i in range(n_poses):
+            v[2, i] += d + q[i, j]
+            b[i] = dtheta
+        largest = abs(dtheta)
+    else:
+        for i in range(n_poses):
+            v[2, i] += d
+            b[i] = (q[i, j] - q_ref[j, i]) + dtheta
+        for i in range(n_poses):
+            largest = max(largest, abs(b[i]))
+    cr = cos_ref[j]
+    sr = sin_ref[j]
+    if largest <= SERIES_LIMIT:
+        # The usual case (every change within the series): the angles' cosines and sines
+        # by the series, then the joint's turns of each vector in one pass over the poses,
+        # the same operations in the same order as the passes below take them.
+        has_beta = joints[j, 4] >= 0
+        cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p) if has_beta else (1.0, 0.0)
+        ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
+        a = p[joints[j, 1]]
+        for i in range(n_poses):
+            bi = b[i]
+            b2 = bi * bi
+            cb = 1.0 + b2 * (-0.5 + b2 * (1.0 / 24.0))
+            sb = bi * (1.0 + b2 * (-1.0 / 6.0 + b2 * (1.0 / 120.0)))
+            cos[i] = cr[i] * cb - sr[i] * sb
+            sin[i] = sr[i] * cb + cr[i] * sb
+        for m in range(n_vec):
+            _series_turns(v[3 * m], v[3 * m + 1], v[3 * m + 2], cos, sin, has_beta, (cb_, sb_, ca, sa), a, m == 0)
+        return
+    # A larger change somewhere: per pose the series or the angle's own cosine and sine.
+    for i in range(n_poses):
+        angle = theta if prismatic else q[i, j] + theta
+        cos[i], sin[i] = _cos_sin(b[i], cr[i], sr[i], angle)
+    for m in range(n_vec):
+        _turn(v[3 * m], v[3 * m + 1], cos, sin)
+    if joints[j, 4] >= 0:
+        cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p)
+        for m in range(n_vec):
+            _turn_fixed(v[3 * m + 2], v[3 * m], cb_, sb_)
+    ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
+    for m in range(n_vec):
+        _turn_fixed(v[3 * m + 1], v[3 * m + 2], ca, sa)
+    a = p[joints[j, 1]]
+    for i in range(n_poses):
+        v[0, i] += a
 
 
 def chunk_count(n_trials: int) -> int:
@@ -386,7 +460,7 @@ def _times(vector: np.ndarray, matrix_t: np.ndarray, out: np.ndarray) -> None:
 def _eigen_step(
     rhs: np.ndarray,
     lam2: float,
-    factors: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    factors: tuple[np.ndarray, ...],
     rp: np.ndarray,
     rf: np.ndarray,
     y: np.ndarray,
@@ -464,30 +538,15 @@ def _norm(x: np.ndarray) -> float:
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def chord_solve(
     qs: np.ndarray,
+    reading_errors: np.ndarray,
     measured: np.ndarray,
+    deviations: np.ndarray,
     weights: np.ndarray,
     lambdas: np.ndarray,
     x_start: np.ndarray,
-    start: np.ndarray,
-    estimated: np.ndarray,
-    scale: np.ndarray,
-    mask: np.ndarray,
-    jacobian_t: np.ndarray,
-    wcomp: np.ndarray,
-    joint_jacobian: np.ndarray,
-    pose_normal: np.ndarray,
-    reference: np.ndarray,
-    ref_joints: np.ndarray,
-    factors: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    joints: np.ndarray,
-    blocks: np.ndarray,
-    q_ref: np.ndarray,
-    theta_ref: np.ndarray,
-    cos_ref: np.ndarray,
-    sin_ref: np.ndarray,
-    p_ref: np.ndarray,
-    cos_p: np.ndarray,
-    sin_p: np.ndarray,
+    problem: tuple[np.ndarray, ...],
+    factors: tuple[np.ndarray, ...],
+    walker: tuple[np.ndarray, ...],
     poses: bool,
     max_iterations: int,
     relative_tolerance: float,
@@ -499,33 +558,31 @@ def chord_solve(
     """The chord re-identification of every trial, each trial start to end in one pass.
 
     The iteration of :meth:`~robocal_uncertainty.uncertainty.reidentification.ChordSolver.solve`
-    with ``linear_start``: the first step from the first-order prediction (residual at the
-    reference, the reading errors through ``joint_map``), then exact steps (the chain walked
-    at the trial's parameters and readings) until a step is below `relative_tolerance` of the
-    first or `max_iterations` steps are taken; the Jacobian frozen at the calibration. The
-    same operations as the numpy solver in another order, so the results agree to rounding.
+    with ``linear_start`` (first-order first step, then exact steps, the Jacobian frozen at
+    the calibration): the numpy solver's operations in another order (equal to rounding).
 
     Parameters
     ----------
     qs : (n_q, n_poses, n_joints), n_q 1 or n_trials
+    reading_errors : (n_e, n_poses, n_joints), n_e 0 or n_trials
+        The trials' reading errors, added here to the shared `qs` (n_q 1); n_e 0: none.
     measured : (n_m, n_poses, value_size), n_m 1 or n_trials
+    deviations : (n_d, n_poses, dimension), n_d 0 or n_trials
+        The trials' measurement errors, applied here to the shared `measured` (n_m 1) by
+        :func:`_perturb`; n_d 0: `measured` are the trials' values.
     weights : (n_w, n_poses), n_w 0 (every pose) or n_trials
-    lambdas : (n_trials,)
-    x_start : (k,)
-    start, estimated, scale, mask
-        The problem's nominal parameters (n_params,), estimated indices (k,), column
-        scaling (k,) and penalty mask (k,).
-    jacobian_t : (k, n_poses dimension)
-        The whitened Jacobian, transposed; wcomp : (dimension,) the whitening.
-    joint_jacobian : (n_poses, dimension, n_joints)
-        Whitened ``J_q``: the first step's right-hand side is ``(r - J_q dQ) J``, which
-        equals the numpy iteration's ``r J - dQ @ joint_map``.
-    pose_normal : (n_poses, k k)
-    reference : (n_poses, value_size); ref_joints : (n_poses, n_joints)
+    lambdas : (n_trials,); x_start : (k,)
+    problem : tuple
+        The problem's nominal parameters (n_params,), estimated indices (k,), column scaling
+        (k,), penalty mask (k,); the whitened Jacobian transposed (k, n_poses dimension); the
+        whitening (dimension,); the whitened ``J_q`` (n_poses, dimension, n_joints), so that
+        the first step's right-hand side is ``(r - J_q dQ) J`` (the numpy iteration's
+        ``r J - dQ @ joint_map``); the pose normals (n_poses, k k); the reference prediction
+        (n_poses, value_size) and readings (n_poses, n_joints).
     factors
         :meth:`~robocal_uncertainty.uncertainty.reidentification.StepFactors.as_tuple`.
-    joints .. sin_p
-        The walk's layout and reference (see :func:`walk`).
+    walker : tuple
+        The walk's layout and reference, ``joints .. sin_p`` of :func:`walk`.
     poses : bool
         6-DOF values (12 per pose, 6 equations) instead of points.
     x_out : (n_trials, k); steps : (n_trials,) int64; failed : (n_trials,) bool
@@ -535,124 +592,261 @@ def chord_solve(
         See :func:`walk`.
     """
     n_trials = x_out.shape[0]
-    n_poses = reference.shape[0]
-    nj = ref_joints.shape[1]
-    k = x_start.shape[0]
-    dim = 6 if poses else 3
-    width = 12 if poses else 3
+    ref_joints = problem[9]
+    n_poses, nj = ref_joints.shape
+    # The first step corrects for readings that differ from the reference (numpy: np.any(dq)).
+    correct = qs.shape[0] > 1 or reading_errors.shape[0] > 0 or _differs(qs[0], ref_joints)
     has_w = weights.shape[0] > 0
-    shared_dq = False  # shared readings that differ from the reference (numpy: np.any(dq))
-    if qs.shape[0] == 1:
-        for i in range(n_poses):
-            for j in range(nj):
-                if qs[0, i, j] != ref_joints[i, j]:
-                    shared_dq = True
     for ch in numba.prange(n_chunks):
-        rot = np.empty(27)
-        v = np.empty((9, n_poses))
-        b = np.empty(n_poses)
-        cos = np.empty(n_poses)
-        sin = np.empty(n_poses)
-        pred = np.empty((n_poses, width))
-        r = np.empty(n_poses * dim)
-        rhs = np.empty(k)
-        step = np.empty(k)
-        x = np.empty(k)
-        rp = np.empty(k)
-        rf = np.empty(k)
-        y = np.empty(k)
-        dqs = np.empty(nj)
-        params = np.empty(start.shape[0])
-        normal = np.empty((k, k))
-        flat_normal = normal.reshape(k * k)
-        pw = np.ones(n_poses)
+        scratch = _trial_scratch(n_poses, nj, x_start.shape[0], problem[0].shape[0], poses)
+        pw = scratch[-1]
+        pw[:] = 1.0
+        perturbed = np.empty((n_poses, measured.shape[2]))
+        read = np.empty((n_poses, nj))
         for t in range(ch * n_trials // n_chunks, (ch + 1) * n_trials // n_chunks):
-            q = qs[0] if qs.shape[0] == 1 else qs[t]
-            m = measured[0] if measured.shape[0] == 1 else measured[t]
             if has_w:
                 pw[:] = weights[t]
-            lam = lambdas[t]
-            lam2 = lam * lam
-            x[:] = x_start
-            failed[t] = False
-            steps[t] = 1
-            # Step 1: the first-order prediction at the start.
-            if not _residual(m, reference, poses, wcomp, pw, has_w, r):
-                failed[t] = True
-                continue
-            if qs.shape[0] > 1 or shared_dq:
-                for i in range(n_poses):
-                    for j in range(nj):
-                        dqs[j] = q[i, j] - ref_joints[i, j]
-                    w_pose = pw[i] if has_w else 1.0
-                    jq = joint_jacobian[i]
-                    for c in range(dim):
-                        row = jq[c]
-                        moved = 0.0
-                        for j in range(nj):
-                            moved += row[j] * dqs[j]
-                        r[i * dim + c] -= moved * w_pose if has_w else moved
-            _times(r, jacobian_t, rhs)
-            for c in range(k):
-                rhs[c] -= lam2 * (x[c] * mask[c])
-            if has_w:
-                # Every trial its own normal matrix (its poses), factorised once for its steps.
-                flat_normal[:] = 0.0
-                for i in range(n_poses):
-                    wi = pw[i]
-                    if wi != 0.0:
-                        contribution = pose_normal[i]
-                        for e in range(k * k):
-                            flat_normal[e] += wi * contribution[e]
-                for c in range(k):
-                    normal[c, c] += lam2 * mask[c]
-                if not _cholesky(normal):
-                    failed[t] = True
-                    continue
-                _cholesky_solve(normal, rhs, step)
-            else:
-                _eigen_step(rhs, lam2, factors, rp, rf, y, step)
-            for c in range(k):
-                x[c] += step[c]
-            first = max(_norm(step), 2.2250738585072014e-308)
-            # Exact steps until one is small enough.
-            for it in range(2, max_iterations + 1):
-                params[:] = start
-                for c in range(k):
-                    params[estimated[c]] += x[c] / scale[c]
-                _walk_trial(
-                    params,
-                    q,
-                    joints,
-                    blocks,
-                    q_ref,
-                    theta_ref,
-                    cos_ref,
-                    sin_ref,
-                    p_ref,
-                    cos_p,
-                    sin_p,
-                    poses,
-                    rot,
-                    v,
-                    b,
-                    cos,
-                    sin,
-                    pred,
-                )
-                if not _residual(m, pred, poses, wcomp, pw, has_w, r):
-                    failed[t] = True
-                    break
-                _times(r, jacobian_t, rhs)
-                for c in range(k):
-                    rhs[c] -= lam2 * (x[c] * mask[c])
-                if has_w:
-                    _cholesky_solve(normal, rhs, step)
-                else:
-                    _eigen_step(rhs, lam2, factors, rp, rf, y, step)
-                for c in range(k):
-                    x[c] += step[c]
-                steps[t] = it
-                if not _norm(step) > relative_tolerance * first:
-                    break
-            x_out[t] = x
+            q = qs[0] if qs.shape[0] == 1 else qs[t]
+            if reading_errors.shape[0] > 0:
+                _add(q, reading_errors[t], read)
+                q = read
+            m = measured[0] if measured.shape[0] == 1 else measured[t]
+            if deviations.shape[0] > 0:
+                _perturb(m, deviations[t], poses, perturbed)
+                m = perturbed
+            settings = (poses, has_w, correct, max_iterations, relative_tolerance)
+            steps[t], failed[t] = _solve_trial(q, m, lambdas[t], x_start, problem, factors, walker, settings, scratch)
+            x_out[t] = scratch[9]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _trial_scratch(n_poses: int, nj: int, k: int, n_params: int, poses: bool) -> tuple[np.ndarray, ...]:
+    """Working arrays of :func:`_solve_trial` (allocated once per chunk of trials): the walk's
+    rot, v, b, cos, sin; pred, r, rhs, step, x, rp, rf, y, dqs, params, normal, pw."""
+    width = 12 if poses else 3
+    dim = 6 if poses else 3
+    return (
+        np.empty(27),
+        np.empty((9, n_poses)),
+        np.empty(n_poses),
+        np.empty(n_poses),
+        np.empty(n_poses),
+        np.empty((n_poses, width)),
+        np.empty(n_poses * dim),
+        np.empty(k),
+        np.empty(k),
+        np.empty(k),
+        np.empty(k),
+        np.empty(k),
+        np.empty(k),
+        np.empty(nj),
+        np.empty(n_params),
+        np.empty((k, k)),
+        np.ones(n_poses),
+    )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _solve_trial(
+    q: np.ndarray,
+    m: np.ndarray,
+    lam: float,
+    x_start: np.ndarray,
+    problem: tuple[np.ndarray, ...],
+    factors: tuple[np.ndarray, ...],
+    walker: tuple[np.ndarray, ...],
+    settings: tuple[bool, bool, bool, int, float],
+    scratch: tuple[np.ndarray, ...],
+) -> tuple[int, bool]:
+    """One trial of :func:`chord_solve` (readings q, measured values m, lambda `lam`): its
+    parameters into ``scratch[9]``; returns the steps taken and whether it failed.
+    `settings`: poses, pose weights given (in ``scratch[-1]``), readings to correct for in
+    the first step, the most steps, the relative tolerance."""
+    start, estimated, scale, mask, jacobian_t, wcomp, joint_jacobian, pose_normal, reference, ref_joints = problem
+    rot, v, b, cos, sin, pred, r, rhs, step, x, rp, rf, y, dqs, params, normal, pw = scratch
+    poses, has_w, correct, max_iterations, relative_tolerance = settings
+    k = x.shape[0]
+    lam2 = lam * lam
+    x[:] = x_start
+    # Step 1: the first-order prediction at the start.
+    if not _residual(m, reference, poses, wcomp, pw, has_w, r):
+        return 1, True
+    if correct:
+        _reading_correction(q, ref_joints, joint_jacobian, pw, has_w, dqs, r)
+    _times(r, jacobian_t, rhs)
+    for c in range(k):
+        rhs[c] -= lam2 * (x[c] * mask[c])
+    if has_w:
+        # Every trial its own normal matrix (its poses), factorised once for its steps.
+        if not _weighted_normal(pose_normal, pw, lam2, mask, normal):
+            return 1, True
+        _cholesky_solve(normal, rhs, step)
+    else:
+        _eigen_step(rhs, lam2, factors, rp, rf, y, step)
+    for c in range(k):
+        x[c] += step[c]
+    first = max(_norm(step), 2.2250738585072014e-308)
+    # Exact steps until one is small enough.
+    for it in range(2, max_iterations + 1):
+        params[:] = start
+        for c in range(k):
+            params[estimated[c]] += x[c] / scale[c]
+        joints, blocks, q_ref, theta_ref, cos_ref, sin_ref, p_ref, cos_p, sin_p = walker
+        _walk_trial(
+            params,
+            q,
+            joints,
+            blocks,
+            q_ref,
+            theta_ref,
+            cos_ref,
+            sin_ref,
+            p_ref,
+            cos_p,
+            sin_p,
+            poses,
+            rot,
+            v,
+            b,
+            cos,
+            sin,
+            pred,
+        )
+        if not _residual(m, pred, poses, wcomp, pw, has_w, r):
+            return it - 1, True
+        _times(r, jacobian_t, rhs)
+        for c in range(k):
+            rhs[c] -= lam2 * (x[c] * mask[c])
+        if has_w:
+            _cholesky_solve(normal, rhs, step)
+        else:
+            _eigen_step(rhs, lam2, factors, rp, rf, y, step)
+        for c in range(k):
+            x[c] += step[c]
+        if not _norm(step) > relative_tolerance * first:
+            return it, False
+    return max(1, max_iterations), False
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _reading_correction(
+    q: np.ndarray,
+    ref_joints: np.ndarray,
+    joint_jacobian: np.ndarray,
+    pw: np.ndarray,
+    has_w: bool,
+    dqs: np.ndarray,
+    r: np.ndarray,
+) -> None:
+    """``r -= J_q dQ`` pose by pose (pose-weighted): the reading errors' first-order move of
+    the residual at the reference."""
+    n_poses, nj = ref_joints.shape
+    dim = joint_jacobian.shape[1]
+    for i in range(n_poses):
+        for j in range(nj):
+            dqs[j] = q[i, j] - ref_joints[i, j]
+        w_pose = pw[i] if has_w else 1.0
+        jq = joint_jacobian[i]
+        for c in range(dim):
+            row = jq[c]
+            moved = 0.0
+            for j in range(nj):
+                moved += row[j] * dqs[j]
+            r[i * dim + c] -= moved * w_pose if has_w else moved
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _weighted_normal(
+    pose_normal: np.ndarray, pw: np.ndarray, lam2: float, mask: np.ndarray, normal: np.ndarray
+) -> bool:
+    """``sum_i w_i J_i^T J_i + lam2 M`` into `normal` (k, k), factorised by :func:`_cholesky`
+    in place; False when it is not positive definite."""
+    k = normal.shape[0]
+    flat_normal = normal.reshape(k * k)
+    flat_normal[:] = 0.0
+    for i in range(pw.shape[0]):
+        wi = pw[i]
+        if wi != 0.0:
+            contribution = pose_normal[i]
+            for e in range(k * k):
+                flat_normal[e] += wi * contribution[e]
+    for c in range(k):
+        normal[c, c] += lam2 * mask[c]
+    return _cholesky(normal)
+
+
+POSE_SERIES_THETA2 = 1.0e-6
+"""Squared angle [rad^2] of a trial's orientation errors below which :func:`_perturb` takes
+``sin(t) / t`` and ``(1 - cos t) / t^2`` from their series, as
+:meth:`~robocal_uncertainty.core.pose_measurement.PoseMeasurement.perturb` does."""
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _perturb(values: np.ndarray, errors: np.ndarray, poses: bool, out: np.ndarray) -> None:
+    """One trial's measured values moved by its errors into `out` (n_poses, value_size).
+
+    Points: ``values + errors``. Poses: the position plus its error and ``exp([e]x) R`` by
+    :meth:`~robocal_uncertainty.core.pose_measurement.PoseMeasurement.perturb`'s formulas,
+    operation by operation. That method takes the series for a whole batch when every angle
+    of the batch is small; here the choice is the trial's own (its every angle below 1e-3
+    rad: the series; else per pose as there), so where a batch holds a larger angle the two
+    differ by rounding alone, and a trial's values never depend on the other trials.
+    """
+    n_poses = values.shape[0]
+    if not poses:
+        for i in range(n_poses):
+            for c in range(values.shape[1]):
+                out[i, c] = values[i, c] + errors[i, c]
+        return
+    largest = 0.0
+    for i in range(n_poses):
+        e = errors[i]
+        largest = max(largest, e[3] * e[3] + e[4] * e[4] + e[5] * e[5])
+    for i in range(n_poses):
+        _perturb_pose(values[i], errors[i], largest < POSE_SERIES_THETA2, out[i])
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _perturb_pose(v: np.ndarray, e: np.ndarray, series: bool, out: np.ndarray) -> None:
+    """One pose's 12 values moved by its 6 errors (see :func:`_perturb`)."""
+    for c in range(3):
+        out[c] = v[c] + e[c]
+    e0, e1, e2 = e[3], e[4], e[5]
+    theta2 = e0 * e0 + e1 * e1 + e2 * e2
+    if series or theta2 < 1e-8:
+        a = 1.0 - theta2 / 6.0 + (theta2 * theta2) / 120.0
+        b = 0.5 - theta2 / 24.0 + (theta2 * theta2) / 720.0
+    else:
+        t = math.sqrt(theta2)
+        a = math.sin(t) / t
+        b = (1.0 - math.cos(t)) / (t * t)
+    diagonal = 1.0 - b * theta2
+    be0, be1, be2 = b * e0, b * e1, b * e2
+    ae0, ae1, ae2 = a * e0, a * e1, a * e2
+    for i in range(3):
+        if i == 0:
+            x, y, z = diagonal + be0 * e0, be0 * e1 - ae2, be0 * e2 + ae1
+        elif i == 1:
+            x, y, z = be1 * e0 + ae2, diagonal + be1 * e1, be1 * e2 - ae0
+        else:
+            x, y, z = be2 * e0 - ae1, be2 * e1 + ae0, diagonal + be2 * e2
+        for j in range(3):
+            out[3 + 3 * i + j] = x * v[3 + j] + y * v[6 + j] + z * v[9 + j]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _add(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out = a + b`` for 2-D arrays of one shape."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            out[i, j] = a[i, j] + b[i, j]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _differs(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two 2-D arrays of one shape differ anywhere."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            if a[i, j] != b[i, j]:
+                return True
+    return False

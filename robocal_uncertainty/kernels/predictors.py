@@ -206,10 +206,15 @@ class CompiledMeasurement:
         *,
         max_iterations: int,
         relative_tolerance: float,
+        deviations: Array | None = None,
+        reading_errors: Array | None = None,
     ) -> tuple[Array, int] | None:
         """:meth:`ChordSolver.solve` (its ``linear_start`` iteration) for every trial, compiled.
 
-        Parameters as there (`solver` the :class:`ChordSolver`). Returns None, for the
+        Parameters as there (`solver` the :class:`ChordSolver`; with `deviations`, the
+        measurement errors (T, n_poses, dimension) that the kernel applies to the shared
+        `measured` itself, as the measurement type's ``perturb`` does; with `reading_errors`
+        (T, n_poses, n_joints), those it adds to the shared readings). Returns None, for the
         solver's own numpy iteration on this block, where a trial needs what the kernel does
         not do (a residual rotation near pi, a normal matrix that is not positive definite).
         """
@@ -218,45 +223,42 @@ class CompiledMeasurement:
         if solver.joint_jacobian is None:  # a solver built without ChordSolver.at
             return None
         walker = self.walker
-        n_trials = measured.shape[0]
+        n_trials = max([measured.shape[0], *(len(e) for e in (deviations, reading_errors) if e is not None)])
         n_poses = walker.joints.shape[0]
         k = x_start.size
         q = np.asarray(joint_positions, dtype=np.float64)
         q = _kernel_array(q.reshape(1, *q.shape) if q.ndim == 2 else _shared(q))
+        read_errors = np.empty((0, *walker.joints.shape))
+        if reading_errors is not None:
+            if q.shape[0] != 1:
+                return None  # errors for readings that differ from trial to trial: the numpy path
+            read_errors = _kernel_array(reading_errors)
         values = _kernel_array(_shared(np.asarray(measured, dtype=np.float64)))
+        if deviations is None:
+            errors = np.empty((0, n_poses, solver.problem.measurement.dimension))
+        elif values.shape[0] != 1:
+            return None  # errors for values that differ from trial to trial: the numpy path
+        else:
+            errors = _kernel_array(deviations)
         w = (
             np.empty((0, n_poses))
             if weights is None
             else _kernel_array(np.broadcast_to(np.asarray(weights, dtype=np.float64), (n_trials, n_poses)))
         )
-        start, estimated, scale, mask, whitening, reference, ref_joints = solver.kernel_arrays
         x = np.empty((n_trials, k))
         steps = np.empty(n_trials, dtype=np.int64)
         failed = np.zeros(n_trials, dtype=np.bool_)
         chord_solve(
             q,
+            read_errors,
             values,
+            errors,
             w,
             _kernel_array(np.broadcast_to(np.asarray(lambdas, dtype=np.float64), (n_trials,))),
             _kernel_array(np.asarray(x_start, dtype=np.float64).reshape(k)),
-            start,
-            estimated,
-            scale,
-            mask,
-            solver.transposed_jacobian,
-            whitening,
-            solver.joint_jacobian,
-            _kernel_array(solver.pose_normal),
-            reference,
-            ref_joints,
+            _problem_arrays(solver),
             solver.step_factors.as_tuple(),
-            walker.flat.joints,
-            walker.flat.blocks,
-            walker.reference_readings,
-            walker.theta,
-            walker.cos_ref,
-            walker.sin_ref,
-            *walker.parameter_trig,
+            self._walk_reference(),
             self.orientation,
             int(max_iterations),
             float(relative_tolerance),
@@ -268,6 +270,37 @@ class CompiledMeasurement:
         if failed.any():
             return None
         return x, int(steps.max()) if n_trials else 1
+
+    def _walk_reference(self) -> tuple[Any, ...]:
+        """The walk's layout and reference as the kernel takes them (``joints .. sin_p``)."""
+        walker = self.walker
+        flat = walker.flat
+        return (
+            flat.joints,
+            flat.blocks,
+            walker.reference_readings,
+            walker.theta,
+            walker.cos_ref,
+            walker.sin_ref,
+            *walker.parameter_trig,
+        )
+
+
+def _problem_arrays(solver: Any) -> tuple[Any, ...]:
+    """The chord solver's problem as the kernel takes it (see ``chord_solve``)."""
+    start, estimated, scale, mask, whitening, reference, ref_joints = solver.kernel_arrays
+    return (
+        start,
+        estimated,
+        scale,
+        mask,
+        solver.transposed_jacobian,
+        whitening,
+        solver.joint_jacobian,
+        _kernel_array(solver.pose_normal),
+        reference,
+        ref_joints,
+    )
 
 
 def _shared(values: Array) -> Array:

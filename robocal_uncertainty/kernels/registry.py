@@ -222,12 +222,7 @@ def _warm_up_kernels() -> None:
         np.zeros((0, 1)),
         np.zeros((0, 0)),
     )
-    chord_solve(
-        np.zeros((1, 1, 1)),
-        np.zeros((1, 1, 3)),
-        np.empty((0, 1)),
-        np.ones(1),
-        np.zeros(1),
+    problem = (
         np.zeros(layout.size),
         index,
         np.ones(1),
@@ -238,14 +233,19 @@ def _warm_up_kernels() -> None:
         np.zeros((1, 1)),
         np.zeros((1, 3)),
         np.zeros((1, 1)),
-        factors,
-        flat.joints,
-        flat.blocks,
-        np.zeros((1, 1)),
+    )
+    walker = (flat.joints, flat.blocks, np.zeros((1, 1)), np.zeros(1), np.ones((1, 1)), np.zeros((1, 1)), *trig)
+    chord_solve(
+        np.zeros((1, 1, 1)),
+        np.empty((0, 1, 1)),
+        np.zeros((1, 1, 3)),
+        np.empty((0, 1, 3)),
+        np.empty((0, 1)),
+        np.ones(1),
         np.zeros(1),
-        np.ones((1, 1)),
-        np.zeros((1, 1)),
-        *trig,
+        problem,
+        factors,
+        walker,
         False,
         2,
         1e-3,

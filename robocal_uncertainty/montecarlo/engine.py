@@ -31,7 +31,7 @@ import math
 import multiprocessing
 import warnings
 from collections import deque
-from collections.abc import Callable, Generator, Mapping, Sequence
+from collections.abc import Callable, Generator, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol, runtime_checkable
 
@@ -550,31 +550,8 @@ def run_trials(
     collector = _Collector(nonfinite)
     if adaptive is None:
         total = _check_int("n_trials", n_trials, 1)
-        n_blocks, sizes = _fixed_blocks(total, block_size)
-        blocks: list[NDArray[np.float64]] = []
-        stream = _iter_blocks(
-            trial_block,
-            seed,
-            sizes,
-            n_blocks,
-            chunk_blocks,
-            workers,
-            mp_context,
-            executor,
-        )
-        done = 0
-        try:
-            for b, values in enumerate(stream):
-                blocks.append(collector.accept(b, values))
-                done += values.shape[0]
-                if progress is not None and ((b + 1) % chunk_blocks == 0 or b == n_blocks - 1):
-                    progress(done, total)
-        finally:
-            stream.close()
-        samples = np.concatenate(blocks)
-        samples.setflags(write=False)
-        _warn_dropped(collector.n_dropped, total)
-        return TrialsResult(samples, total, seed, block_size, n_blocks, collector.n_dropped, None)
+        stream_args = (trial_block, seed, block_size, chunk_blocks, workers, mp_context, executor)
+        return _run_fixed(total, stream_args, progress, collector)
     return _run_adaptive(
         trial_block,
         adaptive,
@@ -587,6 +564,43 @@ def run_trials(
         mp_context,
         executor,
     )
+
+
+def _run_fixed(
+    total: int,
+    stream_args: tuple[TrialBlock | StagedTrialBlock, int, int, int, int, str | None, object | None],
+    progress: ProgressCallback | None,
+    collector: _Collector,
+) -> TrialsResult:
+    """`total` trials in blocks of ``block_size`` (the last one the remainder); `stream_args`
+    are :func:`run_trials`' trial block, seed, block size, chunk blocks, workers, start method
+    and executor."""
+    trial_block, seed, block_size, chunk_blocks, workers, mp_context, executor = stream_args
+    n_blocks, sizes = _fixed_blocks(total, block_size)
+    blocks: list[NDArray[np.float64]] = []
+    stream = _iter_blocks(
+        trial_block,
+        seed,
+        sizes,
+        n_blocks,
+        chunk_blocks,
+        workers,
+        mp_context,
+        executor,
+    )
+    done = 0
+    try:
+        for b, values in enumerate(stream):
+            blocks.append(collector.accept(b, values))
+            done += values.shape[0]
+            if progress is not None and ((b + 1) % chunk_blocks == 0 or b == n_blocks - 1):
+                progress(done, total)
+    finally:
+        stream.close()
+    samples = np.concatenate(blocks)
+    samples.setflags(write=False)
+    _warn_dropped(collector.n_dropped, total)
+    return TrialsResult(samples, total, seed, block_size, n_blocks, collector.n_dropped, None)
 
 
 def _warn_dropped(n_dropped: int, n_trials: int) -> None:
@@ -634,37 +648,10 @@ def _run_adaptive(
         executor,
         lookahead=1,
     )
-    sequences: list[NDArray[np.float64]] = []
-    moments: list[NDArray[np.float64]] = []
-    monitored: list[NDArray[np.float64]] = []
-    current: list[NDArray[np.float64]] = []
-    converged = False
-    delta = reached = np.zeros(0)
-    done = 0
     try:
-        for b, values in enumerate(stream):
-            current.append(collector.accept(b, values))
-            done += values.shape[0]
-            if progress is not None and (b + 1) % chunk_blocks == 0:
-                progress(done, None)
-            if (b + 1) % blocks_per_sequence:
-                continue
-            sequence = np.concatenate(current)
-            current = []
-            sequences.append(sequence)
-            seq_moments, seq_monitored = _sequence_stats(sequence, settings)
-            moments.append(seq_moments)
-            monitored.append(seq_monitored)
-            h = len(sequences)
-            if h < 2:
-                continue
-            spread = np.stack(monitored).std(axis=0, ddof=1) / math.sqrt(h)  # (4, n_out)
-            reached = 2.0 * spread.max(axis=0)
-            delta = _deltas(settings, _pooled_std(moments), sequence.shape[1])
-            watched = slice(None) if settings.monitored is None else list(settings.monitored)
-            if bool((reached[watched] <= delta[watched]).all()):
-                converged = True
-                break
+        sequences, converged, delta, reached = _adaptive_sequences(
+            stream, settings, blocks_per_sequence, chunk_blocks, progress, collector
+        )
     finally:
         stream.close()
     samples = np.concatenate(sequences)
@@ -691,6 +678,47 @@ def _run_adaptive(
         collector.n_dropped,
         report,
     )
+
+
+def _adaptive_sequences(
+    stream: Iterator[NDArray[np.float64]],
+    settings: AdaptiveSettings,
+    blocks_per_sequence: int,
+    chunk_blocks: int,
+    progress: ProgressCallback | None,
+    collector: _Collector,
+) -> tuple[list[NDArray[np.float64]], bool, NDArray[np.float64], NDArray[np.float64]]:
+    """Sequences of blocks from `stream` until the §7.9.4 stopping rule holds (or the stream
+    ends); returns the sequences, whether it held, and the last tolerances δ and 2s."""
+    sequences: list[NDArray[np.float64]] = []
+    moments: list[NDArray[np.float64]] = []
+    monitored: list[NDArray[np.float64]] = []
+    current: list[NDArray[np.float64]] = []
+    delta = reached = np.zeros(0)
+    done = 0
+    for b, values in enumerate(stream):
+        current.append(collector.accept(b, values))
+        done += values.shape[0]
+        if progress is not None and (b + 1) % chunk_blocks == 0:
+            progress(done, None)
+        if (b + 1) % blocks_per_sequence:
+            continue
+        sequence = np.concatenate(current)
+        current = []
+        sequences.append(sequence)
+        seq_moments, seq_monitored = _sequence_stats(sequence, settings)
+        moments.append(seq_moments)
+        monitored.append(seq_monitored)
+        h = len(sequences)
+        if h < 2:
+            continue
+        spread = np.stack(monitored).std(axis=0, ddof=1) / math.sqrt(h)  # (4, n_out)
+        reached = 2.0 * spread.max(axis=0)
+        delta = _deltas(settings, _pooled_std(moments), sequence.shape[1])
+        watched = slice(None) if settings.monitored is None else list(settings.monitored)
+        if bool((reached[watched] <= delta[watched]).all()):
+            return sequences, True, delta, reached
+    return sequences, False, delta, reached
 
 
 @dataclass(frozen=True, eq=False)
@@ -1014,15 +1042,7 @@ def monte_carlo(
     -------
     MonteCarloResult
     """
-    p = check_coverage(coverage)
-    if trials is not None:
-        _check_int("trials", trials, 1)
-    if adaptive is not None and adaptive.coverage != p:
-        msg = f"adaptive.coverage must equal coverage ({p}), got {adaptive.coverage}"
-        raise ConfigError(msg)
-    if not callable(model):
-        msg = f"model must be callable, got {type(model).__name__}"
-        raise ConfigError(msg)
+    p = _checked_coverage(model, coverage, trials, adaptive)
     names, distributions, columns = resolve_inputs(inputs)
     run = run_trials(
         DistributionTrials(model, distributions),
@@ -1051,3 +1071,17 @@ def monte_carlo(
         n_dropped=run.n_dropped,
         adaptive=run.adaptive,
     )
+
+
+def _checked_coverage(model: object, coverage: float, trials: int | None, adaptive: AdaptiveSettings | None) -> float:
+    """:func:`monte_carlo`'s arguments checked; returns the coverage probability."""
+    p = check_coverage(coverage)
+    if trials is not None:
+        _check_int("trials", trials, 1)
+    if adaptive is not None and adaptive.coverage != p:
+        msg = f"adaptive.coverage must equal coverage ({p}), got {adaptive.coverage}"
+        raise ConfigError(msg)
+    if not callable(model):
+        msg = f"model must be callable, got {type(model).__name__}"
+        raise ConfigError(msg)
+    return p

@@ -186,7 +186,6 @@ def propagate_gum(
         msg = f"relative_step must lie in (0, 1], got {relative_step!r}"
         raise ConfigError(msg)
     _, distributions, columns = resolve_inputs(inputs)
-    n = len(columns)
     x0 = np.concatenate([d.mean_vector() for d in distributions])
     variances = np.concatenate([_variances(d) for d in distributions])
     dof = np.concatenate(
@@ -196,20 +195,7 @@ def propagate_gum(
         msg = "every input must have a finite standard uncertainty for the GUM, got inf"
         raise ConfigError(msg)
     u_in = np.sqrt(np.clip(variances, 0.0, None))
-    if sensitivities is None:
-        h = np.where(u_in > 0, step * u_in, step * np.maximum(np.abs(x0), 1.0))
-        points = np.vstack([x0, x0 + np.diag(h), x0 - np.diag(h)])
-        values = _model_values(model, points)
-        y = values[0]
-        jacobian = ((values[1 : n + 1] - values[n + 1 :]) / (2.0 * h)[:, np.newaxis]).T
-        used_step: float | None = step
-    else:
-        y = _model_values(model, x0[np.newaxis, :])[0]
-        jacobian = np.array(sensitivities, dtype=np.float64)
-        if jacobian.shape != (y.shape[0], n) or not np.isfinite(jacobian).all():
-            msg = f"sensitivities must be finite with shape ({y.shape[0]}, {n}), got {jacobian.shape}"
-            raise ConfigError(msg)
-        used_step = None
+    y, jacobian, used_step = _sensitivities(model, x0, u_in, step, sensitivities)
     covariance = np.zeros((y.shape[0], y.shape[0]))
     start = 0
     for dist in distributions:
@@ -217,6 +203,48 @@ def propagate_gum(
         covariance += _propagated(jacobian[:, start:stop], dist)
         start = stop
     covariance = 0.5 * (covariance + covariance.T)
+    outputs = _outputs(y, covariance, jacobian, u_in, dof, p)
+    for array in (covariance, jacobian, x0):
+        array.setflags(write=False)
+    return GumResult(tuple(outputs), covariance, jacobian, x0, distributions, columns, p, used_step)
+
+
+def _sensitivities(
+    model: Callable[[NDArray[np.float64]], ArrayLike],
+    x0: NDArray[np.float64],
+    u_in: NDArray[np.float64],
+    step: float,
+    sensitivities: ArrayLike | None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float | None]:
+    """The model's value at the estimates x0 and its Jacobian: the given `sensitivities`, or
+    central differences of `step` standard uncertainties (`step` times max(|x|, 1) for an
+    exact input); returns them and the step used (None for given sensitivities)."""
+    n = x0.size
+    if sensitivities is None:
+        h = np.where(u_in > 0, step * u_in, step * np.maximum(np.abs(x0), 1.0))
+        points = np.vstack([x0, x0 + np.diag(h), x0 - np.diag(h)])
+        values = _model_values(model, points)
+        y = values[0]
+        jacobian = ((values[1 : n + 1] - values[n + 1 :]) / (2.0 * h)[:, np.newaxis]).T
+        return y, jacobian, step
+    y = _model_values(model, x0[np.newaxis, :])[0]
+    jacobian = np.array(sensitivities, dtype=np.float64)
+    if jacobian.shape != (y.shape[0], n) or not np.isfinite(jacobian).all():
+        msg = f"sensitivities must be finite with shape ({y.shape[0]}, {n}), got {jacobian.shape}"
+        raise ConfigError(msg)
+    return y, jacobian, None
+
+
+def _outputs(
+    y: NDArray[np.float64],
+    covariance: NDArray[np.float64],
+    jacobian: NDArray[np.float64],
+    u_in: NDArray[np.float64],
+    dof: NDArray[np.float64],
+    p: float,
+) -> list[GumOutput]:
+    """Every output's estimate, standard uncertainty, Welch-Satterthwaite degrees of freedom,
+    coverage factor and interval."""
     u_c = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     student = np.isfinite(dof)
     outputs = []
@@ -228,6 +256,4 @@ def propagate_gum(
         expanded = k * float(u_c[j])
         interval = CoverageInterval(float(y[j]) - expanded, float(y[j]) + expanded, "gum", p)
         outputs.append(GumOutput(float(y[j]), float(u_c[j]), nu, k, expanded, interval))
-    for array in (covariance, jacobian, x0):
-        array.setflags(write=False)
-    return GumResult(tuple(outputs), covariance, jacobian, x0, distributions, columns, p, used_step)
+    return outputs

@@ -376,35 +376,38 @@ class ChordSolver:
         max_iterations: int = 6,
         relative_tolerance: float = 1e-3,
         linear_start: bool = True,
+        deviations: Array | None = None,
+        reading_errors: Array | None = None,
     ) -> tuple[Array, int]:
         """Solve T regularised identifications.
 
         Parameters
         ----------
         joint_positions : ndarray, shape (T, n_poses, n_joints) or (n_poses, n_joints) [rad]
-        measured : ndarray, shape (T, n_poses, value_size) [m for points]
-            Measured values of each trial (the problem's measurement type).
+        measured : ndarray, shape (T, n_poses, value_size) [m for points]: each trial's values
         weights : ndarray, shape (T, n_poses), or None
             Pose weights (0/1 for subsets); None uses every pose.
         lambdas : ndarray, shape (T,)
             Regularisation parameter per trial (scaled units).
         x_start : ndarray, shape (k,)
-            Calibration's scaled deviation from nominal (the parameters the Jacobian is
-            frozen at).
+            Calibration's scaled deviation from nominal (where the Jacobian is frozen).
         initial_prediction : ndarray, shape (n_poses, value_size) [m for points], optional
             ``F(p_start, Q)`` (the measurement type's prediction) when every trial shares
             the readings Q and `linear_start` is false (saves one kinematics pass).
         max_iterations : int
             Steps per trial at most, the first included.
         relative_tolerance : float
-            A trial stops when its step is below this fraction of its first step. The
-            chord iteration contracts by ~1e-4 per step here, so two steps usually suffice
-            and the error left is ~3e-8 of the trial's deviation (about 1e-12 m on the
-            seed's case, measured against a 14-digit solution).
+            A trial stops when its step is below this fraction of its first step (the chord
+            iteration contracts by ~1e-4 per step: two steps usually suffice, leaving ~3e-8
+            of the trial's deviation, ~1e-12 m on the seed's case against a 14-digit solution).
         linear_start : bool
             Take the first step from the first-order prediction ``reference + J_q dQ`` (no
             kinematics, see the class docstring); false evaluates the prediction at the
             start exactly (the method before this option, kept as its reference).
+        deviations, reading_errors : ndarray, shape (T, n_poses, dimension), (T, n_poses, n_joints)
+            Errors: the trials measure ``perturb(measured (1, n_poses, value_size), deviations)``
+            at ``joint_positions (n_poses, n_joints) + reading_errors`` (a compiled iteration
+            applies them itself, without copies).
 
         Returns
         -------
@@ -412,57 +415,120 @@ class ChordSolver:
         iterations_run : int
             The most steps any trial took.
         """
-        kernel = getattr(self.predictor, "solve_chord", None)
-        if kernel is not None and linear_start:
-            # A backend's compiled iteration (the same steps, trial by trial start to end);
-            # None where it defers to this one for the block.
-            solved: tuple[Array, int] | None = kernel(
-                self,
+        if linear_start:
+            # A backend's compiled iteration (the same steps, trial by trial), if it takes the block.
+            solved = self._compiled(
                 joint_positions,
                 measured,
                 weights,
                 lambdas,
                 x_start,
-                max_iterations=max_iterations,
-                relative_tolerance=relative_tolerance,
+                (max_iterations, relative_tolerance, deviations, reading_errors),
             )
             if solved is not None:
                 return solved
-        measurement = self.problem.measurement
+        joint_positions, measured = self._with_errors(joint_positions, measured, deviations, reading_errors)
         n_trials = measured.shape[0]
-        k = x_start.size
         lam2 = np.asarray(lambdas, dtype=np.float64)[:, None] ** 2
         x = np.repeat(x_start[None, :], n_trials, axis=0)
-        w_rows = None if weights is None else np.repeat(weights, measurement.dimension, axis=1)
-        mask = self.problem.penalty_mask
-        normal = None
-        if weights is not None:
-            normal = (weights @ self.pose_normal).reshape(n_trials, k, k)
-            normal += lam2[:, :, None] * np.diag(mask)
+        w_rows = None if weights is None else np.repeat(weights, self.problem.measurement.dimension, axis=1)
+        normal = self._weighted_normals(weights, lam2, x_start.size)
         q = np.asarray(joint_positions, dtype=np.float64)
         # Step 1: at the start, from the first-order prediction or the exact one.
         if linear_start:
-            r = stack_residual(measurement, measurement.residual(measured, self.reference))
-            if w_rows is not None:
-                r = r * w_rows
-            rhs = r @ self.jacobian
-            dq = q - self.joints
-            if dq.ndim == 3 or np.any(dq):
-                dq = np.broadcast_to(dq, (n_trials, *self.joints.shape))
-                if weights is not None:
-                    dq = dq * weights[:, :, None]
-                rhs -= dq.reshape(n_trials, -1) @ self.joint_map
+            rhs = self._linear_rhs(q, measured, weights, w_rows)
         else:
             pred = initial_prediction if initial_prediction is not None else self._predict(x, q)
-            r = stack_residual(measurement, measurement.residual(measured, pred))
+            r = stack_residual(self.problem.measurement, self.problem.measurement.residual(measured, pred))
             if w_rows is not None:
                 r = r * w_rows
             rhs = r @ self.jacobian
-        rhs -= lam2 * (x * mask)
+        rhs -= lam2 * (x * self.problem.penalty_mask)
         step = self._solve(rhs, lam2, normal)
         x += step
         first = np.maximum(np.linalg.norm(step, axis=1), np.finfo(float).tiny)
-        # Exact steps, each for the trials whose last step was not yet small enough.
+        done = self._exact_steps(x, q, measured, w_rows, (lam2, normal, first), max_iterations, relative_tolerance)
+        return x, done
+
+    def _compiled(
+        self,
+        joint_positions: Array,
+        measured: Array,
+        weights: Array | None,
+        lambdas: Array,
+        x_start: Array,
+        settings: tuple[int, float, Array | None, Array | None],
+    ) -> tuple[Array, int] | None:
+        """:meth:`solve` by the predictor's compiled iteration (``solve_chord``), or None;
+        `settings` the most steps, the relative tolerance and the measurement and reading errors."""
+        max_iterations, relative_tolerance, deviations, reading_errors = settings
+        kernel = getattr(self.predictor, "solve_chord", None)
+        if kernel is None:
+            return None
+        solved: tuple[Array, int] | None = kernel(
+            self,
+            joint_positions,
+            measured,
+            weights,
+            lambdas,
+            x_start,
+            max_iterations=max_iterations,
+            relative_tolerance=relative_tolerance,
+            **({} if deviations is None else {"deviations": deviations}),
+            **({} if reading_errors is None else {"reading_errors": reading_errors}),
+        )
+        return solved
+
+    def _with_errors(
+        self, joint_positions: Array, measured: Array, deviations: Array | None, reading_errors: Array | None
+    ) -> tuple[Array, Array]:
+        """The trials' readings and measured values, the errors (when given) applied."""
+        if deviations is not None:
+            measured = self.problem.measurement.perturb(measured, deviations)
+        if reading_errors is not None:
+            joint_positions = joint_positions[None] + reading_errors
+        return joint_positions, measured
+
+    def _weighted_normals(self, weights: Array | None, lam2: Array, k: int) -> Array | None:
+        """Per-trial normal matrices ``sum_i w_i J_i^T J_i + lam^2 M`` (T, k, k); None without weights."""
+        if weights is None:
+            return None
+        normal: Array = (weights @ self.pose_normal).reshape(weights.shape[0], k, k)
+        normal += lam2[:, :, None] * np.diag(self.problem.penalty_mask)
+        return normal
+
+    def _linear_rhs(self, q: Array, measured: Array, weights: Array | None, w_rows: Array | None) -> Array:
+        """The first step's right-hand side from the first-order prediction ``reference + J_q dQ``."""
+        measurement = self.problem.measurement
+        n_trials = measured.shape[0]
+        r = stack_residual(measurement, measurement.residual(measured, self.reference))
+        if w_rows is not None:
+            r = r * w_rows
+        rhs: Array = r @ self.jacobian
+        dq = q - self.joints
+        if dq.ndim == 3 or np.any(dq):
+            dq = np.broadcast_to(dq, (n_trials, *self.joints.shape))
+            if weights is not None:
+                dq = dq * weights[:, :, None]
+            rhs -= dq.reshape(n_trials, -1) @ self.joint_map
+        return rhs
+
+    def _exact_steps(
+        self,
+        x: Array,
+        q: Array,
+        measured: Array,
+        w_rows: Array | None,
+        state: tuple[Array, Array | None, Array],
+        max_iterations: int,
+        relative_tolerance: float,
+    ) -> int:
+        """Exact steps on x (T, k) in place, each for the trials whose last step was not yet
+        below `relative_tolerance` of their first; `state` is lambda^2 (T, 1), the per-trial
+        normal matrices (or None) and the first steps' norms (T,). Returns the most steps."""
+        lam2, normal, first = state
+        measurement = self.problem.measurement
+        mask = self.problem.penalty_mask
         active: slice | NDArray[np.intp] = slice(None)  # all trials, without copying their data
         done = 1
         for done in range(2, max_iterations + 1):
@@ -477,8 +543,8 @@ class ChordSolver:
             more = np.linalg.norm(step, axis=1) > relative_tolerance * first[active]
             if not more.any():
                 break
-            active = np.arange(n_trials)[active][more]
-        return x, done
+            active = np.arange(x.shape[0])[active][more]
+        return done
 
     def _predict(self, x: Array, joint_positions: Array) -> Array:
         """The measurement type's prediction at scaled deviations x (T, k) and the readings."""

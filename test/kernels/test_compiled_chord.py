@@ -161,3 +161,48 @@ def test_shared_measured_values_and_readings() -> None:
             np.testing.assert_allclose(direct[0], want, rtol=0.0, atol=1e-12 * np.abs(want).max())
         else:
             _assert_same_parameters(trials, direct[0], want)
+
+
+@pytest.mark.parametrize(("layout", "six_dof"), [("paper_arm", False), ("paper_arm", True), ("ur10.urdf", True)])
+@pytest.mark.parametrize("large", [False, True])
+def test_errors_applied_in_the_kernel_equal_perturbed_values(layout: str, six_dof: bool, large: bool) -> None:
+    """The measurement and reading errors handed to the kernel (``deviations``,
+    ``reading_errors``), which applies them itself, give the trials of the numpy solver fed the
+    perturbed values (the measurement type's ``perturb``) and readings:
+    bit for bit where every angle error is small (the series on both sides), and to 1e-12
+    where a trial holds a rotation error above 1e-3 rad (sin and cos of the angle)."""
+    compiled, reference, trials = _solvers(layout, six_dof, "tracker")
+    rng = np.random.default_rng(11)
+    n = 29
+    values = trials.points  # type: ignore[attr-defined]
+    measurement = trials.problem.measurement  # type: ignore[attr-defined]
+    q0 = trials.joint_positions  # type: ignore[attr-defined]
+    dq = rng.uniform(-2e-5, 2e-5, (n, *q0.shape))
+    q = q0[None] + dq
+    errors = rng.normal(0.0, 1e-5, (n, values.shape[0], measurement.dimension))
+    if six_dof:
+        errors[..., 3:] = rng.normal(0.0, 1e-4, (n, values.shape[0], 3))
+        if large:
+            errors[3, 5, 3:] = (2e-3, -1e-3, 5e-4)  # one pose of one trial: sin and cos
+    lambdas = np.full(n, trials.lambda_star)  # type: ignore[attr-defined]
+    x_hat = trials.x_hat  # type: ignore[attr-defined]
+    want, _ = reference.solve(q, measurement.perturb(values[None], errors), None, lambdas, x_hat)  # type: ignore[attr-defined]
+    given = {"deviations": errors, "reading_errors": dq}
+    got, _ = compiled.solve(q0, values[None], None, lambdas, x_hat, **given)  # type: ignore[attr-defined]
+    numpy_path, _ = reference.solve(q0, values[None], None, lambdas, x_hat, **given)  # type: ignore[attr-defined]
+    assert np.array_equal(numpy_path, want)  # the numpy solver perturbs as the caller did
+    _assert_same_parameters(trials, got, want)
+    perturbed = measurement.perturb(values[None], errors)
+    kernel_values = np.array([_kernel_perturb(values, e, six_dof) for e in errors])
+    if six_dof and large:
+        assert np.abs(kernel_values - perturbed).max() <= 1e-15
+    else:
+        assert np.array_equal(kernel_values, perturbed)
+
+
+def _kernel_perturb(values: np.ndarray, errors: np.ndarray, poses: bool) -> np.ndarray:
+    from robocal_uncertainty.kernels._numba_walk import _perturb
+
+    out = np.empty_like(values)
+    _perturb(np.ascontiguousarray(values), np.ascontiguousarray(errors), poses, out)
+    return out

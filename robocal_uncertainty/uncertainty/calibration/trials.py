@@ -94,7 +94,6 @@ class CalibrationTrials:
         Returns the full parameter vector of every trial, shape (n, n_params), and the
         test-joint deviations and prediction offsets the sources set (None when none did).
         """
-        measurement = self.problem.measurement
         params = np.empty((n, self.problem.start.size))
         test_deviations: list[Array] = []
         predictions: list[Array] = []
@@ -107,25 +106,25 @@ class CalibrationTrials:
             # Every source perturbs the measured points with zero-mean errors, so the trials
             # stay centred on the calibration.
             # Source deviations are in the residual coordinates of the measurement type.
-            pts = (
-                measurement.perturb(self.points[None], batch.points)
-                if batch.points is not None
-                else np.broadcast_to(self.points, (t, *self.points.shape))
-            )
-            q = self.joint_positions[None] + batch.joints if batch.joints is not None else self.joint_positions
             lambdas = batch.lambdas if batch.lambdas is not None else np.full(t, self.lambda_star)
             if self.solver is not None:
-                x, _ = self.solver.solve(q, pts, batch.weights, lambdas, self.x_hat)
-            else:
-                x, _ = reidentify_batch(
-                    self.problem,
-                    q,
-                    np.ascontiguousarray(pts),
+                # The solver adds the errors (a compiled one inside its kernel, without copies).
+                measured = (
+                    self.points[None]
+                    if batch.points is not None
+                    else np.broadcast_to(self.points, (t, *self.points.shape))
+                )
+                x, _ = self.solver.solve(
+                    self.joint_positions,
+                    measured,
                     batch.weights,
                     lambdas,
                     self.x_hat,
-                    iterations=self.gauss_newton_iterations,
+                    deviations=batch.points,
+                    reading_errors=batch.joints,
                 )
+            else:
+                x = self._gauss_newton(batch, lambdas)
             params[sl] = self.problem.parameters(x)
             if batch.test_joints is not None:
                 test_deviations.append(batch.test_joints)
@@ -134,6 +133,26 @@ class CalibrationTrials:
         qt_dev = np.concatenate(test_deviations) if test_deviations else None
         pred = np.concatenate(predictions) if predictions else None
         return params, qt_dev, pred
+
+    def _gauss_newton(self, batch: TrialBatch, lambdas: Array) -> Array:
+        """The exact batched re-identification of one sub-batch (no chord solver)."""
+        t = batch.n_trials
+        q = self.joint_positions[None] + batch.joints if batch.joints is not None else self.joint_positions
+        pts = (
+            self.problem.measurement.perturb(self.points[None], batch.points)
+            if batch.points is not None
+            else np.broadcast_to(self.points, (t, *self.points.shape))
+        )
+        x, _ = reidentify_batch(
+            self.problem,
+            q,
+            np.ascontiguousarray(pts),
+            batch.weights,
+            lambdas,
+            self.x_hat,
+            iterations=self.gauss_newton_iterations,
+        )
+        return x
 
     def _evaluate_tests(self, params: Array, qt_dev: Array | None, pred: Array | None, out: Array) -> None:
         """Fill the position (and rotation) columns of `out` at the test configurations.
