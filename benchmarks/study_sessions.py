@@ -46,8 +46,9 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import fit_rigid_base
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, ValidatedLevel, verify_session
+from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, ValidatedLevel
 from robocal_uncertainty.importers import read_tracker_csv
+from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 SERIES = {
     # Series D ships with the repository; Series B lies in shared/ beside it.
