@@ -46,8 +46,9 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import fit_rigid_base
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, ValidatedLevel
+from robocal_uncertainty.core.session import BASE_NAMES, STATEMENT_TOLERANCE, TOOL_NAMES, ValidatedLevel
 from robocal_uncertainty.importers import read_tracker_csv
+from robocal_uncertainty.uncertainty.sessions.level import tolerance_check
 from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 SERIES = {
@@ -116,6 +117,17 @@ def future_coverage(model: RobotModel, campaign: Campaign, check_idx: np.ndarray
     return float(np.mean(z <= stats.t.ppf(0.975, nu)))
 
 
+def statement_coverage(model: RobotModel, campaign: Campaign, ref: ValidatedLevel) -> float:
+    """Fraction of `campaign`'s point components inside the calibration's own 95 % statement after
+    re-registering tracker and tool on every pose: ``+-t_nu(0.975) sqrt(level_ref (1 + h_i))``
+    (the validated level, its dof after the dispersion factor, the leverage of the re-registration)."""
+    r, a, _ = reregister(model, campaign)
+    lev = np.einsum("ij,jk,ik->i", a, np.linalg.pinv(a.T @ a), a)
+    u = np.sqrt(ref.level * np.clip(1.0 - lev, 1e-12, None))  # residuals after the fit shrink by 1 - h
+    nu = ref.dof * ref.dof_factor
+    return float(np.mean(np.abs(r.reshape(-1)) / u <= stats.t.ppf(0.975, nu)))
+
+
 def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
     """The README's campaigns: 53 random poses of each series and checks of the others (seeded)."""
     from robocal_uncertainty.bagio import write_campaign
@@ -167,11 +179,26 @@ def main() -> None:
             held = series[home].subset(np.sort(order[N_CAL:]))
             rms_home, ratio_home, ok_home = full_verdict(calibrated, held, ref)
             rms_away, ratio_away, ok_away = full_verdict(calibrated, series[away], ref)
+            rule = tolerance_check(ref.level, ref.dof, ref)  # the rule for this calibration: r*, poses needed
+            cover = {
+                w: statement_coverage(calibrated, cmp, ref) for w, cmp in (("same", held), ("other", series[away]))
+            }
+            by_cover = {w: c >= 0.95 - STATEMENT_TOLERANCE for w, c in cover.items()}
+            summary.setdefault(f"{home}->{away} full series inside the statement", []).append(cover["other"])
+            summary.setdefault(f"{home}->{away} full series consistent (coverage >= 91 %)", []).append(
+                float(by_cover["other"])
+            )
             print(
                 f"\n{home} 53 ({c + 1}): validated level {np.sqrt(ref.level) * 1e3:.3f} mm per component "
                 f"({ref.dof * ref.dof_factor:.0f} dof); all poses re-registered: {home} {rms_home * 1e3:.3f} mm RMS "
                 f"(ratio {ratio_home:.2f}, {'consistent' if ok_home else 'drifted'}), {away} {rms_away * 1e3:.3f} mm "
                 f"({rms_away / rms_home:.2f}x; ratio {ratio_away:.2f}, {'consistent' if ok_away else 'drifted'})"
+            )
+            print(
+                f"  the statement's 95 % region holds {cover['same'] * 100:.1f} % of {home}'s other points' components "
+                f"and {cover['other'] * 100:.1f} % of {away}'s "
+                f"({'consistent' if by_cover['other'] else 'drifted'} by the 91 % rule); tolerated ratio "
+                f"{rule.tolerated_ratio:.3f}; a check says consistent under that rule from {rule.poses_needed} poses"
             )
             for which, camp, pool, truth in (
                 ("same", series[home], order[N_CAL:], ok_home),
@@ -179,7 +206,7 @@ def main() -> None:
             ):
                 cells = []
                 for n in SIZES:
-                    verdicts, ps, ratios = [], [], []
+                    verdicts, ps, ratios, threes = [], [], [], []
                     for k in range(args.checks):
                         pick = np.sort(
                             np.random.default_rng([args.seed, ord(home), c, n, k, len(which)]).choice(
@@ -192,10 +219,25 @@ def main() -> None:
                         verdicts.append(v.consistent)
                         ps.append(v.p_value)
                         ratios.append(v.error_ratio)
+                        assert v.tolerance is not None
+                        threes.append(v.tolerance.verdict)
                     rate = float(np.mean(verdicts))
                     agree = float(np.mean(np.array(verdicts) == truth))
                     summary.setdefault(f"{home}->{home if which == 'same' else away} {n} consistent", []).append(rate)
-                    summary.setdefault(f"{home}->{home if which == 'same' else away} {n} agree", []).append(agree)
+                    key = f"{home}->{home if which == 'same' else away} {n}"
+                    summary.setdefault(f"{key} agree", []).append(agree)
+                    ref_ok = by_cover[which]
+                    summary.setdefault(f"{key} agree (coverage reference)", []).append(
+                        float(np.mean(np.array(verdicts) == ref_ok))
+                    )
+                    told = [t for t in threes if t != "inconclusive"]
+                    right = sum((t == "consistent") == ref_ok for t in told)
+                    summary.setdefault(f"{key} three-way right", []).append(right / len(threes))
+                    summary.setdefault(f"{key} three-way wrong", []).append((len(told) - right) / len(threes))
+                    summary.setdefault(f"{key} three-way inconclusive", []).append(1.0 - len(told) / len(threes))
+                    summary.setdefault(f"{key} margin test not drifted", []).append(
+                        float(np.mean([t != "drifted" for t in threes]))
+                    )
                     cells.append(
                         f"{n}: {sum(verdicts)}/{len(verdicts)} (p {np.median(ps):.2g}, x{np.median(ratios):.2f})"
                     )

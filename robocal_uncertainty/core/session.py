@@ -35,9 +35,11 @@ __all__ = [
     "DEFAULT_SIGNIFICANCE",
     "LENGTH_SCALE",
     "MIN_CHECK_DOF",
+    "STATEMENT_TOLERANCE",
     "TOOL_NAMES",
     "LevelTest",
     "SessionState",
+    "ToleranceCheck",
     "TrackerMove",
     "ValidatedLevel",
     "Verification",
@@ -358,6 +360,10 @@ class Verification:
         kurtosis of a :class:`ValidatedLevel`).
     level_trace : float
         The equations `level` is taken over (``m_kept``; pooling weight of fold levels).
+    tolerance : ToleranceCheck or None
+        The check's level against what the statement tolerates (consistent, drifted or
+        inconclusive, with the size a check would need); None without a validated level or
+        with a between-session spread of the level (the future-session test).
     """
 
     consistent: bool
@@ -398,6 +404,7 @@ class Verification:
     duplicates: int = 0
     level_z: Array | None = None
     level_trace: float = float("nan")
+    tolerance: ToleranceCheck | None = None
 
     def coverage_factors(self, coverage: float = 0.95) -> Array:
         """Per component: the t-quantile for `coverage` with its Welch-Satterthwaite dof, shape (n, 3).
@@ -437,6 +444,56 @@ def effect_jacobian(layout: ParameterLayout, params: Array, joint_positions: Arr
             msg = f"unknown session effect {name!r} (joint offsets jointN.theta or {LENGTH_SCALE})"
             raise ConfigError(msg)
     return out
+
+
+STATEMENT_TOLERANCE = 0.04
+"""How far below 95 % the share of a session's points inside the statement's 95 % region may fall
+before the session is *clearly* outside the statement: 95 +- 4 %, the band a statement for a
+future session is held to."""
+
+
+@dataclass(frozen=True)
+class ToleranceCheck:
+    """A check's error level against what the statement tolerates, three ways.
+
+    The statement (the validated level, Student t on its degrees of freedom) holds for a session
+    while about 95 % of its points fall inside its 95 % region; with normal errors that lasts up
+    to an error ratio ``r* = t_nu(0.975) / z(0.955)`` (91 % inside, :data:`STATEMENT_TOLERANCE`).
+    *drifted*: the check's ratio is beyond ``r*`` (one-sided F test at 5 %); *consistent*: its
+    one-sided 95 % upper bound is within ``r*``; *inconclusive*: the check is too small to tell.
+
+    Attributes
+    ----------
+    verdict : str
+        ``"consistent"``, ``"drifted"`` or ``"inconclusive"``.
+    tolerated_ratio : float
+        ``r*``.
+    upper_ratio : float
+        One-sided 95 % upper bound of the check's error ratio.
+    p_beyond : float
+        One-sided p-value of "the ratio is at most ``r*``".
+    poses_needed : int or None
+        Fewest check poses (same re-registration) whose upper bound stays within ``r*`` when the
+        check's errors are the calibration's; None when no size reaches it (the reference level's
+        own degrees of freedom are the limit).
+    """
+
+    verdict: str
+    tolerated_ratio: float
+    upper_ratio: float
+    p_beyond: float
+    poses_needed: int | None
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready."""
+        return {
+            "verdict": self.verdict,
+            "rule": "statement's 95 % region holds at least 91 % of the points (95 +- 4 %)",
+            "tolerated_error_ratio": self.tolerated_ratio,
+            "error_ratio_upper_95": self.upper_ratio,
+            "p_beyond_tolerance": self.p_beyond,
+            "poses_needed": self.poses_needed,
+        }
 
 
 @dataclass(frozen=True)

@@ -66,7 +66,7 @@ from robocal_uncertainty.uncertainty.sessions.check_campaign import (
     pose_noise,
     unique_poses,
 )
-from robocal_uncertainty.uncertainty.sessions.level import error_level, level_test
+from robocal_uncertainty.uncertainty.sessions.level import error_level, level_test, tolerance_check
 from robocal_uncertainty.uncertainty.sessions.null_distribution import (
     chol_factor,
     gls_chi2,
@@ -525,6 +525,9 @@ def _verification(
     move, tool_change, tool_std = _session_changes(s, fit, retool)
     effect_values, effect_cov = _effects(s, fit, effects)
     between_names = None if s.between is None else state.between_session_names
+    tolerance = None
+    if outcome is not None and outcome.test == "error level" and state.validated_level is not None:
+        tolerance = tolerance_check(level, level_dof, state.validated_level, reregistered=s.free.size)
     return Verification(
         consistent=consistent,
         verdict=verdict,
@@ -566,4 +569,5 @@ def _verification(
         duplicates=s.duplicates,
         level_z=level_z,
         level_trace=level_trace,
+        tolerance=tolerance,
     )
