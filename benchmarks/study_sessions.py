@@ -13,14 +13,22 @@ calibrated on) and of the other series. Printed per calibration:
   every pose would say);
 - per check size: how many checks say consistent, the median p-value and the median error
   ratio ("errors 1.6x the calibration session's");
+- the full series' verdict by the issue's own definition: the share of its point components
+  inside the calibration's statement (``+-t_nu(0.975) sqrt(level_ref)``, the validated level on
+  its degrees of freedom over the dispersion), consistent when at least 91 % (95 +- 4 %), drifted
+  below; the tolerated error ratio and the check size that could tell;
+- per check size, the three-way verdict of ``verify`` against that tolerance
+  (``Verification.tolerance``: consistent, drifted or inconclusive): right and wrong against the
+  issue's reference, inconclusive counted apart (never as agreement);
 - a statement for the rest of the series after re-registering on a 10-pose check: each
   remaining point's components inside ``+-t_nu(0.975) u_i`` with ``u_i^2 = level_check (1 +
   h_i)`` (the check's own error level, its degrees of freedom, the re-registration's leverage
   at the point): the fraction inside over the ``--checks`` checks.
 
 Summary rows give the same-session consistent rate against check size (the false-alarm rate
-is its complement), the cross-session agreement of 10-pose verdicts with the full series'
-verdict, and the coverage of the future-session statement.
+is its complement), the cross-session agreement of the verdicts with the full series' verdict
+(the level test's and the 91 % rule's), the three-way rates, and the coverage of the
+future-session statement.
 
     python benchmarks/study_sessions.py                      # 4 calibrations x 8 checks per size
     python benchmarks/study_sessions.py --calibrations 8 --checks 16

@@ -116,9 +116,9 @@ def tolerance_line(check: ToleranceCheck) -> str:
         f"{check.tolerated_ratio:.2f}x): "
     )
     need = (
-        f"measure at least {check.poses_needed} poses to tell"
+        f"a check shows errors within it from {check.poses_needed} poses on (errors at the calibration's level)"
         if check.poses_needed is not None
-        else "no check size can tell against this calibration's validated level"
+        else "no check size can show errors within it: the validated level itself is too uncertain"
     )
     if check.verdict == "inconclusive":
         return (
