@@ -51,7 +51,7 @@ sys.path.insert(0, str(ROOT))
 from robocal_uncertainty.app.verification import calibrate_session
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise, load_robot_model
 from robocal_uncertainty.core.campaign import Campaign
-from robocal_uncertainty.core.identification import fit_rigid_base
+from robocal_uncertainty.core.identification import fit_rigid_base, identify
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import BASE_NAMES, STATEMENT_TOLERANCE, TOOL_NAMES, ValidatedLevel
@@ -136,6 +136,59 @@ def statement_coverage(model: RobotModel, campaign: Campaign, ref: ValidatedLeve
     return float(np.mean(np.abs(r.reshape(-1)) / u <= stats.t.ppf(0.975, nu)))
 
 
+ROTATION_NAMES = ("tool.rx", "tool.ry", "tool.rz")
+
+
+def future_coverage_6dof(
+    model: RobotModel, campaign: Campaign, check_idx: np.ndarray, dof_factor: float
+) -> tuple[float, float]:
+    """As :func:`future_coverage` for a 6-DOF calibration and campaign (positions and T-Mac
+    orientations): tracker pose, tool point and tool rotation re-registered on the poses
+    `check_idx` (Gauss-Newton, rows of each kind scaled by their own error level, two passes),
+    each kind's level from its rows' residuals over their share of the kept equations; returns
+    the fractions of the rest's position and rotation components inside their 95 % intervals."""
+    layout = model.layout
+    campaign = campaign.reorder_joints(model.joint_names)
+    meas = campaign.measurement
+    check = campaign.subset(check_idx)
+    q, y = check.joint_positions, check.points
+    p = model.parameter_vector()
+    b0 = layout.base_index
+    p_kin = p.copy()
+    p_kin[b0 : b0 + 6] = 0.0
+    positions = np.asarray(meas.positions(y), dtype=np.float64)
+    xyz, rpy = fit_rigid_base(forward_points(layout, p_kin, q), positions)
+    p[b0 : b0 + 3], p[b0 + 3 : b0 + 6] = xyz, rpy
+    free = np.array([layout.names.index(n) for n in (*BASE_NAMES, *TOOL_NAMES, *ROTATION_NAMES)])
+    scale = np.array([1e-4, 1e-4, 1e-4, 1e-3, 1e-3, 1e-3])  # first guess [m, rad]
+    levels = scale**2
+    for _ in range(2):
+        for _ in range(20):
+            pred, jac = meas.predict_and_jacobian(layout, p, q)
+            r = meas.residual(y, pred) / scale
+            a = (jac[:, :, free] / scale[None, :, None]).reshape(-1, free.size)
+            step = np.linalg.lstsq(a, r.reshape(-1), rcond=None)[0]
+            p[free] += step
+            if np.max(np.abs(step)) < 1e-12:
+                break
+        pred, jac = meas.predict_and_jacobian(layout, p, q)
+        r = meas.residual(y, pred)
+        a = (jac[:, :, free] / scale[None, :, None]).reshape(-1, free.size)
+        h = np.einsum("ij,jk,ik->i", a, np.linalg.pinv(a.T @ a), a).reshape(-1, 6)
+        for block in (slice(0, 3), slice(3, 6)):
+            levels[block] = float(np.sum(r[:, block] ** 2)) / float(np.sum(1.0 - h[:, block]))
+        scale = np.sqrt(levels)
+    a = (jac[:, :, free] / scale[None, :, None]).reshape(-1, free.size)
+    nu = (a.shape[0] - free.size) * dof_factor
+    rest = campaign.subset(np.setdiff1d(np.arange(campaign.n_poses), check_idx))
+    pred, jac = meas.predict_and_jacobian(layout, p, rest.joint_positions)
+    j_rest = (jac[:, :, free] / scale[None, :, None]).reshape(-1, free.size)
+    lev = np.einsum("ij,jk,ik->i", j_rest, np.linalg.pinv(a.T @ a), j_rest).reshape(-1, 6)
+    z = np.abs(meas.residual(rest.points, pred)) / np.sqrt(levels * (1.0 + lev))
+    inside = z <= stats.t.ppf(0.975, nu)
+    return float(np.mean(inside[:, :3])), float(np.mean(inside[:, 3:]))
+
+
 def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
     """The README's campaigns: 53 random poses of each series and checks of the others (seeded)."""
     from robocal_uncertainty.bagio import write_campaign
@@ -158,6 +211,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--null-trials", type=int, default=500)
     parser.add_argument(
+        "--six-dof",
+        action="store_true",
+        help="also calibrate 6-DOF (positions and orientations) on the same 53 poses and state the future "
+        "session's positions and orientations after a 10-pose re-registration",
+    )
+    parser.add_argument(
         "--write-example",
         metavar="DIR",
         help="only write the README's example campaigns to DIR (b53.mcap: 53 random poses of B; b10.mcap, "
@@ -166,6 +225,11 @@ def main() -> None:
     args = parser.parse_args()
     model = load_robot_model(ROOT / "robocal_uncertainty" / "data" / "ur10.yaml")
     series = {name: read_tracker_csv(path) for name, path in SERIES.items()}
+    series6 = (
+        {name: read_tracker_csv(path, orientation_convention="intrinsic_xyz") for name, path in SERIES.items()}
+        if args.six_dof
+        else {}
+    )
     if args.write_example:
         write_example(series, Path(args.write_example), args.seed)
         return
@@ -257,6 +321,35 @@ def main() -> None:
                 )
                 covs.append(future_coverage(calibrated, series[away], np.sort(pick), ref.dof_factor))
             summary.setdefault(f"{home}->{away} future coverage", []).append(float(np.mean(covs)))
+            if args.six_dof:
+                six = identify(
+                    model.with_tool_rotation(), series6[home].subset(np.sort(order[:N_CAL])), accept_unconverged=True
+                )
+                cov6 = np.array(
+                    [
+                        future_coverage_6dof(
+                            six.model,
+                            series6[away],
+                            np.sort(
+                                np.random.default_rng([args.seed, ord(away), c, k]).choice(
+                                    series[away].n_poses, 10, replace=False
+                                )
+                            ),
+                            ref.dof_factor,
+                        )
+                        for k in range(args.checks)
+                    ]
+                )
+                summary.setdefault(f"{home}->{away} 6-DOF future coverage, positions", []).append(
+                    float(cov6[:, 0].mean())
+                )
+                summary.setdefault(f"{home}->{away} 6-DOF future coverage, rotations", []).append(
+                    float(cov6[:, 1].mean())
+                )
+                print(
+                    f"  6-DOF statement for {away} after a 10-pose re-registration: positions "
+                    f"{cov6[:, 0].mean() * 100:.1f} %, rotations {cov6[:, 1].mean() * 100:.1f} % inside 95 %"
+                )
             print(
                 f"  statement for {away} after a 10-pose re-registration: "
                 f"{np.mean(covs) * 100:.1f} % of its other points' components inside 95 %"
