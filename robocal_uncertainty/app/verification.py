@@ -8,12 +8,13 @@ by :func:`~robocal_uncertainty.core.calibration_file.write_calibration`.
 :func:`verify` reads such a calibration file and a short check campaign measured in a new
 session, re-registers the new measurement frame (and the tool point when asked), and tests
 whether the robot still agrees with its calibration within the stated uncertainty
-(:func:`~robocal_uncertainty.core.session.verify_session`).
+(:func:`~robocal_uncertainty.uncertainty.sessions.verification.verify_session`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,15 +28,18 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, verify_session
+from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState
 from robocal_uncertainty.errors import CalibError, ConfigError
-from robocal_uncertainty.uncertainty.between_sessions import (
+from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
+from robocal_uncertainty.uncertainty.sessions.between import (
     estimate_between_sessions,
     identifiable_effects,
     with_between_sessions,
 )
-from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
-from robocal_uncertainty.uncertainty.sessions import cross_validated_model_error, session_state, validated_level
+from robocal_uncertainty.uncertainty.sessions.cross_validation import cross_validated_model_error
+from robocal_uncertainty.uncertainty.sessions.state import session_state
+from robocal_uncertainty.uncertainty.sessions.validated_level import validated_level
+from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 __all__ = [
     "SessionCalibration",
@@ -91,108 +95,119 @@ def calibrate_session(
     cross_validation_folds : int
         With `correlated_model_error` off and an inadequate model, take the model error from
         this many folds of held-out poses
-        (:func:`~robocal_uncertainty.uncertainty.sessions.cross_validated_model_error`); 0 keeps
+        (:func:`~robocal_uncertainty.uncertainty.sessions.cross_validation.cross_validated_model_error`); 0 keeps
         the one from the calibration's own residuals.
     later_sessions : sequence of Campaign
         Campaigns of the same robot from other sessions (their own tracker set-ups): the
         between-session component is estimated from them and the statement then holds for a
-        future session (:mod:`~robocal_uncertainty.uncertainty.between_sessions`).
+        future session (:mod:`~robocal_uncertainty.uncertainty.sessions.between`).
     retool : bool
         The probe was remounted between sessions (re-register the tool point on each).
     correlated_model_error : bool
         When the model is inadequate, state the model error as a field correlated over the
         joint configurations, estimated from the calibration's residuals by restricted maximum
-        likelihood (:func:`~robocal_uncertainty.uncertainty.sessions.estimate_model_error_field`;
+        likelihood (:func:`~robocal_uncertainty.uncertainty.sessions.field.estimate_model_error_field`;
         default). Off: independent from pose to pose (held-out folds as above).
     validate_level : bool
         Measure the calibration's error level on its own held-out poses, re-registered as a
-        check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level`, four splits into five folds):
+        check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level.validated_level`,
+        four splits into five folds):
         ``verify`` tests a check against it and states the check's error ratio.
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
-    warnings: list[str] = []
-    full = result
-    if result.measurement.dimension != 3 or result.measurement.weights is not None:
-        # A 6-DOF (or weighted) calibration: verify checks tool points, so the session record is
-        # the point calibration of the same poses (positions only, the tool point's part); the
-        # file keeps the 6-DOF parameters.
-        positions = campaign.measurement.positions(campaign.points)
-        if positions is None:
-            warning = "no session record: verify and between-session statements need measured positions"
-            return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
-        campaign = dataclasses.replace(campaign, points=np.asarray(positions), measurement=POINT, point_std=None)
-        model = dataclasses.replace(model, tool_rotation=False)
-        result = identify(model, campaign, lambda_=lambda_, accept_unconverged=True)
-        warnings.append(
-            "session record from the positions of the same poses (a point calibration of them): verify checks "
-            "tool points against it with this calibration's parameters"
+    point = _point_calibration(model, campaign, result, lambda_)
+    if point is None:
+        warning = "no session record: verify and between-session statements need measured positions"
+        return SessionCalibration(result=result, state=None, adequacy=None, warnings=(warning,))
+    options = _RecordOptions(
+        tracker_noise, encoder_noise, lambda_, sources, campaign_name, cross_validation_folds, retool,
+        correlated_model_error, validate_level,
+    )  # fmt: skip
+    state, adequacy, warnings = _session_record(*point, options)
+    if later_sessions:
+        between = estimate_between_sessions(
+            point[2].model, state, list(later_sessions), retool=retool, reference_campaign=point[1]
         )
-    settings: dict[str, object] = {
-        "lambda": str(lambda_),
-        "lambda_method": result.lambda_method,
-        "cross_validation_folds": cross_validation_folds,
-        "retool": retool,
-        "correlated_model_error": correlated_model_error,
-    }
-    state, adequacy = session_state(
-        result,
-        campaign,
-        tracker_noise,
-        encoder_noise,
-        sources=sources,
-        campaign_name=campaign_name,
-        settings=settings,
-        correlated=correlated_model_error,
+        state = with_between_sessions(state, between)
+    if point[2] is not result and state.frame == "tracker":
+        # Tracker move and tool change are reported against the parameters the file holds.
+        b0 = result.model.layout.base_index
+        extra = dict(state.extra)
+        extra["tool_point_m"] = [float(v) for v in result.model.tool_point]
+        state = dataclasses.replace(state, registration=result.estimate[b0 : b0 + 6].copy(), extra=extra)
+    return SessionCalibration(result=result, state=state, adequacy=adequacy, warnings=tuple(warnings))
+
+
+@dataclass(frozen=True)
+class _RecordOptions:
+    """How :func:`calibrate_session` makes the session record (its keyword arguments)."""
+
+    tracker_noise: TrackerNoise
+    encoder_noise: EncoderNoise
+    lambda_: str | float
+    sources: tuple[str, ...]
+    campaign_name: str | None
+    cross_validation_folds: int
+    retool: bool
+    correlated_model_error: bool
+    validate_level: bool
+
+
+def _point_calibration(
+    model: RobotModel, campaign: Campaign, result: IdentificationResult, lambda_: str | float
+) -> tuple[RobotModel, Campaign, IdentificationResult, list[str]] | None:
+    """The point calibration the session record is made of (None: the campaign has no positions)."""
+    if result.measurement.dimension == 3 and result.measurement.weights is None:
+        return model, campaign, result, []
+    # A 6-DOF (or weighted) calibration: verify checks tool points, so the session record is
+    # the point calibration of the same poses (positions only, the tool point's part); the
+    # file keeps the 6-DOF parameters.
+    positions = campaign.measurement.positions(campaign.points)
+    if positions is None:
+        return None
+    campaign = dataclasses.replace(campaign, points=np.asarray(positions), measurement=POINT, point_std=None)
+    model = dataclasses.replace(model, tool_rotation=False)
+    result = identify(model, campaign, lambda_=lambda_, accept_unconverged=True)
+    warning = (
+        "session record from the positions of the same poses (a point calibration of them): verify checks "
+        "tool points against it with this calibration's parameters"
     )
-    if not correlated_model_error and cross_validation_folds and not adequacy.adequate and "residual" in sources:
+    return model, campaign, result, [warning]
+
+
+def _session_record(
+    model: RobotModel, campaign: Campaign, result: IdentificationResult, warnings: list[str], o: _RecordOptions
+) -> tuple[SessionState, ModelAdequacy, list[str]]:
+    """The session record of a point calibration: model error (field or folds), validated level."""
+    settings: dict[str, object] = {
+        "lambda": str(o.lambda_),
+        "lambda_method": result.lambda_method,
+        "cross_validation_folds": o.cross_validation_folds,
+        "retool": o.retool,
+        "correlated_model_error": o.correlated_model_error,
+    }
+    noise = (o.tracker_noise, o.encoder_noise)
+    record = functools.partial(session_state, sources=o.sources, campaign_name=o.campaign_name, settings=settings)
+    state, adequacy = record(result, campaign, *noise, correlated=o.correlated_model_error)
+    folds = o.cross_validation_folds
+    if not o.correlated_model_error and folds and not adequacy.adequate and "residual" in o.sources:
         try:
-            cv = cross_validated_model_error(
-                model, campaign, tracker_noise, encoder_noise, folds=cross_validation_folds, lambda_=lambda_
-            )
+            cv = cross_validated_model_error(model, campaign, *noise, folds=folds, lambda_=o.lambda_)
         except CalibError as err:
-            warnings.append(f"model error from the calibration's own residuals: {cross_validation_folds}-fold {err}")
+            warnings.append(f"model error from the calibration's own residuals: {folds}-fold {err}")
         else:
-            state, adequacy = session_state(
-                result,
-                campaign,
-                tracker_noise,
-                encoder_noise,
-                sources=sources,
-                adequacy=adequacy,
-                campaign_name=campaign_name,
-                settings=settings,
-                cross_validated=cv,
-                correlated=False,
-            )
-    if validate_level:
+            state, adequacy = record(result, campaign, *noise, adequacy=adequacy, cross_validated=cv, correlated=False)
+    if o.validate_level:
         try:
             level = validated_level(
-                model,
-                campaign,
-                tracker_noise,
-                encoder_noise,
-                lambda_=lambda_,
-                retool=retool,
-                sources=sources,
-                correlated=correlated_model_error,
-                reference=state,
-            )
+                model, campaign, *noise, lambda_=o.lambda_, retool=o.retool, sources=o.sources,
+                correlated=o.correlated_model_error, reference=state,
+            )  # fmt: skip
         except CalibError as err:
             warnings.append(f"no validated error level (verify then tests against the statement alone): {err}")
         else:
             state = dataclasses.replace(state, validated_level=level)
-    if later_sessions:
-        between = estimate_between_sessions(
-            result.model, state, list(later_sessions), retool=retool, reference_campaign=campaign
-        )
-        state = with_between_sessions(state, between)
-    if full is not result and state.frame == "tracker":
-        # Tracker move and tool change are reported against the parameters the file holds.
-        b0 = full.model.layout.base_index
-        extra = dict(state.extra)
-        extra["tool_point_m"] = [float(v) for v in full.model.tool_point]
-        state = dataclasses.replace(state, registration=full.estimate[b0 : b0 + 6].copy(), extra=extra)
-    return SessionCalibration(result=full, state=state, adequacy=adequacy, warnings=tuple(warnings))
+    return state, adequacy, warnings
 
 
 def load_session_calibration(model: RobotModel, path: str | Path) -> tuple[RobotModel, SessionState, dict[str, Any]]:
@@ -270,10 +285,10 @@ def verify(
     retool : bool
         Re-register the tool point (probe remounted).
     significance, tracker_noise, encoder_noise, null_trials, seed
-        See :func:`~robocal_uncertainty.core.session.verify_session`.
+        See :func:`~robocal_uncertainty.uncertainty.sessions.verification.verify_session`.
     effects : bool
         Also estimate what changed since the calibration (joint offsets, length scale) on
-        the check (:func:`~robocal_uncertainty.uncertainty.between_sessions.identifiable_effects`).
+        the check (:func:`~robocal_uncertainty.uncertainty.sessions.between.identifiable_effects`).
 
     Raises
     ------

@@ -147,7 +147,7 @@ def uncertainty_settings(args: argparse.Namespace, campaign: Any, sources: Seque
 
     between = None
     if getattr(args, "between_session", None):
-        from robocal_uncertainty.uncertainty.between_sessions import between_sessions_from_file
+        from robocal_uncertainty.uncertainty.sessions.between import between_sessions_from_file
 
         between = between_sessions_from_file(args.between_session)
     # Every registered source's options, as parsed (each source turns its own into settings).

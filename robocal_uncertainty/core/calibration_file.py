@@ -52,7 +52,7 @@ model-error field), a JSON object with
     Uncertainty sources of the statement.
 ``between_session``
     ``null`` for one session, or the between-session component estimated from several (see
-    :mod:`robocal_uncertainty.uncertainty.between_sessions`): ``effects`` (``jointN.theta``
+    :mod:`robocal_uncertainty.uncertainty.sessions.between`): ``effects`` (``jointN.theta``
     [rad], ``length_scale`` [1]), their ``covariance`` for a future session, ``dof``, and a
     summary (group standard deviations, per-session effects).
 ``scope``
@@ -298,10 +298,6 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
     if frame not in ("base", "tracker") or reg.shape != (6,) or not np.isfinite(reg).all():
         msg = f"{where}: session frame must be base or tracker with a 6-value registration"
         raise ConfigError(msg)
-    between = data.get("between_session")
-    between_cov = None
-    between_names: tuple[str, ...] = ()
-    between_dof = None
     extra: dict[str, object] = {
         "campaign": session.get("campaign"),
         "settings": data.get("settings") or {},
@@ -312,30 +308,10 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
             if k not in ("covariance_base_m2", "draws_base_m", "dof_estimate", "field")
         },
     }
-    if between is not None:
-        try:
-            between_names = tuple(str(n) for n in between["effects"])
-            between_dof = None if between.get("dof") is None else float(between["dof"])
-        except (KeyError, TypeError, ValueError) as err:
-            msg = f"{where}: incomplete between_session record ({err.__class__.__name__}: {err})"
-            raise ConfigError(msg) from err
-        between_cov = _square(where, "between_session.covariance", between.get("covariance"), len(between_names))
-        extra["between_session"] = {k: v for k, v in between.items() if k not in ("effects", "covariance", "dof")}
-    draws = model_error.get("draws_base_m")
-    draws_array = None
-    if draws is not None:
-        draws_array = np.asarray(draws, dtype=np.float64)
-        if draws_array.ndim != 2 or draws_array.shape[1] != 3 or not np.isfinite(draws_array).all():
-            msg = f"{where}: model_error.draws_base_m must be n rows of 3 finite values [m]"
-            raise ConfigError(msg)
+    between_names, between_cov, between_dof = _read_between(data.get("between_session"), where, extra)
+    draws = _read_draws(model_error.get("draws_base_m"), where)
     me_field = _read_field(model_error.get("field"), where)
-    level = None
-    if session.get("validated_level") is not None:
-        try:
-            level = ValidatedLevel.from_dict(dict(session["validated_level"]))
-        except (KeyError, TypeError, ValueError) as err:
-            msg = f"{where}: incomplete session.validated_level record ({err.__class__.__name__}: {err})"
-            raise ConfigError(msg) from err
+    level = _read_validated_level(session.get("validated_level"), where)
     return SessionState(
         frame=frame,
         frame_id=str(session.get("frame_id", "")),
@@ -353,13 +329,52 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         between_session_covariance=between_cov,
         between_session_names=between_names,
         between_session_dof=between_dof,
-        model_error_draws=draws_array,
+        model_error_draws=draws,
         model_error_dof=None if model_error.get("dof_estimate") is None else float(model_error["dof_estimate"]),
         scope=str(data.get("scope", "session")),
         extra=extra,
         model_error_field=me_field,
         validated_level=level,
     )
+
+
+def _read_between(
+    between: Any, where: str, extra: dict[str, object]
+) -> tuple[tuple[str, ...], NDArray[np.float64] | None, float | None]:
+    """Effect names, covariance and dof of a ``between_session`` record (its summary goes to `extra`)."""
+    if between is None:
+        return (), None, None
+    try:
+        between_names = tuple(str(n) for n in between["effects"])
+        between_dof = None if between.get("dof") is None else float(between["dof"])
+    except (KeyError, TypeError, ValueError) as err:
+        msg = f"{where}: incomplete between_session record ({err.__class__.__name__}: {err})"
+        raise ConfigError(msg) from err
+    between_cov = _square(where, "between_session.covariance", between.get("covariance"), len(between_names))
+    extra["between_session"] = {k: v for k, v in between.items() if k not in ("effects", "covariance", "dof")}
+    return between_names, between_cov, between_dof
+
+
+def _read_draws(draws: object, where: str) -> NDArray[np.float64] | None:
+    """The model-error draws [m], n rows of 3, or None."""
+    if draws is None:
+        return None
+    draws_array = np.asarray(draws, dtype=np.float64)
+    if draws_array.ndim != 2 or draws_array.shape[1] != 3 or not np.isfinite(draws_array).all():
+        msg = f"{where}: model_error.draws_base_m must be n rows of 3 finite values [m]"
+        raise ConfigError(msg)
+    return draws_array
+
+
+def _read_validated_level(value: object, where: str) -> ValidatedLevel | None:
+    """The ``session.validated_level`` record, or None."""
+    if value is None:
+        return None
+    try:
+        return ValidatedLevel.from_dict(dict(value))  # type: ignore[call-overload]
+    except (KeyError, TypeError, ValueError) as err:
+        msg = f"{where}: incomplete session.validated_level record ({err.__class__.__name__}: {err})"
+        raise ConfigError(msg) from err
 
 
 def _read_field(value: object, where: str) -> ModelErrorField | None:

@@ -15,7 +15,7 @@ with ``Sigma_m`` the per-pose model-error covariance (3 x 3), ``c`` the correlat
 every joint, so ``q`` and ``q + 2 pi`` are the same configuration; for small differences the
 Euclidean joint distance). ``c``, ``l`` and the scale of ``Sigma_m`` are estimated from the
 calibration's own residuals by restricted maximum likelihood
-(:func:`~robocal_uncertainty.uncertainty.sessions.estimate_model_error_field`).
+(:func:`~robocal_uncertainty.uncertainty.sessions.field.estimate_model_error_field`).
 
 A calibration's estimate follows the field at its poses: ``delta_theta = G (e_t + eps_t)`` with
 ``G`` the regularised least-squares gain. At new poses ``q_c`` the prediction error is

@@ -19,11 +19,12 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.session import LENGTH_SCALE, Verification
+from robocal_uncertainty.core.session import LENGTH_SCALE, ToleranceCheck, Verification
 
 __all__ = [
     "VERIFICATION_FORMAT",
     "plot_verification",
+    "tolerance_line",
     "verification_lines",
     "verification_markdown",
     "verification_summary",
@@ -108,9 +109,32 @@ def _inseparable_line(names: tuple[str, ...]) -> str:
     )
 
 
+def tolerance_line(check: ToleranceCheck) -> str:
+    """The check against what the statement tolerates: consistent, drifted or inconclusive."""
+    head = (
+        f"against the statement's tolerance (its 95 % region holding at least 91 % of the points: errors up to "
+        f"{check.tolerated_ratio:.2f}x): "
+    )
+    need = (
+        f"a check shows errors within it from {check.poses_needed} poses on (errors at the calibration's level)"
+        if check.poses_needed is not None
+        else "no check size can show errors within it: the validated level itself is too uncertain"
+    )
+    if check.verdict == "inconclusive":
+        return (
+            head + f"inconclusive: this check's errors may be up to {check.upper_ratio:.2f}x (one-sided 95 %) "
+            f"and are not clearly beyond {check.tolerated_ratio:.2f}x (p = {check.p_beyond:.3g}); {need}"
+        )
+    if check.verdict == "drifted":
+        return head + f"drifted: the errors are beyond it (p = {check.p_beyond:.3g} < 0.05)"
+    return head + f"consistent: the errors are within it (at most {check.upper_ratio:.2f}x, one-sided 95 %)"
+
+
 def verification_lines(result: Verification, *, scope: str = "session") -> list[str]:
     """What ``verify`` prints: the verdict, the re-registration, the test and the worst poses."""
     lines = [result.verdict]
+    if result.tolerance is not None:
+        lines.append(tolerance_line(result.tolerance))
     move = result.move
     alike = inseparable(result)
     if alike:
@@ -209,6 +233,7 @@ def verification_to_dict(
             "error_ratio_interval_95": None
             if result.error_ratio_interval is None
             else list(result.error_ratio_interval),
+            "tolerance": None if result.tolerance is None else result.tolerance.to_dict(),
         },
         "duplicate_poses_dropped": result.duplicates,
         "n_poses": result.n_poses,
@@ -259,6 +284,7 @@ def verification_markdown(result: Verification, *, calibration: str, check_campa
         "",
         f"**{'Consistent' if result.consistent else 'Drifted'}.** {result.verdict}",
         "",
+        *([] if result.tolerance is None else [tolerance_line(result.tolerance), ""]),
         "## Re-registration",
         "",
     ]

@@ -240,7 +240,7 @@ def estimate_field(
     (x) s S``, ``W`` the measurement type's whitening weights); ``s``, ``c``, ``l`` maximise its
     likelihood (Harville's identity, ``Q`` never formed). ``c = 0`` is the independent model
     error; for points it is the estimator of
-    :func:`~robocal_uncertainty.uncertainty.sessions.estimate_model_error_field`. The returned
+    :func:`~robocal_uncertainty.uncertainty.sessions.field.estimate_model_error_field`. The returned
     per-pose covariance keeps ``c`` and ``l`` and takes its scale, per component, from the
     leave-one-out prediction errors (:func:`_leave_one_out_scale`,
     :func:`_leave_one_out_components`); the likelihood's is recorded beside it.

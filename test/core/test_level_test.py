@@ -1,8 +1,8 @@
 """The level test of ``verify`` against statistics with known truth.
 
-:func:`~robocal_uncertainty.core.session.check_level` pools held-out fold levels and measures
+:func:`~robocal_uncertainty.uncertainty.sessions.level.check_level` pools held-out fold levels and measures
 their dispersion (their relative variance over the normal-theory ``2 / nu``);
-:func:`~robocal_uncertainty.core.session.level_test` F-tests a check's level against it. Here
+:func:`~robocal_uncertainty.uncertainty.sessions.level.level_test` F-tests a check's level against it. Here
 the fold and check levels are mean squares of drawn errors (no robot: the statistics alone),
 so the truth is known: the dispersion of independent normal components is 1, of components
 equal within a pose 3 (a pose then carries one degree of freedom, not three), of Student-t
@@ -21,8 +21,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from robocal_uncertainty.core.session import ValidatedLevel, check_level, level_test
+from robocal_uncertainty.core.session import ValidatedLevel
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty.sessions.level import check_level, level_test
 
 
 def _fold(errors: np.ndarray) -> SimpleNamespace:

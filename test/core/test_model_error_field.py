@@ -12,13 +12,14 @@ import pytest
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise, identify, load_robot_model
 from robocal_uncertainty.core.calibration_file import read_calibration, read_session_state, write_calibration
 from robocal_uncertainty.core.model_error_field import ModelErrorField, chordal_distance
-from robocal_uncertainty.core.session import verify_session
 from robocal_uncertainty.core.simulation import SessionSimulationSettings, simulate_sessions
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.importers import read_tracker_csv
 from robocal_uncertainty.report.verification_report import verification_lines
 from robocal_uncertainty.uncertainty.model_adequacy import pose_noise_covariances
-from robocal_uncertainty.uncertainty.sessions import campaign_distances, estimate_model_error_field, session_state
+from robocal_uncertainty.uncertainty.sessions.field import campaign_distances, estimate_model_error_field
+from robocal_uncertainty.uncertainty.sessions.state import session_state
+from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 ROOT = Path(__file__).resolve().parents[2]
 

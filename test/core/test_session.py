@@ -19,7 +19,7 @@ from robocal_uncertainty.core.calibration_file import (
 )
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_model import rpy_to_matrix
-from robocal_uncertainty.core.session import LENGTH_SCALE, effect_jacobian, tracker_move, verify_session
+from robocal_uncertainty.core.session import LENGTH_SCALE, effect_jacobian
 from robocal_uncertainty.core.simulation import (
     SessionChange,
     SessionSimulationSettings,
@@ -28,7 +28,9 @@ from robocal_uncertainty.core.simulation import (
     simulate_sessions,
 )
 from robocal_uncertainty.errors import ConfigError, IdentifiabilityError
-from robocal_uncertainty.uncertainty.sessions import session_state
+from robocal_uncertainty.uncertainty.sessions.state import session_state
+from robocal_uncertainty.uncertainty.sessions.tracker_move import tracker_move
+from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 DATA = Path(__file__).resolve().parents[2] / "robocal_uncertainty" / "data"
 

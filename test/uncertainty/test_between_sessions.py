@@ -14,12 +14,12 @@ from robocal_uncertainty.core.session import LENGTH_SCALE, effect_jacobian
 from robocal_uncertainty.core.simulation import SessionSimulationSettings, simulate_sessions
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
-from robocal_uncertainty.uncertainty.between_sessions import (
+from robocal_uncertainty.uncertainty.sessions.between import (
     estimate_between_sessions,
     identifiable_effects,
     with_between_sessions,
 )
-from robocal_uncertainty.uncertainty.sessions import session_state
+from robocal_uncertainty.uncertainty.sessions.state import session_state
 from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY
 
 DATA = Path(__file__).resolve().parents[2] / "robocal_uncertainty" / "data"

@@ -21,7 +21,6 @@ import pytest
 
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise, identify, load_robot_model
 from robocal_uncertainty.core.robot_model import rpy_to_matrix
-from robocal_uncertainty.core.session import verify_session
 from robocal_uncertainty.core.simulation import (
     SessionChange,
     SessionSimulationSettings,
@@ -30,8 +29,9 @@ from robocal_uncertainty.core.simulation import (
     simulate_sessions,
 )
 from robocal_uncertainty.importers import read_tracker_csv
-from robocal_uncertainty.uncertainty.between_sessions import estimate_between_sessions, with_between_sessions
-from robocal_uncertainty.uncertainty.sessions import session_state
+from robocal_uncertainty.uncertainty.sessions.between import estimate_between_sessions, with_between_sessions
+from robocal_uncertainty.uncertainty.sessions.state import session_state
+from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]

@@ -53,7 +53,7 @@ def test_importing_the_sources_does_not_import_the_between_session_estimation() 
     code = (
         "import sys; import robocal_uncertainty.uncertainty.sources as s; "
         "assert 'between_session' in s.SOURCE_REGISTRY; "
-        "print('robocal_uncertainty.uncertainty.between_sessions' in sys.modules)"
+        "print('robocal_uncertainty.uncertainty.sessions.between' in sys.modules)"
     )
     out = subprocess.run(
         [sys.executable, "-c", code],

@@ -24,7 +24,6 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise, identify, load_robot_model
-from robocal_uncertainty.core.session import verify_session
 from robocal_uncertainty.core.simulation import (
     SessionSimulationSettings,
     draw_session_change,
@@ -32,7 +31,9 @@ from robocal_uncertainty.core.simulation import (
     simulate_sessions,
 )
 from robocal_uncertainty.importers import read_tracker_csv
-from robocal_uncertainty.uncertainty.sessions import session_state, validated_level
+from robocal_uncertainty.uncertainty.sessions.state import session_state
+from robocal_uncertainty.uncertainty.sessions.validated_level import validated_level
+from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]

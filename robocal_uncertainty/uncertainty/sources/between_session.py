@@ -1,7 +1,7 @@
 """The between-session source: a future session's effects on every prediction.
 
 The component itself (effects, covariance) is estimated from several sessions in
-:mod:`robocal_uncertainty.uncertainty.between_sessions`; the settings carry it, so this
+:mod:`robocal_uncertainty.uncertainty.sessions.between`; the settings carry it, so this
 module needs only its covariance and names, never that module.
 """
 

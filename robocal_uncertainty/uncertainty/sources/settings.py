@@ -12,7 +12,7 @@ from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.sources.registry import default_sources, parse_sources
 
 if TYPE_CHECKING:
-    from robocal_uncertainty.uncertainty.between_sessions import BetweenSessions
+    from robocal_uncertainty.uncertainty.sessions.between import BetweenSessions
 
 __all__ = ["UncertaintySettings"]
 
@@ -54,7 +54,7 @@ class UncertaintySettings:
         Maximum re-identification iterations per trial (warm-started at the calibration).
     between_session : BetweenSessions or None
         Between-session component for the ``between_session`` source
-        (:mod:`robocal_uncertainty.uncertainty.between_sessions`).
+        (:mod:`robocal_uncertainty.uncertainty.sessions.between`).
     jacobian : {"frozen", "exact"}
         ``frozen``: chord iterations with the calibration's Jacobian (fast, default);
         ``exact``: Gauss-Newton with each trial's own Jacobian (reference).

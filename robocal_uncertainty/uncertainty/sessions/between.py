@@ -10,7 +10,7 @@ a re-registration cannot absorb. From two or more sessions of the same robot:
 2. every other session is re-registered (tracker pose and tool point) and its session
    effects (joint offsets ``jointN.theta``, the ``length_scale`` of the links) are estimated
    by one GLS step against the reference, with their covariance ``V_s`` (noise, model error
-   and calibration uncertainty; :func:`~robocal_uncertainty.core.session.verify_session`);
+   and calibration uncertainty; :func:`~.verification.verify_session`);
 3. a random-effects model ``e_s = u_s - u_1 + eps_s``, ``u ~ N(0, tau_g^2)`` per group (joint
    offsets share one variance, the length scale has its own), is fitted by moments:
    ``2 tau_g^2 = max(0, sum_s sum_{j in g} (e_sj^2 - V_s,jj) / ((S - 1) |g|))`` with
@@ -38,14 +38,9 @@ from robocal_uncertainty.core.calibration_file import read_calibration, read_ses
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.session import (
-    LENGTH_SCALE,
-    SessionState,
-    Verification,
-    effect_jacobian,
-    verify_session,
-)
+from robocal_uncertainty.core.session import LENGTH_SCALE, SessionState, Verification, effect_jacobian
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 __all__ = [
     "BetweenSessions",
@@ -222,42 +217,22 @@ def estimate_between_sessions(
     more than they scatter), the effects' raw mean square is used, and the error level's
     between-session spread is at least the log of the significant ratios.
     """
-    if len(sessions) < 1:
-        raise ConfigError("a between-session component needs at least two sessions (the reference and one more)")
-    labels = [f"later session {k + 1}" for k in range(len(sessions))]
-    if reference_campaign is not None:
-        _refuse_repeats([reference_campaign, *sessions], ["the reference calibration's campaign", *labels])
-    else:
-        _refuse_repeats(list(sessions), labels)
-    names = tuple(effects) if effects is not None else identifiable_effects(model, sessions[0], retool=retool)
-    if not names:
-        raise ConfigError("no session effect can be told apart from the re-registration on these sessions")
+    names = _session_effect_names(model, sessions, effects, retool, reference_campaign)
+    checks = [
+        verify_session(model, state, campaign, retool=retool, effects=names, null_trials=null_trials)
+        for campaign in sessions
+    ]
     values = []
     stds = []
     variances = []
-    checks = []
-    for campaign in sessions:
-        check = verify_session(model, state, campaign, retool=retool, effects=names, null_trials=null_trials)
-        checks.append(check)
+    for check in checks:
         assert check.effects is not None and check.effects_covariance is not None
         values.append(check.effects)
         variances.append(np.diag(check.effects_covariance))
         stds.append(np.sqrt(np.clip(np.diag(check.effects_covariance), 0.0, None)))
     e = np.asarray(values)
-    v = np.asarray(variances)
     ratios, p_values, log_std, disagree = _level_spread(state, checks, significance)
-    group_std: dict[str, float] = {}
-    group_dof: dict[str, float] = {}
-    diag = np.zeros(len(names))
-    for group in dict.fromkeys(_group(n) for n in names):
-        cols = [c for c, n in enumerate(names) if _group(n) == group]
-        count = e.shape[0] * len(cols)
-        two_tau2 = max(float(np.sum(e[:, cols] ** 2 - v[:, cols])) / count, 0.0)
-        if two_tau2 == 0.0 and disagree:
-            two_tau2 = float(np.sum(e[:, cols] ** 2)) / count
-        group_std[group] = float(np.sqrt(two_tau2 / 2.0))
-        group_dof[group] = float(count)
-        diag[cols] = two_tau2
+    diag, group_std, group_dof = _group_components(names, e, np.asarray(variances), disagree)
     return BetweenSessions(
         names=names,
         covariance=np.diag(diag),
@@ -272,6 +247,46 @@ def estimate_between_sessions(
         level_log_std=log_std,
         level_dof=float(len(sessions)),
     )
+
+
+def _session_effect_names(
+    model: RobotModel,
+    sessions: Sequence[Campaign],
+    effects: Sequence[str] | None,
+    retool: bool,
+    reference_campaign: Campaign | None,
+) -> tuple[str, ...]:
+    """The effects to estimate, after refusing too few sessions and a session given twice."""
+    if len(sessions) < 1:
+        raise ConfigError("a between-session component needs at least two sessions (the reference and one more)")
+    labels = [f"later session {k + 1}" for k in range(len(sessions))]
+    if reference_campaign is not None:
+        _refuse_repeats([reference_campaign, *sessions], ["the reference calibration's campaign", *labels])
+    else:
+        _refuse_repeats(list(sessions), labels)
+    names = tuple(effects) if effects is not None else identifiable_effects(model, sessions[0], retool=retool)
+    if not names:
+        raise ConfigError("no session effect can be told apart from the re-registration on these sessions")
+    return names
+
+
+def _group_components(
+    names: tuple[str, ...], e: Array, v: Array, disagree: bool
+) -> tuple[Array, dict[str, float], dict[str, float]]:
+    """Per effect ``2 tau_g^2`` of its group (moments), with each group's ``tau_g`` and dof."""
+    group_std: dict[str, float] = {}
+    group_dof: dict[str, float] = {}
+    diag = np.zeros(len(names))
+    for group in dict.fromkeys(_group(n) for n in names):
+        cols = [c for c, n in enumerate(names) if _group(n) == group]
+        count = e.shape[0] * len(cols)
+        two_tau2 = max(float(np.sum(e[:, cols] ** 2 - v[:, cols])) / count, 0.0)
+        if two_tau2 == 0.0 and disagree:
+            two_tau2 = float(np.sum(e[:, cols] ** 2)) / count
+        group_std[group] = float(np.sqrt(two_tau2 / 2.0))
+        group_dof[group] = float(count)
+        diag[cols] = two_tau2
+    return diag, group_std, group_dof
 
 
 def _fingerprint(campaign: Campaign) -> set[bytes]:
