@@ -215,11 +215,10 @@ def _length_errors(
     out = np.empty((trials, 2))
     for start in range(0, trials, _BATCH):
         stop = min(trials, start + _BATCH)
-        normal_shift = np.zeros((stop - start, model.points.shape[0]))
         subset_shift = np.zeros((stop - start, model.subset.shape[0], 2))
         for source, values in zip(sources, draws):
             subset_shift += source.displacement(values[start:stop], model.subset)
-        out[start:stop] = model.evaluate(normal_shift, subset_shift)[:, :2]
+        out[start:stop] = model.lengths(subset_shift)
     return out - model.base[:2]
 
 

@@ -66,6 +66,7 @@ from robocal_uncertainty.inspection.section import (
     SectionEvaluation,
     SectionOptions,
     SectionParameters,
+    _candidate_segments,
     evaluate_section,
     point_to_polyline,
 )
@@ -301,13 +302,7 @@ class FrozenSectionModel:
         """
         trials = normal_shift.shape[0]
         out = np.empty((trials, len(PARAMETER_NAMES)))
-        moved = self.points[self.subset] + subset_shift  # (T, m, 2)
-        a = moved[:, self.thickness_points, np.newaxis, :]
-        s0 = moved[:, self.thickness_segments[..., 0], :]
-        s1 = moved[:, self.thickness_segments[..., 1], :]
-        out[:, 0] = _segment_distance(a, s0, s1).min(axis=2).max(axis=1)
-        ends = moved[:, self.chord_pairs[:, 0], :] - moved[:, self.chord_pairs[:, 1], :]
-        pair_length2 = np.einsum("tki,tki->tk", ends, ends)
+        out[:, 0], pair_length2 = self._thickness_and_pairs(subset_shift)
         out[:, 1] = np.sqrt(pair_length2.max(axis=1))
         change = normal_shift @ self.solve_t  # (T, 3)
         out[:, 2:5] = self.base[2:5] + change
@@ -340,6 +335,31 @@ class FrozenSectionModel:
                 low = np.minimum(low, np.where(member, values, np.inf).min(axis=1))
             out[:, 5 + region] = high - low
         return out
+
+    def lengths(self, subset_shift: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Maximum thickness and chord of T perturbed clouds, shape (T, 2) [m] (as :meth:`evaluate`).
+
+        Parameters
+        ----------
+        subset_shift : ndarray, shape (T, m, 2) [m]
+            Full displacement of the ``subset`` points.
+        """
+        out = np.empty((subset_shift.shape[0], 2))
+        out[:, 0], pair_length2 = self._thickness_and_pairs(subset_shift)
+        out[:, 1] = np.sqrt(pair_length2.max(axis=1))
+        return out
+
+    def _thickness_and_pairs(
+        self, subset_shift: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per trial the maximum thickness (T,) [m] and the squared length of each chord pair (T, kc) [m²]."""
+        moved = self.points[self.subset] + subset_shift  # (T, m, 2)
+        a = moved[:, self.thickness_points, np.newaxis, :]
+        s0 = moved[:, self.thickness_segments[..., 0], :]
+        s1 = moved[:, self.thickness_segments[..., 1], :]
+        thickness = _segment_distance(a, s0, s1).min(axis=2).max(axis=1)
+        ends = moved[:, self.chord_pairs[:, 0], :] - moved[:, self.chord_pairs[:, 1], :]
+        return thickness, np.einsum("tki,tki->tk", ends, ends)
 
     @cached_property
     def solve_t(self) -> NDArray[np.float64]:
@@ -524,6 +544,80 @@ def _edge_windows(
     return (edges[0], edges[1]), pair_edges
 
 
+def _point_bounds(
+    sources: Sequence[ErrorSource], normals: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per point, the largest displacement and the largest displacement along the normal [m]."""
+    per_point = np.zeros(normals.shape[0])
+    along_normal = np.zeros(normals.shape[0])  # what ``normal_shift`` holds
+    for source in sources:
+        scale = draw_bound(source.distribution)
+        if source.kind == "xy":
+            per_point += np.sqrt(2.0) * np.abs(source.gain) * scale
+            along_normal += np.abs(source.gain) * np.abs(normals).sum(axis=1) * scale
+        else:
+            per_point += np.linalg.norm(source.gain, axis=1) * scale
+            along_normal += np.abs(np.einsum("ij,ij->i", source.gain, normals)) * scale
+    return per_point, along_normal
+
+
+def _thickness_candidates(
+    p: NDArray[np.float64], pressure: NDArray[np.intp], suction: NDArray[np.intp], bound: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+    """Pressure-side points and suction segments that can attain the maximum thickness under
+    any draw within ``bound``: ``(points, segments, segment starts, segment ends)``.
+
+    Each pressure point's reach (distance to the suction side) is the minimum over the segments
+    that can be nearest (:func:`~.section._candidate_segments`, every tie among them), then the
+    full row of distances only for the points kept: the same values as the full matrix.
+    """
+    a = p[pressure]
+    s0, s1 = p[suction[:-1]], p[suction[1:]]
+    longest = float(np.sqrt(np.maximum(((s1 - s0) ** 2).sum(axis=1), 1e-300).max()))
+    near = _candidate_segments(a, p[suction], longest)
+    reach = _segment_distance(a[:, np.newaxis, :], s0[near], s1[near]).min(axis=1)
+    _, _, interior = point_to_polyline(a, p[suction])
+    best = reach[interior].max()
+    keep = np.flatnonzero(reach >= best - 4.0 * bound)
+    distance = _segment_distance(a[keep][:, np.newaxis, :], s0[np.newaxis, :, :], s1[np.newaxis, :, :])
+    rows = [np.flatnonzero(distance[i] <= reach[k] + 4.0 * bound) for i, k in enumerate(keep)]
+    last = suction.size - 2
+    if any(r[0] == 0 or r[-1] == last for r in rows):
+        msg = (
+            "the maximum thickness lies within the error bound of a suction-side end; "
+            "the batched model needs it inside the side"
+        )
+        raise ConfigError(msg)
+    width = max(len(r) for r in rows)
+    segments = np.array([np.concatenate([r, np.full(width - len(r), r[0])]) for r in rows])
+    return pressure[keep], segments, suction[segments], suction[segments + 1]
+
+
+def _chord_candidates(p: NDArray[np.float64], chord_points: tuple[int, int], bound: float) -> NDArray[np.intp]:
+    """Pairs of points that could be the farthest pair under any draw within ``bound``, shape (k, 2).
+
+    A point's largest distance to the hull is at most its distance to the hull's centroid plus
+    the hull's radius about it: points whose bound stays below the threshold are skipped, the
+    others get the exact distances (the same pairs as over every point).
+    """
+    n = p.shape[0]
+    try:
+        hull = ConvexHull(p).vertices
+    except QhullError:
+        hull = np.arange(n)
+    chord0 = float(np.linalg.norm(p[chord_points[0]] - p[chord_points[1]]))
+    threshold = chord0 - 4.0 * bound
+    centre = p[hull].mean(axis=0)
+    radius = float(np.sqrt(((p[hull] - centre) ** 2).sum(axis=1)).max())
+    reachable = (np.sqrt(((p - centre) ** 2).sum(axis=1)) + radius) * (1.0 + 1e-9) >= threshold
+    tried = np.flatnonzero(reachable)
+    far = np.sqrt(((p[tried][:, np.newaxis, :] - p[hull][np.newaxis, :, :]) ** 2).sum(axis=-1)).max(axis=1)
+    ends_ok = tried[far >= threshold]
+    pair_d = np.sqrt(((p[ends_ok][:, np.newaxis, :] - p[ends_ok][np.newaxis, :, :]) ** 2).sum(axis=-1))
+    ii, jj = np.nonzero(np.triu(pair_d >= threshold, k=1))
+    return np.column_stack([ends_ok[ii], ends_ok[jj]])
+
+
 def build_frozen_model(
     evaluation: SectionEvaluation,
     sources: Sequence[ErrorSource],
@@ -551,52 +645,13 @@ def build_frozen_model(
     FrozenSectionModel
     """
     p = evaluation.points
-    n = p.shape[0]
-    per_point = np.zeros(n)
-    along_normal = np.zeros(n)  # largest displacement along the normal (what ``normal_shift`` holds)
-    normals = evaluation.registration.normal
-    for source in sources:
-        scale = draw_bound(source.distribution)
-        if source.kind == "xy":
-            per_point += np.sqrt(2.0) * np.abs(source.gain) * scale
-            along_normal += np.abs(source.gain) * np.abs(normals).sum(axis=1) * scale
-        else:
-            per_point += np.linalg.norm(source.gain, axis=1) * scale
-            along_normal += np.abs(np.einsum("ij,ij->i", source.gain, normals)) * scale
+    per_point, along_normal = _point_bounds(sources, evaluation.registration.normal)
     bound = float(per_point.max()) * _BOUND_MARGIN
     seg = evaluation.segmentation
-    pressure = seg.indices(PRESSURE_SIDE)
-    suction = seg.indices(SUCTION_SIDE)
-    distance = _segment_distance(
-        p[pressure][:, np.newaxis, :], p[suction[:-1]][np.newaxis, :, :], p[suction[1:]][np.newaxis, :, :]
-    )  # (n_pressure, n_segments)
-    reach = distance.min(axis=1)
-    _, _, interior = point_to_polyline(p[pressure], p[suction])
-    best = reach[interior].max()
-    keep = np.flatnonzero(reach >= best - 4.0 * bound)
-    rows = [np.flatnonzero(distance[k] <= reach[k] + 4.0 * bound) for k in keep]
-    last = suction.size - 2
-    if any(r[0] == 0 or r[-1] == last for r in rows):
-        msg = (
-            "the maximum thickness lies within the error bound of a suction-side end; "
-            "the batched model needs it inside the side"
-        )
-        raise ConfigError(msg)
-    width = max(len(r) for r in rows)
-    segments = np.array([np.concatenate([r, np.full(width - len(r), r[0])]) for r in rows])
-    starts, ends = suction[segments], suction[segments + 1]
-    thick_points = pressure[keep]
-    # Chord: points that could be an end of the farthest pair, then their pairs.
-    try:
-        hull = ConvexHull(p).vertices
-    except QhullError:
-        hull = np.arange(n)
-    chord0 = float(np.linalg.norm(p[evaluation.chord_points[0]] - p[evaluation.chord_points[1]]))
-    far = np.sqrt(((p[:, np.newaxis, :] - p[hull][np.newaxis, :, :]) ** 2).sum(axis=-1)).max(axis=1)
-    ends_ok = np.flatnonzero(far >= chord0 - 4.0 * bound)
-    pair_d = np.sqrt(((p[ends_ok][:, np.newaxis, :] - p[ends_ok][np.newaxis, :, :]) ** 2).sum(axis=-1))
-    ii, jj = np.nonzero(np.triu(pair_d >= chord0 - 4.0 * bound, k=1))
-    chord_pairs = np.column_stack([ends_ok[ii], ends_ok[jj]])
+    thick_points, segments, starts, ends = _thickness_candidates(
+        p, seg.indices(PRESSURE_SIDE), seg.indices(SUCTION_SIDE), bound
+    )
+    chord_pairs = _chord_candidates(p, evaluation.chord_points, bound)
     subset, inverse = np.unique(
         np.concatenate([thick_points, starts.ravel(), ends.ravel(), chord_pairs.ravel()]), return_inverse=True
     )
