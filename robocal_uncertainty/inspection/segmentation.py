@@ -1,6 +1,6 @@
 """Segmentation of an ordered section contour into leading edge, trailing edge and the two sides.
 
-The seed's steps (§2.1): the two points farthest apart are the leading- and trailing-edge
+The reference paper's steps (§2.1): the two points farthest apart are the leading- and trailing-edge
 extreme points; from each, points are added on both sides one at a time and a least-squares
 circle is fitted, until the radius error (largest |distance to centre - R| of the fitted points)
 exceeds a threshold; the last accepted window is the edge region and its circle the edge circle.
