@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocal_uncertainty.app.section_inspection import load_section_nominal, section_demo
+from robocal_uncertainty.app.section_inspection import inspect_section, load_section_nominal
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.cmm_model import CmmInstrument
@@ -47,12 +47,12 @@ def test_method_names() -> None:
         canonical_method("paper")
 
 
-def test_seed_alias_in_the_app_gives_the_perturbed_method() -> None:
+def test_seed_alias_in_the_app_gives_the_perturbed_method(scan: PointCloud) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        new = section_demo(trials=1000, seed=5, method="perturbed")
+        new = inspect_section(scan, "rotor37", trials=1000, seed=5, method="perturbed")
     with pytest.warns(DeprecationWarning):
-        old = section_demo(trials=1000, seed=5, method="seed")
+        old = inspect_section(scan, "rotor37", trials=1000, seed=5, method="seed")
     assert old.result.method == new.result.method == "perturbed"
     for a, b in zip(old.result.monte_carlo.outputs, new.result.monte_carlo.outputs):
         assert a.probabilistically_symmetric == b.probabilistically_symmetric
