@@ -4,7 +4,7 @@ Families (``robocal_uncertainty.inspection.coverage_study``): ``smooth`` (form e
 waves, 2-10 µm), ``side`` (a bump or dent of 1-10 µm over 1-20 mm on a side), ``edge`` (the same
 within ±10 mm of the leading or trailing edge), ``erosion`` (an edge flattened by 1-10 µm over
 1-20 mm). Each scan: one random part of the family, its noise-free scan evaluated by the
-package's parameter extraction (the truth), one draw of the seed's CMM errors, method
+package's parameter extraction (the truth), one draw of the reference paper's CMM errors, method
 ``denoised`` with ``--trials`` Monte Carlo trials, and the residual check.
 
 Run: ``python benchmarks/bench_section_coverage.py [--scans 60] [--workers 2] [--families ...] [--seed 23]

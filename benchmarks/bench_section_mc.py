@@ -1,16 +1,16 @@
 """Benchmark: 10^6 Monte Carlo trials of the nine blade-section parameters on 1 836 points.
 
-Scenario (issue 9 / seed 2): NASA Rotor 37 surface 2 scaled by 7.14 (maximum thickness 30.37 mm,
-the seed's 30.365 mm; chord 397 mm), a simulated 1 836-point scan with the seed's measured
+Scenario (issue 9 / the second reference paper): NASA Rotor 37 surface 2 scaled by 7.14 (maximum thickness 30.37 mm,
+the reference paper's 30.365 mm; chord 397 mm), a simulated 1 836-point scan with the reference paper's measured
 offsets (-0.1013 mm, 0.0538 mm) and twist (0.0512°) and a 5 µm three-wave form error, measured
-with the seed's CMM (config/instruments/cmm_seed.yaml). The naive baseline runs the full
+with the reference paper's CMM (config/instruments/cmm_seed.yaml). The naive baseline runs the full
 algorithm (registration, segmentation, thickness, chord, profile) per trial on the same draws;
 its time for 10^6 trials is extrapolated from ``--naive`` trials.
 
 Run: ``python benchmarks/bench_section_mc.py [--trials 1000000] [--workers 2] [--naive 100]
-[--method denoised|seed]`` (default ``denoised``, the CLI's: the Monte Carlo of the error around
+[--method denoised|perturbed]`` (default ``denoised``, the CLI's: the Monte Carlo of the error around
 the denoised cloud; its MC mean is the bias-corrected estimate, the value column the measured one).
-Prints the time, peak memory (this process and its workers) and the results next to the seed's.
+Prints the time, peak memory (this process and its workers) and the results next to the reference paper's.
 """
 
 from __future__ import annotations
@@ -34,11 +34,11 @@ ROOT = Path(__file__).resolve().parents[1]
 ROTOR37 = ROOT / "test" / "inspection" / "data" / "nasa_rotor37_blade_geometry.dat"
 INSTRUMENT = ROOT / "config" / "instruments" / "cmm_seed.yaml"
 
-# The seed's published Monte Carlo results (value, standard uncertainty) in mm / µm
+# The reference paper's published Monte Carlo results (value, standard uncertainty) in mm / µm
 # (twist: degrees / millidegrees);
 # its Table 1 (chord) and Table 2 (profile) survive only as captions, so only the GUM chord
 # budget is known for the chord: U95 = 4.686 µm with u3 = 2.087 µm repeatability.
-SEED = {
+PAPER = {
     "max_thickness": (30.365, 1.76),
     "axial_offset": (-0.1013, 0.089),
     "circumferential_offset": (0.0538, 0.045),
@@ -59,7 +59,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--naive", type=int, default=100, help="trials of the per-trial full-algorithm baseline")
     parser.add_argument("--seed", type=int, default=2024)
-    parser.add_argument("--method", choices=("denoised", "seed"), default="denoised")
+    parser.add_argument("--method", choices=("denoised", "perturbed"), default="denoised")
     args = parser.parse_args()
 
     curve = NominalCurve(read_rotor37_section(ROTOR37, 2, scale=7.14))
@@ -92,7 +92,7 @@ def main() -> None:
     print(f"thickness candidates {result.candidate_counts}")
     print()
     header = (
-        f"{'parameter':24s} {'measured':>12s} {'u MC':>10s} {'U95 MC':>10s} {'u GUM':>10s} GUM=MC(§8) seed (value, u)"
+        f"{'parameter':24s} {'measured':>12s} {'u MC':>10s} {'U95 MC':>10s} {'u GUM':>10s} GUM=MC(§8) paper (value, u)"
     )
     print(header)
     measured = result.parameters.as_array()
@@ -100,16 +100,16 @@ def main() -> None:
         out = result.monte_carlo.outputs[j]
         gum = result.gum.outputs[j]
         angle = name == "twist_angle"
-        # Twist: value in degrees, uncertainties in millidegrees (the seed's u is 0.31 m°).
+        # Twist: value in degrees, uncertainties in millidegrees (the reference paper's u is 0.31 m°).
         value_scale, u_scale = (math.degrees(1.0), 1e3 * math.degrees(1.0)) if angle else (1e3, 1e6)
-        seed = SEED.get(name)
-        seed_text = "" if seed is None else f"{seed[0]:g}, {seed[1]:g}"
+        paper = PAPER.get(name)
+        paper_text = "" if paper is None else f"{paper[0]:g}, {paper[1]:g}"
         print(
             f"{name:24s} {measured[j] * value_scale:12.6f} {out.standard_uncertainty * u_scale:10.5f} "
             f"{out.expanded_uncertainty * u_scale:10.5f} {gum.standard_uncertainty * u_scale:10.5f} "
-            f"{'agree' if result.validation[j].validated else 'differ':10s} {seed_text}"
+            f"{'agree' if result.validation[j].validated else 'differ':10s} {paper_text}"
         )
-    print("units: value mm (twist °), u and U95 µm (twist m°); seed column likewise")
+    print("units: value mm (twist °), u and U95 µm (twist m°); paper column likewise")
     print("GUM=MC(§8): JCGM 101 §8 validation of the GUM interval by the Monte Carlo one (not a verdict on the part)")
     if result.check is not None:
         print(f"this cloud: {result.check.describe()}")
@@ -118,7 +118,8 @@ def main() -> None:
     print(
         "chord GUM budget [µm]: "
         + ", ".join(f"{name} {b:.3f}" for name, b in zip(result.sources, budget))
-        + f"; u_c {u_c:.3f}, with the seed's u3 = 2.087: U95 = {1.96 * math.hypot(u_c, 2.087):.3f} (seed 4.686)"
+        + f"; u_c {u_c:.3f}, with the reference paper's u3 = 2.087: "
+        + f"U95 = {1.96 * math.hypot(u_c, 2.087):.3f} (paper 4.686)"
     )
 
 

@@ -1,11 +1,11 @@
 """Simulated CMM clouds for the per-cloud coverage studies of the README (``section CLOUD --coverage-study N``).
 
-Each cloud is a scan of a shipped nominal with the seed's offsets (-0.1013, 0.0538) mm and twist
+Each cloud is a scan of a shipped nominal with the reference paper's offsets (-0.1013, 0.0538) mm and twist
 0.0512°, a 5 µm three-wave form error and one draw of the instrument's errors (seeded), written
 as ``x y z i j k`` in mm:
 
-- ``cascade_800.txt``: the DFVLR L030-4 cascade blade at a 100 mm chord, 800 points, the seed's CMM;
-- ``rotor37_400.txt`` and ``rotor37_5000.txt``: Rotor 37 at the seed's size, 400 and 5 000 points;
+- ``cascade_800.txt``: the DFVLR L030-4 cascade blade at a 100 mm chord, 800 points, the reference paper's CMM;
+- ``rotor37_400.txt`` and ``rotor37_5000.txt``: Rotor 37 at the reference paper's size, 400 and 5 000 points;
 - ``rotor37_1836_cmm09.txt`` and ``rotor37_400_cmm09.txt``: Rotor 37, 1 836 and 400 points,
   measured with ``config/instruments/cmm_0.9_400.yaml`` (MPE (0.9 + L/400) µm).
 

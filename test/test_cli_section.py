@@ -69,15 +69,15 @@ def test_section_report_equals_api(cloud_file: Path, tmp_path: Path, capsys: pyt
     assert main([*argv, "--force", "--no-progress"]) == 0
 
 
-def test_seed_method_is_flagged(cloud_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_perturbed_method_is_flagged(cloud_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "report"
     argv = ["section", str(cloud_file), "--nominal", "rotor37", "--trials", "2000", "--out", str(out)]
-    assert main([*argv, "--method", "seed", "--no-progress"]) == 0
+    assert main([*argv, "--method", "perturbed", "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "bias-corrected interval" in text and "note: This cloud: residual check passed" in text
     assert "NOT verified for this cloud" in text
     data = json.loads((out / "section.json").read_text())
-    assert data["method"] == "seed"
+    assert data["method"] == "perturbed"
     # Nothing verified: a 400-point cloud is outside the studies' scope (at 1 836 points the
     # offsets and twist would be, the max/min parameters' reflected intervals under-cover).
     assert not any(row["coverage_verified"] for row in data["parameters"])
@@ -241,7 +241,7 @@ def test_repeat_scans_give_the_seeds_chord_budget(
     assert u_c == pytest.approx(math.sqrt(sum(c * c for c in contributions)), abs=2e-4)
     assert u95 == pytest.approx(k * math.sqrt(sum(c * c for c in contributions)), abs=1e-3)
     markdown = (out / "section.md").read_text()
-    assert "## GUM budget with repeatability (seed's Table)" in markdown
+    assert "## GUM budget with repeatability (reference paper's table)" in markdown
     assert f"| u3 repeatability | {u3 * 1e6:.4f} µm |" in markdown
 
 
@@ -294,7 +294,7 @@ def test_coverage_study_of_the_cloud(cloud_file: Path, tmp_path: Path, capsys: p
     assert main([*argv, "--force", "--no-progress"]) == 0
     assert "NOT verified for this cloud" in capsys.readouterr().out
     # The study runs method denoised only.
-    assert main([*argv, "--force", "--method", "seed", "--coverage-study", "1"]) == 1
+    assert main([*argv, "--force", "--method", "perturbed", "--coverage-study", "1"]) == 1
     assert "give --method denoised" in capsys.readouterr().err
 
 

@@ -9,14 +9,14 @@ denoising's residual check (``result.check``), which flags a cloud whose form th
 not follow (its intervals are then not verified for it). Measured coverage: the stored studies
 (:mod:`~robocal_uncertainty.inspection.stored_studies`)
 ``COVERAGE_STUDY`` (demo scenario) and ``FAMILY_STUDY`` (scenario families with local features);
-``seed`` perturbs the measured cloud as the seed does.
+``perturbed`` perturbs the measured cloud as the reference paper does.
 :func:`section_demo` does the same on a simulated 1 836-point CMM scan of the shipped NASA
-Rotor 37 section at the seed's size, with a known truth. With ``repeat_scans``,
+Rotor 37 section at the reference paper's size, with a known truth. With ``repeat_scans``,
 :func:`inspect_section` also evaluates k >= 2 repeated scans of the same section with the same
-algorithm and adds their standard deviation to the GUM budget (the seed's u3, repeatability).
+algorithm and adds their standard deviation to the GUM budget (the reference paper's u3, repeatability).
 
 Shipped nominals (``--nominal``): ``rotor37`` (surface 2 scaled by 7.14: maximum thickness
-30.37 mm, the seed's blade 30.365 mm), ``rotor37:K`` (surface K, same scale), ``cascade``
+30.37 mm, the reference paper's blade 30.365 mm), ``rotor37:K`` (surface K, same scale), ``cascade``
 (DFVLR L030-4 at a 100 mm chord). Shipped instruments: ``cmm_seed`` (the default).
 """
 
@@ -48,7 +48,7 @@ from robocal_uncertainty.inspection.point_cloud import (
     read_rotor37_section,
 )
 from robocal_uncertainty.inspection.section import evaluate_section
-from robocal_uncertainty.inspection.section_mc import SectionUncertainty, section_uncertainty
+from robocal_uncertainty.inspection.section_mc import SectionUncertainty, canonical_method, section_uncertainty
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 from robocal_uncertainty.montecarlo.engine import AdaptiveSettings, ProgressCallback
 
@@ -66,7 +66,7 @@ __all__ = [
 ]
 
 ROTOR37_SCALE = 7.14
-"""Scale of the shipped Rotor 37 nominal: surface 2 then has the seed's maximum thickness."""
+"""Scale of the shipped Rotor 37 nominal: surface 2 then has the reference paper's maximum thickness."""
 
 DEMO_SCENARIO: dict[str, float] = {
     "n_points": 1836,
@@ -76,7 +76,7 @@ DEMO_SCENARIO: dict[str, float] = {
     "form_amplitude_m": 5e-6,
     "form_waves": 3,
 }
-"""The demo's simulated scan: the seed's point count, measured offsets and twist, a 5 µm form error."""
+"""The demo's simulated scan: the reference paper's point count, measured offsets and twist, a 5 µm form error."""
 
 _SHIPPED_INSTRUMENTS = ("cmm_seed",)
 
@@ -130,7 +130,7 @@ def _shipped(*parts: str) -> Path:
 
 
 def resolve_instrument(spec: str | None) -> tuple[CmmInstrument, str]:
-    """The instrument of a YAML path or a shipped name (None: the seed's CMM ``cmm_seed``)."""
+    """The instrument of a YAML path or a shipped name (None: the reference paper's CMM ``cmm_seed``)."""
     name = "cmm_seed" if spec is None else spec
     if name in _SHIPPED_INSTRUMENTS and not Path(name).is_file():
         return load_instrument(_shipped("instruments", f"{name}.yaml")), name
@@ -205,6 +205,7 @@ def _run(
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         msg = f"seed must be an integer >= 0, got {seed!r}"
         raise ConfigError(msg)
+    method = canonical_method(method)
     start = time.perf_counter()
     repeat_parameters = _repeat_parameters(cloud, curve, repeats) if repeats else None
     result = section_uncertainty(
@@ -267,6 +268,28 @@ def _repeat_parameters(cloud: PointCloud, curve: NominalCurve, repeats: Sequence
     return np.asarray(rows, dtype=np.float64)
 
 
+def _load_clouds(
+    cloud: str | Path | PointCloud,
+    repeat_scans: Sequence[str | Path | PointCloud] | None,
+    *,
+    unit: str | None,
+    topic: str | None,
+    message: int | None,
+) -> tuple[PointCloud, tuple[PointCloud, ...]]:
+    """The measured cloud and the repeated scans, each read as :func:`load_section_cloud` reads."""
+
+    def load(spec: str | Path | PointCloud) -> PointCloud:
+        return (
+            spec if isinstance(spec, PointCloud) else load_section_cloud(spec, unit=unit, topic=topic, message=message)
+        )
+
+    measured = load(cloud)
+    if repeat_scans is not None and len(repeat_scans) < 2:
+        msg = f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(repeat_scans)}"
+        raise ConfigError(msg)
+    return measured, tuple(load(spec) for spec in repeat_scans or ())
+
+
 def inspect_section(
     cloud: str | Path | PointCloud,
     nominal: str | NominalCurve,
@@ -295,9 +318,9 @@ def inspect_section(
     unit, nominal_unit : str, optional
         Length unit of the cloud / nominal file when the file states none.
     instrument : str, optional
-        Instrument YAML or shipped name; default the seed's CMM.
+        Instrument YAML or shipped name; default the reference paper's CMM.
     trials : int or None
-        Monte Carlo trials (default 10^6, the seed's); None with `adaptive`.
+        Monte Carlo trials (default 10^6, the reference paper's); None with `adaptive`.
     adaptive : AdaptiveSettings, optional
         JCGM 101 §7.9 adaptive trial count.
     seed : int
@@ -309,11 +332,12 @@ def inspect_section(
     progress : callable, optional
         ``progress(done, target)`` after each chunk of trial blocks.
     method : str
-        ``denoised`` (default) or ``seed``; see :func:`~robocal_uncertainty.inspection.section_mc.section_uncertainty`.
+        ``denoised`` (default) or ``perturbed`` (``seed``: deprecated alias); see
+        :func:`~robocal_uncertainty.inspection.section_mc.section_uncertainty`.
     repeat_scans : sequence of str, Path or PointCloud, optional
         k >= 2 repeated scans of the same section (read as `cloud` is, same `unit`, `topic`,
         `message`), evaluated with the same algorithm against the same nominal; their standard
-        deviations (ddof 1) enter ``result.gum_with_repeatability`` as the seed's u3.
+        deviations (ddof 1) enter ``result.gum_with_repeatability`` as the reference paper's u3.
 
     Returns
     -------
@@ -327,17 +351,7 @@ def inspect_section(
         A repeated scan cannot be read or evaluated, or its chord or maximum thickness differs
         from `cloud`'s by more than :data:`REPEAT_TOLERANCE` (not a repeat of this section).
     """
-
-    def load(spec: str | Path | PointCloud) -> PointCloud:
-        return (
-            spec if isinstance(spec, PointCloud) else load_section_cloud(spec, unit=unit, topic=topic, message=message)
-        )
-
-    measured = load(cloud)
-    if repeat_scans is not None and len(repeat_scans) < 2:
-        msg = f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(repeat_scans)}"
-        raise ConfigError(msg)
-    repeats = tuple(load(spec) for spec in repeat_scans or ())
+    measured, repeats = _load_clouds(cloud, repeat_scans, unit=unit, topic=topic, message=message)
     if isinstance(nominal, NominalCurve):
         curve, where = nominal, nominal.section.source
     else:
@@ -370,7 +384,7 @@ def section_demo(
 ) -> SectionInspection:
     """The demo: a simulated CMM scan of the shipped Rotor 37 section, measured with noise.
 
-    The true part is the nominal with the seed's offsets (-0.1013 mm, 0.0538 mm), twist
+    The true part is the nominal with the reference paper's offsets (-0.1013 mm, 0.0538 mm), twist
     0.0512° and a 5 µm three-wave form error (:data:`DEMO_SCENARIO`); 1 836 points are
     scanned and one draw of the instrument errors (seeded by `seed`) is added, as a real scan
     would carry. ``truth`` holds the true parameters (those of the noise-free scan).

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from robocal_uncertainty.cli._common import parse_trials, timed_progress
@@ -24,7 +25,9 @@ def register(sub: Any) -> None:
         "--unit", help="length unit of CLOUD when the file states none: m, mm, um, in (default: none assumed)"
     )
     p.add_argument("--nominal-unit", help="length unit of the --nominal file when it states none")
-    p.add_argument("--instrument", help="instrument YAML or shipped name (default: cmm_seed, the seed's CMM)")
+    p.add_argument(
+        "--instrument", help="instrument YAML or shipped name (default: cmm_seed, the reference paper's CMM)"
+    )
     p.add_argument("--topic", help="PointCloud2 topic of a bag (default: its only PointCloud2 topic)")
     p.add_argument("--message", type=int, help="0-based message index in the topic (default: all messages joined)")
     p.add_argument(
@@ -32,10 +35,11 @@ def register(sub: Any) -> None:
         nargs="+",
         metavar="CLOUD",
         help="2 or more repeated scans of the same section (formats and --unit as CLOUD): their standard "
-        "deviation is the GUM budget's u3 (repeatability), shown for the chord as in the seed's table",
+        "deviation is the GUM budget's u3 (repeatability), shown for the chord as in the reference paper's table",
     )
     p.add_argument(
-        "--trials", help="Monte Carlo trials, or auto (JCGM 101 7.9) (default 1000000, the seed's; --demo 100000)"
+        "--trials",
+        help="Monte Carlo trials, or auto (JCGM 101 7.9) (default 1000000, the reference paper's; --demo 100000)",
     )
     p.add_argument("--seed", type=int, default=0, help="root seed of the random streams (default %(default)s)")
     p.add_argument(
@@ -43,11 +47,12 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("denoised", "seed"),
+        choices=("denoised", "perturbed", "seed"),
         default="denoised",
         help="denoised: Monte Carlo of the error around the denoised cloud (coverage-verified unless the cloud's "
         "residual check flags it); "
-        "seed: perturb the measured cloud as the seed does (max/min intervals under-cover) (default %(default)s)",
+        "perturbed: perturb the measured cloud as the reference paper does (max/min intervals under-cover); "
+        "seed: deprecated name of perturbed (default %(default)s)",
     )
     p.add_argument(
         "--coverage-study",
@@ -70,14 +75,26 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from robocal_uncertainty.app.section_inspection import DEMO_SCENARIO, inspect_section, section_demo
     from robocal_uncertainty.montecarlo.engine import AdaptiveSettings
-    from robocal_uncertainty.report.section_report import (
-        coverage_summary,
-        format_repeatability_budget,
-        format_section_table,
-        write_section_report,
-    )
+
+    _check_args(args)
+    trials = parse_trials(args.trials) if args.trials is not None else (100_000 if args.demo else 1_000_000)
+    adaptive = AdaptiveSettings() if trials == "auto" else None
+    count = None if trials == "auto" else int(trials)
+    progress, finish = timed_progress(not args.no_progress, "section")
+    try:
+        run = _inspect(args, count, adaptive, progress)
+    finally:
+        finish()
+    if args.coverage_study is not None:
+        run = _coverage_study(run, args)
+    _print_and_write(run, args)
+    return 0
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """One-line errors for option combinations that cannot run; the deprecated method name mapped."""
+    from robocal_uncertainty.inspection.section_mc import DEPRECATED_METHODS
 
     if args.demo == (args.cloud is not None):
         raise ConfigError("section needs a CLOUD file or bag, or --demo (not both)")
@@ -93,6 +110,13 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"--repeat-scans needs at least 2 repeated scans for a standard deviation, got {len(args.repeat_scans)}"
         )
+    if args.method in DEPRECATED_METHODS:
+        new = DEPRECATED_METHODS[args.method]
+        print(
+            f"robocal-uncertainty section: warning: --method {args.method} is deprecated, use --method {new}",
+            file=sys.stderr,
+        )
+        args.method = new
     if args.coverage_study is not None and args.coverage_study < 1:
         raise ConfigError(f"--coverage-study needs N >= 1 scans per family, got {args.coverage_study}")
     if args.coverage_study is not None and args.method != "denoised":
@@ -101,48 +125,56 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--study-seed must be >= 0 and --study-trials >= 100")
     if args.dask is not None and args.coverage_study is None:
         raise ConfigError("--dask runs the scans of --coverage-study; give --coverage-study N")
-    trials = parse_trials(args.trials) if args.trials is not None else (100_000 if args.demo else 1_000_000)
-    adaptive = AdaptiveSettings() if trials == "auto" else None
-    count = None if trials == "auto" else int(trials)
-    progress, finish = timed_progress(not args.no_progress, "section")
-    try:
-        if args.demo:
-            print(
-                "Demo: NASA Rotor 37 surface 2 at the seed's size (x7.14), a simulated "
-                f"{DEMO_SCENARIO['n_points']}-point "
-                "CMM scan with offsets (-0.1013, 0.0538) mm, twist 0.0512 deg, a 5 µm 3-wave form error and one draw "
-                "of the instrument errors; the true parameters are known."
-            )
-            run = section_demo(
-                trials=count,
-                adaptive=adaptive,
-                seed=args.seed,
-                workers=args.workers,
-                instrument=args.instrument,
-                progress=progress,
-                method=args.method,
-            )
-        else:
-            run = inspect_section(
-                args.cloud,
-                args.nominal,
-                unit=args.unit,
-                nominal_unit=args.nominal_unit,
-                instrument=args.instrument,
-                trials=count,
-                adaptive=adaptive,
-                seed=args.seed,
-                workers=args.workers,
-                topic=args.topic,
-                message=args.message,
-                progress=progress,
-                method=args.method,
-                repeat_scans=args.repeat_scans,
-            )
-    finally:
-        finish()
-    if args.coverage_study is not None:
-        run = _coverage_study(run, args)
+
+
+def _inspect(args: argparse.Namespace, count: int | None, adaptive: Any, progress: Any) -> Any:
+    """The demo or the inspection of CLOUD (:mod:`robocal_uncertainty.app.section_inspection`)."""
+    from robocal_uncertainty.app.section_inspection import DEMO_SCENARIO, inspect_section, section_demo
+
+    if args.demo:
+        print(
+            "Demo: NASA Rotor 37 surface 2 at the reference paper's size (x7.14), a simulated "
+            f"{DEMO_SCENARIO['n_points']}-point "
+            "CMM scan with offsets (-0.1013, 0.0538) mm, twist 0.0512 deg, a 5 µm 3-wave form error and one draw "
+            "of the instrument errors; the true parameters are known."
+        )
+        return section_demo(
+            trials=count,
+            adaptive=adaptive,
+            seed=args.seed,
+            workers=args.workers,
+            instrument=args.instrument,
+            progress=progress,
+            method=args.method,
+        )
+    return inspect_section(
+        args.cloud,
+        args.nominal,
+        unit=args.unit,
+        nominal_unit=args.nominal_unit,
+        instrument=args.instrument,
+        trials=count,
+        adaptive=adaptive,
+        seed=args.seed,
+        workers=args.workers,
+        topic=args.topic,
+        message=args.message,
+        progress=progress,
+        method=args.method,
+        repeat_scans=args.repeat_scans,
+    )
+
+
+def _print_and_write(run: Any, args: argparse.Namespace) -> None:
+    """The console table and note, then the report in ``args.out``."""
+    from robocal_uncertainty.app.output_paths import clear_earlier_report
+    from robocal_uncertainty.report.section_report import (
+        coverage_summary,
+        format_repeatability_budget,
+        format_section_table,
+        write_section_report,
+    )
+
     result = run.result
     frame = f", frame {run.cloud.frame_id}" if run.cloud.frame_id else ""
     print(
@@ -156,8 +188,6 @@ def run(args: argparse.Namespace) -> int:
         print(format_repeatability_budget(result))
         print()
     print(f"note: {coverage_summary(result, run.study)}")
-    from robocal_uncertainty.app.output_paths import clear_earlier_report
-
     clear_earlier_report(args.out)
     extra = {
         "cloud": run.cloud.source,
@@ -172,12 +202,10 @@ def run(args: argparse.Namespace) -> int:
     }
     files = write_section_report(result, run.corrections, args.out, truth=run.truth, extra=extra, study=run.study)
     print(f"section report written to {files.markdown.parent}")
-    return 0
 
 
 def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
     """Run the cloud's own coverage study, printing the expected time first and progress on stderr."""
-    import sys
     import time
 
     from robocal_uncertainty.app.section_inspection import section_coverage_study

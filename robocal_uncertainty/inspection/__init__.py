@@ -1,7 +1,7 @@
 """Blade-section inspection: point clouds, section algorithms and their CMM Monte Carlo (issue 9).
 
 ``read_point_cloud`` / ``read_nominal_section`` (and the shipped blade readers) give SI data;
-``evaluate_section`` computes the seed's nine section parameters; ``section_uncertainty`` runs
+``evaluate_section`` computes the reference paper's nine section parameters; ``section_uncertainty`` runs
 the batched Monte Carlo under the CMM model (``load_instrument``) with the GUM comparison
 (method ``denoised``: the error sampled around ``denoise_section``'s cloud, whose residual check
 flags a cloud the denoising did not follow); ``coverage_study`` measures the intervals' coverage

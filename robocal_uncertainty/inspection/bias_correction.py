@@ -1,6 +1,6 @@
 """Bias-corrected intervals of the max/min-defined section parameters.
 
-The seed's Monte Carlo perturbs the *measured* cloud. For a parameter that is a maximum or a
+The reference paper's Monte Carlo perturbs the *measured* cloud. For a parameter that is a maximum or a
 minimum over points (maximum thickness, chord, profile deviation = max - min), the measurement
 noise already biased the measured value upward, and the Monte Carlo adds the same noise again:
 its distribution is centred about ``y + b`` (``b`` the noise bias), not about ``y``. Its
@@ -55,11 +55,11 @@ class BiasCorrection:
         Value of the measured cloud [m or rad].
     bias : float
         Monte Carlo estimate of the noise bias of the measured value [m or rad]: mean - measured
-        (method ``seed``), measured - mean = mean(Δ) (method ``denoised``).
+        (method ``perturbed``), measured - mean = mean(Δ) (method ``denoised``).
     estimate : float
         measured - bias [m or rad]; at least 0 for :data:`MAX_MIN_PARAMETERS`.
     interval : CoverageInterval
-        Method ``seed``: the probabilistically symmetric Monte Carlo interval reflected about
+        Method ``perturbed``: the probabilistically symmetric Monte Carlo interval reflected about
         ``measured`` (kind ``probabilistically_symmetric`` of the reflected distribution);
         method ``denoised``: the probabilistically symmetric Monte Carlo interval itself, for the
         max/min parameters widened to the roughness envelope (:mod:`.resolution`, when the result has one)

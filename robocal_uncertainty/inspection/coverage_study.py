@@ -1,8 +1,8 @@
 """Coverage study of the section intervals over families of simulated parts (issue 23).
 
-Each scan of a family is one simulated part: the shipped Rotor 37 section at the seed's size
-(:data:`ROTOR37_SCALE`), 1 836 points (denser at the edges), the seed's offsets and twist, a
-smooth form error and, for the local families, one local feature; one draw of the seed's CMM
+Each scan of a family is one simulated part: the shipped Rotor 37 section at the reference paper's size
+(:data:`ROTOR37_SCALE`), 1 836 points (denser at the edges), the reference paper's offsets and twist, a
+smooth form error and, for the local families, one local feature; one draw of the reference paper's CMM
 errors is added, as a real scan carries. The method under test sees only the noisy scan. The
 truth is the package's parameter extraction (:func:`~.section.evaluate_section`) on the
 noise-free scan of the same part, which knows nothing of the denoising or the Monte Carlo.
@@ -102,17 +102,17 @@ __all__ = [
 ]
 
 ROTOR37_SCALE = 7.14
-"""Rotor 37 surface 2 scaled to the seed's blade (maximum thickness 30.37 mm)."""
+"""Rotor 37 surface 2 scaled to the reference paper's blade (maximum thickness 30.37 mm)."""
 
 FAMILIES: tuple[str, ...] = ("smooth", "side", "edge", "erosion")
 """Scenario families of the study (see the module docstring)."""
 
 OFFSET = (-0.1013e-3, 0.0538e-3)
-"""The seed's measured axial and circumferential offsets [m]."""
+"""The reference paper's measured axial and circumferential offsets [m]."""
 TWIST = math.radians(0.0512)
-"""The seed's measured twist [rad]."""
+"""The reference paper's measured twist [rad]."""
 N_POINTS = 1836
-"""The seed's point count."""
+"""The reference paper's point count."""
 
 _SMOOTH_WAVES = (2, 3, 5, 8, 13)
 
@@ -249,7 +249,7 @@ class StudyScenario:
 
 @cache
 def rotor37_scenario() -> StudyScenario:
-    """The stored study's scenario: Rotor 37 at the seed's size, 1 836 points, the seed's CMM."""
+    """The stored study's scenario: Rotor 37 at the reference paper's size, 1 836 points, the reference paper's CMM."""
     curve = _curve()
     return StudyScenario(
         curve=curve,
@@ -258,7 +258,7 @@ def rotor37_scenario() -> StudyScenario:
         instrument=CmmInstrument(),
         offset=OFFSET,
         twist=TWIST,
-        label=f"Rotor 37 surface 2 x {ROTOR37_SCALE}, {N_POINTS} points, the seed's CMM",
+        label=f"Rotor 37 surface 2 x {ROTOR37_SCALE}, {N_POINTS} points, the reference paper's CMM",
     )
 
 
@@ -642,6 +642,22 @@ class ScenarioStudy:
         return self.scans * len(self.families)
 
 
+def _check_study(scans: int, root_seed: int, families: Sequence[str]) -> tuple[str, ...]:
+    """The families of a valid study request (InputError naming the problem otherwise)."""
+    if isinstance(scans, bool) or not isinstance(scans, int) or scans < 1:
+        msg = f"coverage study scans must be an integer >= 1, got {scans!r}"
+        raise InputError(msg)
+    if isinstance(root_seed, bool) or not isinstance(root_seed, int) or root_seed < 0:
+        msg = f"coverage study seed must be an integer >= 0, got {root_seed!r}"
+        raise InputError(msg)
+    chosen = tuple(families)
+    unknown = [f for f in chosen if f not in FAMILIES]
+    if unknown or not chosen:
+        msg = f"families must be a non-empty subset of {list(FAMILIES)}, got {list(chosen)}"
+        raise InputError(msg)
+    return chosen
+
+
 def run_scenario_study(
     scenario: StudyScenario,
     scans: int,
@@ -682,17 +698,7 @@ def run_scenario_study(
     -------
     ScenarioStudy
     """
-    if isinstance(scans, bool) or not isinstance(scans, int) or scans < 1:
-        msg = f"coverage study scans must be an integer >= 1, got {scans!r}"
-        raise InputError(msg)
-    if isinstance(root_seed, bool) or not isinstance(root_seed, int) or root_seed < 0:
-        msg = f"coverage study seed must be an integer >= 0, got {root_seed!r}"
-        raise InputError(msg)
-    chosen = tuple(families)
-    unknown = [f for f in chosen if f not in FAMILIES]
-    if unknown or not chosen:
-        msg = f"families must be a non-empty subset of {list(FAMILIES)}, got {list(chosen)}"
-        raise InputError(msg)
+    chosen = _check_study(scans, root_seed, families)
     start = time.perf_counter()
     first = study_scan(chosen[0], 0, trials=trials, root_seed=root_seed, scenario=scenario)
     if estimate is not None:

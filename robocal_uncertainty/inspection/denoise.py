@@ -4,7 +4,7 @@ Why
 ---
 Maximum thickness, chord and profile deviation are extreme values over points. The per-point
 instrument noise biases them (the largest of many noisy values overshoots the largest true
-value), and the seed's Monte Carlo, which perturbs the *measured* cloud ``y``, adds the noise
+value), and the reference paper's Monte Carlo, which perturbs the *measured* cloud ``y``, adds the noise
 a second time: its distribution is centred about ``f(y) + b`` instead of describing the error
 ``f(y) - f(x)`` of the measured value (``x`` the true cloud). The error distribution is that of
 ``Δ = f(x + e') - f(x)``; the Monte Carlo can sample it around a cloud ``x̂`` close to ``x``
@@ -491,40 +491,10 @@ def denoise_section(
         candidates = (float(half_width),)
     n = reg.residual.shape[0]
     r = reg.residual
-    # Cp at every ``stride``-th point (an unbiased risk estimate of that subset; the window
-    # spans tens of points, so the subset ranks the windows as the whole would, at a third
-    # of the cost), scaled to all points.
-    stride = max(1, n // _CP_POINTS)
-    subset = np.arange(0, n, stride)
-    risks = []
-    for h in candidates:
-        fit, leverage = smooth_normal_deviation(reg.parameter, r, reg.normal, period, h, at=subset)
-        v = variance[subset]
-        risk = ((r[subset] - fit) ** 2).sum() - v.sum() + 2.0 * (v * leverage).sum()
-        risks.append(float(risk) * n / subset.shape[0])
+    risks = _cp_risks(reg.parameter, r, reg.normal, variance, period, candidates)
     best = int(np.argmin(risks))
-    everywhere = np.arange(n)
-    # Local choice (intersection of confidence intervals, Lepski): per point the widest window
-    # up to the Cp choice whose fit ± ICI_FACTOR·sd still overlaps those of every narrower one.
     tried = candidates[: best + 1] if half_width is None else candidates
-    lower = np.full(n, -np.inf)
-    upper = np.full(n, np.inf)
-    alive = np.ones(n, dtype=bool)
-    chosen = np.zeros(n, dtype=np.intp)
-    rows: list[tuple[NDArray[np.float64], NDArray[np.intp]]] = []
-    fits = np.empty((len(tried), n))
-    sd = np.zeros(n)
-    for k, h in enumerate(tried):
-        weights, source, _ = _smoother_rows(reg.parameter, reg.normal, period, h, everywhere)
-        fits[k] = np.einsum("iw,iw->i", weights, r[source])
-        sd = np.sqrt(np.einsum("iw,iw->i", weights**2, variance[source]))
-        lower = np.maximum(lower, fits[k] - ICI_FACTOR * sd)
-        upper = np.minimum(upper, fits[k] + ICI_FACTOR * sd)
-        alive &= lower <= upper
-        chosen[alive] = k
-        rows.append((weights, source))
-    fit = fits[chosen, everywhere]
-    smooth = fits[len(tried) - 1].copy()
+    fit, smooth, sd, chosen, rows = _local_choice(reg.parameter, r, reg.normal, variance, period, tried)
     hat = _hat_matrix(rows, chosen, n)
     # Twicing (Tukey): smooth the residuals once more and add them back, r̂ = (2S - S²) r. A local
     # quadratic flattens a peak narrower than its window, and a flattened peak gives the Monte
@@ -552,6 +522,73 @@ def denoise_section(
         smooth_deviation=smooth,
         smooth_std=sd,
     )
+
+
+def _cp_risks(
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    variance: NDArray[np.float64],
+    period: float,
+    candidates: Sequence[float],
+) -> list[float]:
+    """Mallows' Cp risk of each candidate half-width [m²], scaled to all points."""
+    n = r.shape[0]
+    # Cp at every ``stride``-th point (an unbiased risk estimate of that subset; the window
+    # spans tens of points, so the subset ranks the windows as the whole would, at a third
+    # of the cost), scaled to all points.
+    stride = max(1, n // _CP_POINTS)
+    subset = np.arange(0, n, stride)
+    risks = []
+    for h in candidates:
+        fit, leverage = smooth_normal_deviation(u, r, normal, period, h, at=subset)
+        v = variance[subset]
+        risk = ((r[subset] - fit) ** 2).sum() - v.sum() + 2.0 * (v * leverage).sum()
+        risks.append(float(risk) * n / subset.shape[0])
+    return risks
+
+
+def _local_choice(
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    variance: NDArray[np.float64],
+    period: float,
+    tried: Sequence[float],
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.intp],
+    list[tuple[NDArray[np.float64], NDArray[np.intp]]],
+]:
+    """Per point the widest window of ``tried`` that the intersection of confidence intervals keeps.
+
+    Returns ``(fit, smooth, smooth_sd, chosen, rows)``: the fit at the chosen windows (n,), the
+    widest window's fit and its standard deviation (n,), the chosen index into ``tried`` (n,)
+    and each window's smoother rows ``(weights, source)``.
+    """
+    n = r.shape[0]
+    everywhere = np.arange(n)
+    # Local choice (intersection of confidence intervals, Lepski): per point the widest window
+    # up to the Cp choice whose fit ± ICI_FACTOR·sd still overlaps those of every narrower one.
+    lower = np.full(n, -np.inf)
+    upper = np.full(n, np.inf)
+    alive = np.ones(n, dtype=bool)
+    chosen = np.zeros(n, dtype=np.intp)
+    rows: list[tuple[NDArray[np.float64], NDArray[np.intp]]] = []
+    fits = np.empty((len(tried), n))
+    sd = np.zeros(n)
+    for k, h in enumerate(tried):
+        weights, source, _ = _smoother_rows(u, normal, period, h, everywhere)
+        fits[k] = np.einsum("iw,iw->i", weights, r[source])
+        sd = np.sqrt(np.einsum("iw,iw->i", weights**2, variance[source]))
+        lower = np.maximum(lower, fits[k] - ICI_FACTOR * sd)
+        upper = np.minimum(upper, fits[k] + ICI_FACTOR * sd)
+        alive &= lower <= upper
+        chosen[alive] = k
+        rows.append((weights, source))
+    return fits[chosen, everywhere], fits[len(tried) - 1].copy(), sd, chosen, rows
 
 
 def _hat_matrix(

@@ -4,7 +4,7 @@ The curve interpolates the nominal contour points with a C2 periodic cubic splin
 y(u), u the cumulative chord length along the contour (closed, so the first point follows the
 last). Closest points are found by Newton's method on u, started from the nearest of a dense
 sampling; distances are signed positive outward (material excess), since the contour is
-counterclockwise. This plays the part of the seed's NURBS nominal curve with its
+counterclockwise. This plays the part of the reference paper's NURBS nominal curve with its
 circle-clipping + Newton point-to-curve distance.
 """
 

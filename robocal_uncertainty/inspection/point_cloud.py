@@ -375,7 +375,7 @@ def read_rotor37_section(path: str | Path, surface: int, *, scale: float = 1.0) 
         Surface number, 1 (hub) to 13 (shroud).
     scale : float
         Geometric scale factor (dimensionless, > 0) applied after conversion to metres, e.g. to
-        bring the blade to the size of the seed's (maximum thickness about 30 mm).
+        bring the blade to the size of the reference paper's (maximum thickness about 30 mm).
 
     Returns
     -------

@@ -8,7 +8,7 @@ the identity: the measured cloud must already lie in the nominal frame to within
 the section thickness, as a CMM inspection does after its part alignment.
 
 ``t`` gives the axial (x) and circumferential (y) position offsets, ``θ`` the twist angle about
-the stacking point ``pivot``, counterclockwise positive (the seed counts counterclockwise as
+the stacking point ``pivot``, counterclockwise positive (the reference paper counts counterclockwise as
 negative: negate for its convention).
 """
 
@@ -160,27 +160,7 @@ def register_to_nominal(
     if centre.shape != (2,) or not np.isfinite(centre).all():
         msg = f"pivot must be a finite (2,) point [m], got {pivot!r}"
         raise InputError(msg)
-    t = np.zeros(2)
-    theta = 0.0
-    u: NDArray[np.float64] | None = None
-    for iteration in range(1, _MAX_ITERATIONS + 1):
-        r = rotation(theta)
-        local = (p - centre - t) @ r + centre  # R(-θ)(p - pivot - t) + pivot
-        # Closest points from the global (dense-sample) start every iteration: warm-starting
-        # Newton at the previous feet lets feet of a large move (0.3° on a 300 mm blade)
-        # stay on a wrong local minimum, and the registration converged silently off.
-        near = curve.closest(local)
-        u = near.parameter
-        normal = near.normal @ r.T
-        a = registration_jacobian(near.foot, normal, theta, centre)
-        step, *_ = np.linalg.lstsq(a, near.distance, rcond=None)
-        t = t + step[:2]
-        theta += float(step[2])
-        if np.max(np.abs(step)) < tolerance:
-            converged = True
-            break
-    else:
-        converged = False
+    t, theta, u, iteration, last_step = _gauss_newton(p, curve, centre, tolerance)
     r = rotation(theta)
     near = curve.closest((p - centre - t) @ r + centre, start=u)
     normal = near.normal @ r.T
@@ -202,7 +182,36 @@ def register_to_nominal(
             f"after registration (limit {_MISMATCH_RMS * size * 1e3:.3g} mm)"
         )
         raise InputError(msg)
-    if not converged:
-        msg = f"registration did not converge in {_MAX_ITERATIONS} iterations (last step {np.abs(step).max():.3g})"
+    if not last_step < tolerance:  # also a NaN step
+        msg = f"registration did not converge in {_MAX_ITERATIONS} iterations (last step {last_step:.3g})"
         raise ConvergenceError(msg)
     return result
+
+
+def _gauss_newton(
+    p: NDArray[np.float64], curve: NominalCurve, centre: NDArray[np.float64], tolerance: float
+) -> tuple[NDArray[np.float64], float, NDArray[np.float64] | None, int, float]:
+    """Gauss-Newton iterations of the registration: ``(offset, twist, feet parameters, iterations,
+    largest component of the last step)``; the last step is below ``tolerance`` when converged."""
+    t = np.zeros(2)
+    theta = 0.0
+    u: NDArray[np.float64] | None = None
+    last_step = np.inf
+    iteration = 0
+    for iteration in range(1, _MAX_ITERATIONS + 1):
+        r = rotation(theta)
+        local = (p - centre - t) @ r + centre  # R(-θ)(p - pivot - t) + pivot
+        # Closest points from the global (dense-sample) start every iteration: warm-starting
+        # Newton at the previous feet lets feet of a large move (0.3° on a 300 mm blade)
+        # stay on a wrong local minimum, and the registration converged silently off.
+        near = curve.closest(local)
+        u = near.parameter
+        normal = near.normal @ r.T
+        a = registration_jacobian(near.foot, normal, theta, centre)
+        step, *_ = np.linalg.lstsq(a, near.distance, rcond=None)
+        t = t + step[:2]
+        theta += float(step[2])
+        last_step = float(np.max(np.abs(step)))
+        if last_step < tolerance:
+            break
+    return t, theta, u, iteration, last_step

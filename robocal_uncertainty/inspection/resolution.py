@@ -215,11 +215,10 @@ def _length_errors(
     out = np.empty((trials, 2))
     for start in range(0, trials, _BATCH):
         stop = min(trials, start + _BATCH)
-        normal_shift = np.zeros((stop - start, model.points.shape[0]))
         subset_shift = np.zeros((stop - start, model.subset.shape[0], 2))
         for source, values in zip(sources, draws):
             subset_shift += source.displacement(values[start:stop], model.subset)
-        out[start:stop] = model.evaluate(normal_shift, subset_shift)[:, :2]
+        out[start:stop] = model.lengths(subset_shift)
     return out - model.base[:2]
 
 
@@ -261,30 +260,10 @@ def resolution_envelope(
     -------
     ResolutionEnvelope
     """
-    if not 0.0 < coverage < 1.0:
-        msg = f"coverage must be in (0, 1), got {coverage!r}"
-        raise ConfigError(msg)
-    if isinstance(n_draws, bool) or not isinstance(n_draws, int) or n_draws < 100:
-        msg = f"n_draws must be an integer >= 100, got {n_draws!r}"
-        raise ConfigError(msg)
     reg = evaluation.registration
     labels = evaluation.segmentation.labels
     rough = reg.residual
-    flat = np.asarray(smooth, dtype=np.float64)
-    if flat.shape != rough.shape:
-        msg = f"smooth deviations must have shape {rough.shape}, got {flat.shape}"
-        raise ConfigError(msg)
-    if not (np.isfinite(plateau_factor) and plateau_factor >= 0.0):
-        msg = f"plateau_factor must be finite and >= 0, got {plateau_factor!r}"
-        raise ConfigError(msg)
-    if smooth_std is None:
-        plateau, factor = flat, 0.0
-    else:
-        std = np.asarray(smooth_std, dtype=np.float64)
-        if std.shape != rough.shape or not np.all(np.isfinite(std)) or np.any(std < 0.0):
-            msg = f"smooth_std must be finite, >= 0 and of shape {rough.shape} [m]"
-            raise ConfigError(msg)
-        plateau, factor = plateau_extremes(flat, std, labels, plateau_factor), float(plateau_factor)
+    flat, plateau, factor = _envelope_limits(evaluation, smooth, coverage, n_draws, smooth_std, plateau_factor)
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(ENVELOPE_STREAM,)))
     # Per-point sources first, then the common ones, from the one stream.
     ordered = [s for s in sources if s.kind != "common"] + [s for s in sources if s.kind == "common"]
@@ -319,3 +298,36 @@ def resolution_envelope(
         seed=seed,
         plateau_factor=factor,
     )
+
+
+def _envelope_limits(
+    evaluation: SectionEvaluation,
+    smooth: ArrayLike,
+    coverage: float,
+    n_draws: int,
+    smooth_std: ArrayLike | None,
+    plateau_factor: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """The checked smooth limit, its flattened extremes (:func:`plateau_extremes`) and the factor used."""
+    if not 0.0 < coverage < 1.0:
+        msg = f"coverage must be in (0, 1), got {coverage!r}"
+        raise ConfigError(msg)
+    if isinstance(n_draws, bool) or not isinstance(n_draws, int) or n_draws < 100:
+        msg = f"n_draws must be an integer >= 100, got {n_draws!r}"
+        raise ConfigError(msg)
+    rough = evaluation.registration.residual
+    flat = np.asarray(smooth, dtype=np.float64)
+    if flat.shape != rough.shape:
+        msg = f"smooth deviations must have shape {rough.shape}, got {flat.shape}"
+        raise ConfigError(msg)
+    if not (np.isfinite(plateau_factor) and plateau_factor >= 0.0):
+        msg = f"plateau_factor must be finite and >= 0, got {plateau_factor!r}"
+        raise ConfigError(msg)
+    if smooth_std is None:
+        return flat, flat, 0.0
+    std = np.asarray(smooth_std, dtype=np.float64)
+    if std.shape != rough.shape or not np.all(np.isfinite(std)) or np.any(std < 0.0):
+        msg = f"smooth_std must be finite, >= 0 and of shape {rough.shape} [m]"
+        raise ConfigError(msg)
+    labels = evaluation.segmentation.labels
+    return flat, plateau_extremes(flat, std, labels, plateau_factor), float(plateau_factor)

@@ -4,10 +4,10 @@ Each step is a pure function over arrays, SI units inside:
 
 - :func:`order_along_contour`: measured points sorted by their feet on the nominal curve after
   registration (refuses open sections: a gap over 5 % of the perimeter);
-- :func:`max_thickness`: the seed's §2.1 steps 8-9, the largest over pressure-side points of
+- :func:`max_thickness`: the reference paper's §2.1 steps 8-9, the largest over pressure-side points of
   the distance to the suction side, with the suction side taken as the polyline through its
-  points (the seed densifies it with a B-spline; the polyline's chord sag is below 0.1 µm at
-  the seed's point density). Where the suction side is flatter than the largest inscribed
+  points (the reference paper densifies it with a B-spline; the polyline's chord sag is below 0.1 µm at
+  the reference paper's point density). Where the suction side is flatter than the largest inscribed
   circle, which holds for blade sections, this is that circle's diameter;
 - :func:`chord_length`: leading/trailing edge point method, the distance between the two
   points farthest apart (the extreme points of §2.1 step 1);
@@ -61,7 +61,7 @@ _SIZE_RATIO = (0.2, 5.0)
 
 @dataclass(frozen=True)
 class SectionParameters:
-    """The seed's five parameter kinds of one section.
+    """The reference paper's five parameter kinds of one section.
 
     Attributes
     ----------

@@ -40,6 +40,7 @@ sequence, so switching a source off leaves the other sources' draws unchanged.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -66,6 +67,7 @@ from robocal_uncertainty.inspection.section import (
     SectionEvaluation,
     SectionOptions,
     SectionParameters,
+    _candidate_segments,
     evaluate_section,
     point_to_polyline,
 )
@@ -83,6 +85,7 @@ from robocal_uncertainty.montecarlo.engine import (
     AdaptiveSettings,
     MonteCarloResult,
     ProgressCallback,
+    TrialsResult,
     run_trials,
 )
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
@@ -90,12 +93,14 @@ from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.montecarlo.validation import GumValidation, validate_gum
 
 __all__ = [
+    "DEPRECATED_METHODS",
     "METHODS",
     "FrozenSectionModel",
     "SectionTrials",
     "SectionUncertainty",
     "TrialSetup",
     "build_frozen_model",
+    "canonical_method",
     "full_section_trials",
     "gum_source_budget",
     "prepare_trials",
@@ -103,10 +108,33 @@ __all__ = [
     "section_uncertainty",
 ]
 
-METHODS: tuple[str, ...] = ("seed", "denoised")
-"""Monte Carlo methods of :func:`section_uncertainty`: ``seed`` perturbs the measured cloud
-(the seed's method); ``denoised`` samples the error Δ around the denoised cloud
+METHODS: tuple[str, ...] = ("perturbed", "denoised")
+"""Monte Carlo methods of :func:`section_uncertainty`: ``perturbed`` perturbs the measured cloud
+(the reference paper's method); ``denoised`` samples the error Δ around the denoised cloud
 (:mod:`.denoise`) and states the distribution of ``f(y) - Δ``."""
+
+DEPRECATED_METHODS: dict[str, str] = {"seed": "perturbed"}
+"""Old method names still accepted (with a :class:`DeprecationWarning`): ``seed`` named the
+reference paper's method, and read like the random seed."""
+
+
+def canonical_method(method: str) -> str:
+    """The method name of :data:`METHODS` for ``method``, a deprecated alias mapped with a warning.
+
+    Raises
+    ------
+    ConfigError
+        For a name that is neither a method nor a deprecated alias.
+    """
+    if method in DEPRECATED_METHODS:
+        new = DEPRECATED_METHODS[method]
+        warnings.warn(f"method {method!r} is deprecated: use {new!r}", DeprecationWarning, stacklevel=3)
+        return new
+    if method not in METHODS:
+        msg = f"method must be one of {list(METHODS)}, got {method!r}"
+        raise ConfigError(msg)
+    return method
+
 
 _EDGE_SLACK = 0.05e-6
 """Slack on the linearised edge-circle error bound [m]: second-order terms are ~0.01 µm."""
@@ -301,13 +329,7 @@ class FrozenSectionModel:
         """
         trials = normal_shift.shape[0]
         out = np.empty((trials, len(PARAMETER_NAMES)))
-        moved = self.points[self.subset] + subset_shift  # (T, m, 2)
-        a = moved[:, self.thickness_points, np.newaxis, :]
-        s0 = moved[:, self.thickness_segments[..., 0], :]
-        s1 = moved[:, self.thickness_segments[..., 1], :]
-        out[:, 0] = _segment_distance(a, s0, s1).min(axis=2).max(axis=1)
-        ends = moved[:, self.chord_pairs[:, 0], :] - moved[:, self.chord_pairs[:, 1], :]
-        pair_length2 = np.einsum("tki,tki->tk", ends, ends)
+        out[:, 0], pair_length2 = self._thickness_and_pairs(subset_shift)
         out[:, 1] = np.sqrt(pair_length2.max(axis=1))
         change = normal_shift @ self.solve_t  # (T, 3)
         out[:, 2:5] = self.base[2:5] + change
@@ -340,6 +362,31 @@ class FrozenSectionModel:
                 low = np.minimum(low, np.where(member, values, np.inf).min(axis=1))
             out[:, 5 + region] = high - low
         return out
+
+    def lengths(self, subset_shift: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Maximum thickness and chord of T perturbed clouds, shape (T, 2) [m] (as :meth:`evaluate`).
+
+        Parameters
+        ----------
+        subset_shift : ndarray, shape (T, m, 2) [m]
+            Full displacement of the ``subset`` points.
+        """
+        out = np.empty((subset_shift.shape[0], 2))
+        out[:, 0], pair_length2 = self._thickness_and_pairs(subset_shift)
+        out[:, 1] = np.sqrt(pair_length2.max(axis=1))
+        return out
+
+    def _thickness_and_pairs(
+        self, subset_shift: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per trial the maximum thickness (T,) [m] and the squared length of each chord pair (T, kc) [m²]."""
+        moved = self.points[self.subset] + subset_shift  # (T, m, 2)
+        a = moved[:, self.thickness_points, np.newaxis, :]
+        s0 = moved[:, self.thickness_segments[..., 0], :]
+        s1 = moved[:, self.thickness_segments[..., 1], :]
+        thickness = _segment_distance(a, s0, s1).min(axis=2).max(axis=1)
+        ends = moved[:, self.chord_pairs[:, 0], :] - moved[:, self.chord_pairs[:, 1], :]
+        return thickness, np.einsum("tki,tki->tk", ends, ends)
 
     @cached_property
     def solve_t(self) -> NDArray[np.float64]:
@@ -397,7 +444,7 @@ def section_sources(
         Probe vectors in the *input* order of the cloud (reordered here); None: along normals.
     reference : array_like, shape (2,) [m], optional
         Reference point of the MPE/thermal lengths; default the leading-edge extreme point
-        (so the trailing-edge point's L is the chord, as in the seed's GUM budget).
+        (so the trailing-edge point's L is the chord, as in the reference paper's GUM budget).
 
     Returns
     -------
@@ -434,6 +481,32 @@ def _circle_check(
     return verdict, residual, projector
 
 
+_Check = tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]
+"""One uncertain window size of an edge candidate: ``(k, window, residual, projector)``."""
+
+
+def _candidate_growth(
+    p: NDArray[np.float64], c: int, start: int, limit: int, bound: NDArray[np.float64], tolerance: float
+) -> tuple[int, tuple[_Check, ...]] | None:
+    """Where the growth around candidate ``c`` stops when no uncertain size fails, and its uncertain
+    sizes; None where the first window could fail or the growth reaches ``limit``."""
+    n = p.shape[0]
+    if _circle_check(p, np.arange(c - start, c + start + 1) % n, bound, tolerance)[0] != "pass":
+        return None
+    found: list[_Check] = []
+    k = start + 1
+    while True:
+        if k > limit:
+            return None
+        window = np.arange(c - k, c + k + 1) % n
+        verdict, residual, projector = _circle_check(p, window, bound, tolerance)
+        if verdict == "fail":
+            return k - 1, tuple(found)
+        if verdict == "check":
+            found.append((k, window, residual, projector))
+        k += 1
+
+
 def _edge_windows(
     evaluation: SectionEvaluation,
     chord_pairs: NDArray[np.intp],
@@ -468,27 +541,12 @@ def _edge_windows(
         offset = (candidates - anchor + n // 2) % n - n // 2
         if np.abs(offset).max() > limit // 2:
             return None
-        stops = []
-        checks = []
-        widest = 0
-        for c in candidates:
-            if _circle_check(p, np.arange(c - start, c + start + 1) % n, bound, tolerance)[0] != "pass":
-                return None
-            found: list[tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]] = []
-            k = start + 1
-            while True:
-                if k > limit:
-                    return None
-                window = np.arange(c - k, c + k + 1) % n
-                verdict, residual, projector = _circle_check(p, window, bound, tolerance)
-                if verdict == "fail":
-                    break
-                if verdict == "check":
-                    found.append((k, window, residual, projector))
-                k += 1
-            stops.append(k - 1)
-            checks.append(tuple(found))
-            widest = max(widest, k - 1)
+        growth = [_candidate_growth(p, int(c), start, limit, bound, tolerance) for c in candidates]
+        if any(g is None for g in growth):
+            return None
+        stops = [g[0] for g in growth if g is not None]
+        checks = [g[1] for g in growth if g is not None]
+        widest = max(stops)
         low = int(offset.min()) - widest
         high = int(offset.max()) + widest
         zone_offset = np.arange(low - 1, high + 2)
@@ -524,6 +582,80 @@ def _edge_windows(
     return (edges[0], edges[1]), pair_edges
 
 
+def _point_bounds(
+    sources: Sequence[ErrorSource], normals: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per point, the largest displacement and the largest displacement along the normal [m]."""
+    per_point = np.zeros(normals.shape[0])
+    along_normal = np.zeros(normals.shape[0])  # what ``normal_shift`` holds
+    for source in sources:
+        scale = draw_bound(source.distribution)
+        if source.kind == "xy":
+            per_point += np.sqrt(2.0) * np.abs(source.gain) * scale
+            along_normal += np.abs(source.gain) * np.abs(normals).sum(axis=1) * scale
+        else:
+            per_point += np.linalg.norm(source.gain, axis=1) * scale
+            along_normal += np.abs(np.einsum("ij,ij->i", source.gain, normals)) * scale
+    return per_point, along_normal
+
+
+def _thickness_candidates(
+    p: NDArray[np.float64], pressure: NDArray[np.intp], suction: NDArray[np.intp], bound: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+    """Pressure-side points and suction segments that can attain the maximum thickness under
+    any draw within ``bound``: ``(points, segments, segment starts, segment ends)``.
+
+    Each pressure point's reach (distance to the suction side) is the minimum over the segments
+    that can be nearest (:func:`~.section._candidate_segments`, every tie among them), then the
+    full row of distances only for the points kept: the same values as the full matrix.
+    """
+    a = p[pressure]
+    s0, s1 = p[suction[:-1]], p[suction[1:]]
+    longest = float(np.sqrt(np.maximum(((s1 - s0) ** 2).sum(axis=1), 1e-300).max()))
+    near = _candidate_segments(a, p[suction], longest)
+    reach = _segment_distance(a[:, np.newaxis, :], s0[near], s1[near]).min(axis=1)
+    _, _, interior = point_to_polyline(a, p[suction])
+    best = reach[interior].max()
+    keep = np.flatnonzero(reach >= best - 4.0 * bound)
+    distance = _segment_distance(a[keep][:, np.newaxis, :], s0[np.newaxis, :, :], s1[np.newaxis, :, :])
+    rows = [np.flatnonzero(distance[i] <= reach[k] + 4.0 * bound) for i, k in enumerate(keep)]
+    last = suction.size - 2
+    if any(r[0] == 0 or r[-1] == last for r in rows):
+        msg = (
+            "the maximum thickness lies within the error bound of a suction-side end; "
+            "the batched model needs it inside the side"
+        )
+        raise ConfigError(msg)
+    width = max(len(r) for r in rows)
+    segments = np.array([np.concatenate([r, np.full(width - len(r), r[0])]) for r in rows])
+    return pressure[keep], segments, suction[segments], suction[segments + 1]
+
+
+def _chord_candidates(p: NDArray[np.float64], chord_points: tuple[int, int], bound: float) -> NDArray[np.intp]:
+    """Pairs of points that could be the farthest pair under any draw within ``bound``, shape (k, 2).
+
+    A point's largest distance to the hull is at most its distance to the hull's centroid plus
+    the hull's radius about it: points whose bound stays below the threshold are skipped, the
+    others get the exact distances (the same pairs as over every point).
+    """
+    n = p.shape[0]
+    try:
+        hull = ConvexHull(p).vertices
+    except QhullError:
+        hull = np.arange(n)
+    chord0 = float(np.linalg.norm(p[chord_points[0]] - p[chord_points[1]]))
+    threshold = chord0 - 4.0 * bound
+    centre = p[hull].mean(axis=0)
+    radius = float(np.sqrt(((p[hull] - centre) ** 2).sum(axis=1)).max())
+    reachable = (np.sqrt(((p - centre) ** 2).sum(axis=1)) + radius) * (1.0 + 1e-9) >= threshold
+    tried = np.flatnonzero(reachable)
+    far = np.sqrt(((p[tried][:, np.newaxis, :] - p[hull][np.newaxis, :, :]) ** 2).sum(axis=-1)).max(axis=1)
+    ends_ok = tried[far >= threshold]
+    pair_d = np.sqrt(((p[ends_ok][:, np.newaxis, :] - p[ends_ok][np.newaxis, :, :]) ** 2).sum(axis=-1))
+    ii, jj = np.nonzero(np.triu(pair_d >= threshold, k=1))
+    return np.column_stack([ends_ok[ii], ends_ok[jj]])
+
+
 def build_frozen_model(
     evaluation: SectionEvaluation,
     sources: Sequence[ErrorSource],
@@ -551,52 +683,13 @@ def build_frozen_model(
     FrozenSectionModel
     """
     p = evaluation.points
-    n = p.shape[0]
-    per_point = np.zeros(n)
-    along_normal = np.zeros(n)  # largest displacement along the normal (what ``normal_shift`` holds)
-    normals = evaluation.registration.normal
-    for source in sources:
-        scale = draw_bound(source.distribution)
-        if source.kind == "xy":
-            per_point += np.sqrt(2.0) * np.abs(source.gain) * scale
-            along_normal += np.abs(source.gain) * np.abs(normals).sum(axis=1) * scale
-        else:
-            per_point += np.linalg.norm(source.gain, axis=1) * scale
-            along_normal += np.abs(np.einsum("ij,ij->i", source.gain, normals)) * scale
+    per_point, along_normal = _point_bounds(sources, evaluation.registration.normal)
     bound = float(per_point.max()) * _BOUND_MARGIN
     seg = evaluation.segmentation
-    pressure = seg.indices(PRESSURE_SIDE)
-    suction = seg.indices(SUCTION_SIDE)
-    distance = _segment_distance(
-        p[pressure][:, np.newaxis, :], p[suction[:-1]][np.newaxis, :, :], p[suction[1:]][np.newaxis, :, :]
-    )  # (n_pressure, n_segments)
-    reach = distance.min(axis=1)
-    _, _, interior = point_to_polyline(p[pressure], p[suction])
-    best = reach[interior].max()
-    keep = np.flatnonzero(reach >= best - 4.0 * bound)
-    rows = [np.flatnonzero(distance[k] <= reach[k] + 4.0 * bound) for k in keep]
-    last = suction.size - 2
-    if any(r[0] == 0 or r[-1] == last for r in rows):
-        msg = (
-            "the maximum thickness lies within the error bound of a suction-side end; "
-            "the batched model needs it inside the side"
-        )
-        raise ConfigError(msg)
-    width = max(len(r) for r in rows)
-    segments = np.array([np.concatenate([r, np.full(width - len(r), r[0])]) for r in rows])
-    starts, ends = suction[segments], suction[segments + 1]
-    thick_points = pressure[keep]
-    # Chord: points that could be an end of the farthest pair, then their pairs.
-    try:
-        hull = ConvexHull(p).vertices
-    except QhullError:
-        hull = np.arange(n)
-    chord0 = float(np.linalg.norm(p[evaluation.chord_points[0]] - p[evaluation.chord_points[1]]))
-    far = np.sqrt(((p[:, np.newaxis, :] - p[hull][np.newaxis, :, :]) ** 2).sum(axis=-1)).max(axis=1)
-    ends_ok = np.flatnonzero(far >= chord0 - 4.0 * bound)
-    pair_d = np.sqrt(((p[ends_ok][:, np.newaxis, :] - p[ends_ok][np.newaxis, :, :]) ** 2).sum(axis=-1))
-    ii, jj = np.nonzero(np.triu(pair_d >= chord0 - 4.0 * bound, k=1))
-    chord_pairs = np.column_stack([ends_ok[ii], ends_ok[jj]])
+    thick_points, segments, starts, ends = _thickness_candidates(
+        p, seg.indices(PRESSURE_SIDE), seg.indices(SUCTION_SIDE), bound
+    )
+    chord_pairs = _chord_candidates(p, evaluation.chord_points, bound)
     subset, inverse = np.unique(
         np.concatenate([thick_points, starts.ravel(), ends.ravel(), chord_pairs.ravel()]), return_inverse=True
     )
@@ -648,7 +741,7 @@ class SectionTrials:
         Trials evaluated per vectorised step (memory knob): the same draws whatever its value,
         the model values equal up to round-off of the regrouped matrix products (~1e-21 m).
     reflect : ndarray, shape (9,) [m, rad], optional
-        None: a trial's value is the model value ``f(x + e')`` (the seed's method). Given
+        None: a trial's value is the model value ``f(x + e')`` (the reference paper's method). Given
         ``c = f(y) + f(x̂)``: ``c - f(x̂ + e') = f(y) - Δ`` with ``Δ = f(x̂ + e') - f(x̂)``, the
         value the measurand would have if the measured ``f(y)`` carried the error Δ (method
         ``denoised`` of :func:`section_uncertainty`, ``model`` built at the denoised cloud x̂).
@@ -732,13 +825,13 @@ class TrialSetup:
     measured : SectionEvaluation
         Evaluation of the measured cloud y (its parameters are the estimates).
     centre : SectionEvaluation
-        Evaluation of the cloud the trials perturb: y (``seed``) or the denoised x̂ (``denoised``).
+        Evaluation of the cloud the trials perturb: y (``perturbed``) or the denoised x̂ (``denoised``).
     sources : tuple of ErrorSource
         Enabled sources at ``centre``'s points.
     source_indices : tuple of int
         Stream key of each source.
     reflect : ndarray, shape (9,) or None
-        ``f(y) + f(x̂)`` for ``denoised`` (see :class:`SectionTrials`), None for ``seed``.
+        ``f(y) + f(x̂)`` for ``denoised`` (see :class:`SectionTrials`), None for ``perturbed``.
     denoised : DenoisedCloud or None
         The denoised cloud (``denoised`` only).
     options : SectionOptions
@@ -786,7 +879,7 @@ def prepare_trials(
     sources: Sequence[str] = SOURCE_NAMES,
     options: SectionOptions | None = None,
     reference: ArrayLike | None = None,
-    method: str = "seed",
+    method: str = "perturbed",
     denoise_half_width: float | None = None,
 ) -> TrialSetup:
     """Evaluate the measured cloud and, for ``denoised``, denoise and evaluate it again.
@@ -801,16 +894,14 @@ def prepare_trials(
     options = SectionOptions() if options is None else options
     instrument = instrument or CmmInstrument()
     indices = _select_sources(sources)
-    if method not in METHODS:
-        msg = f"method must be one of {list(METHODS)}, got {method!r}"
-        raise ConfigError(msg)
+    method = canonical_method(method)
     evaluation = evaluate_section(cloud, curve, options)
     probe = cloud.probe_vectors if isinstance(cloud, PointCloud) else None
     every = section_sources(evaluation, instrument, probe_vectors=probe, reference=reference)
     # The noise variance of every per-point source weights the window choice and the residual
     # check, whichever sources the Monte Carlo enables: it is the noise in the measured points.
     denoised = denoise_section(evaluation, every, curve.period, half_width=denoise_half_width)
-    if method == "seed":
+    if method == "perturbed":
         enabled = tuple(every[k] for k in indices)
         return TrialSetup(evaluation, evaluation, enabled, indices, None, None, options, denoised.check, enabled)
     centre = evaluate_section(denoised.points, curve, options)
@@ -841,7 +932,7 @@ def full_section_trials(
     options: SectionOptions | None = None,
     reference: ArrayLike | None = None,
     block_size: int = DEFAULT_BLOCK_SIZE,
-    method: str = "seed",
+    method: str = "perturbed",
     denoise_half_width: float | None = None,
 ) -> NDArray[np.float64]:
     """Parameters of each trial by the full algorithm (re-registration, re-segmentation).
@@ -925,7 +1016,7 @@ class SectionUncertainty:
         JCGM 101 §8 comparison per parameter (instrument model only, as simulated).
     gum_with_repeatability : GumResult or None
         GUM budget with the repeatability of repeated scans added as a Type A input per
-        parameter (the seed's u3; Student t with k - 1 degrees of freedom, Welch-Satterthwaite);
+        parameter (the reference paper's u3; Student t with k - 1 degrees of freedom, Welch-Satterthwaite);
         None when no repeated scans were given. Its ``sensitivities`` (9, n_sources + 9) hold
         the instrument sources' contributions, then the repeatability standard deviations.
     sources : tuple of str
@@ -937,13 +1028,13 @@ class SectionUncertainty:
     candidate_counts : tuple of int
         Thickness candidate points, suction segments per candidate, chord pairs.
     method : str
-        ``seed``: ``monte_carlo`` describes ``f(y + e')``, the measured cloud y perturbed (the
-        seed's method; its mean exceeds the measured value by the noise bias of the max/min
+        ``perturbed``: ``monte_carlo`` describes ``f(y + e')``, the measured cloud y perturbed (the
+        reference paper's method; its mean exceeds the measured value by the noise bias of the max/min
         parameters). ``denoised``: ``monte_carlo`` describes ``f(y) - Δ``,
         ``Δ = f(x̂ + e') - f(x̂)`` the error sampled around the denoised cloud x̂: its mean is the
         bias-corrected estimate, its intervals are the intervals for the measurand.
     reference_parameters : ndarray, shape (9,) [m, rad]
-        Parameters of the cloud the trials perturb (y for ``seed``, x̂ for ``denoised``).
+        Parameters of the cloud the trials perturb (y for ``perturbed``, x̂ for ``denoised``).
     denoised : DenoisedCloud or None
         The denoised cloud and its window choice (``denoised`` only).
     check : ResidualCheck or None
@@ -952,7 +1043,7 @@ class SectionUncertainty:
     envelope : ResolutionEnvelope or None
         Method ``denoised``: the max/min parameters' error quantiles at the smoothest and the
         roughest form the scan supports (:mod:`.resolution`); their stated intervals
-        (:func:`~.bias_correction.bias_corrections`) are widened to them. None for ``seed``.
+        (:func:`~.bias_correction.bias_corrections`) are widened to them. None for ``perturbed``.
     n_points : int
         Points of the measured cloud (0 when not recorded).
     nominal_length : float
@@ -969,7 +1060,7 @@ class SectionUncertainty:
     reference: NDArray[np.float64]
     candidate_counts: tuple[int, int, int]
     gum_with_repeatability: GumResult | None = None
-    method: str = "seed"
+    method: str = "perturbed"
     reference_parameters: NDArray[np.float64] | None = None
     denoised: DenoisedCloud | None = None
     check: ResidualCheck | None = None
@@ -998,50 +1089,39 @@ def section_uncertainty(
     keep_samples: bool = False,
     bins: int | str = 100,
     repeat_parameters: ArrayLike | None = None,
-    method: str = "seed",
+    method: str = "perturbed",
     denoise_half_width: float | None = None,
 ) -> SectionUncertainty:
     """Monte Carlo of the nine section parameters under the CMM model, with the GUM comparison.
 
     Parameters
     ----------
-    cloud : PointCloud or array_like, shape (n, 2) [m]
-        Measured section (its probe vectors, if any, orient the probing error).
-    curve : NominalCurve
-        Nominal section.
-    seed : int
-        Root seed (>= 0).
-    trials : int or None
-        Fixed number of trials (default 10^6); None with ``adaptive``.
-    adaptive : AdaptiveSettings, optional
-        JCGM 101 §7.9 adaptive trial count instead (give ``trials=None``).
-    instrument : CmmInstrument, optional
-        Source magnitudes; default the seed's.
-    sources : sequence of str
-        Enabled sources, a subset of :data:`~robocal_uncertainty.core.instruments.cmm.SOURCE_NAMES`.
-    options : SectionOptions, optional
-        Evaluation settings.
-    reference : array_like, shape (2,) [m], optional
-        Reference point of the MPE/thermal lengths (default the leading-edge extreme point).
-    coverage : float
-        Coverage probability p.
+    cloud, curve
+        Measured section (PointCloud or (n, 2) array [m]; its probe vectors, if any, orient the
+        probing error) and the nominal section (NominalCurve).
+    seed, trials, adaptive
+        Root seed (>= 0); fixed number of trials (default 10^6), or None with JCGM 101 §7.9
+        ``adaptive`` settings.
+    instrument, sources
+        Source magnitudes (default the reference paper's CMM); enabled sources, a subset of
+        :data:`~robocal_uncertainty.core.instruments.cmm.SOURCE_NAMES`.
+    options, reference
+        Evaluation settings; reference point (2,) [m] of the MPE/thermal lengths (default the
+        leading-edge extreme point).
+    coverage, keep_samples, bins
+        Coverage probability p; keep the (trials, 9) model values; histogram bins.
     block_size, chunk_blocks, workers, progress
         As for :func:`~robocal_uncertainty.montecarlo.engine.run_trials`.
     batch : int
         Trials per vectorised step inside a block (memory ~ 60 kB × n_points × batch / 1836).
-    keep_samples : bool
-        Keep the (trials, 9) model values.
-    bins : int or str
-        Histogram bins.
     repeat_parameters : array_like, shape (k, 9) [m, rad], optional
-        Parameters of k >= 2 repeated scans of the same section (``SectionParameters.as_array``
-        of each); their standard deviations enter ``gum_with_repeatability`` (the seed's u3).
+        Parameters of k >= 2 repeated scans of the same section; their standard deviations
+        enter ``gum_with_repeatability`` (the reference paper's u3).
     method : str
-        ``seed`` (default): Monte Carlo of the measured cloud perturbed, the seed's method; its
-        intervals of the max/min parameters (thickness, chord, profiles) do not cover the true
-        value at 95 % (the noise bias is counted twice). ``denoised``: Monte Carlo of the error
-        around the denoised cloud (:mod:`.denoise`), stated as the distribution of ``f(y) - Δ``
-        (see :class:`SectionUncertainty`); the estimate stays ``parameters`` = f(y).
+        One of :data:`METHODS` (see :attr:`SectionUncertainty.method`): ``perturbed`` perturbs the
+        measured cloud (the reference paper's method; its max/min intervals under-cover),
+        ``denoised`` states ``f(y) - Δ``, Δ sampled around the denoised cloud (:mod:`.denoise`).
+        ``seed`` is a deprecated alias of ``perturbed``.
     denoise_half_width : float, optional
         Smoothing window half-width of ``denoised`` [m]; None: chosen by Mallows' Cp.
 
@@ -1049,71 +1129,43 @@ def section_uncertainty(
     -------
     SectionUncertainty
     """
-    if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
-        msg = f"batch must be an integer >= 1, got {batch!r}"
-        raise ConfigError(msg)
+    _check_batch(batch)
     repeats = None if repeat_parameters is None else _check_repeats(repeat_parameters)
     inst = instrument or CmmInstrument()
-    prepared = prepare_trials(
-        cloud,
-        curve,
-        instrument=inst,
-        sources=sources,
-        options=options,
-        reference=reference,
-        method=method,
-        denoise_half_width=denoise_half_width,
-    )
-    evaluation = prepared.measured
-    indices = prepared.source_indices
+    setup: dict[str, Any] = {"options": options, "reference": reference, "denoise_half_width": denoise_half_width}
+    prepared = prepare_trials(cloud, curve, instrument=inst, sources=sources, method=canonical_method(method), **setup)
     block = prepared.trials(batch)
-    model = block.model
-    run = run_trials(
-        block,
-        seed=seed,
-        n_trials=trials,
-        adaptive=adaptive,
-        block_size=block_size,
-        chunk_blocks=chunk_blocks,
-        workers=workers,
-        progress=progress,
-    )
+    engine: dict[str, Any] = {
+        "block_size": block_size,
+        "chunk_blocks": chunk_blocks,
+        "workers": workers,
+        "progress": progress,
+    }
+    run = run_trials(block, seed=seed, n_trials=trials, adaptive=adaptive, **engine)
     p = coverage if adaptive is None else adaptive.coverage
-    summary = run.summary(p, bins=bins)
-    names = tuple(SOURCE_NAMES[k] for k in indices)
-    mc = MonteCarloResult(
-        outputs=summary.outputs,
-        covariance=summary.covariance,
-        coverage_probability=p,
-        samples=run.samples if keep_samples else None,
-        input_names=names,
-        input_columns=names,
-        n_trials=run.n_trials,
-        seed=run.seed,
-        block_size=run.block_size,
-        n_dropped=run.n_dropped,
-        adaptive=run.adaptive,
+    return _section_result(prepared, block, run, p, inst, reference, curve, bins, keep_samples, repeats)
+
+
+def _section_result(
+    prepared: TrialSetup,
+    block: SectionTrials,
+    run: TrialsResult,
+    p: float,
+    instrument: CmmInstrument,
+    reference: ArrayLike | None,
+    curve: NominalCurve,
+    bins: int | str,
+    keep_samples: bool,
+    repeats: NDArray[np.float64] | None,
+) -> SectionUncertainty:
+    """The statements of a finished Monte Carlo run (:func:`section_uncertainty`)."""
+    evaluation = prepared.measured
+    model = block.model
+    names = tuple(SOURCE_NAMES[k] for k in prepared.source_indices)
+    mc = _monte_carlo_result(run, p, bins, names, keep_samples=keep_samples)
+    gum, covariance, validation, with_repeats = _gum_statements(
+        block, evaluation.parameters.as_array(), names, p, mc, repeats
     )
-    budget, covariance = gum_source_budget(block)
-    base = evaluation.parameters.as_array()
-
-    def combined(z: NDArray[np.float64]) -> NDArray[np.float64]:
-        return base + z @ budget.T
-
-    gum = propagate_gum(combined, {name: Normal(0.0, 1.0) for name in names}, coverage=p)
-    validation = tuple(validate_gum(gum, mc, output=j) for j in range(len(PARAMETER_NAMES)))
-    with_repeats = None
-    if repeats is not None:
-        spread = repeats.std(axis=0, ddof=1)
-        dof = repeats.shape[0] - 1
-        full_budget = np.concatenate([budget, np.diag(spread)], axis=1)
-
-        def with_repeatability(z: NDArray[np.float64]) -> NDArray[np.float64]:
-            return np.asarray(base + z @ full_budget.T, dtype=np.float64)
-
-        inputs: dict[str, Distribution] = {name: Normal(0.0, 1.0) for name in names}
-        inputs.update({f"repeatability[{name}]": StudentT(0.0, 1.0, dof) for name in PARAMETER_NAMES})
-        with_repeats = propagate_gum(with_repeatability, inputs, coverage=p)
     reference_point = (
         prepared.centre.points[prepared.centre.segmentation.leading_edge_point]
         if reference is None
@@ -1126,7 +1178,7 @@ def section_uncertainty(
         gum_covariance=covariance,
         validation=validation,
         sources=names,
-        instrument=inst,
+        instrument=instrument,
         reference=reference_point,
         candidate_counts=(
             int(model.thickness_points.size),
@@ -1134,14 +1186,70 @@ def section_uncertainty(
             int(model.chord_pairs.shape[0]),
         ),
         gum_with_repeatability=with_repeats,
-        method=method,
+        method="denoised" if prepared.denoised is not None else "perturbed",
         reference_parameters=model.base.copy(),
         denoised=prepared.denoised,
         check=prepared.check,
-        envelope=prepared.envelope(seed, p),
+        envelope=prepared.envelope(run.seed, p),
         n_points=int(evaluation.points.shape[0]),
         nominal_length=float(curve.period),
     )
+
+
+def _monte_carlo_result(
+    run: TrialsResult, p: float, bins: int | str, names: tuple[str, ...], *, keep_samples: bool
+) -> MonteCarloResult:
+    """The JCGM 101 summary of a finished run (``run_trials``' result) at coverage ``p``."""
+    summary = run.summary(p, bins=bins)
+    return MonteCarloResult(
+        outputs=summary.outputs,
+        covariance=summary.covariance,
+        coverage_probability=p,
+        samples=run.samples if keep_samples else None,
+        input_names=names,
+        input_columns=names,
+        n_trials=run.n_trials,
+        seed=run.seed,
+        block_size=run.block_size,
+        n_dropped=run.n_dropped,
+        adaptive=run.adaptive,
+    )
+
+
+def _gum_statements(
+    block: SectionTrials,
+    base: NDArray[np.float64],
+    names: tuple[str, ...],
+    p: float,
+    mc: MonteCarloResult,
+    repeats: NDArray[np.float64] | None,
+) -> tuple[GumResult, NDArray[np.float64], tuple[GumValidation, ...], GumResult | None]:
+    """The GUM budget, its covariance, the JCGM 101 §8 validation and the budget with repeatability."""
+    budget, covariance = gum_source_budget(block)
+
+    def combined(z: NDArray[np.float64]) -> NDArray[np.float64]:
+        return base + z @ budget.T
+
+    gum = propagate_gum(combined, {name: Normal(0.0, 1.0) for name in names}, coverage=p)
+    validation = tuple(validate_gum(gum, mc, output=j) for j in range(len(PARAMETER_NAMES)))
+    if repeats is None:
+        return gum, covariance, validation, None
+    spread = repeats.std(axis=0, ddof=1)
+    dof = repeats.shape[0] - 1
+    full_budget = np.concatenate([budget, np.diag(spread)], axis=1)
+
+    def with_repeatability(z: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(base + z @ full_budget.T, dtype=np.float64)
+
+    inputs: dict[str, Distribution] = {name: Normal(0.0, 1.0) for name in names}
+    inputs.update({f"repeatability[{name}]": StudentT(0.0, 1.0, dof) for name in PARAMETER_NAMES})
+    return gum, covariance, validation, propagate_gum(with_repeatability, inputs, coverage=p)
+
+
+def _check_batch(batch: int) -> None:
+    if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
+        msg = f"batch must be an integer >= 1, got {batch!r}"
+        raise ConfigError(msg)
 
 
 def _check_repeats(values: ArrayLike) -> NDArray[np.float64]:

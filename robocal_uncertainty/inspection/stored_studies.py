@@ -44,9 +44,9 @@ class Coverage(NamedTuple):
     """Measured coverage of the 95 % intervals of one parameter, per interval kind."""
 
     jcgm101: float
-    """Method ``seed``: the JCGM 101 interval of the measured cloud perturbed."""
+    """Method ``perturbed``: the JCGM 101 interval of the measured cloud perturbed."""
     reflected: float
-    """Method ``seed``: that interval reflected about the measured value (bias-corrected)."""
+    """Method ``perturbed``: that interval reflected about the measured value (bias-corrected)."""
     denoised: float
     """Method ``denoised``: the interval of f(y) - Δ, Δ sampled around the denoised cloud."""
 
@@ -92,10 +92,10 @@ Holm-adjusted p-value: with 36 cells, a per-cell 5 % test would call some cell s
 below 95 % with probability about 0.8 even if every interval covered exactly 95 %."""
 
 STUDY_POINTS = 1836
-"""Points per scan in every coverage study (the seed's count, denser at the edges)."""
+"""Points per scan in every coverage study (the reference paper's count, denser at the edges)."""
 
 STUDY_NOMINAL_LENGTH = 0.80977
-"""Contour length [m] of the studies' nominal: Rotor 37 surface 2 at the seed's size (x7.14)."""
+"""Contour length [m] of the studies' nominal: Rotor 37 surface 2 at the reference paper's size (x7.14)."""
 
 STUDY_POINT_TOLERANCE = 0.10
 STUDY_LENGTH_TOLERANCE = 0.01
@@ -106,7 +106,7 @@ def outside_study_scope(result: SectionUncertainty) -> str | None:
 
     Every study simulates the same kind of scan: :data:`STUDY_POINTS` points (± 10 % accepted)
     of a section whose nominal contour is :data:`STUDY_NOMINAL_LENGTH` long (± 1 %), measured by
-    the seed's CMM (:class:`~robocal_uncertainty.core.instruments.cmm.CmmInstrument` defaults).
+    the reference paper's CMM (:class:`~robocal_uncertainty.core.instruments.cmm.CmmInstrument` defaults).
     The denoising windows, the residual check's power and the roughness envelope all depend on
     the point spacing, the contour and the noise, so a measured coverage is not carried to
     another point density, blade or instrument: outside that scope no interval is stated
@@ -121,10 +121,10 @@ def outside_study_scope(result: SectionUncertainty) -> str | None:
             f"a nominal contour of {result.nominal_length * 1e3:.1f} mm, the studies' Rotor 37 section "
             f"{STUDY_NOMINAL_LENGTH * 1e3:.1f} mm"
         )
-    seed = CmmInstrument()
+    paper = CmmInstrument()
     numeric = [f.name for f in dataclasses.fields(CmmInstrument) if f.name != "name"]
-    if not all(math.isclose(getattr(result.instrument, n), getattr(seed, n), rel_tol=1e-9) for n in numeric):
-        reasons.append("an instrument other than the seed's CMM the studies simulate")
+    if not all(math.isclose(getattr(result.instrument, n), getattr(paper, n), rel_tol=1e-9) for n in numeric):
+        reasons.append("an instrument other than the reference paper's CMM the studies simulate")
     return "; ".join(reasons) or None
 
 
@@ -132,7 +132,7 @@ FAMILY_CELLS = sum(1 for study in FAMILY_STUDY.values() for c in study.values() 
 """Cells of :data:`FAMILY_STUDY` with a test (some unflagged scans): the Holm adjustment's count."""
 
 LINEAR_PARAMETERS = ("axial_offset", "circumferential_offset", "twist_angle")
-"""Parameters linear in the errors: methods ``seed`` and ``denoised`` state the same interval."""
+"""Parameters linear in the errors: methods ``perturbed`` and ``denoised`` state the same interval."""
 
 
 def family_coverage(name: str) -> tuple[float, bool]:
@@ -152,8 +152,8 @@ def stated_coverage(
     Returns
     -------
     tuple
-        ``(kind, coverage, verified)``: kind ``jcgm101`` (method ``seed``, offsets and twist),
-        ``reflected`` (method ``seed``, the max/min parameters) or ``denoised``; coverage the
+        ``(kind, coverage, verified)``: kind ``jcgm101`` (method ``perturbed``, offsets and twist),
+        ``reflected`` (method ``perturbed``, the max/min parameters) or ``denoised``; coverage the
         lowest of the demo scenario's study and (``jcgm101``, ``denoised``: the offsets and twist
         are linear in the errors, so both methods state the same interval) the scenario families'
         unflagged scans; verified only when `check` is given and did not flag the cloud, the
@@ -163,7 +163,7 @@ def stated_coverage(
     study = COVERAGE_STUDY[name]
     if method == "denoised":
         kind = "denoised"
-    elif method == "seed":
+    elif method == "perturbed":
         kind = "jcgm101" if name in LINEAR_PARAMETERS else "reflected"
     else:
         msg = f"unknown method {method!r}"

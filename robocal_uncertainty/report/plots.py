@@ -1,4 +1,4 @@
-"""Figures of an uncertainty evaluation (seed Figs. 5-11), one PNG per function.
+"""Figures of an uncertainty evaluation (the reference paper's Figs. 5-11), one PNG per function.
 
 Uses matplotlib's Agg backend and the object API (no pyplot state), so figures can be
 written from worker threads and on machines without a display. Each function writes
@@ -129,7 +129,7 @@ def plot_axis_histograms(
     unit: str = "mm",
     bins: int = 60,
 ) -> Path:
-    """Per-axis histograms of the tool position (seed Fig. 10).
+    """Per-axis histograms of the tool position (the reference paper's Fig. 10).
 
     Each panel shows the Monte Carlo density, the mean, the probabilistically symmetric
     and the shortest coverage intervals, and the GUM normal pdf N(y_GUM, u_GUM²).
@@ -359,6 +359,24 @@ def plot_lcurve(calibration: IdentificationResult, path: str | Path) -> Path:
     return _save(fig, path)
 
 
+def _mark_held(ax: Axes) -> None:
+    """Mark a panel whose spread is the Tikhonov term's, not a measurement's, as the tables mark it."""
+    ax.set_facecolor("0.93")
+    ax.text(
+        0.02,
+        0.97,
+        "held by\nregularisation",
+        ha="left",
+        va="top",
+        transform=ax.transAxes,
+        fontsize=6,
+        color="tab:red",
+        bbox={"facecolor": "white", "edgecolor": "none", "pad": 1.0},
+    )
+    for patch in ax.patches:
+        patch.set_hatch("///")
+
+
 def plot_parameter_distributions(
     result: CalibrationUncertainty,
     path: str | Path,
@@ -366,7 +384,7 @@ def plot_parameter_distributions(
     bins: int = 40,
     columns: int = 6,
 ) -> Path:
-    """Grid of histograms of the identified parameter errors (seed Fig. 5).
+    """Grid of histograms of the identified parameter errors (the reference paper's Fig. 5).
 
     Each panel is the Monte Carlo distribution of ``p − p_nominal`` for one estimated
     parameter, in µm for lengths and mdeg for angles, with the calibration's estimate
@@ -411,21 +429,7 @@ def plot_parameter_distributions(
         ax.hist(err, bins=bins, histtype="stepfilled", color="0.7", ec="0.4", lw=0.5)
         ax.axvline((cal.estimate[i] - cal.nominal[i]) * scale, color="tab:red", lw=1.0)
         if held[i]:
-            # Its spread is the Tikhonov term's, not a measurement's: marked, as the tables mark it.
-            ax.set_facecolor("0.93")
-            ax.text(
-                0.02,
-                0.97,
-                "held by\nregularisation",
-                ha="left",
-                va="top",
-                transform=ax.transAxes,
-                fontsize=6,
-                color="tab:red",
-                bbox={"facecolor": "white", "edgecolor": "none", "pad": 1.0},
-            )
-            for patch in ax.patches:
-                patch.set_hatch("///")
+            _mark_held(ax)
         ax.set_title(name + (" (held)" if held[i] else ""), fontsize=8)
         ax.set_xlabel(f"δ / {unit}", fontsize=7)
         ax.xaxis.set_major_locator(MaxNLocator(4))
@@ -453,7 +457,7 @@ def plot_position_error(
     pose: int = 0,
     bins: int = 60,
 ) -> Path:
-    """Distribution of the position error |position − mean| in µm (seed Fig. 11).
+    """Distribution of the position error |position − mean| in µm (the reference paper's Fig. 11).
 
     Parameters
     ----------
@@ -502,7 +506,7 @@ def plot_uncertainty_vs(
     log_x: bool = False,
     title: str | None = None,
 ) -> Path:
-    """Standard uncertainty per axis against a swept setting (seed Figs. 7-9).
+    """Standard uncertainty per axis against a swept setting (the reference paper's Figs. 7-9).
 
     Parameters
     ----------

@@ -13,7 +13,7 @@ computes no statistic: the verdicts come from ``inspection``; it lays them out a
 :mod:`~robocal_uncertainty.report.document_tree` rendered to Markdown and HTML.
 The table's §8 column is the JCGM 101 §8 validation of the GUM interval by the Monte Carlo one
 (whether the GUM framework reproduces the Monte Carlo interval), not a verdict on the part.
-With repeated scans (``gum_with_repeatability``) every report also gives the seed's GUM budget
+With repeated scans (``gum_with_repeatability``) every report also gives the reference paper's GUM budget
 of the chord length (u1 MPE, u2 thermal, u3 repeatability, the other sources, u_c, k, U95).
 ``section.html`` is ``section.md`` as a self-contained page (the histograms embedded).
 """
@@ -229,7 +229,7 @@ def section_report_dict(
         "coverage_study_scope": {
             "points": STUDY_POINTS,
             "nominal_length_m": STUDY_NOMINAL_LENGTH,
-            "instrument": "seed's CMM (cmm_seed)",
+            "instrument": "reference paper's CMM (cmm_seed)",
             "this_cloud_points": result.n_points,
             "this_nominal_length_m": result.nominal_length if math.isfinite(result.nominal_length) else None,
             "outside_because": outside_study_scope(result),
@@ -312,7 +312,7 @@ def repeatability_budget(result: SectionUncertainty) -> dict[str, Any] | None:
     """The GUM budget with repeatability per parameter (SI), or None without repeated scans.
 
     ``contributions`` are the standard contributions [m, rad] of the instrument sources and of
-    ``repeatability`` (the seed's u3: the standard deviation, ddof 1, of the repeated scans'
+    ``repeatability`` (the reference paper's u3: the standard deviation, ddof 1, of the repeated scans'
     values, a Type A input with ``n_scans - 1`` degrees of freedom); ``u_c`` their root sum of
     squares, ``k`` the Student t factor at the Welch-Satterthwaite ``effective_dof``, ``U`` = k u_c.
     """
@@ -347,13 +347,13 @@ def repeatability_budget(result: SectionUncertainty) -> dict[str, Any] | None:
 
 
 def _budget_order(contributions: dict[str, float]) -> list[str]:
-    """The seed's order: u1 MPE, u2 thermal, u3 repeatability, then the other sources."""
+    """The reference paper's order: u1 MPE, u2 thermal, u3 repeatability, then the other sources."""
     first = [s for s in ("mpe", "thermal", "repeatability") if s in contributions]
     return first + [s for s in contributions if s not in first]
 
 
 def format_repeatability_budget(result: SectionUncertainty, name: str = "chord_length") -> str:
-    """The seed's GUM budget table of one parameter (default the chord) with repeatability
+    """The reference paper's GUM budget table of one parameter (default the chord) with repeatability
     (u1 MPE, u2 thermal, u3 repeatability, the other sources, u_c, k, U95); "" without repeats."""
     budget = repeatability_budget(result)
     if budget is None:
@@ -418,8 +418,8 @@ def _check_dict(check: ResidualCheck) -> dict[str, Any]:
 
 
 _DEMO_SCENARIO_TEXT = (
-    "the demo scenario (Rotor 37 at the seed's size, 1 836 points, a 5 µm three-wave form error, the seed's "
-    "offsets and twist and CMM; 200 simulated scans)"
+    "the demo scenario (Rotor 37 at the reference paper's size, 1 836 points, a 5 µm three-wave form error, "
+    "the reference paper's offsets and twist and CMM; 200 simulated scans)"
 )
 
 
@@ -513,7 +513,7 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
         f"scans of every scenario family (there the test is Holm-adjusted over the study's {FAMILY_CELLS} cells)"
     )
     denoised = ", ".join(f"{_LABELS[n]} {v.denoised:.1%}" for n, v in COVERAGE_STUDY.items())
-    seed = ", ".join(f"{_LABELS[n]} {v.jcgm101:.1%}" for n, v in COVERAGE_STUDY.items())
+    paper = ", ".join(f"{_LABELS[n]} {v.jcgm101:.1%}" for n, v in COVERAGE_STUDY.items())
     reflected = ", ".join(f"{_LABELS[n]} {v.reflected:.1%}" for n, v in COVERAGE_STUDY.items())
     scope = outside_study_scope(result)
     failing = [_LABELS[n] for n in COVERAGE_STUDY if not stated_coverage(n, method, check)[2]]
@@ -523,9 +523,9 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
         cloud = (
             f"This cloud: {check.describe()}. Its intervals are NOT verified for this cloud: it is outside "
             f"the scope of the coverage studies below ({scope}; the studies simulate {STUDY_POINTS}-point "
-            "scans of the Rotor 37 section at the seed's size on the seed's CMM), whose coverage is not "
-            "carried to another point density, blade or instrument; `section CLOUD --coverage-study N` runs the "
-            "study for this cloud's own part, layout and instrument."
+            "scans of the Rotor 37 section at the reference paper's size on the reference paper's CMM), whose "
+            "coverage is not carried to another point density, blade or instrument; "
+            "`section CLOUD --coverage-study N` runs the study for this cloud's own part, layout and instrument."
         )
     elif check.flagged:
         cloud = (
@@ -543,9 +543,9 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
     )
     background = (
         " The max/min-defined parameters (maximum thickness, chord, profiles) are biased upward by "
-        "the measurement noise, and the seed's Monte Carlo, which perturbs the already noisy measured "
+        "the measurement noise, and the reference paper's Monte Carlo, which perturbs the already noisy measured "
         f"cloud, adds that noise again: its 95 % JCGM 101 intervals under-cover. Over {_DEMO_SCENARIO_TEXT} "
-        f"they cover the truth in: {seed}; reflected about the measured value (bias-corrected) in: {reflected}."
+        f"they cover the truth in: {paper}; reflected about the measured value (bias-corrected) in: {reflected}."
     )
     if method == "denoised":
         return (
@@ -565,7 +565,7 @@ def coverage_summary(result: SectionUncertainty, study: ScenarioStudy | None = N
         )
     return (
         cloud
-        + " Method 'seed':"
+        + " Method 'perturbed':"
         + background
         + " Offsets and twist are well calibrated. Thickness and chord under-cover even corrected; the "
         "profile intervals do not cover the true form deviation: read the profile values as an upper bound "
@@ -604,12 +604,12 @@ def format_section_table(
     truth: NDArray[np.float64] | None = None,
     study: ScenarioStudy | None = None,
 ) -> str:
-    """Console table in the seed's layout: value, u, 95 % interval, GUM u, the JCGM 101 §8 GUM
+    """Console table in the reference paper's layout: value, u, 95 % interval, GUM u, the JCGM 101 §8 GUM
     validation (``agree``/``differ``), and the measured coverage of the stated interval (``NOT
     VERIFIED`` outside the tolerance, ``not verified for this cloud`` when the residual check
     flagged it); then the §8 legend and the residual check's line.
 
-    Method ``seed``: the JCGM 101 interval of the perturbed measured cloud and the bias-corrected
+    Method ``perturbed``: the JCGM 101 interval of the perturbed measured cloud and the bias-corrected
     (reflected) one. Method ``denoised``: the estimated bias and the Monte Carlo interval for the
     measurand (u is the standard deviation of the error Δ).
     """
@@ -773,7 +773,13 @@ def _demo_study_table(data: dict[str, Any]) -> Table:
                 f"{row['stated_interval_kind']} {row['coverage_measured']:.1%} {flag}",
             )
         )
-    header = ("parameter", "seed: JCGM 101 interval", "seed: bias-corrected (reflected)", "denoised", "this report")
+    header = (
+        "parameter",
+        "perturbed: JCGM 101 interval",
+        "perturbed: bias-corrected (reflected)",
+        "denoised",
+        "this report",
+    )
     return table(header, rows)
 
 
@@ -875,7 +881,7 @@ def _repeatability_blocks(repeat: dict[str, Any], files: list[str] | None) -> li
             )
         )
     return [
-        Heading(2, "GUM budget with repeatability (seed's Table)"),
+        Heading(2, "GUM budget with repeatability (reference paper's table)"),
         Paragraph(
             f"Chord length, {repeat['n_scans']} repeated scans"
             + (f" ({', '.join(files)})" if files else "")
@@ -891,7 +897,7 @@ def _repeatability_blocks(repeat: dict[str, Any], files: list[str] | None) -> li
 
 def _stated_interval(name: str, result: SectionUncertainty, fix: BiasCorrection) -> Any:
     """The interval the report states for `name`: the bias-corrected one (for ``denoised``, widened
-    to the roughness envelope), or the JCGM 101 one for the offsets and twist under ``seed``."""
+    to the roughness envelope), or the JCGM 101 one for the offsets and twist under ``perturbed``."""
     j = PARAMETER_NAMES.index(name)
     if stated_coverage(name, result.method)[0] == "jcgm101":
         return result.monte_carlo.outputs[j].probabilistically_symmetric

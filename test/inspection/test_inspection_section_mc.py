@@ -202,7 +202,7 @@ def test_denoised_method_states_the_error_sampled_around_the_denoised_cloud(
 
     result = section_uncertainty(small_scan, rotor37_curve, seed=1, trials=4000, block_size=1000, method="denoised")
     seed = section_uncertainty(small_scan, rotor37_curve, seed=1, trials=4000, block_size=1000)
-    assert result.method == "denoised" and seed.method == "seed" and seed.denoised is None
+    assert result.method == "denoised" and seed.method == "perturbed" and seed.denoised is None
     assert np.array_equal(result.parameters.as_array(), measured)  # the estimate stays f(y)
     assert result.reference_parameters == pytest.approx(centre, rel=1e-15)
     fixes = bias_corrections(result)

@@ -105,7 +105,7 @@ def test_report_files_and_content(demo: SectionInspection, tmp_path: Path) -> No
     assert note.startswith("This cloud: residual check passed (p = ")
     assert "Every stated interval is coverage-verified for it" in note and "NOT coverage-verified" not in note
     assert "Holm-adjusted over the study's 36 cells" in note
-    assert "the demo scenario (Rotor 37 at the seed's size" in note and "Scenario families" in note
+    assert "the demo scenario (Rotor 37 at the reference paper's size" in note and "Scenario families" in note
     assert "under-cover" in note and "72.0%" in note
     markdown = files.markdown.read_text()
     assert "## Coverage of the intervals: this cloud's check and the simulated studies" in markdown
@@ -122,10 +122,10 @@ def test_report_files_and_content(demo: SectionInspection, tmp_path: Path) -> No
     assert files.histograms.stat().st_size > 10_000
 
 
-def test_seed_method_flags_the_intervals_known_to_under_cover() -> None:
-    run = section_demo(trials=2000, seed=3, method="seed")
+def test_perturbed_method_flags_the_intervals_known_to_under_cover() -> None:
+    run = section_demo(trials=2000, seed=3, method="perturbed")
     data = section_report_dict(run.result, run.corrections)
-    assert data["method"] == "seed" and data["denoise_half_width_m"] is None
+    assert data["method"] == "perturbed" and data["denoise_half_width_m"] is None
     verified = {row["name"]: row["coverage_verified"] for row in data["parameters"]}
     assert verified == {name: name in ("axial_offset", "circumferential_offset", "twist_angle") for name in verified}
     kinds = [row["stated_interval_kind"] for row in data["parameters"]]
@@ -158,7 +158,7 @@ def test_a_flagged_cloud_is_never_stated_verified(demo: SectionInspection, tmp_p
     flagged = dataclasses.replace(
         demo.result, check=dataclasses.replace(check, flagged=True, p_value=0.005, statistic=9.0)
     )
-    for method in ("denoised", "seed"):
+    for method in ("denoised", "perturbed"):
         result = dataclasses.replace(flagged, method=method)
         assert not any(stated_coverage(name, method, result.check)[2] for name in PARAMETER_NAMES)
         data = section_report_dict(result, demo.corrections)
@@ -309,7 +309,7 @@ def test_clouds_outside_the_studies_scope_are_never_stated_verified(demo: Sectio
     others = {
         "1400 points, the studies 1836": dataclasses.replace(demo.result, n_points=1400),
         "a nominal contour of 100.0 mm": dataclasses.replace(demo.result, nominal_length=0.1),
-        "an instrument other than the seed's CMM": dataclasses.replace(
+        "an instrument other than the reference paper's CMM": dataclasses.replace(
             demo.result, instrument=CmmInstrument(probing_half_width=1e-6)
         ),
         "points, the studies": dataclasses.replace(demo.result, n_points=0),  # not recorded
