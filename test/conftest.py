@@ -8,19 +8,22 @@ own path, so the working directory can be a fresh one.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
-# BLAS single-threaded, as the command line and the nodes run it (robocal_uncertainty/cli.py):
+from robocal_uncertainty._threads import limit_threads
+
+# BLAS single-threaded, as the command line and the nodes run it (robocal_uncertainty/_threads.py):
 # the Monte Carlo is many small batched products, where BLAS threads only add synchronisation.
 # On the loaded 2-core development machine (load average 14-17) the pooled simulated hold-out
 # test (6 campaigns of 253 poses, 2000 trials) took 81-98 s with two BLAS threads and 23-27 s
 # with one (CPU 20-22 s and 6-7 s). Set before any test module loads numpy; an explicit
 # setting in the environment wins.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+# numba's thread count too: importing the command line sets it to 1 (limit_threads), and numba
+# refuses a thread count that changes after its threads started, so a kernel test run on its own
+# (`pytest test/kernels`) failed at its first compile after a command-line test had run.
+limit_threads()
 
 
 @pytest.fixture(autouse=True)
