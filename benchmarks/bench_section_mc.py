@@ -3,7 +3,7 @@
 Scenario (issue 9 / the second reference paper): NASA Rotor 37 surface 2 scaled by 7.14 (maximum thickness 30.37 mm,
 the reference paper's 30.365 mm; chord 397 mm), a simulated 1 836-point scan with the reference paper's measured
 offsets (-0.1013 mm, 0.0538 mm) and twist (0.0512°) and a 5 µm three-wave form error, measured
-with the reference paper's CMM (config/instruments/cmm_seed.yaml). The naive baseline runs the full
+with the reference paper's CMM (config/instruments/cmm_reference_paper.yaml). The naive baseline runs the full
 algorithm (registration, segmentation, thickness, chord, profile) per trial on the same draws;
 its time for 10^6 trials is extrapolated from ``--naive`` trials.
 
@@ -32,7 +32,7 @@ from robocal_uncertainty.inspection.simulate import simulate_section_scan
 
 ROOT = Path(__file__).resolve().parents[1]
 ROTOR37 = ROOT / "test" / "inspection" / "data" / "nasa_rotor37_blade_geometry.dat"
-INSTRUMENT = ROOT / "config" / "instruments" / "cmm_seed.yaml"
+INSTRUMENT = ROOT / "config" / "instruments" / "cmm_reference_paper.yaml"
 
 # The reference paper's published Monte Carlo results (value, standard uncertainty) in mm / µm
 # (twist: degrees / millidegrees);

@@ -33,7 +33,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cloud", type=Path)
     parser.add_argument("--nominal", default="rotor37")
-    parser.add_argument("--instrument", default="cmm_seed")
+    parser.add_argument("--instrument", default="cmm_reference_paper")
     parser.add_argument("--family", default="smooth", choices=cs.FAMILIES)
     parser.add_argument("--scans", type=int, default=200)
     parser.add_argument("--half-width", type=float, default=4.33, help="µm")

@@ -33,7 +33,7 @@ def main() -> None:
     args = parser.parse_args()
     for path in args.clouds:
         nominal = NOMINALS[path.stem.split("_")[0]]
-        instrument = next((v for k, v in INSTRUMENTS.items() if k in path.stem), "cmm_seed")
+        instrument = next((v for k, v in INSTRUMENTS.items() if k in path.stem), "cmm_reference_paper")
         curve = load_section_nominal(nominal)
         scenario = scenario_from_cloud(read_point_cloud(path), curve, resolve_instrument(instrument)[0])
         scenario.landmarks  # noqa: B018  (built once per study, not per scan)

@@ -27,9 +27,9 @@ from robocal_uncertainty.inspection.section_mc import section_sources
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 
 CLOUDS = {
-    "cascade_800.txt": ("cascade", 800, "cmm_seed"),
-    "rotor37_400.txt": ("rotor37", 400, "cmm_seed"),
-    "rotor37_5000.txt": ("rotor37", 5000, "cmm_seed"),
+    "cascade_800.txt": ("cascade", 800, "cmm_reference_paper"),
+    "rotor37_400.txt": ("rotor37", 400, "cmm_reference_paper"),
+    "rotor37_5000.txt": ("rotor37", 5000, "cmm_reference_paper"),
     "rotor37_1836_cmm09.txt": ("rotor37", 1836, "config/instruments/cmm_0.9_400.yaml"),
     "rotor37_400_cmm09.txt": ("rotor37", 400, "config/instruments/cmm_0.9_400.yaml"),
 }

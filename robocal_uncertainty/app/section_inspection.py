@@ -17,7 +17,7 @@ algorithm and adds their standard deviation to the GUM budget (the reference pap
 
 Shipped nominals (``--nominal``): ``rotor37`` (surface 2 scaled by 7.14: maximum thickness
 30.37 mm, the reference paper's blade 30.365 mm), ``rotor37:K`` (surface K, same scale), ``cascade``
-(DFVLR L030-4 at a 100 mm chord). Shipped instruments: ``cmm_seed`` (the default).
+(DFVLR L030-4 at a 100 mm chord). Shipped instruments: ``cmm_reference_paper`` (the default).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -78,7 +79,10 @@ DEMO_SCENARIO: dict[str, float] = {
 }
 """The demo's simulated scan: the reference paper's point count, measured offsets and twist, a 5 µm form error."""
 
-_SHIPPED_INSTRUMENTS = ("cmm_seed",)
+_SHIPPED_INSTRUMENTS = ("cmm_reference_paper",)
+RENAMED_INSTRUMENTS = {"cmm_seed": "cmm_reference_paper"}
+"""Old shipped names still accepted (with a DeprecationWarning): ``cmm_seed`` named the reference
+paper's CMM and read like the random seed."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,8 +134,12 @@ def _shipped(*parts: str) -> Path:
 
 
 def resolve_instrument(spec: str | None) -> tuple[CmmInstrument, str]:
-    """The instrument of a YAML path or a shipped name (None: the reference paper's CMM ``cmm_seed``)."""
-    name = "cmm_seed" if spec is None else spec
+    """The instrument of a YAML path or a shipped name (None: the reference paper's CMM ``cmm_reference_paper``)."""
+    name = "cmm_reference_paper" if spec is None else spec
+    if name in RENAMED_INSTRUMENTS and not Path(name).is_file():
+        new = RENAMED_INSTRUMENTS[name]
+        warnings.warn(f"instrument {name!r} is deprecated: use {new!r}", DeprecationWarning, stacklevel=2)
+        name = new
     if name in _SHIPPED_INSTRUMENTS and not Path(name).is_file():
         return load_instrument(_shipped("instruments", f"{name}.yaml")), name
     path = Path(name).expanduser()

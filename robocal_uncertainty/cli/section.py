@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from robocal_uncertainty.cli._common import parse_trials, timed_progress
@@ -26,7 +27,7 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--nominal-unit", help="length unit of the --nominal file when it states none")
     p.add_argument(
-        "--instrument", help="instrument YAML or shipped name (default: cmm_seed, the reference paper's CMM)"
+        "--instrument", help="instrument YAML or shipped name (default: cmm_reference_paper, the reference paper's CMM)"
     )
     p.add_argument("--topic", help="PointCloud2 topic of a bag (default: its only PointCloud2 topic)")
     p.add_argument("--message", type=int, help="0-based message index in the topic (default: all messages joined)")
@@ -94,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_args(args: argparse.Namespace) -> None:
     """One-line errors for option combinations that cannot run; the deprecated method name mapped."""
+    from robocal_uncertainty.app.section_inspection import RENAMED_INSTRUMENTS
     from robocal_uncertainty.inspection.section_mc import DEPRECATED_METHODS
 
     if args.demo == (args.cloud is not None):
@@ -117,6 +119,13 @@ def _check_args(args: argparse.Namespace) -> None:
             file=sys.stderr,
         )
         args.method = new
+    if args.instrument in RENAMED_INSTRUMENTS and not Path(args.instrument).is_file():
+        new = RENAMED_INSTRUMENTS[args.instrument]
+        print(
+            f"robocal-uncertainty section: warning: --instrument {args.instrument} is deprecated, use {new}",
+            file=sys.stderr,
+        )
+        args.instrument = new
     if args.coverage_study is not None and args.coverage_study < 1:
         raise ConfigError(f"--coverage-study needs N >= 1 scans per family, got {args.coverage_study}")
     if args.coverage_study is not None and args.method != "denoised":

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
         load_instrument,
         point_displacements,
         point_error_sources,
-        seed_instrument,
+        reference_paper_instrument,
     )
     from robocal_uncertainty.inspection.bias_correction import MAX_MIN_PARAMETERS, BiasCorrection, bias_corrections
     from robocal_uncertainty.inspection.denoise import DenoisedCloud, ResidualCheck, denoise_section
@@ -95,10 +95,10 @@ __all__ = [
     "read_nominal_section",
     "read_point_cloud",
     "read_rotor37_section",
+    "reference_paper_instrument",
     "register_to_nominal",
     "resolution_envelope",
     "section_uncertainty",
-    "seed_instrument",
     "segment_section",
     "simulate_section_scan",
 ]

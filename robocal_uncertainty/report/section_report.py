@@ -229,7 +229,7 @@ def section_report_dict(
         "coverage_study_scope": {
             "points": STUDY_POINTS,
             "nominal_length_m": STUDY_NOMINAL_LENGTH,
-            "instrument": "reference paper's CMM (cmm_seed)",
+            "instrument": "reference paper's CMM (cmm_reference_paper)",
             "this_cloud_points": result.n_points,
             "this_nominal_length_m": result.nominal_length if math.isfinite(result.nominal_length) else None,
             "outside_because": outside_study_scope(result),

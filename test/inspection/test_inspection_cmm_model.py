@@ -14,12 +14,12 @@ from robocal_uncertainty.core.instruments.cmm import (
     load_instrument,
     point_displacements,
     point_error_sources,
-    seed_instrument,
+    reference_paper_instrument,
 )
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.distributions import Normal, Rectangular
 
-SHIPPED = Path(__file__).resolve().parents[2] / "config" / "instruments" / "cmm_seed.yaml"
+SHIPPED = Path(__file__).resolve().parents[2] / "config" / "instruments" / "cmm_reference_paper.yaml"
 SEED_KEYS = {
     "mpe_a_um": 1.2,
     "mpe_k_mm_per_um": 350,
@@ -38,12 +38,12 @@ def write_yaml(tmp_path: Path, entries: dict[str, object]) -> Path:
 
 def test_shipped_instrument_is_the_seeds() -> None:
     loaded = load_instrument(SHIPPED)
-    seed = seed_instrument()
+    seed = reference_paper_instrument()
     for field in ("mpe_a", "mpe_k", "thermal_half_width", "temperature_deviation"):
         assert getattr(loaded, field) == pytest.approx(getattr(seed, field), rel=1e-12)
     assert loaded.probing_half_width == pytest.approx(2e-6, rel=1e-12)
     assert loaded.algorithm_half_width == pytest.approx(0.05e-6, rel=1e-12)
-    assert loaded.name.startswith("seed_cmm")
+    assert loaded.name.startswith("reference_paper_cmm")
 
 
 def test_mpe_formula() -> None:

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
         load_instrument,
         point_displacements,
         point_error_sources,
-        seed_instrument,
+        reference_paper_instrument,
     )
     from robocal_uncertainty.core.instruments.encoders import LINEAR_ENCODER_HALF_WIDTH, EncoderNoise
     from robocal_uncertainty.core.instruments.laser_tracker import TrackerNoise
@@ -42,6 +42,6 @@ __all__ = [
     "load_instrument",
     "point_displacements",
     "point_error_sources",
-    "seed_instrument",
+    "reference_paper_instrument",
 ]
 __getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)

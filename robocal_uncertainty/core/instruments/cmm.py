@@ -1,4 +1,4 @@
-"""Coordinate measuring machine: the error model of each measured point (blade seed §1.2).
+"""Coordinate measuring machine: the error model of each measured point (the reference paper on blade sections, §1.2).
 
 Four independent sources displace each measured point in the section plane (z errors leave the
 in-plane parameters unchanged to first order and are not simulated):
@@ -10,12 +10,12 @@ in-plane parameters unchanged to first order and are not simulated):
     Expansion-coefficient difference δα ~ R(-a, a) [1/°C], one value per trial (a property of
     the part/machine pair), times the temperature deviation Δt: the point moves by
     ``δα·Δt·(p - p_ref)``, a scale error about the reference point, so a length L changes by
-    δα·Δt·L, whose standard uncertainty is the seed's 1.15e-3·L·Δt µm (L in mm).
+    δα·Δt·L, whose standard uncertainty is the reference paper's 1.15e-3·L·Δt µm (L in mm).
 ``probing``
     R(-P, P) along the point's probe vector (along the nominal outward normal when the export
     has no probe vectors).
 ``algorithm``
-    R(-e, e) along the nominal outward normal (the seed's 0.05 µm evaluation-algorithm error).
+    R(-e, e) along the nominal outward normal (the reference paper's 0.05 µm evaluation-algorithm error).
 
 Each source is an :class:`ErrorSource`: a ``montecarlo`` distribution for its draws and a fixed
 linear map from draws to point displacements, so one definition gives both the Monte Carlo
@@ -46,7 +46,7 @@ __all__ = [
     "load_instrument",
     "point_displacements",
     "point_error_sources",
-    "seed_instrument",
+    "reference_paper_instrument",
 ]
 
 SOURCE_NAMES: tuple[str, ...] = ("mpe", "thermal", "probing", "algorithm")
@@ -81,18 +81,18 @@ class CmmInstrument:
     Attributes
     ----------
     mpe_a : float
-        Constant term A of the MPE [m] (seed: 1.2 µm).
+        Constant term A of the MPE [m] (reference paper: 1.2 µm).
     mpe_k : float
-        K of the MPE's length term L/K, with L in mm giving µm (seed: 350); in SI the term is
+        K of the MPE's length term L/K, with L in mm giving µm (reference paper: 350); in SI the term is
         ``L[m] · 1e-3 / K`` [m].
     thermal_half_width : float
-        Half-width of the expansion-coefficient difference [1/°C] (seed: 2e-6).
+        Half-width of the expansion-coefficient difference [1/°C] (reference paper: 2e-6).
     temperature_deviation : float
-        Temperature deviation from 20 °C [°C] (seed: 0.3).
+        Temperature deviation from 20 °C [°C] (reference paper: 0.3).
     probing_half_width : float
-        Half-width of the probing error [m] (seed: 2 µm).
+        Half-width of the probing error [m] (reference paper: 2 µm).
     algorithm_half_width : float
-        Half-width of the algorithm error [m] (seed: 0.05 µm).
+        Half-width of the algorithm error [m] (reference paper: 0.05 µm).
     name : str
         Instrument name for reports.
     """
@@ -103,7 +103,7 @@ class CmmInstrument:
     temperature_deviation: float = 0.3
     probing_half_width: float = 2e-6
     algorithm_half_width: float = 0.05e-6
-    name: str = "seed_cmm"
+    name: str = "reference_paper_cmm"
 
     def __post_init__(self) -> None:
         for field in _SCALE:
@@ -133,13 +133,13 @@ def _as_points(values: ArrayLike, name: str) -> NDArray[np.float64]:
     return array
 
 
-def seed_instrument() -> CmmInstrument:
-    """The seed's CMM (the defaults of :class:`CmmInstrument`)."""
+def reference_paper_instrument() -> CmmInstrument:
+    """The reference paper's CMM (the defaults of :class:`CmmInstrument`)."""
     return CmmInstrument()
 
 
 def load_instrument(path: str | Path) -> CmmInstrument:
-    """Read an instrument YAML file (``config/instruments/cmm_seed.yaml`` is the seed's).
+    """Read an instrument YAML file (``config/instruments/cmm_reference_paper.yaml`` is the reference paper's).
 
     Keys carry their unit: ``mpe_a_um``, ``mpe_k_mm_per_um``,
     ``thermal_expansion_half_width_per_degc``, ``temperature_deviation_degc``,
