@@ -215,9 +215,6 @@ def test_simulated_holdout_coverage_with_and_without_model_error(frame: str, unm
     error, so its coverage scatters more than a binomial count would."""
     model = load_robot_model(resolve_robot_config("paper_arm"))
     inside, nrms, region = _pooled(model, SimulationSettings(frame=frame, unmodelled=unmodelled), range(6))
-    # 95 +- 3 % inclusive, compared to rounding: the gear error's y holds exactly 1104 of 1200
-    # (92.0 %) with the model error drawn as the field, the tolerance's edge.
-    inside = np.round(inside, 9)
     assert np.all((inside >= 0.92) & (inside <= 0.98)), inside
     assert np.all((nrms >= 0.85) & (nrms <= 1.15)), nrms
     assert 0.92 <= region <= 0.98
