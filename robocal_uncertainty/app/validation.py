@@ -66,26 +66,8 @@ def validate(
         A validation campaign measured in another set-up (its frame moved, see
         :func:`~robocal_uncertainty.uncertainty.holdout.validate_holdout`).
     """
-    if options.trials == "auto":
-        raise ConfigError("validate needs a fixed number of --trials, not auto")
-    if options.frame != "measurement":
-        # Held-out measurements exist only in the campaign's frame; moving them into the base
-        # frame would use the uncertain identified base and bias the comparison.
-        raise ConfigError(
-            "validate compares with measurements, so it works in the measurement frame only (no --frame base)"
-        )
+    _check_options(options, (train_poses, holdout_fraction, k_folds), validation_campaign)
     chosen = [x is not None for x in (train_poses, holdout_fraction, k_folds)]
-    if sum(chosen) > 1:
-        raise ConfigError("give only one of --train-poses, --holdout-fraction, --k-folds")
-    if validation_campaign is not None and any(chosen):
-        # The second campaign is held out whole and the first used whole for training: a split
-        # option would be ignored without a word.
-        given = next(o for o, c in zip(("--train-poses", "--holdout-fraction", "--k-folds"), chosen) if c)
-        msg = (
-            f"{given} splits the campaign, --validation-campaign holds out a second campaign whole and "
-            "trains on the first whole: give one or the other"
-        )
-        raise ConfigError(msg)
     splits = None
     if validation_campaign is None:
         fraction = holdout_fraction if any(chosen) else DEFAULT_HOLDOUT_FRACTION
@@ -110,3 +92,29 @@ def validate(
         progress=progress,
         backend=options.backend,
     )
+
+
+def _check_options(
+    options: EvaluationSettings, split_options: tuple[object, object, object], validation_campaign: Campaign | None
+) -> None:
+    """Refuse what :func:`validate` cannot validate (see its Raises)."""
+    chosen = [x is not None for x in split_options]
+    if options.trials == "auto":
+        raise ConfigError("validate needs a fixed number of --trials, not auto")
+    if options.frame != "measurement":
+        # Held-out measurements exist only in the campaign's frame; moving them into the base
+        # frame would use the uncertain identified base and bias the comparison.
+        raise ConfigError(
+            "validate compares with measurements, so it works in the measurement frame only (no --frame base)"
+        )
+    if sum(chosen) > 1:
+        raise ConfigError("give only one of --train-poses, --holdout-fraction, --k-folds")
+    if validation_campaign is not None and any(chosen):
+        # The second campaign is held out whole and the first used whole for training: a split
+        # option would be ignored without a word.
+        given = next(o for o, c in zip(("--train-poses", "--holdout-fraction", "--k-folds"), chosen) if c)
+        msg = (
+            f"{given} splits the campaign, --validation-campaign holds out a second campaign whole and "
+            "trains on the first whole: give one or the other"
+        )
+        raise ConfigError(msg)

@@ -19,7 +19,7 @@ no position (e.g. a distance) cannot be held out this way.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -413,21 +413,19 @@ def validate_holdout(
     campaign : Campaign
         Calibration campaign (joint readings [rad], points [m]).
     splits : sequence of HoldoutSplit, optional
-        Folds of `campaign` (see :func:`split_campaign`); required unless
-        `validation_campaign` is given.
+        Folds of `campaign` (:func:`split_campaign`); required unless `validation_campaign`.
     validation_campaign : Campaign, optional
         A second campaign measured in the same frame (same tracker set-up): every pose of
         it is held out and `campaign` is used whole for training.
     settings : UncertaintySettings, optional
         Sources and noise models, as for :func:`evaluate_uncertainty`.
     lambda_ : {"auto", "gcv"} or float
-    trials : int
-        Monte Carlo trials per fold.
+    trials, workers : int
+        Monte Carlo trials per fold; worker processes.
     coverage : float
         Coverage probability p of the intervals checked.
     seed : int
         Root seed (Monte Carlo and the held-out measurement noise).
-    workers : int
     levels : sequence of float
         Coverage probabilities of the reliability curve.
     progress : callable, optional
@@ -447,11 +445,97 @@ def validate_holdout(
         A validation campaign in another frame or with other joints.
     """
     settings = settings or UncertaintySettings()
+    levels_arr = _levels(levels, coverage)
+    campaign = campaign.reorder_joints(model.joint_names)
+    folds, mode = _folds(model, campaign, splits, validation_campaign)
+    pooled = _Pooled()
+    fold_results = []
+    frame_comparison: FrameComparison | None = None
+    chunk = _check_memory(model, folds, trials)
+    run = _FoldRun(settings, levels_arr, seed, chunk, mode, workers, trials, coverage, backend)
+    for f, (train, held_all) in enumerate(folds):
+        calibration = identify(model, train, lambda_=lambda_)
+        result, comparison = _run_fold(model, train, held_all, calibration, f, run, pooled)
+        frame_comparison = comparison if comparison is not None else frame_comparison
+        fold_results.append(_fold_result(result, calibration, train, held_all.n_poses))
+        if progress is not None:
+            progress(f"fold {f + 1}/{len(folds)}: {_fold_line(train, held_all, calibration)}")
+        frame_id = result.frame_id
+    record = (tuple(fold_results), frame_id, tuple(settings.sources), seed, mode, frame_comparison)
+    return _pooled_validation(pooled, levels_arr, coverage, record)
+
+
+def _fold_line(train: Campaign, held: Campaign, calibration: IdentificationResult) -> str:
+    """A fold's progress line (after its number)."""
+    n_train, n_held, rms = train.n_poses, held.n_poses, calibration.rms_after
+    return f"{n_train} training poses, {n_held} held out, residual RMS {rms * 1e3:.4f} mm"
+
+
+def _levels(levels: Sequence[float], coverage: float) -> Array:
+    """The reliability curve's coverage levels with `coverage` among them, sorted; all in (0, 1)."""
     levels_arr = np.asarray(sorted({float(v) for v in levels} | {float(coverage)}))
     if not ((levels_arr > 0) & (levels_arr < 1)).all():
         raise ConfigError(f"coverage levels must lie in (0, 1), got {levels_arr.tolist()}")
-    campaign = campaign.reorder_joints(model.joint_names)
-    folds: list[tuple[Campaign, Campaign]]
+    return levels_arr
+
+
+def _pooled_validation(
+    pooled: _Pooled,
+    levels_arr: Array,
+    coverage: float,
+    record: tuple[tuple[FoldResult, ...], str, tuple[str, ...], int, str, FrameComparison | None],
+) -> HoldoutValidation:
+    """The validation pooled over every fold and chunk (`record`: folds, frame id, sources, seed,
+    mode and frame comparison, as recorded)."""
+    folds, frame_id, sources, seed, mode, frame_comparison = record
+    err = np.concatenate(pooled.errors)
+    sd = np.concatenate(pooled.stds)
+    reg_all = np.concatenate(pooled.region_inside, axis=1)
+    at = int(np.flatnonzero(np.isclose(levels_arr, coverage))[0])
+    axes = _axis_validations(AXES, err, sd, np.concatenate(pooled.inside, axis=1), at)
+    orientation_axes: tuple[AxisValidation, ...] = ()
+    if pooled.rot_errors:
+        r_ins = np.concatenate(pooled.rot_inside, axis=1)
+        r_err, r_sd = np.concatenate(pooled.rot_errors), np.concatenate(pooled.rot_stds)
+        orientation_axes = _axis_validations(("rx", "ry", "rz"), r_err, r_sd, r_ins, at)
+    return HoldoutValidation(
+        orientation_axes=orientation_axes,
+        coverage_probability=float(coverage),
+        levels=levels_arr,
+        axes=axes,
+        region_inside_fraction=float(reg_all[at].mean()),
+        region_reliability=reg_all.mean(axis=1),
+        errors=err,
+        standard_uncertainties=sd,
+        folds=folds,
+        frame_id=frame_id,
+        sources=sources,
+        seed=seed,
+        mode=mode,
+        frame_comparison=frame_comparison,
+    )
+
+
+@dataclass
+class _Pooled:
+    """Per-chunk statistics of every fold, pooled at the end (lists of arrays)."""
+
+    errors: list[Array] = field(default_factory=list)
+    stds: list[Array] = field(default_factory=list)
+    inside: list[NDArray[np.bool_]] = field(default_factory=list)
+    region_inside: list[NDArray[np.bool_]] = field(default_factory=list)
+    rot_errors: list[Array] = field(default_factory=list)
+    rot_stds: list[Array] = field(default_factory=list)
+    rot_inside: list[NDArray[np.bool_]] = field(default_factory=list)
+
+
+def _folds(
+    model: RobotModel,
+    campaign: Campaign,
+    splits: Sequence[HoldoutSplit] | None,
+    validation_campaign: Campaign | None,
+) -> tuple[list[tuple[Campaign, Campaign]], str]:
+    """The (training, held-out) campaigns and the mode (``campaign``, ``k-fold``, ``split``)."""
     if validation_campaign is not None:
         if splits is not None:
             raise ConfigError("give either splits or a validation campaign, not both")
@@ -462,20 +546,15 @@ def validate_holdout(
                 f"campaign's in {campaign.frame_id!r} ({campaign.frame}): they must share one tracker set-up"
             )
             raise InputError(msg)
-        folds = [(campaign, held)]
-        mode = "campaign"
-    else:
-        if not splits:
-            raise ConfigError("give splits (hold-out fraction, training poses or k folds) or a validation campaign")
-        folds = [(campaign.subset(s.train), campaign.subset(s.held_out)) for s in splits]
-        mode = "k-fold" if len(splits) > 1 else "split"
+        return [(campaign, held)], "campaign"
+    if not splits:
+        raise ConfigError("give splits (hold-out fraction, training poses or k folds) or a validation campaign")
+    folds = [(campaign.subset(s.train), campaign.subset(s.held_out)) for s in splits]
+    return folds, "k-fold" if len(splits) > 1 else "split"
 
-    errors, stds, inside, region_inside = [], [], [], []
-    rot_errors: list[Array] = []
-    rot_stds: list[Array] = []
-    rot_inside: list[NDArray[np.bool_]] = []
-    fold_results = []
-    frame_comparison: FrameComparison | None = None
+
+def _check_memory(model: RobotModel, folds: list[tuple[Campaign, Campaign]], trials: int) -> int:
+    """Held-out poses per Monte Carlo chunk; refuses a trial count whose largest chunk would not fit in memory."""
     chunk = holdout_chunk_size(trials)
     largest = min(chunk, max(held.n_poses for _, held in folds))
     check_fits(
@@ -489,109 +568,106 @@ def validate_holdout(
         f"--trials {int(trials)} with {largest} held-out poses per Monte Carlo",
         "use fewer --trials",
     )
-    for f, (train, held_all) in enumerate(folds):
-        calibration = identify(model, train, lambda_=lambda_)
-        n_held = held_all.n_poses
-        result: CalibrationUncertainty | None = None
-        # The held-out poses in chunks of a size fixed by the trial count: peak memory does not
-        # grow with their number (the Monte Carlo of a chunk holds trials x poses values).
-        for c, lo in enumerate(range(0, n_held, chunk)):
-            held = held_all if n_held <= chunk else held_all.subset(np.arange(lo, min(n_held, lo + chunk)))
-            result = evaluate_uncertainty(
-                model,
-                train,
-                held.joint_positions,
-                EvaluationSettings(
-                    uncertainty=settings,
-                    trials=trials,
-                    coverage=coverage,
-                    seed=seed + f if c == 0 else _chunk_seed(seed, f, c),
-                    orientation=held.measurement.measures_orientation,
-                    backend=backend,
-                ),
-                calibration=calibration,
-                run=RunContext(workers=workers),
-            )
-            stats = _chunk_statistics(result, held, settings, levels_arr, seed, f, c)
-            if mode == "campaign" and c == 0:
-                frame_comparison = _check_frame(calibration, held_all, stats[1], coverage)
-            errors.append(stats[0])
-            stds.append(stats[1])
-            inside.append(stats[2])
-            region_inside.append(stats[3])
-            if stats[4] is not None:
-                rot_errors.append(stats[4][0])
-                rot_stds.append(stats[4][1])
-                rot_inside.append(stats[4][2])
-        assert result is not None
-        if result.not_converged:
-            # The trials do not re-identify the calibration: no statement to validate.
-            msg = f"fold {f + 1}: the Monte Carlo did not converge to a statement: {result.not_converged[0]}"
-            raise ConvergenceError(msg)
-        adequacy = result.model_adequacy
-        fold_results.append(
-            FoldResult(
-                n_train=train.n_poses,
-                n_held_out=n_held,
-                rms_train_after=calibration.rms_after,
-                lambda_=calibration.lambda_,
-                model_adequate=adequacy.adequate,
-                model_error_std=adequacy.standard_uncertainty,
-                n_trials=result.n_trials,
-                trustworthy=adequacy.trustworthy,
-                trust_note=adequacy.trust_note,
-                model_error=_model_error_kind(result),
-            )
+    return chunk
+
+
+@dataclass(frozen=True)
+class _FoldRun:
+    """What every fold's Monte Carlo shares (see :func:`validate_holdout`)."""
+
+    settings: UncertaintySettings
+    levels: Array
+    seed: int
+    chunk: int
+    mode: str
+    workers: int
+    trials: int
+    coverage: float
+    backend: str
+
+
+def _run_fold(
+    model: RobotModel,
+    train: Campaign,
+    held_all: Campaign,
+    calibration: IdentificationResult,
+    f: int,
+    run: _FoldRun,
+    pooled: _Pooled,
+) -> tuple[CalibrationUncertainty, FrameComparison | None]:
+    """One fold's Monte Carlo, chunk by chunk, its statistics appended to `pooled`."""
+    settings, seed, chunk = run.settings, run.seed, run.chunk
+    n_held = held_all.n_poses
+    result: CalibrationUncertainty | None = None
+    frame_comparison: FrameComparison | None = None
+    # The held-out poses in chunks of a size fixed by the trial count: peak memory does not
+    # grow with their number (the Monte Carlo of a chunk holds trials x poses values).
+    for c, lo in enumerate(range(0, n_held, chunk)):
+        held = held_all if n_held <= chunk else held_all.subset(np.arange(lo, min(n_held, lo + chunk)))
+        result = evaluate_uncertainty(
+            model,
+            train,
+            held.joint_positions,
+            EvaluationSettings(
+                uncertainty=settings,
+                trials=run.trials,
+                coverage=run.coverage,
+                seed=seed + f if c == 0 else _chunk_seed(seed, f, c),
+                orientation=held.measurement.measures_orientation,
+                backend=run.backend,
+            ),
+            calibration=calibration,
+            run=RunContext(workers=run.workers),
         )
-        if progress is not None:
-            progress(
-                f"fold {f + 1}/{len(folds)}: {train.n_poses} training poses, {n_held} held out, "
-                f"residual RMS {calibration.rms_after * 1e3:.4f} mm"
-            )
-        frame_id = result.frame_id
-    err = np.concatenate(errors)
-    sd = np.concatenate(stds)
-    ins = np.concatenate(inside, axis=1)  # (L, n, n_axes)
-    reg_all = np.concatenate(region_inside, axis=1)
-    at = int(np.flatnonzero(np.isclose(levels_arr, coverage))[0])
-    axes = tuple(
+        stats = _chunk_statistics(result, held, settings, run.levels, seed, f, c)
+        if run.mode == "campaign" and c == 0:
+            frame_comparison = _check_frame(calibration, held_all, stats[1], run.coverage)
+        pooled.errors.append(stats[0])
+        pooled.stds.append(stats[1])
+        pooled.inside.append(stats[2])
+        pooled.region_inside.append(stats[3])
+        if stats[4] is not None:
+            pooled.rot_errors.append(stats[4][0])
+            pooled.rot_stds.append(stats[4][1])
+            pooled.rot_inside.append(stats[4][2])
+    assert result is not None
+    if result.not_converged:
+        # The trials do not re-identify the calibration: no statement to validate.
+        msg = f"fold {f + 1}: the Monte Carlo did not converge to a statement: {result.not_converged[0]}"
+        raise ConvergenceError(msg)
+    return result, frame_comparison
+
+
+def _fold_result(
+    result: CalibrationUncertainty, calibration: IdentificationResult, train: Campaign, n_held: int
+) -> FoldResult:
+    """What one fold records (its training, the adequacy and which model error was drawn)."""
+    adequacy = result.model_adequacy
+    return FoldResult(
+        n_train=train.n_poses,
+        n_held_out=n_held,
+        rms_train_after=calibration.rms_after,
+        lambda_=calibration.lambda_,
+        model_adequate=adequacy.adequate,
+        model_error_std=adequacy.standard_uncertainty,
+        n_trials=result.n_trials,
+        trustworthy=adequacy.trustworthy,
+        trust_note=adequacy.trust_note,
+        model_error=_model_error_kind(result),
+    )
+
+
+def _axis_validations(
+    names: Sequence[str], err: Array, sd: Array, ins: NDArray[np.bool_], at: int
+) -> tuple[AxisValidation, ...]:
+    """Pooled per-axis statistics: errors and std (n, k), inside flags (L, n, k), `at` the level checked."""
+    return tuple(
         AxisValidation(
-            axis=AXES[a],
+            axis=name,
             rms_error=float(np.sqrt(np.mean(err[:, a] ** 2))),
             normalized_rms=float(np.sqrt(np.mean((err[:, a] / sd[:, a]) ** 2))),
             inside_fraction=float(ins[at, :, a].mean()),
             reliability=ins[:, :, a].mean(axis=1),
         )
-        for a in range(len(AXES))
-    )
-    orientation_axes: tuple[AxisValidation, ...] = ()
-    if rot_errors:
-        r_err = np.concatenate(rot_errors)
-        r_sd = np.concatenate(rot_stds)
-        r_ins = np.concatenate(rot_inside, axis=1)
-        orientation_axes = tuple(
-            AxisValidation(
-                axis=name,
-                rms_error=float(np.sqrt(np.mean(r_err[:, a] ** 2))),
-                normalized_rms=float(np.sqrt(np.mean((r_err[:, a] / r_sd[:, a]) ** 2))),
-                inside_fraction=float(r_ins[at, :, a].mean()),
-                reliability=r_ins[:, :, a].mean(axis=1),
-            )
-            for a, name in enumerate(("rx", "ry", "rz"))
-        )
-    return HoldoutValidation(
-        orientation_axes=orientation_axes,
-        coverage_probability=float(coverage),
-        levels=levels_arr,
-        axes=axes,
-        region_inside_fraction=float(reg_all[at].mean()),
-        region_reliability=reg_all.mean(axis=1),
-        errors=err,
-        standard_uncertainties=sd,
-        folds=tuple(fold_results),
-        frame_id=frame_id,
-        sources=tuple(settings.sources),
-        seed=seed,
-        mode=mode,
-        frame_comparison=frame_comparison,
+        for a, name in enumerate(names)
     )

@@ -262,7 +262,107 @@ def estimate_field(
         checks re-register and test against the validated level), without the leave-one-out
         scale and its degrees of freedom.
     """
-    from scipy import linalg, optimize
+    system = _field_system(calibration, joint_positions, noise, shape, max_equations=max_equations, seed=seed)
+    fun, log_s, c, log_l, independent_fun, bounds = _reml_optimum(system)
+    r, fit, n_cov, d = system.residuals, system.fit, system.noise, system.dimension
+    m = r.size - fit.shape[1]
+    hyper, dof = _hyper_covariance(system, log_s, c, log_l)
+    const = 0.5 * m * np.log(2 * np.pi)
+    common = {
+        "correlated_fraction": float(c),
+        "length_scale": float(np.exp(log_l)),
+        "likelihood_per_pose_covariance": float(np.exp(log_s)) * system.shape,
+        "log_likelihood": -fun - const,
+        "independent_log_likelihood": -independent_fun - const,
+        "dof": float(min(max(dof, 1.0), m)),
+        "poses_used": int(system.poses),
+        "hyper_covariance": hyper,
+        "contrasts": int(m),
+    }
+    if not leave_one_out:
+        return FieldEstimate(per_pose_covariance=float(np.exp(log_s)) * system.shape, **common)
+    unit = system.unit_covariance(c, float(np.exp(log_l)))
+    scale = _leave_one_out_scale(r, fit, n_cov, unit, d, (float(np.exp(bounds[0])), float(np.exp(bounds[1]))))
+    if scale is None:  # no scale explains the prediction errors (a degenerate shape): the likelihood's
+        scale = float(np.exp(log_s))
+    factors = _leave_one_out_components(r, fit, n_cov, unit, d, scale)
+    scale_dof, tail_dof = _leave_one_out_dof(r, fit, n_cov, unit, d, factors)
+    return FieldEstimate(
+        per_pose_covariance=system.shape * np.outer(factors, factors),
+        scale_dof=scale_dof,
+        tail_dof=tail_dof,
+        **common,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class _FieldSystem:
+    """The whitened residual equations the field's restricted likelihood is made of.
+
+    ``residuals`` (``W r``, length ``n d``), ``fit`` (an orthonormal basis of the whitened
+    Jacobian's columns), ``noise`` (``W N W``), ``white`` and ``kron_ones`` (``I (x) S`` and
+    ``1 1^T (x) S``, whitened), ``distance`` (chordal, ``n x n``) and ``shape`` (``S`` with
+    whitened trace ``d``).
+    """
+
+    residuals: Array
+    fit: Array
+    noise: Array
+    white: Array
+    kron_ones: Array
+    distance: Array
+    shape: Array
+    dimension: int
+
+    @property
+    def poses(self) -> int:
+        return int(self.distance.shape[0])
+
+    def unit_covariance(self, c: float, length: float) -> Array:
+        """``[c rho(d / l) + (1 - c) I] (x) S``, whitened: the field's covariance per unit scale."""
+        d = self.dimension
+        unit: Array = np.asarray((1.0 - c) * self.white, dtype=np.float64)
+        if c > 0.0:
+            rho = kernel_correlation(self.distance, length)
+            unit = np.asarray(unit + c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * self.kron_ones)
+        return np.asarray(unit, dtype=np.float64)
+
+    def nll(self, log_s: float, c: float, log_l: float) -> float:
+        """Negative restricted log-likelihood (without its constant) at ``(log s, c, log l)``."""
+        from scipy import linalg
+
+        # log|Q^T V Q| = log|V| + log|U^T V^-1 U| and
+        # r^T Q (Q^T V Q)^-1 Q^T r = r^T (V^-1 - V^-1 U (U^T V^-1 U)^-1 U^T V^-1) r.
+        d, fit, r = self.dimension, self.fit, self.residuals
+        s = float(np.exp(log_s))
+        cov = self.noise + s * (1.0 - c) * self.white
+        if c > 0.0:
+            rho = kernel_correlation(self.distance, float(np.exp(log_l)))
+            cov = cov + s * c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * self.kron_ones
+        try:
+            chol = linalg.cholesky(cov, lower=True)
+            vi_u = linalg.cho_solve((chol, True), fit)
+            vi_r = linalg.cho_solve((chol, True), r)
+            chol_u = linalg.cholesky(fit.T @ vi_u, lower=True)
+        except (linalg.LinAlgError, ValueError):
+            return float("inf")
+        z = linalg.solve_triangular(chol_u, fit.T @ vi_r, lower=True)
+        quad = float(r @ vi_r - z @ z)
+        return float(np.sum(np.log(np.diag(chol))) + np.sum(np.log(np.diag(chol_u))) + 0.5 * quad)
+
+
+def _field_system(
+    calibration: IdentificationResult,
+    joint_positions: Array,
+    noise: Array,
+    shape: Array,
+    *,
+    max_equations: int,
+    seed: int,
+) -> _FieldSystem:
+    """The whitened residual equations of :func:`estimate_field` (a seeded subset of the poses
+    of a campaign with more than `max_equations` equations)."""
+    from scipy import linalg
 
     measurement = calibration.measurement
     residuals = np.asarray(calibration.residuals, dtype=np.float64)
@@ -282,7 +382,6 @@ def estimate_field(
     u, sv, _ = np.linalg.svd(a_mat, full_matrices=False)
     fit = u[:, : int(np.sum(sv > 1e-10 * sv[0]))]
     r = residuals[idx].reshape(-1) * w
-    m = r.size - fit.shape[1]
     w_pose = w[:d]
     shape = np.asarray(shape, dtype=np.float64)
     scale = float(np.trace(w_pose[:, None] * shape * w_pose[None, :])) / d
@@ -290,32 +389,27 @@ def estimate_field(
         shape, scale = np.diag(1.0 / w_pose**2), 1.0
     shape = shape / scale  # whitened trace d
     ww = np.outer(w, w)
-    n_cov = linalg.block_diag(*noise[idx]) * ww
-    white = np.kron(np.eye(n), shape) * ww
-    kron_ones = np.kron(np.ones((n, n)), shape) * ww
-    distance = chordal_distance(q, q)
-    noise_level = float(np.trace(n_cov)) / r.size
+    return _FieldSystem(
+        residuals=r,
+        fit=fit,
+        noise=linalg.block_diag(*noise[idx]) * ww,
+        white=np.asarray(np.kron(np.eye(n), shape) * ww, dtype=np.float64),
+        kron_ones=np.asarray(np.kron(np.ones((n, n)), shape) * ww, dtype=np.float64),
+        distance=chordal_distance(q, q),
+        shape=shape,
+        dimension=d,
+    )
+
+
+def _reml_optimum(system: _FieldSystem) -> tuple[float, float, float, float, float, tuple[float, float]]:
+    """Maximum of the restricted likelihood: ``(nll, log s, c, log l)``, the best ``c = 0`` model's
+    ``nll``, and the bounds of ``log s`` searched."""
+    from scipy import optimize
+
+    r, nll = system.residuals, system.nll
+    m = r.size - system.fit.shape[1]
+    noise_level = float(np.trace(system.noise)) / r.size
     mean_square = float(r @ r) / max(m, 1)
-
-    def nll(log_s: float, c: float, log_l: float) -> float:
-        # log|Q^T V Q| = log|V| + log|U^T V^-1 U| and
-        # r^T Q (Q^T V Q)^-1 Q^T r = r^T (V^-1 - V^-1 U (U^T V^-1 U)^-1 U^T V^-1) r.
-        s = float(np.exp(log_s))
-        cov = n_cov + s * (1.0 - c) * white
-        if c > 0.0:
-            rho = kernel_correlation(distance, float(np.exp(log_l)))
-            cov = cov + s * c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * kron_ones
-        try:
-            chol = linalg.cholesky(cov, lower=True)
-            vi_u = linalg.cho_solve((chol, True), fit)
-            vi_r = linalg.cho_solve((chol, True), r)
-            chol_u = linalg.cholesky(fit.T @ vi_u, lower=True)
-        except (linalg.LinAlgError, ValueError):
-            return float("inf")
-        z = linalg.solve_triangular(chol_u, fit.T @ vi_r, lower=True)
-        quad = float(r @ vi_r - z @ z)
-        return float(np.sum(np.log(np.diag(chol))) + np.sum(np.log(np.diag(chol_u))) + 0.5 * quad)
-
     s0 = max(mean_square - noise_level, 1e-3 * max(noise_level, 1e-30))
     floor = max(noise_level, 1e-30)
     lo_s, hi_s = np.log(1e-6 * floor), np.log(1e4 * max(mean_square, floor))
@@ -331,9 +425,17 @@ def estimate_field(
         )
         if res.fun < best[0]:
             best = (float(res.fun), float(res.x[0]), float(res.x[1]), float(res.x[2]))
-    fun, log_s, c, log_l = best
+    return best[0], best[1], best[2], best[3], float(independent.fun), (float(lo_s), float(hi_s))
+
+
+def _hyper_covariance(system: _FieldSystem, log_s: float, c: float, log_l: float) -> tuple[Array, float]:
+    """Covariance of ``(log s, c, log l)`` (the restricted likelihood's inverse curvature; zero rows
+    for those at a bound) and the scale's effective degrees of freedom ``2 / var(log s)``."""
+    m = system.residuals.size - system.fit.shape[1]
     free = [0] if c <= 1e-6 else ([0, 1, 2] if c < 1.0 - 1e-6 else [0, 2])
-    hess = central_hessian(lambda x: nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free)
+    hess = central_hessian(
+        lambda x: system.nll(x[0], min(max(x[1], 0.0), 1.0), x[2]), np.array([log_s, c, log_l]), free
+    )
     hyper = np.zeros((3, 3))
     try:
         inv = np.linalg.inv(hess)
@@ -343,32 +445,7 @@ def estimate_field(
     if np.all(np.isfinite(inv)) and np.all(np.linalg.eigvalsh(0.5 * (inv + inv.T)) > 0):
         hyper[np.ix_(free, free)] = 0.5 * (inv + inv.T)
     dof = 2.0 / var_log_s if np.isfinite(var_log_s) and var_log_s > 0 else float(m)
-    const = 0.5 * m * np.log(2 * np.pi)
-    common = {
-        "correlated_fraction": float(c),
-        "length_scale": float(np.exp(log_l)),
-        "likelihood_per_pose_covariance": float(np.exp(log_s)) * shape,
-        "log_likelihood": -fun - const,
-        "independent_log_likelihood": -float(independent.fun) - const,
-        "dof": float(min(max(dof, 1.0), m)),
-        "poses_used": int(n),
-        "hyper_covariance": hyper,
-        "contrasts": int(m),
-    }
-    if not leave_one_out:
-        return FieldEstimate(per_pose_covariance=float(np.exp(log_s)) * shape, **common)
-    unit: Array = np.asarray((1.0 - c) * white, dtype=np.float64)
-    if c > 0.0:
-        rho = kernel_correlation(distance, float(np.exp(log_l)))
-        unit = np.asarray(unit + c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * kron_ones, dtype=np.float64)
-    scale = _leave_one_out_scale(r, fit, n_cov, unit, d, (float(np.exp(lo_s)), float(np.exp(hi_s))))
-    if scale is None:  # no scale explains the prediction errors (a degenerate shape): the likelihood's
-        scale = float(np.exp(log_s))
-    factors = _leave_one_out_components(r, fit, n_cov, unit, d, scale)
-    scale_dof, tail_dof = _leave_one_out_dof(r, fit, n_cov, unit, d, factors)
-    return FieldEstimate(
-        per_pose_covariance=shape * np.outer(factors, factors), scale_dof=scale_dof, tail_dof=tail_dof, **common
-    )
+    return hyper, dof
 
 
 def _leave_one_out_scale(

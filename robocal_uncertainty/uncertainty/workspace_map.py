@@ -28,11 +28,12 @@ from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError, ConvergenceError, InputError
 from robocal_uncertainty.kernels import BackendInfo, resolve_backend
-from robocal_uncertainty.montecarlo.engine import ProgressCallback, reduce_trials
+from robocal_uncertainty.montecarlo.engine import ProgressCallback, ReducedTrials, reduce_trials
 from robocal_uncertainty.montecarlo.region import coverage_region
 from robocal_uncertainty.montecarlo.streaming import Reduction
 from robocal_uncertainty.uncertainty.calibration import (
     OUTPUT_FRAMES,
+    CalibrationTrials,
     first_order_standard_uncertainty,
     prepare_calibration_trials,
 )
@@ -306,104 +307,76 @@ def map_workspace(
 
     Parameters
     ----------
-    model : RobotModel
-        Nominal model.
-    campaign : Campaign
-        Calibration data (joint readings [rad], points [m]).
+    model, campaign : RobotModel, Campaign
+        Nominal model; calibration data (joint readings [rad], points [m]).
     configurations : array_like, shape (n, n_joints) [rad]
-        Where to evaluate, inside the joint limits (see :func:`grid_configurations`,
-        :func:`sample_configurations`).
+        Where to evaluate, inside the joint limits (:func:`grid_configurations`, :func:`sample_configurations`).
     settings : UncertaintySettings, optional
         Sources and their models; default as :func:`evaluate_uncertainty`.
     calibration : IdentificationResult, optional
-        An existing calibration of `campaign`; identified with `lambda_` if omitted.
-    lambda_ : {"auto", "gcv"} or float
-        Lambda method of the calibration when it is identified here.
-    accept_unconverged : bool
-        Use an identification that did not converge instead of raising ConvergenceError.
-    trials : int
-        Monte Carlo trials (fixed, >= 2; a region needs more, e.g. 11 at p = 0.95, and
-        JCGM 101 asks for 10^4 or more).
-    seed : int
-        Root seed; the map is reproducible from it.
+        An existing calibration of `campaign`; else identified with `lambda_` and `accept_unconverged`
+        (an identification that did not converge is used instead of raising).
+    trials, seed : int
+        Monte Carlo trials (fixed, >= 2; a region needs more, e.g. 11 at p = 0.95; JCGM 101
+        asks for 10^4 or more); root seed, the map is reproducible from it.
     frame : {"measurement", "base"}
         Output frame of the positions (see :func:`evaluate_uncertainty`).
     coverage : float
         Coverage probability of the JCGM 102 regions.
     regions : sequence of int
-        0-based configurations whose Monte Carlo values are kept for a coverage region
-        (3 x trials values each); the others keep only their mean and covariance.
-    block_size : int
+        0-based configurations whose Monte Carlo values (3 x trials each) are kept for a coverage
+        region; the others keep only their mean and covariance.
+    block_size, chunk_blocks : int
         Trials per random stream (part of the result's identity, as in
-        :func:`evaluate_uncertainty`, whose default is 10 000).
-    chunk_blocks : int
-        Blocks per task (never changes the result).
-    executor : object, optional
-        ``concurrent.futures`` executor or ``dask.distributed.Client`` for the blocks.
-    workers : int
-        Local processes when no executor is given (never changes the result).
-    progress : callable, optional
-        ``progress(done, target)`` after each chunk.
-    backend : str
-        Trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`);
-        the same result to rounding.
-
-    Returns
-    -------
-    WorkspaceMap
+        :func:`evaluate_uncertainty`); blocks per task (never changes the result).
+    executor, workers, progress, backend
+        ``concurrent.futures`` executor or ``dask.distributed.Client`` for the blocks; local
+        processes without one (never change the result); ``progress(done, target)`` after each
+        chunk; trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`,
+        the same result to rounding).
 
     Raises
     ------
-    ConfigError
-        Bad configurations, settings, frame or region indices.
-    InputError
-        Configurations outside the joint limits or not finite.
+    ConfigError, InputError
+        Bad settings, frame or region indices; configurations outside the joint limits or not finite.
     ConvergenceError
         The trials' spread disagrees with the first-order (GUM) statement by more than
         :data:`~.statement_check.GUM_DISAGREEMENT_FACTOR` at a checked configuration
         (:data:`GUM_CHECKED_CONFIGURATIONS`): they did not re-identify the calibration.
     """
     settings = settings or UncertaintySettings()
-    if frame not in OUTPUT_FRAMES:
-        msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
-        raise ConfigError(msg)
-    if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 2:
-        msg = f"trials must be an integer >= 2 for a map, got {trials!r}"
-        raise ConfigError(msg)
-    if isinstance(coverage, bool) or not isinstance(coverage, (int, float)) or not 0.0 < coverage < 1.0:
-        msg = f"coverage probability must be in (0, 1), got {coverage!r}"
-        raise ConfigError(msg)
+    _check_map_settings(frame, trials, coverage)
     q = _check_configurations(model, configurations)
-    n = q.shape[0]
-    kept_configs = _check_regions(regions, n)
+    kept_configs = _check_regions(regions, q.shape[0])
     campaign = campaign.reorder_joints(model.joint_names)
-    rows = min(int(block_size), int(trials)) * max(1, int(chunk_blocks))
-    check_fits(
-        map_bytes(
-            n,
-            model.n_joints,
-            campaign.n_poses,
-            block_rows=rows,
-            workers=1 if executor is not None else int(workers),
-            n_trials=int(trials),
-            n_regions=int(kept_configs.size),
-        ),
-        f"a map of {_grouped(n)} configurations x {_grouped(int(trials))} trials ({_grouped(rows)} trials per "
-        f"block, {int(workers)} worker{'s' if int(workers) != 1 else ''}"
-        f"{f', {kept_configs.size} with a region' if kept_configs.size else ''})",
-        "use fewer configurations, a smaller --block-size, fewer --workers"
-        + (", or fewer --trials or --regions" if kept_configs.size else ""),
-    )
+    _check_map_memory(model, campaign, q.shape[0], trials, kept_configs, (block_size, chunk_blocks, executor, workers))
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     trial_block = prepare_calibration_trials(
         model, campaign, q, settings=settings, calibration=calibration, frame=frame, backend=backend
     )
+    blocks = (block_size, chunk_blocks, workers, executor, progress)
+    run = _run_map(trial_block, q.shape[0], kept_configs, seed, trials, blocks)
+    record = (frame, coverage, seed, block_size, backend)
+    return _assemble_map(model, campaign, q, run, kept_configs, calibration, settings, record)
+
+
+def _run_map(
+    trial_block: CalibrationTrials,
+    n: int,
+    kept_configs: NDArray[np.intp],
+    seed: int,
+    trials: int,
+    blocks: tuple[int, int, int, object | None, ProgressCallback | None],
+) -> ReducedTrials:
+    """The map's trials reduced where they run: per configuration a mean and 3 x 3 covariance,
+    Monte Carlo values of `kept_configs` only (`blocks`: block size, blocks per chunk, workers,
+    executor, progress)."""
+    block_size, chunk_blocks, workers, executor, progress = blocks
     groups = np.arange(POSITION_DIM * n).reshape(n, POSITION_DIM)
-    reduction = Reduction(groups, keep=groups[kept_configs].ravel())
-    run = reduce_trials(
+    return reduce_trials(
         trial_block,
-        reduction,
+        Reduction(groups, keep=groups[kept_configs].ravel()),
         seed=seed,
         n_trials=int(trials),
         block_size=block_size,
@@ -412,21 +385,28 @@ def map_workspace(
         executor=executor,
         progress=progress,
     )
+
+
+def _assemble_map(
+    model: RobotModel,
+    campaign: Campaign,
+    q: Array,
+    run: ReducedTrials,
+    kept_configs: NDArray[np.intp],
+    calibration: IdentificationResult,
+    settings: UncertaintySettings,
+    record: tuple[str, float, int, int, str],
+) -> WorkspaceMap:
+    """The map from the reduced trials (checked against the GUM first; `record`: frame, coverage,
+    seed, block size, backend as asked)."""
+    frame, coverage, seed, block_size, backend = record
+    n = q.shape[0]
     mean = run.moments.mean[: POSITION_DIM * n].reshape(n, POSITION_DIM)
     covariance = run.moments.group_covariance
     std = np.sqrt(np.einsum("nii->ni", covariance))
     _check_against_gum(model, campaign, q, std, settings, calibration, frame)
     warns: list[str] = list(calibration.warnings)
-    semi = np.full((n, POSITION_DIM), np.nan)
-    for slot, i in enumerate(kept_configs):
-        values = run.kept[:, POSITION_DIM * slot : POSITION_DIM * (slot + 1)]
-        try:
-            region = coverage_region(values, coverage)
-        except (InputError, ConfigError) as err:
-            warns.append(f"map configuration {int(i)}: no coverage region ({err})")
-            continue
-        eig = np.clip(np.linalg.eigvalsh(region.covariance), 0.0, None)
-        semi[i] = region.coverage_factor * np.sqrt(eig[::-1])
+    semi = _region_semi_axes(run.kept, kept_configs, n, coverage, warns)
     in_base = frame == "base" or campaign.frame == "base"
     positions = _calibrated_points(calibration, q, in_base=frame == "base")
     poses = _calibrated_points(calibration, campaign.joint_positions, in_base=frame == "base")
@@ -456,3 +436,62 @@ def map_workspace(
         warnings=tuple(warns),
         backend=resolve_backend(backend),
     )
+
+
+def _check_map_settings(frame: str, trials: int, coverage: float) -> None:
+    """Refuse an output frame, trial count or coverage probability a map cannot have."""
+    if frame not in OUTPUT_FRAMES:
+        msg = f"output frame must be one of {', '.join(OUTPUT_FRAMES)}, got {frame!r}"
+        raise ConfigError(msg)
+    if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 2:
+        msg = f"trials must be an integer >= 2 for a map, got {trials!r}"
+        raise ConfigError(msg)
+    if isinstance(coverage, bool) or not isinstance(coverage, (int, float)) or not 0.0 < coverage < 1.0:
+        msg = f"coverage probability must be in (0, 1), got {coverage!r}"
+        raise ConfigError(msg)
+
+
+def _check_map_memory(
+    model: RobotModel,
+    campaign: Campaign,
+    n: int,
+    trials: int,
+    kept_configs: NDArray[np.intp],
+    run: tuple[int, int, object | None, int],
+) -> None:
+    """Refuse a map whose blocks (and kept region values) would not fit in memory (`run`: block
+    size, blocks per chunk, executor, workers)."""
+    block_size, chunk_blocks, executor, workers = run
+    rows = min(int(block_size), int(trials)) * max(1, int(chunk_blocks))
+    check_fits(
+        map_bytes(
+            n,
+            model.n_joints,
+            campaign.n_poses,
+            block_rows=rows,
+            workers=1 if executor is not None else int(workers),
+            n_trials=int(trials),
+            n_regions=int(kept_configs.size),
+        ),
+        f"a map of {_grouped(n)} configurations x {_grouped(int(trials))} trials ({_grouped(rows)} trials per "
+        f"block, {int(workers)} worker{'s' if int(workers) != 1 else ''}"
+        f"{f', {kept_configs.size} with a region' if kept_configs.size else ''})",
+        "use fewer configurations, a smaller --block-size, fewer --workers"
+        + (", or fewer --trials or --regions" if kept_configs.size else ""),
+    )
+
+
+def _region_semi_axes(kept: Array, kept_configs: NDArray[np.intp], n: int, coverage: float, warns: list[str]) -> Array:
+    """Semi-axes of the JCGM 102 regions, shape (n, 3) (NaN without a region); a region that
+    cannot be formed is a line appended to `warns`."""
+    semi = np.full((n, POSITION_DIM), np.nan)
+    for slot, i in enumerate(kept_configs):
+        values = kept[:, POSITION_DIM * slot : POSITION_DIM * (slot + 1)]
+        try:
+            region = coverage_region(values, coverage)
+        except (InputError, ConfigError) as err:
+            warns.append(f"map configuration {int(i)}: no coverage region ({err})")
+            continue
+        eig = np.clip(np.linalg.eigvalsh(region.covariance), 0.0, None)
+        semi[i] = region.coverage_factor * np.sqrt(eig[::-1])
+    return semi
