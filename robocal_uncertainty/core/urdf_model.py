@@ -541,6 +541,40 @@ def model_frames(model: RobotModel, q: Array | None = None) -> tuple[list[Array]
     return frames, current @ transform(model.tool_point, model.tool_rpy)
 
 
+@dataclass(frozen=True)
+class _DhRows:
+    """The modified-DH rows of a chain and the mount that puts joint 1's frame on its axis."""
+
+    mount_xyz: Array
+    mount_rpy: Array
+    alpha: Array
+    a: Array
+    theta: Array
+    d: Array
+    beta: Array
+    has_beta: tuple[bool, ...]
+
+
+def _dh_rows(joint_frames: list[Array], movable: tuple[UrdfJoint, ...]) -> _DhRows:
+    """Walk the joint axes (in the base link) into modified-DH rows, one line step per joint."""
+    axes = [frame[:3, :3] @ np.asarray(j.axis) for frame, j in zip(joint_frames, movable)]
+    points = [frame[:3, 3] for frame in joint_frames]
+    mount_xyz, mount_rpy = _frame_on_axis(points[0], axes[0])
+    n = len(movable)
+    alpha, a, beta, theta, d = (np.zeros(n) for _ in range(5))
+    has_beta = [False] * n
+    frame = transform(mount_xyz, mount_rpy)
+    for i in range(1, n):
+        row = _line_step(frame, points[i], axes[i])
+        theta[i - 1] += row.phi
+        d[i - 1] += row.s
+        alpha[i], a[i], beta[i], has_beta[i] = row.alpha, row.a, row.beta, row.has_beta
+        frame = frame @ _rot(2, row.phi) @ _trans(2, row.s) @ _rot(0, row.alpha) @ _trans(0, row.a)
+        if row.has_beta:
+            frame = frame @ _rot(1, row.beta)
+    return _DhRows(mount_xyz, mount_rpy, alpha, a, theta, d, beta, tuple(has_beta))
+
+
 def robot_model_from_urdf(
     robot: UrdfRobot,
     base_link: str | None = None,
@@ -576,21 +610,7 @@ def robot_model_from_urdf(
     chain = urdf_chain(robot, base_link, tip_link)
     joint_frames, _ = chain_frames(chain)
     movable = chain.movable
-    axes = [frame[:3, :3] @ np.asarray(j.axis) for frame, j in zip(joint_frames, movable)]
-    points = [frame[:3, 3] for frame in joint_frames]
-    mount_xyz, mount_rpy = _frame_on_axis(points[0], axes[0])
-    n = len(movable)
-    alpha, a, beta, theta, d = (np.zeros(n) for _ in range(5))
-    has_beta = [False] * n
-    frame = transform(mount_xyz, mount_rpy)
-    for i in range(1, n):
-        row = _line_step(frame, points[i], axes[i])
-        theta[i - 1] += row.phi
-        d[i - 1] += row.s
-        alpha[i], a[i], beta[i], has_beta[i] = row.alpha, row.a, row.beta, row.has_beta
-        frame = frame @ _rot(2, row.phi) @ _trans(2, row.s) @ _rot(0, row.alpha) @ _trans(0, row.a)
-        if row.has_beta:
-            frame = frame @ _rot(1, row.beta)
+    dh = _dh_rows(joint_frames, movable)
     limits = np.array(
         [[j.lower, j.upper] if j.type != "continuous" else [-2.0 * math.pi, 2.0 * math.pi] for j in movable],
         dtype=np.float64,
@@ -598,12 +618,12 @@ def robot_model_from_urdf(
     model = RobotModel(
         name=f"{robot.name}[{chain.base_link}->{chain.tip_link}]",
         joint_names=tuple(j.name for j in movable),
-        alpha=alpha,
-        a=a,
-        theta=theta,
-        d=d,
-        beta=beta,
-        has_beta=tuple(has_beta),
+        alpha=dh.alpha,
+        a=dh.a,
+        theta=dh.theta,
+        d=dh.d,
+        beta=dh.beta,
+        has_beta=dh.has_beta,
         joint_limits=limits,
         tool_point=np.zeros(3),
         base_xyz=np.zeros(3),
@@ -612,11 +632,17 @@ def robot_model_from_urdf(
         base_frame_id=chain.base_link,
         measurement_frame_id=measurement_frame_id,
         prismatic=tuple(j.type == "prismatic" for j in movable),
-        mount_xyz=mount_xyz,
-        mount_rpy=mount_rpy,
+        mount_xyz=dh.mount_xyz,
+        mount_rpy=dh.mount_rpy,
         mounted=True,
     )
-    # The tool: tip link in the last modified-DH frame, then the measured point in the tip link.
+    return _with_tool(model, chain, tool_point)
+
+
+def _with_tool(
+    model: RobotModel, chain: UrdfChain, tool_point: Array | tuple[float, float, float] | None
+) -> RobotModel:
+    """`model` with its tool: the tip link in the last modified-DH frame, then the measured point in it."""
     frames, _ = model_frames(model)
     _, tip = chain_frames(chain)
     last_t_tip = _inv(frames[-1]) @ tip
@@ -626,6 +652,30 @@ def robot_model_from_urdf(
         raise ConfigError(msg)
     point = last_t_tip[:3, :3] @ given + last_t_tip[:3, 3]
     return replace(model, tool_point=point, tool_rpy=urdf_rpy(last_t_tip[:3, :3]), tool_known=tool_point is not None)
+
+
+def _axis_offsets(chain: UrdfChain, nominal: RobotModel, base: Array) -> list[Array]:
+    """Per movable joint, its nominal frame in the nominal model frame on its axis.
+
+    Raises ConfigError when a joint does not turn (or slide) about that frame's z axis.
+    """
+    joint_nominal, _ = chain_frames(chain)
+    model_nominal, _ = model_frames(nominal)
+    offsets = []
+    for joint, j_frame, m_frame in zip(chain.movable, joint_nominal, model_nominal):
+        k = _inv(base @ m_frame) @ j_frame  # model frame i <- joint frame i
+        axis = k[:3, :3] @ np.asarray(joint.axis)
+        misfit = float(np.linalg.norm(axis - np.array([0.0, 0.0, 1.0])))
+        if joint.type != "prismatic":
+            misfit = max(misfit, float(math.hypot(k[0, 3], k[1, 3])))
+        if misfit > _AXIS_TOL:
+            msg = (
+                f"{chain.robot.where}: joint {joint.name!r} does not turn about the model's axis "
+                f"(misfit {misfit:.3g}): the URDF and robot model {nominal.name!r} describe different robots"
+            )
+            raise ConfigError(msg)
+        offsets.append(k)
+    return offsets
 
 
 def calibrated_joint_origins(
@@ -675,23 +725,8 @@ def calibrated_joint_origins(
         )
         raise ConfigError(msg)
     base = np.eye(4) if frame0 is None else np.asarray(frame0, dtype=np.float64)
-    joint_nominal, _ = chain_frames(chain)
-    model_nominal, _ = model_frames(nominal)
+    offsets = _axis_offsets(chain, nominal, base)
     model_cal, tool_cal = model_frames(calibrated)
-    offsets = []
-    for joint, j_frame, m_frame in zip(movable, joint_nominal, model_nominal):
-        k = _inv(base @ m_frame) @ j_frame  # model frame i <- joint frame i
-        axis = k[:3, :3] @ np.asarray(joint.axis)
-        misfit = float(np.linalg.norm(axis - np.array([0.0, 0.0, 1.0])))
-        if joint.type != "prismatic":
-            misfit = max(misfit, float(math.hypot(k[0, 3], k[1, 3])))
-        if misfit > _AXIS_TOL:
-            msg = (
-                f"{chain.robot.where}: joint {joint.name!r} does not turn about the model's axis "
-                f"(misfit {misfit:.3g}): the URDF and robot model {nominal.name!r} describe different robots"
-            )
-            raise ConfigError(msg)
-        offsets.append(k)
     origins: dict[str, tuple[Array, Array]] = {}
     current = chain.base_offset.copy()
     k_index = 0
