@@ -325,6 +325,8 @@ def _objective(residual: Array, x: Array, penalized: NDArray[np.bool_], lam: flo
 
 
 def _gauss_newton(
+    x_start: Array,
+    *,
     layout: ParameterLayout,
     measurement: MeasurementType,
     p0: Array,
@@ -335,7 +337,6 @@ def _gauss_newton(
     measured: Array,
     method: LambdaMethod,
     fixed_lambda: float,
-    x_start: Array,
     max_iterations: int,
     step_tolerance: float,
     start: tuple[Array, Array] | None = None,
@@ -842,16 +843,16 @@ def _identify_weighted(
     rms_before, max_before = residual_stats(_position_part(measurement, residuals0))
     solve = partial(
         _gauss_newton,
-        layout,
-        measurement,
-        p0,
-        est,
-        scale,
-        penalized,
-        q,
-        measured,
-        method,
-        fixed_lambda,
+        layout=layout,
+        measurement=measurement,
+        p0=p0,
+        est=est,
+        scale=scale,
+        penalized=penalized,
+        q=q,
+        measured=measured,
+        method=method,
+        fixed_lambda=fixed_lambda,
         max_iterations=max_iterations,
         step_tolerance=step_tolerance,
     )

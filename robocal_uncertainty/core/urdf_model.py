@@ -251,6 +251,62 @@ def _parse_joint(element: ET.Element, where: str) -> UrdfJoint:
     )
 
 
+def _parse_links(root: ET.Element, where: str) -> list[str]:
+    """The link names, each named once."""
+    links: list[str] = []
+    for element in root.findall("link"):
+        name = element.get("name")
+        if not name:
+            msg = f"{where}: a <link> has no name"
+            raise ConfigError(msg)
+        if name in links:
+            msg = f"{where}: link {name!r} is defined twice"
+            raise ConfigError(msg)
+        links.append(name)
+    return links
+
+
+def _parse_joints(root: ET.Element, links: list[str], where: str) -> list[UrdfJoint]:
+    """The joints, each named once, between defined links, no link the child of two joints."""
+    joints: list[UrdfJoint] = []
+    for element in root.findall("joint"):
+        joint = _parse_joint(element, where)
+        if any(j.name == joint.name for j in joints):
+            msg = f"{where}: joint {joint.name!r} is defined twice"
+            raise ConfigError(msg)
+        for end in (joint.parent, joint.child):
+            if end not in links:
+                msg = f"{where}: joint {joint.name!r} names link {end!r}, which the URDF does not define"
+                raise ConfigError(msg)
+        other = next((j for j in joints if j.child == joint.child), None)
+        if other is not None:
+            msg = (
+                f"{where}: link {joint.child!r} is the child of joints {other.name!r} and {joint.name!r}: "
+                "a kinematic loop (a URDF describes a tree)"
+            )
+            raise ConfigError(msg)
+        joints.append(joint)
+    return joints
+
+
+def _check_tree(robot: UrdfRobot) -> None:
+    """Refuse a kinematic loop or several root links."""
+    where, links = robot.where, robot.links
+    for link in links:
+        seen = {link}
+        up = robot.parent_joint(link)
+        while up is not None:
+            if up.parent in seen:
+                msg = f"{where}: joint {up.name!r} closes a kinematic loop through link {up.parent!r}"
+                raise ConfigError(msg)
+            seen.add(up.parent)
+            up = robot.parent_joint(up.parent)
+    roots = [link for link in links if robot.parent_joint(link) is None]
+    if len(roots) > 1:
+        msg = f"{where}: links {', '.join(repr(r) for r in roots)} have no parent: the URDF is not one tree"
+        raise ConfigError(msg)
+
+
 def parse_urdf(text: str, *, where: str = "URDF") -> UrdfRobot:
     """Parse URDF text (plain XML; xacro must be expanded first) into links and joints.
 
@@ -272,51 +328,13 @@ def parse_urdf(text: str, *, where: str = "URDF") -> UrdfRobot:
     if any("xacro" in (el.tag if isinstance(el.tag, str) else "") for el in root.iter()) or "${" in text:
         msg = f"{where} still holds xacro macros: expand it first (xacro robot.urdf.xacro > robot.urdf)"
         raise ConfigError(msg)
-    links: list[str] = []
-    for element in root.findall("link"):
-        name = element.get("name")
-        if not name:
-            msg = f"{where}: a <link> has no name"
-            raise ConfigError(msg)
-        if name in links:
-            msg = f"{where}: link {name!r} is defined twice"
-            raise ConfigError(msg)
-        links.append(name)
-    joints: list[UrdfJoint] = []
-    for element in root.findall("joint"):
-        joint = _parse_joint(element, where)
-        if any(j.name == joint.name for j in joints):
-            msg = f"{where}: joint {joint.name!r} is defined twice"
-            raise ConfigError(msg)
-        for end in (joint.parent, joint.child):
-            if end not in links:
-                msg = f"{where}: joint {joint.name!r} names link {end!r}, which the URDF does not define"
-                raise ConfigError(msg)
-        other = next((j for j in joints if j.child == joint.child), None)
-        if other is not None:
-            msg = (
-                f"{where}: link {joint.child!r} is the child of joints {other.name!r} and {joint.name!r}: "
-                "a kinematic loop (a URDF describes a tree)"
-            )
-            raise ConfigError(msg)
-        joints.append(joint)
+    links = _parse_links(root, where)
+    joints = _parse_joints(root, links, where)
     if not links:
         msg = f"{where} defines no links"
         raise ConfigError(msg)
     robot = UrdfRobot(name=root.get("name") or "robot", links=tuple(links), joints=tuple(joints), where=where)
-    for link in links:
-        seen = {link}
-        up = robot.parent_joint(link)
-        while up is not None:
-            if up.parent in seen:
-                msg = f"{where}: joint {up.name!r} closes a kinematic loop through link {up.parent!r}"
-                raise ConfigError(msg)
-            seen.add(up.parent)
-            up = robot.parent_joint(up.parent)
-    roots = [link for link in links if robot.parent_joint(link) is None]
-    if len(roots) > 1:
-        msg = f"{where}: links {', '.join(repr(r) for r in roots)} have no parent: the URDF is not one tree"
-        raise ConfigError(msg)
+    _check_tree(robot)
     return robot
 
 
