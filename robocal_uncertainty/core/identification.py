@@ -2,10 +2,10 @@
 
 Each iteration linearises the measurements (points by default; any
 :class:`~robocal_uncertainty.core.measurement.MeasurementType`, whitened by its weights) around
-the current estimate and takes the
-seed's Tikhonov step ``E = (U^T U + Gamma^T Gamma)^-1 U^T dS`` with ``Gamma = lambda I`` on a
-column-scaled Jacobian (metres and radians do not mix unscaled). The penalty acts on the
-whole deviation from the nominal model, so the iteration converges to the minimiser of
+the current estimate and takes the robot paper's (Jiang et al.) Tikhonov step
+``E = (U^T U + Gamma^T Gamma)^-1 U^T dS`` with ``Gamma = lambda I`` on a column-scaled Jacobian
+(metres and radians do not mix unscaled). The penalty acts on the whole deviation from the
+nominal model, so the iteration converges to the minimiser of
 ``||S - F(p)||^2 + lambda^2 ||D (p - p_nominal)||^2`` rather than drifting.
 Lambda is chosen at the L-curve corner (default), by GCV, or fixed.
 """
