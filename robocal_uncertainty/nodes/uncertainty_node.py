@@ -205,8 +205,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "test_joints_deg",
         None,
         "Test joint configurations in DEGREES, n_joints values per configuration, flattened; one result per "
-        "configuration (fixed at start); set this or test_joints_rad, not both; neither: the seed's test "
-        "configuration",
+        "configuration (fixed at start); set this or test_joints_rad, not both; neither: the robot paper's "
+        "test configuration (Jiang et al. Table 2)",
         "deg",
         read_only=True,
         check=_joints,

@@ -13,7 +13,7 @@ from robocal_uncertainty.core.joint_limits import DEGREES_HINT
 from robocal_uncertainty.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
-# The seed's test configuration (Table 2), degrees; joint2 must lie in [-265, -95] deg.
+# The robot paper's test configuration (Table 2), degrees; joint2 must lie in [-265, -95] deg.
 PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
 
 

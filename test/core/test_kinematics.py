@@ -103,7 +103,7 @@ def perturbed(model: RobotModel, rng: np.random.Generator, *, beta: bool) -> Rob
     )
 
 
-# --- the seed's test pose ---------------------------------------------------------------
+# --- the robot paper's test pose --------------------------------------------------------
 
 
 def test_seed_pose_independent_product_matches_paper() -> None:
