@@ -48,17 +48,17 @@ from robocal_uncertainty.app import evaluate
 from robocal_uncertainty.bagio.messages import pose_with_covariance, uncertainty_to_msgs
 from robocal_uncertainty.core import EncoderNoise, SimulationSettings, TrackerNoise, load_robot_model, simulate_campaign
 from robocal_uncertainty.core.campaign import Campaign
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.sample import CalibrationSample
 from robocal_uncertainty.importers import read_tracker_csv
 from robocal_uncertainty.montecarlo.executor import RunContext, WorkerPool
 from robocal_uncertainty.pipeline.markers import uncertainty_markers
 from robocal_uncertainty.pipeline.sample_store import SampleStore
+from robocal_uncertainty.report.references import PAPER_TEST_JOINTS_DEG
 from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings
 
 ROOT = Path(__file__).resolve().parents[1]
-SEED_TEST_JOINTS_DEG = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]  # the node's default
 UR10_CSV = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
 UR10_TEST = np.array([[0.934319, -1.79251, 1.5196, 0.272862, 0.934269, -1.57075]])  # as test_trust_on_real_robots
 MODES = ("1 worker", "2 workers, new pool", "2 workers, kept pool")
@@ -85,7 +85,7 @@ def campaign_of(name: str, n_poses: int) -> tuple[RobotModel, Campaign, np.ndarr
         return model, campaign, UR10_TEST
     model = load_robot_model(resolve_robot_config("paper_arm"))
     campaign = simulate_campaign(model, SimulationSettings(n_poses=n_poses, frame="tracker"), seed=1).campaign
-    return model, campaign, np.radians([SEED_TEST_JOINTS_DEG])
+    return model, campaign, np.radians([PAPER_TEST_JOINTS_DEG])
 
 
 def samples_of(campaign: Campaign) -> list[CalibrationSample]:

@@ -45,7 +45,7 @@ def _child(n_held: int, trials: int, one_chunk: bool, backend: str) -> None:
     sys.path.insert(0, str(ROOT))
     import numpy as np
 
-    from robocal_uncertainty.core.robot_config import load_robot_model
+    from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
     from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
     from robocal_uncertainty.uncertainty import holdout
     from robocal_uncertainty.uncertainty.sources import UncertaintySettings

@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import identify
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledErrors, simulate_campaign
 from robocal_uncertainty.errors import CalibError
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv

@@ -44,7 +44,7 @@ from robocal_uncertainty.app.validation import validate
 from robocal_uncertainty.core.calibration_file import calibration_to_dict
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.kinematics import forward_poses
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.core.rotation import EULER_CONVENTIONS, euler_to_matrix, rotation_log
 from robocal_uncertainty.importers.targets import Targets
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv

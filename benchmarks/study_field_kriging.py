@@ -34,7 +34,7 @@ from robocal_uncertainty.core import identify
 from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
 from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_correlation
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.core.session import parameter_gain
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
 from robocal_uncertainty.uncertainty.model_adequacy import (

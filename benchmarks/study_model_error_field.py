@@ -29,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
 from robocal_uncertainty.uncertainty import UncertaintySettings, default_sources
 from robocal_uncertainty.uncertainty.holdout import HoldoutSplit, validate_holdout

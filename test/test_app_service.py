@@ -15,7 +15,7 @@ from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.bagio.messages import msg_to_sample, sample_to_msg
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core import load_robot_model
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.pipeline import CollectorSettings, SampleStore
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty

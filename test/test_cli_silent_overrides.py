@@ -15,7 +15,7 @@ import yaml
 
 from robocal_uncertainty.bagio import write_campaign
 from robocal_uncertainty.cli import main
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import rpy_to_matrix
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 

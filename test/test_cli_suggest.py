@@ -14,7 +14,7 @@ from robocal_uncertainty.app import suggest_poses
 from robocal_uncertainty.bagio import read_campaign
 from robocal_uncertainty.cli import PAPER_TEST_JOINTS_DEG, main
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise, load_robot_model
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.uncertainty import UncertaintySettings
 
 ROOT = Path(__file__).resolve().parents[1]

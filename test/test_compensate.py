@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.app.compensation import compensate
-from robocal_uncertainty.app.export import export_calibration, load_robot_source
+from robocal_uncertainty.app.export import export_calibration
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core.calibration_file import CALIBRATION_FORMAT, apply_calibration
 from robocal_uncertainty.core.inverse_kinematics import IkSettings, solve_near
 from robocal_uncertainty.core.kinematics import forward_points, forward_poses
+from robocal_uncertainty.core.robot_formats import load_robot_source
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.importers.targets import Targets, read_targets
 

@@ -25,7 +25,7 @@ def _benchmark() -> ModuleType:
 
 def test_series_d_goal_angles_are_ros_roll_pitch_yaw() -> None:
     from robocal_uncertainty.core import euler_to_matrix, forward_poses, load_robot_model
-    from robocal_uncertainty.core.robot_config import resolve_robot_config
+    from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
     from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
 
     bench = _benchmark()

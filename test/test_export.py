@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import yaml
 
-from robocal_uncertainty.app.export import calibrated_robot_description, export_calibration, load_robot_source
+from robocal_uncertainty.app.export import calibrated_robot_description, export_calibration
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core.calibration_file import CALIBRATION_FORMAT, apply_calibration, read_calibration
 from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.robot_formats import load_robot_source
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 
 pin = pytest.importorskip("pinocchio")
@@ -196,7 +197,7 @@ def test_ur_kinematics_of_the_shipped_series(tmp_path: Path, capsys: pytest.Capt
 
 def test_robot_description_string_from_a_description_parameter() -> None:
     """What the calibration node publishes: the parameter's URDF text with corrected origins."""
-    from robocal_uncertainty.app.export import robot_source_from_description
+    from robocal_uncertainty.core.robot_formats import robot_source_from_description
 
     text = (URDF_DIR / "panda_arm.urdf").read_text()
     source = robot_source_from_description(text)

@@ -13,7 +13,7 @@ import yaml
 from robocal_uncertainty.bagio.campaign_mcap import write_campaign
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core import identify
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
 from robocal_uncertainty.pipeline.diagnostics import DiagnosticLevel, uncertainty_status
 from robocal_uncertainty.uncertainty import UncertaintySettings, default_sources

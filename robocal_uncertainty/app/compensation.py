@@ -23,6 +23,7 @@ joints as its test configurations in one batched run.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -42,7 +43,7 @@ from robocal_uncertainty.core.inverse_kinematics import (
     ur_dh_parameters,
 )
 from robocal_uncertainty.core.kinematics import forward_points
-from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.importers.targets import Targets
 from robocal_uncertainty.montecarlo.executor import RunContext
@@ -325,22 +326,9 @@ def _nominal_seeds(
         )
         return found.joints, "nominal IK from the nearest campaign pose", [""] * n
     assert targets.rotations is not None
-    # Target tool frames -> flange poses in the robot base frame (the nominal chain's frame).
-    layout = nominal.layout
-    b0, t0, r0 = layout.base_index, layout.tool_index, layout.tool_rotation_index
-    world_t_base = np.eye(4)
-    world_t_base[:3, :3] = rpy_to_matrix(nom_params[b0 + 3 : b0 + 6])
-    world_t_base[:3, 3] = nom_params[b0 : b0 + 3]
-    flange_t_tool = np.eye(4)
-    if r0 is not None:
-        flange_t_tool[:3, :3] = rpy_to_matrix(nom_params[r0 : r0 + 3])
-    flange_t_tool[:3, 3] = nom_params[t0 : t0 + 3]
-    tool = np.tile(np.eye(4), (n, 1, 1))
-    tool[:, :3, :3] = targets.rotations
-    tool[:, :3, 3] = targets.points
-    flange = np.linalg.inv(world_t_base) @ tool @ np.linalg.inv(flange_t_tool)
-    solutions = ur_analytic_ik(model, flange)
+    solutions = ur_analytic_ik(model, _flange_targets(nominal.layout, nom_params, targets))
     assert solutions is not None
+    b0 = nominal.layout.base_index
     base_only = nom_params.copy()
     base_only[b0 : b0 + 6] = 0.0
     flat = solutions.reshape(-1, 6)
@@ -363,6 +351,39 @@ def _nominal_seeds(
         axis=2
     )
     reference = start if start is not None else np.zeros((n, 6))
+    seeds, missing = _nearest_on_branch(model, solutions, match, reference, names, wanted)
+    return seeds, source, missing
+
+
+def _flange_targets(layout: ParameterLayout, nom_params: Array, targets: Targets) -> Array:
+    """Target tool frames -> flange poses (n, 4, 4) in the robot base frame (the nominal chain's frame)."""
+    assert targets.rotations is not None
+    b0, t0, r0 = layout.base_index, layout.tool_index, layout.tool_rotation_index
+    world_t_base = np.eye(4)
+    world_t_base[:3, :3] = rpy_to_matrix(nom_params[b0 + 3 : b0 + 6])
+    world_t_base[:3, 3] = nom_params[b0 : b0 + 3]
+    flange_t_tool = np.eye(4)
+    if r0 is not None:
+        flange_t_tool[:3, :3] = rpy_to_matrix(nom_params[r0 : r0 + 3])
+    flange_t_tool[:3, 3] = nom_params[t0 : t0 + 3]
+    tool = np.tile(np.eye(4), (targets.n, 1, 1))
+    tool[:, :3, :3] = targets.rotations
+    tool[:, :3, 3] = targets.points
+    flange: Array = np.linalg.inv(world_t_base) @ tool @ np.linalg.inv(flange_t_tool)
+    return flange
+
+
+def _nearest_on_branch(
+    model: RobotModel,
+    solutions: Array,
+    match: NDArray[np.bool_],
+    reference: Array,
+    names: Sequence[str],
+    wanted: NDArray[np.int64],
+) -> tuple[Array, list[str]]:
+    """Per target, the analytic solution on the wanted branch nearest to `reference` (whole turns
+    within the limits), or `reference` and why there is none."""
+    n = reference.shape[0]
     seeds = reference.copy()
     missing = [""] * n
     lo, hi = model.joint_limits[:, 0], model.joint_limits[:, 1]
@@ -377,7 +398,7 @@ def _nominal_seeds(
         shifted = options + 2 * np.pi * turns
         shifted = np.where(shifted > hi, shifted - 2 * np.pi, np.where(shifted < lo, shifted + 2 * np.pi, shifted))
         seeds[i] = shifted[np.argmin(np.linalg.norm(shifted - reference[i], axis=1))]
-    return seeds, source, missing
+    return seeds, missing
 
 
 def _status(model: RobotModel, solution: IkSolution, targets: Targets, settings: IkSettings) -> tuple[str, ...]:
@@ -435,6 +456,174 @@ def _status(model: RobotModel, solution: IkSolution, targets: Targets, settings:
     return tuple(out)
 
 
+@dataclass(frozen=True)
+class _Solved:
+    """The calibrated inverse kinematics of the targets, before any uncertainty."""
+
+    calibrated: RobotModel
+    frame: str
+    frame_id: str
+    params: Array
+    """The calibrated parameters with the base of `frame` [m, rad]."""
+    seed_source: str
+    nominal_joints: Array
+    solution: IkSolution
+    status: tuple[str, ...]
+    accepted: NDArray[np.bool_]
+    tool_frame: str
+
+
+def _seed_params(nominal: RobotModel, cal_params: Array) -> Array:
+    """The nominal kinematics with the calibration's base placement and tool.
+
+    The seed then differs from the calibrated solution by the kinematic correction alone (a probe
+    mounted turned by 90 deg is not a correction).
+    """
+    nom_params = nominal.parameter_vector()
+    b0, t0 = nominal.layout.base_index, nominal.layout.tool_index
+    nom_params[b0 : b0 + 6] = cal_params[b0 : b0 + 6]
+    nom_params[t0 : t0 + 3] = cal_params[t0 : t0 + 3]
+    r0 = nominal.layout.tool_rotation_index
+    if r0 is not None:
+        nom_params[r0 : r0 + 3] = cal_params[r0 : r0 + 3]
+    return nom_params
+
+
+def _given_seeds(model: RobotModel, seeds: Array, n: int) -> Array:
+    """The given seed joints, one per target (one given for all is repeated); checked against the limits."""
+    from robocal_uncertainty.core.joint_limits import check_joint_limits
+
+    q0 = np.atleast_2d(np.asarray(seeds, dtype=np.float64))
+    if q0.shape[1] != model.n_joints or q0.shape[0] not in (1, n):
+        msg = (
+            f"seed joints: {q0.shape[0]} configurations of {q0.shape[1]} joints for {n} targets of a "
+            f"{model.n_joints}-joint robot: give one, or one per target"
+        )
+        raise InputError(msg)
+    check_joint_limits(model, q0, what="seed configuration")
+    return np.repeat(q0, n, axis=0) if q0.shape[0] == 1 else q0
+
+
+def _solve(
+    model: RobotModel,
+    calibration: dict[str, Any],
+    targets: Targets,
+    *,
+    frame: str | None,
+    seeds: Array | None,
+    campaign: Campaign | None,
+    settings: IkSettings,
+    branch: dict[str, int] | None,
+    where: str,
+) -> _Solved:
+    """Seeds (given or the nominal model's) and the calibrated solution near them, with a status each."""
+    calibrated = apply_calibration(model, calibration, where=where)
+    nominal = model.with_tool_rotation() if calibrated.tool_rotation else model
+    chosen, frame_id = targets_frame(model, calibrated, frame)
+    cal_params = _frame_params(calibrated, chosen)
+    nom_params = _seed_params(nominal, cal_params)
+    _check_plausible(targets, calibrated, cal_params)
+    # Without a calibrated tool rotation (point data) an orientation is the flange's: said in the output.
+    tool_frame = (
+        "the calibrated tool frame (tool.rx, tool.ry, tool.rz)"
+        if calibrated.tool_rotation
+        else "the flange frame (the calibration has no tool rotation)"
+    )
+    if seeds is not None:
+        nominal_q, seed_source = _given_seeds(model, seeds, targets.n), "given"
+    else:
+        nominal_q, seed_source, no_seed = _nominal_seeds(
+            model, nominal, nom_params, targets, campaign, branch, settings
+        )
+    solution = solve_near(calibrated, cal_params, nominal_q, targets.points, targets.rotations, settings)
+    status = _status(calibrated, solution, targets, settings)
+    if seeds is None:
+        status = tuple(no_seed[i] or s for i, s in enumerate(status))
+    return _Solved(
+        calibrated=calibrated,
+        frame=chosen,
+        frame_id=frame_id,
+        params=cal_params,
+        seed_source=seed_source,
+        nominal_joints=nominal_q,
+        solution=solution,
+        status=status,
+        accepted=np.array([s == "ok" for s in status]),
+        tool_frame=tool_frame,
+    )
+
+
+def _reached_uncertainty(
+    model: RobotModel,
+    calibration: dict[str, Any],
+    solved: _Solved,
+    campaign: Campaign | None,
+    options: EvaluationSettings,
+    *,
+    where: str,
+    workers: int,
+) -> tuple[CalibrationUncertainty, float]:
+    """Uncertainty of the accepted reached positions, from the campaign re-identified, and how far
+    that re-identification places them from the calibration's [m] (refused beyond the tolerance)."""
+    from robocal_uncertainty.app.evaluation import evaluate
+
+    if campaign is None:
+        msg = (
+            "the uncertainty of the reached positions needs the calibration's campaign: give --campaign "
+            "(or --no-uncertainty)"
+        )
+        raise ConfigError(msg)
+    lam = calibration.get("lambda")
+    if not isinstance(lam, (int, float)) or isinstance(lam, bool):
+        msg = f"{where} has no numeric 'lambda': cannot re-identify its campaign for the uncertainty"
+        raise ConfigError(msg)
+    chosen, calibrated, cal_params = solved.frame, solved.calibrated, solved.params
+    q_ok = solved.solution.joints[solved.accepted]
+    asked = replace(options, test_joints=q_ok, lambda_=float(lam), frame=chosen)
+    evaluation = evaluate(model, campaign, asked, run=RunContext(workers=workers))
+    again = model.with_tool_rotation() if evaluation.calibration.model.tool_rotation else model
+    reidentified = _frame_params(again.with_parameters(evaluation.calibration.estimate), chosen)
+    gap = forward_points(calibrated.layout, reidentified, q_ok) - forward_points(calibrated.layout, cal_params, q_ok)
+    reproduction = float(np.max(np.linalg.norm(gap, axis=1)))
+    if reproduction > REPRODUCTION_TOLERANCE_M:
+        msg = (
+            f"the campaign does not reproduce {where}: its re-identification (lambda {lam:g}) places the "
+            f"compensated points up to {reproduction * 1e3:.4g} mm away: give the campaign the calibration "
+            "was made from"
+        )
+        raise ConfigError(msg)
+    return evaluation.uncertainty, reproduction
+
+
+def _compensation(
+    model: RobotModel,
+    targets: Targets,
+    solved: _Solved,
+    settings: IkSettings,
+    uncertainty: CalibrationUncertainty | None,
+    reproduction: float | None,
+) -> Compensation:
+    """The result: the solved joints, their status and, where asked, the uncertainty."""
+    return Compensation(
+        robot=model.name,
+        joint_names=tuple(model.joint_names),
+        frame=solved.frame,
+        frame_id=solved.frame_id,
+        targets=targets,
+        seed_source=solved.seed_source,
+        nominal_joints=solved.nominal_joints,
+        joints=solved.solution.joints,
+        accepted=solved.accepted,
+        status=solved.status,
+        solution=solved.solution,
+        settings=settings,
+        uncertainty=uncertainty,
+        reproduction_m=reproduction,
+        prismatic=tuple(model.prismatic),
+        tool_frame=solved.tool_frame,
+    )
+
+
 def compensate(
     model: RobotModel,
     calibration: dict[str, Any],
@@ -490,100 +679,25 @@ def compensate(
         No seeds and no campaign; an uncertainty asked for without a campaign; a campaign that
         does not reproduce the calibration.
     """
-    from robocal_uncertainty.app.evaluation import evaluate
-    from robocal_uncertainty.core.joint_limits import check_joint_limits
-
     settings = settings or IkSettings()
-    calibrated = apply_calibration(model, calibration, where=where)
-    nominal = model.with_tool_rotation() if calibrated.tool_rotation else model
-    chosen, frame_id = targets_frame(model, calibrated, frame)
-    cal_params = _frame_params(calibrated, chosen)
-    # The nominal kinematics with the calibration's base placement and tool: the seed differs from
-    # the calibrated solution by the kinematic correction alone (a probe mounted turned by 90 deg
-    # is not a correction).
-    nom_params = nominal.parameter_vector()
-    b0, t0 = nominal.layout.base_index, nominal.layout.tool_index
-    nom_params[b0 : b0 + 6] = cal_params[b0 : b0 + 6]
-    nom_params[t0 : t0 + 3] = cal_params[t0 : t0 + 3]
-    r0 = nominal.layout.tool_rotation_index
-    if r0 is not None:
-        nom_params[r0 : r0 + 3] = cal_params[r0 : r0 + 3]
-    _check_plausible(targets, calibrated, cal_params)
-    # Without a calibrated tool rotation (point data) an orientation is the flange's: said in the output.
-    tool_frame = (
-        "the calibrated tool frame (tool.rx, tool.ry, tool.rz)"
-        if calibrated.tool_rotation
-        else "the flange frame (the calibration has no tool rotation)"
+    solved = _solve(
+        model,
+        calibration,
+        targets,
+        frame=frame,
+        seeds=seeds,
+        campaign=campaign,
+        settings=settings,
+        branch=branch,
+        where=where,
     )
-    n = targets.n
-    if seeds is not None:
-        q0 = np.atleast_2d(np.asarray(seeds, dtype=np.float64))
-        if q0.shape[1] != model.n_joints or q0.shape[0] not in (1, n):
-            msg = (
-                f"seed joints: {q0.shape[0]} configurations of {q0.shape[1]} joints for {n} targets of a "
-                f"{model.n_joints}-joint robot: give one, or one per target"
-            )
-            raise InputError(msg)
-        check_joint_limits(model, q0, what="seed configuration")
-        nominal_q = np.repeat(q0, n, axis=0) if q0.shape[0] == 1 else q0
-        seed_source = "given"
-    else:
-        nominal_q, seed_source, no_seed = _nominal_seeds(
-            model, nominal, nom_params, targets, campaign, branch, settings
-        )
-    solution = solve_near(calibrated, cal_params, nominal_q, targets.points, targets.rotations, settings)
-    status = _status(calibrated, solution, targets, settings)
-    if seeds is None:
-        status = tuple(no_seed[i] or s for i, s in enumerate(status))
-    accepted = np.array([s == "ok" for s in status])
     uncertainty = None
     reproduction = None
-    if options is not None and accepted.any():
-        if campaign is None:
-            msg = (
-                "the uncertainty of the reached positions needs the calibration's campaign: give --campaign "
-                "(or --no-uncertainty)"
-            )
-            raise ConfigError(msg)
-        lam = calibration.get("lambda")
-        if not isinstance(lam, (int, float)) or isinstance(lam, bool):
-            msg = f"{where} has no numeric 'lambda': cannot re-identify its campaign for the uncertainty"
-            raise ConfigError(msg)
-        q_ok = solution.joints[accepted]
-        asked = replace(options, test_joints=q_ok, lambda_=float(lam), frame=chosen)
-        evaluation = evaluate(model, campaign, asked, run=RunContext(workers=workers))
-        again = model.with_tool_rotation() if evaluation.calibration.model.tool_rotation else model
-        reidentified = _frame_params(again.with_parameters(evaluation.calibration.estimate), chosen)
-        gap = forward_points(calibrated.layout, reidentified, q_ok) - forward_points(
-            calibrated.layout, cal_params, q_ok
+    if options is not None and solved.accepted.any():
+        uncertainty, reproduction = _reached_uncertainty(
+            model, calibration, solved, campaign, options, where=where, workers=workers
         )
-        reproduction = float(np.max(np.linalg.norm(gap, axis=1)))
-        if reproduction > REPRODUCTION_TOLERANCE_M:
-            msg = (
-                f"the campaign does not reproduce {where}: its re-identification (lambda {lam:g}) places the "
-                f"compensated points up to {reproduction * 1e3:.4g} mm away: give the campaign the calibration "
-                "was made from"
-            )
-            raise ConfigError(msg)
-        uncertainty = evaluation.uncertainty
-    return Compensation(
-        robot=model.name,
-        joint_names=tuple(model.joint_names),
-        frame=chosen,
-        frame_id=frame_id,
-        targets=targets,
-        seed_source=seed_source,
-        nominal_joints=nominal_q,
-        joints=solution.joints,
-        accepted=accepted,
-        status=status,
-        solution=solution,
-        settings=settings,
-        uncertainty=uncertainty,
-        reproduction_m=reproduction,
-        prismatic=tuple(model.prismatic),
-        tool_frame=tool_frame,
-    )
+    return _compensation(model, targets, solved, settings, uncertainty, reproduction)
 
 
 def service_targets(

@@ -33,24 +33,16 @@ from robocal_uncertainty.core.robot_formats import (
     ExportRequest,
     RobotSource,
     Written,
-    load_robot_source,
     robot_format_named,
-    robot_source_from_description,
 )
-from robocal_uncertainty.core.robot_formats.ur_kinematics import UR_KINEMATICS_KEYS
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 
 __all__ = [
-    "EXPORT_FORMATS",
     "SIDECAR_FORMAT",
-    "UR_KINEMATICS_KEYS",
     "Export",
-    "RobotSource",
     "calibrated_robot_description",
     "export_calibration",
-    "load_robot_source",
-    "robot_source_from_description",
 ]
 
 Array = NDArray[np.float64]

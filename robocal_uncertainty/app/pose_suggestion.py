@@ -41,7 +41,7 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.joint_limits import check_joint_limits
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.measurement import joint_columns
-from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
 from robocal_uncertainty.core.simulation import draw_joint_positions
 from robocal_uncertainty.errors import ConvergenceError, InputError
 from robocal_uncertainty.kernels import BackendInfo, get_backend, resolve_backend
@@ -182,6 +182,60 @@ def _rms_u(covariances: Array) -> float:
     return math.sqrt(float(np.mean(np.trace(covariances, axis1=1, axis2=2))))
 
 
+def _checked_test_joints(model: RobotModel, campaign: Campaign, test_joints: ArrayLike, frame: str) -> Array:
+    """The test joints (n_test, n_joints) [rad]; refuses a non-point campaign, an unknown frame, a wrong shape."""
+    if campaign.measurement.dimension != 3 or campaign.measurement.positions(campaign.points) is None:
+        msg = f"next-best poses need point measurements, got {campaign.measurement.quantity}"
+        raise InputError(msg)
+    if frame not in ("measurement", "base"):
+        msg = f"frame must be 'measurement' or 'base', got {frame!r}"
+        raise InputError(msg)
+    q_test = np.atleast_2d(np.asarray(test_joints, dtype=np.float64))
+    if q_test.ndim != 2 or q_test.shape[1] != model.n_joints:
+        msg = f"test_joints must have shape (n_test, {model.n_joints}), got {q_test.shape}"
+        raise InputError(msg)
+    return q_test
+
+
+def _noise_levels(model: RobotModel, settings: UncertaintySettings) -> tuple[float, float, float | Array]:
+    """Tracker a [m], b [m/m] and encoder variance [rad^2, m^2] of the enabled sources (zero when off)."""
+    tracker_on = "tracker" in settings.sources
+    encoder_on = "encoder" in settings.sources
+    a = settings.tracker_noise.a if tracker_on else 0.0
+    b = settings.tracker_noise.b if tracker_on else 0.0
+    encoder_var: float | Array = (settings.encoder_noise.half_width**2 / 3.0) if encoder_on else 0.0
+    if encoder_on and any(model.prismatic):
+        encoder_var = settings.encoder_noise.variances(model.prismatic)  # rad^2 and m^2
+    if a == b == 0.0 and not np.any(encoder_var):
+        msg = "no tracker or encoder noise in the settings: nothing to weight the poses with"
+        raise InputError(msg)
+    return a, b, encoder_var
+
+
+def _test_jacobians(
+    layout: ParameterLayout,
+    estimate: Array,
+    q_test: Array,
+    estimated: NDArray[np.intp],
+    scale: Array,
+    *,
+    drop_base: bool,
+) -> tuple[Array, Array]:
+    """Jacobians of the test points in the estimated (scaled) parameters and in the joints.
+
+    With `drop_base` (base-frame output of a tracker campaign) the base is the identity and its
+    columns are zero.
+    """
+    p_out = estimate.copy()
+    b0 = layout.base_index
+    if drop_base:
+        p_out[b0 : b0 + 6] = 0.0
+    _, gy = forward_points_and_jacobian(layout, p_out, q_test)
+    if drop_base:
+        gy[:, :, b0 : b0 + 6] = 0.0
+    return gy[:, :, estimated] / scale, gy[:, :, joint_columns(layout)]
+
+
 def linearize(
     model: RobotModel,
     campaign: Campaign,
@@ -211,26 +265,8 @@ def linearize(
     InputError
         Not a point campaign, no noise to weight with, a singular information matrix.
     """
-    if campaign.measurement.dimension != 3 or campaign.measurement.positions(campaign.points) is None:
-        msg = f"next-best poses need point measurements, got {campaign.measurement.quantity}"
-        raise InputError(msg)
-    if frame not in ("measurement", "base"):
-        msg = f"frame must be 'measurement' or 'base', got {frame!r}"
-        raise InputError(msg)
-    q_test = np.atleast_2d(np.asarray(test_joints, dtype=np.float64))
-    if q_test.ndim != 2 or q_test.shape[1] != model.n_joints:
-        msg = f"test_joints must have shape (n_test, {model.n_joints}), got {q_test.shape}"
-        raise InputError(msg)
-    tracker_on = "tracker" in settings.sources
-    encoder_on = "encoder" in settings.sources
-    a = settings.tracker_noise.a if tracker_on else 0.0
-    b = settings.tracker_noise.b if tracker_on else 0.0
-    encoder_var: float | Array = (settings.encoder_noise.half_width**2 / 3.0) if encoder_on else 0.0
-    if encoder_on and any(model.prismatic):
-        encoder_var = settings.encoder_noise.variances(model.prismatic)  # rad^2 and m^2
-    if a == b == 0.0 and not np.any(encoder_var):
-        msg = "no tracker or encoder noise in the settings: nothing to weight the poses with"
-        raise InputError(msg)
+    q_test = _checked_test_joints(model, campaign, test_joints, frame)
+    a, b, encoder_var = _noise_levels(model, settings)
     layout = model.layout
     estimated = np.flatnonzero(calibration.estimated)
     scale = calibration.column_scale[estimated]
@@ -260,16 +296,9 @@ def linearize(
     if np.linalg.cond(information) > 1e14:
         msg = "the linearised calibration is singular: too few or too alike poses to rank candidates"
         raise InputError(msg)
-    p_out = estimate.copy()
-    b0 = layout.base_index
-    drop_base = frame == "base" and campaign.frame == "tracker"
-    if drop_base:
-        p_out[b0 : b0 + 6] = 0.0
-    _, gy = forward_points_and_jacobian(layout, p_out, q_test)
-    if drop_base:
-        gy[:, :, b0 : b0 + 6] = 0.0
-    g = gy[:, :, estimated] / scale
-    gq = gy[:, :, joint_columns(layout)]
+    g, gq = _test_jacobians(
+        layout, estimate, q_test, estimated, scale, drop_base=frame == "base" and campaign.frame == "tracker"
+    )
     frame_id = model.base_frame_id if frame == "base" or campaign.frame == "base" else campaign.frame_id
     return replace(
         lin,
@@ -352,6 +381,120 @@ def with_simulated_pose(campaign: Campaign, model: RobotModel, estimate: Array, 
     )
 
 
+def _check_counts(*, n_candidates: int, count: int, monte_carlo_check: int, trials: int) -> None:
+    """Refuse counts that are not integers at or above their least value."""
+    for name, value, low in (
+        ("n_candidates", n_candidates, 1),
+        ("count", count, 1),
+        ("monte_carlo_check", monte_carlo_check, 0),
+        ("trials", trials, 1),
+    ):
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            msg = f"{name} must be an integer >= {low}, got {value!r}"
+            raise InputError(msg)
+
+
+def _candidate_joints(
+    model: RobotModel, candidates: ArrayLike | None, n_candidates: int, rng: np.random.Generator, margin_rad: float
+) -> Array:
+    """The given candidates (checked against the joint limits), or `n_candidates` drawn inside them."""
+    if candidates is None:
+        return draw_joint_positions(model, n_candidates, rng=rng, margin=margin_rad)
+    q_c = np.atleast_2d(np.asarray(candidates, dtype=np.float64))
+    check_joint_limits(model, q_c, what="candidate")
+    return q_c
+
+
+def _greedy_order(model: RobotModel, lin: Linearization, q_c: Array, count: int) -> tuple[list[int], list[float]]:
+    """Candidate indices in suggestion order, and the predicted RMS u [m] after each is added.
+
+    Each next suggestion is the best given the ones before it measured (information update), so
+    the suggestions complement each other.
+    """
+    order: list[int] = []
+    predicted: list[float] = []
+    information = lin.information.copy()
+    covariance = lin.covariance
+    a_all, r_all = _pose_terms(model, lin, q_c)
+    for _ in range(min(count, len(q_c))):
+        gains = rank_candidates(model, lin, q_c, covariance=covariance)
+        gains[order] = -np.inf
+        best = int(np.argmax(gains))
+        order.append(best)
+        information = information + a_all[best].T @ np.linalg.solve(r_all[best], a_all[best])
+        covariance = np.linalg.inv(information)
+        predicted.append(_rms_u(lin.test_covariances(information)))
+    return order, predicted
+
+
+@dataclass(frozen=True)
+class _MonteCarloCheck:
+    """Monte Carlo RMS u [m] of the current campaign and with the first suggestions added."""
+
+    current: float
+    checked: dict[int, float]
+
+
+def _monte_carlo_check(
+    model: RobotModel,
+    campaign: Campaign,
+    q_test: Array,
+    evaluation: EvaluationSettings,
+    estimate: Array,
+    added: list[Array],
+) -> _MonteCarloCheck:
+    """Evaluate the current campaign and, for each entry of `added`, the campaign with those poses simulated."""
+
+    def mc_u(c: Campaign) -> float:
+        result = evaluate_uncertainty(model, c, q_test, evaluation)
+        if result.not_converged:  # diverged trials: no statement to rank by
+            msg = f"the Monte Carlo check did not converge to a statement: {result.not_converged[0]}"
+            raise ConvergenceError(msg)
+        return _rms_u(np.array([pose.covariance for pose in result.poses]))
+
+    current = mc_u(campaign)
+    checked = {j: mc_u(with_simulated_pose(campaign, model, estimate, joints)) for j, joints in enumerate(added)}
+    return _MonteCarloCheck(current, checked)
+
+
+def _suggestions(
+    model: RobotModel,
+    lin: Linearization,
+    q_c: Array,
+    order: list[int],
+    predicted: list[float],
+    check: _MonteCarloCheck | None,
+    *,
+    seed: int,
+    trials: int,
+    backend: str,
+) -> Suggestions:
+    """The ranked suggestions with the reductions of every candidate and, where made, the checks."""
+    reductions = rank_candidates(model, lin, q_c)
+    checked = {} if check is None else check.checked
+    suggestions = tuple(
+        PoseSuggestion(
+            joint_positions=q_c[i].copy(),
+            reduction_m2=float(reductions[i]),
+            predicted_u_m=predicted[j],
+            monte_carlo_u_m=checked.get(j),
+        )
+        for j, i in enumerate(order)
+    )
+    return Suggestions(
+        suggestions=suggestions,
+        current_u_m=_rms_u(lin.test_covariances()),
+        monte_carlo_current_u_m=None if check is None else check.current,
+        candidates=q_c,
+        reductions_m2=reductions,
+        joint_names=model.joint_names,
+        frame_id=lin.frame_id,
+        trials=0 if check is None else trials,
+        seed=seed,
+        backend=None if check is None else resolve_backend(backend),
+    )
+
+
 def suggest_poses(
     model: RobotModel,
     campaign: Campaign,
@@ -414,85 +557,22 @@ def suggest_poses(
         Bad shapes, candidates outside the joint limits, non-point campaign, singular problem.
     """
     settings = settings or UncertaintySettings()
-    for name, value, low in (
-        ("n_candidates", n_candidates, 1),
-        ("count", count, 1),
-        ("monte_carlo_check", monte_carlo_check, 0),
-        ("trials", trials, 1),
-    ):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            msg = f"{name} must be an integer >= {low}, got {value!r}"
-            raise InputError(msg)
+    _check_counts(n_candidates=n_candidates, count=count, monte_carlo_check=monte_carlo_check, trials=trials)
     get_backend(backend)  # an unknown or missing backend stops here, before any work
-    rng = np.random.default_rng(seed)
-    if candidates is None:
-        q_c = draw_joint_positions(model, n_candidates, rng=rng, margin=margin_rad)
-    else:
-        q_c = np.atleast_2d(np.asarray(candidates, dtype=np.float64))
-        check_joint_limits(model, q_c, what="candidate")
+    q_c = _candidate_joints(model, candidates, n_candidates, np.random.default_rng(seed), margin_rad)
     if calibration is None:
         calibration = identify(model, campaign, lambda_=lambda_)
     q_test = np.atleast_2d(np.asarray(test_joints, dtype=np.float64))
     lin = linearize(model, campaign, q_test, calibration, settings, frame=frame)
-    reductions = rank_candidates(model, lin, q_c)
-    current = lin.test_covariances()
-    # Greedy sequence: each next suggestion is the best given the ones before it measured
-    # (information update), so the N suggestions complement each other.
-    order: list[int] = []
-    predicted: list[float] = []
-    information = lin.information.copy()
-    covariance = lin.covariance
-    a_all, r_all = _pose_terms(model, lin, q_c)
-    for _ in range(min(count, len(q_c))):
-        gains = rank_candidates(model, lin, q_c, covariance=covariance)
-        gains[order] = -np.inf
-        best = int(np.argmax(gains))
-        order.append(best)
-        information = information + a_all[best].T @ np.linalg.solve(r_all[best], a_all[best])
-        covariance = np.linalg.inv(information)
-        predicted.append(_rms_u(lin.test_covariances(information)))
-    mc_current = None
-    checked: dict[int, float] = {}
+    order, predicted = _greedy_order(model, lin, q_c, count)
+    check = None
     if monte_carlo_check:
-
-        def mc_u(c: Campaign) -> float:
-            result = evaluate_uncertainty(
-                model,
-                c,
-                q_test,
-                EvaluationSettings(
-                    uncertainty=settings, lambda_=lambda_, trials=trials, seed=seed, frame=frame, backend=backend
-                ),
-            )
-            if result.not_converged:  # diverged trials: no statement to rank by
-                msg = f"the Monte Carlo check did not converge to a statement: {result.not_converged[0]}"
-                raise ConvergenceError(msg)
-            return _rms_u(np.array([pose.covariance for pose in result.poses]))
-
-        mc_current = mc_u(campaign)
-        for j in range(min(monte_carlo_check, len(order))):
-            checked[j] = mc_u(with_simulated_pose(campaign, model, calibration.estimate, q_c[order[: j + 1]]))
-    suggestions = tuple(
-        PoseSuggestion(
-            joint_positions=q_c[i].copy(),
-            reduction_m2=float(reductions[i]),
-            predicted_u_m=predicted[j],
-            monte_carlo_u_m=checked.get(j),
+        evaluation = EvaluationSettings(
+            uncertainty=settings, lambda_=lambda_, trials=trials, seed=seed, frame=frame, backend=backend
         )
-        for j, i in enumerate(order)
-    )
-    return Suggestions(
-        suggestions=suggestions,
-        current_u_m=_rms_u(current),
-        monte_carlo_current_u_m=mc_current,
-        candidates=q_c,
-        reductions_m2=reductions,
-        joint_names=model.joint_names,
-        frame_id=lin.frame_id,
-        trials=trials if monte_carlo_check else 0,
-        seed=seed,
-        backend=resolve_backend(backend) if monte_carlo_check else None,
-    )
+        added = [q_c[order[: j + 1]] for j in range(min(monte_carlo_check, len(order)))]
+        check = _monte_carlo_check(model, campaign, q_test, evaluation, calibration.estimate, added)
+    return _suggestions(model, lin, q_c, order, predicted, check, seed=seed, trials=trials, backend=backend)
 
 
 DEFAULT_COUNT = 5

@@ -233,43 +233,14 @@ class CampaignRecorder:
         if self._writer is None:
             msg = f"campaign recorder for {self.path} is closed"
             raise CampaignError(msg)
-        if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int | np.integer):
-            msg = f"stamp_ns must be an integer number of ns, got {stamp_ns!r}"
-            raise InputError(msg)
-        stamp = int(stamp_ns)
-        stamp_parts(stamp)
-        if stamp in self._stamps:
-            msg = f"stamp {stamp} ns was already appended to {self.path}"
-            raise InputError(msg)
+        stamp = self._checked_stamp(stamp_ns)
         q = _vector("joint_positions", joint_positions, len(self._names))
         xyz = _vector("point", point, 3)
-        std = None if point_std is None else _vector("point_std", point_std, 3)
-        if std is not None and (std < 0).any():
-            msg = f"point_std must be non-negative, got {std.tolist()}"
-            raise InputError(msg)
-        if self._with_std is not None and self._with_std != (std is not None):
-            msg = f"point_std must be given for every pose or for none (pose {self.n_poses})"
-            raise InputError(msg)
-        if self._with_std is None:
-            self._with_std = std is not None
-            if std is not None:
-                self._std_channel = self._channel(POINT_STD_TOPIC, VECTOR3_STAMPED)
-        quaternion = rot_std = None
-        if self._poses:
-            if orientation is None or orientation_std is None:
-                msg = f"a 6-DOF campaign needs an orientation and its std for every pose (pose {self.n_poses})"
-                raise InputError(msg)
-            quaternion = _vector("orientation", orientation, 4)
-            quaternion_to_matrix(quaternion, name="orientation")  # unit and finite, one-line error
-            rot_std = _vector("orientation_std", orientation_std, 3)
-            if (rot_std < 0).any():
-                msg = f"orientation_std must be non-negative, got {rot_std.tolist()}"
-                raise InputError(msg)
-        elif orientation is not None or orientation_std is not None:
-            msg = "orientation given to a point campaign recorder (create it with a PoseMeasurement)"
-            raise InputError(msg)
+        std = self._checked_point_std(point_std)
+        rotation = self._checked_orientation(orientation, orientation_std)
         sequence = self.n_poses
-        if quaternion is not None and rot_std is not None:
+        if rotation is not None:
+            quaternion, rot_std = rotation
             self._writer.add_message(
                 self._orientation_std_channel,
                 stamp,
@@ -298,6 +269,53 @@ class CampaignRecorder:
         )
         self._sync()
         self._stamps.add(stamp)
+
+    def _checked_stamp(self, stamp_ns: int) -> int:
+        """The stamp as an int [ns]; refuses a non-integer, out-of-range or repeated one."""
+        if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int | np.integer):
+            msg = f"stamp_ns must be an integer number of ns, got {stamp_ns!r}"
+            raise InputError(msg)
+        stamp = int(stamp_ns)
+        stamp_parts(stamp)
+        if stamp in self._stamps:
+            msg = f"stamp {stamp} ns was already appended to {self.path}"
+            raise InputError(msg)
+        return stamp
+
+    def _checked_point_std(self, point_std: ArrayLike | None) -> NDArray[np.float64] | None:
+        """The point std [m], given for every pose or for none (the first pose decides)."""
+        std = None if point_std is None else _vector("point_std", point_std, 3)
+        if std is not None and (std < 0).any():
+            msg = f"point_std must be non-negative, got {std.tolist()}"
+            raise InputError(msg)
+        if self._with_std is not None and self._with_std != (std is not None):
+            msg = f"point_std must be given for every pose or for none (pose {self.n_poses})"
+            raise InputError(msg)
+        if self._with_std is None:
+            self._with_std = std is not None
+            if std is not None:
+                self._std_channel = self._channel(POINT_STD_TOPIC, VECTOR3_STAMPED)
+        return std
+
+    def _checked_orientation(
+        self, orientation: ArrayLike | None, orientation_std: ArrayLike | None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """Quaternion and rotation std [rad] of a 6-DOF pose; None for a point recorder."""
+        if self._poses:
+            if orientation is None or orientation_std is None:
+                msg = f"a 6-DOF campaign needs an orientation and its std for every pose (pose {self.n_poses})"
+                raise InputError(msg)
+            quaternion = _vector("orientation", orientation, 4)
+            quaternion_to_matrix(quaternion, name="orientation")  # unit and finite, one-line error
+            rot_std = _vector("orientation_std", orientation_std, 3)
+            if (rot_std < 0).any():
+                msg = f"orientation_std must be non-negative, got {rot_std.tolist()}"
+                raise InputError(msg)
+            return quaternion, rot_std
+        if orientation is not None or orientation_std is not None:
+            msg = "orientation given to a point campaign recorder (create it with a PoseMeasurement)"
+            raise InputError(msg)
+        return None
 
     def close(self) -> None:
         """Finish the file (summary and footer) and close it; closing twice is a no-op."""

@@ -289,6 +289,95 @@ def _pair(
     return point_index, joint_index
 
 
+def _refuse_damaged(bag: Bag, accept_damaged: bool) -> None:
+    """Refuse a finished file whose records break off in the middle, unless the caller accepts it."""
+    path = bag.path
+    damaged_at = getattr(bag.contents, "damaged_at", None)
+    if damaged_at is not None and not accept_damaged:
+        msg = (
+            f"{path} is damaged: its records break off at byte {damaged_at} of {path.stat().st_size} although "
+            "the file ends with an intact footer (finished, then corrupted; not a writer stopped early); "
+            "refusing to drop the poses after the damage (--accept-damaged reads the poses before it)"
+        )
+        raise BagError(msg)
+
+
+def _read_metadata(
+    header: CampaignHeader | None, bag: Bag, wanted: tuple[str, str, str], stamp_tolerance_ns: int, dropped: int
+) -> dict[str, object]:
+    """The stored metadata, or the provenance of a file without a metadata record."""
+    if header is not None:
+        return dict(header.metadata)
+    joint_topic, point_topic, _ = wanted
+    return {
+        "source_file": bag.path.name,
+        "source_format": bag.storage,
+        "joint_topic": joint_topic,
+        "point_topic": point_topic,
+        "stamp_tolerance_ns": stamp_tolerance_ns,
+        "points_dropped": dropped,
+    }
+
+
+def _campaign(
+    bag: Bag,
+    header: CampaignHeader | None,
+    wanted: tuple[str, str, str],
+    *,
+    base_frame_id: str,
+    stamp_tolerance_ns: int,
+) -> Campaign:
+    """Decode, pair by stamp and assemble the campaign of an opened recording."""
+    path, contents = bag.path, bag.contents
+    damaged_at = getattr(contents, "damaged_at", None)
+    joint_topic, _, point_std_topic = wanted
+    joints, points, stds = _decode_all(bag, wanted)
+    names, positions = _joint_matrix(joints, header.joint_names if header else None, joint_topic, path)
+    point_stamps = np.array([r.stamp_ns for r in points], dtype=np.int64)
+    notes: list[str] = []
+    point_index, joint_index = _pair(
+        joints,
+        point_stamps,
+        stamp_tolerance_ns,
+        wanted,
+        path,
+        truncated="damaged" if damaged_at is not None else contents.truncated,
+        notes=notes,
+    )
+    dropped = len(points) - point_index.size
+    kept = [points[i] for i in point_index]
+    stamps = point_stamps[point_index]
+    frame, frame_id = _frame(kept, header, base_frame_id, path)
+    metadata = _read_metadata(header, bag, wanted, stamp_tolerance_ns, dropped)
+    # Warnings describe this reading of this file: a stored list (a recovered campaign
+    # written back) is replaced, so a complete rewritten file does not claim truncation.
+    metadata.pop(READ_WARNINGS_KEY, None)
+    if notes:
+        metadata[READ_WARNINGS_KEY] = notes
+    values = np.array([p.xyz for p in kept], dtype=np.float64).reshape(-1, 3)
+    std = _point_std(stds, stamps, point_std_topic, path)
+    measurement: MeasurementType = POINT
+    if header is not None and header.measurement is not None:
+        values, std, measurement = _poses(bag, header, values, stamps, std)
+    try:
+        return Campaign(
+            joint_names=names,
+            joint_positions=positions[joint_index],
+            points=values,
+            frame=frame,
+            frame_id=frame_id,
+            point_std=std,
+            stamps_ns=None if header is not None and header.stamps_synthetic else stamps,
+            metadata=metadata,
+            measurement=measurement,
+        )
+    except InputError as err:
+        if isinstance(err, CampaignError):
+            raise
+        msg = f"{path}: {err}"
+        raise BagError(msg) from err
+
+
 def read_campaign(
     path: str | Path,
     *,
@@ -351,16 +440,8 @@ def read_campaign(
         point_std_topic or POINT_STD_TOPIC,
     )
     bag = open_bag(path, wanted, what="campaign")
-    contents, source = bag.contents, bag.storage
-    damaged_at = getattr(contents, "damaged_at", None)
-    if damaged_at is not None and not accept_damaged:
-        msg = (
-            f"{path} is damaged: its records break off at byte {damaged_at} of {path.stat().st_size} although "
-            "the file ends with an intact footer (finished, then corrupted; not a writer stopped early); "
-            "refusing to drop the poses after the damage (--accept-damaged reads the poses before it)"
-        )
-        raise BagError(msg)
-    record = contents.metadata.get(METADATA_NAME)
+    _refuse_damaged(bag, accept_damaged)
+    record = bag.contents.metadata.get(METADATA_NAME)
     header = None if record is None else parse_header(record, str(path))
     if header is not None:
         wanted = (
@@ -368,59 +449,4 @@ def read_campaign(
             point_topic or header.point_topic,
             point_std_topic or header.point_std_topic,
         )
-    joint_topic, point_topic, point_std_topic = wanted
-    joints, points, stds = _decode_all(bag, wanted)
-    names, positions = _joint_matrix(joints, header.joint_names if header else None, joint_topic, path)
-    point_stamps = np.array([r.stamp_ns for r in points], dtype=np.int64)
-    notes: list[str] = []
-    point_index, joint_index = _pair(
-        joints,
-        point_stamps,
-        stamp_tolerance_ns,
-        wanted,
-        path,
-        truncated="damaged" if damaged_at is not None else contents.truncated,
-        notes=notes,
-    )
-    dropped = len(points) - point_index.size
-    kept = [points[i] for i in point_index]
-    stamps = point_stamps[point_index]
-    frame, frame_id = _frame(kept, header, base_frame_id, path)
-    if header is not None:
-        metadata = dict(header.metadata)
-    else:
-        metadata = {
-            "source_file": path.name,
-            "source_format": source,
-            "joint_topic": joint_topic,
-            "point_topic": point_topic,
-            "stamp_tolerance_ns": stamp_tolerance_ns,
-            "points_dropped": dropped,
-        }
-    # Warnings describe this reading of this file: a stored list (a recovered campaign
-    # written back) is replaced, so a complete rewritten file does not claim truncation.
-    metadata.pop(READ_WARNINGS_KEY, None)
-    if notes:
-        metadata[READ_WARNINGS_KEY] = notes
-    values = np.array([p.xyz for p in kept], dtype=np.float64).reshape(-1, 3)
-    std = _point_std(stds, stamps, point_std_topic, path)
-    measurement: MeasurementType = POINT
-    if header is not None and header.measurement is not None:
-        values, std, measurement = _poses(bag, header, values, stamps, std)
-    try:
-        return Campaign(
-            joint_names=names,
-            joint_positions=positions[joint_index],
-            points=values,
-            frame=frame,
-            frame_id=frame_id,
-            point_std=std,
-            stamps_ns=None if header is not None and header.stamps_synthetic else stamps,
-            metadata=metadata,
-            measurement=measurement,
-        )
-    except InputError as err:
-        if isinstance(err, CampaignError):
-            raise
-        msg = f"{path}: {err}"
-        raise BagError(msg) from err
+    return _campaign(bag, header, wanted, base_frame_id=base_frame_id, stamp_tolerance_ns=stamp_tolerance_ns)

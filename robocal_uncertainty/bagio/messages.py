@@ -13,7 +13,7 @@ field by field into the rosidl-generated classes.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import cache
 from importlib import resources
 from typing import Any
@@ -266,6 +266,57 @@ def pose_with_covariance(
     )
 
 
+def _orientation_fields(pose: PoseUncertainty, types: Mapping[str, Any]) -> dict[str, Any]:
+    """The orientation fields of a PoseUncertainty message (identity and NaN without orientation)."""
+    orientation = pose.orientation
+    nan3 = np.full(3, np.nan)
+    if orientation is None:
+        quaternion = types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+        rot_cov = np.zeros(9)
+        rot = dict.fromkeys(("u", "U", "sl", "sh", "hl", "hh"), nan3)
+        undetermined = np.zeros(3, dtype=bool)
+        pose_cov = np.zeros(36)
+    else:
+        q = orientation.mean_quaternion
+        quaternion = types["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+        determined = orientation.determined
+        pose_cov = ros_pose_covariance(pose).reshape(-1)
+        # The rotation block of pose_covariance: the Monte Carlo covariance where determined,
+        # the huge variance along undetermined directions (never a finite number there).
+        rot_cov = pose_cov.reshape(6, 6)[3:, 3:].reshape(-1).copy()
+        rot_axes = orientation.axes
+
+        def rot_axis(values: list[float | None]) -> NDArray[np.float64]:
+            return np.array(
+                [np.nan if v is None or not ok else v for v, ok in zip(values, determined, strict=True)],
+                dtype=np.float64,
+            )
+
+        rot = {
+            "u": rot_axis([a.standard_uncertainty for a in rot_axes]),
+            "U": rot_axis([a.expanded_uncertainty for a in rot_axes]),
+            "sl": rot_axis([a.probabilistically_symmetric.low for a in rot_axes]),
+            "sh": rot_axis([a.probabilistically_symmetric.high for a in rot_axes]),
+            "hl": rot_axis([a.shortest.low for a in rot_axes]),
+            "hh": rot_axis([a.shortest.high for a in rot_axes]),
+        }
+        undetermined = ~np.array(determined, dtype=bool)
+    return {
+        # A statement about the orientation only where some rotation is determined.
+        "has_orientation": orientation is not None and bool(np.any(orientation.determined)),
+        "mean_orientation": quaternion,
+        "orientation_covariance": rot_cov,
+        "orientation_standard_uncertainty": rot["u"],
+        "orientation_expanded_uncertainty": rot["U"],
+        "orientation_symmetric_low": rot["sl"],
+        "orientation_symmetric_high": rot["sh"],
+        "orientation_shortest_low": rot["hl"],
+        "orientation_shortest_high": rot["hh"],
+        "orientation_undetermined": undetermined,
+        "pose_covariance": pose_cov,
+    }
+
+
 def pose_uncertainty_to_msg(
     pose: PoseUncertainty,
     *,
@@ -309,53 +360,9 @@ def pose_uncertainty_to_msg(
     def per_axis(values: list[float | None]) -> NDArray[np.float64]:
         return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
 
-    orientation = pose.orientation
-    nan3 = np.full(3, np.nan)
     types = robocal_typestore().types
-    if orientation is None:
-        quaternion = types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
-        rot_cov = np.zeros(9)
-        rot = dict.fromkeys(("u", "U", "sl", "sh", "hl", "hh"), nan3)
-        undetermined = np.zeros(3, dtype=bool)
-        pose_cov = np.zeros(36)
-    else:
-        q = orientation.mean_quaternion
-        quaternion = types["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
-        determined = orientation.determined
-        pose_cov = ros_pose_covariance(pose).reshape(-1)
-        # The rotation block of pose_covariance: the Monte Carlo covariance where determined,
-        # the huge variance along undetermined directions (never a finite number there).
-        rot_cov = pose_cov.reshape(6, 6)[3:, 3:].reshape(-1).copy()
-        rot_axes = orientation.axes
-
-        def rot_axis(values: list[float | None]) -> NDArray[np.float64]:
-            return np.array(
-                [np.nan if v is None or not ok else v for v, ok in zip(values, determined, strict=True)],
-                dtype=np.float64,
-            )
-
-        rot = {
-            "u": rot_axis([a.standard_uncertainty for a in rot_axes]),
-            "U": rot_axis([a.expanded_uncertainty for a in rot_axes]),
-            "sl": rot_axis([a.probabilistically_symmetric.low for a in rot_axes]),
-            "sh": rot_axis([a.probabilistically_symmetric.high for a in rot_axes]),
-            "hl": rot_axis([a.shortest.low for a in rot_axes]),
-            "hh": rot_axis([a.shortest.high for a in rot_axes]),
-        }
-        undetermined = ~np.array(determined, dtype=bool)
     return types[POSE_UNCERTAINTY](
-        # A statement about the orientation only where some rotation is determined.
-        has_orientation=orientation is not None and bool(np.any(orientation.determined)),
-        mean_orientation=quaternion,
-        orientation_covariance=rot_cov,
-        orientation_standard_uncertainty=rot["u"],
-        orientation_expanded_uncertainty=rot["U"],
-        orientation_symmetric_low=rot["sl"],
-        orientation_symmetric_high=rot["sh"],
-        orientation_shortest_low=rot["hl"],
-        orientation_shortest_high=rot["hh"],
-        orientation_undetermined=undetermined,
-        pose_covariance=pose_cov,
+        **_orientation_fields(pose, types),
         header=_header(stamp_ns, frame_id),
         joint_names=[str(n) for n in joint_names],
         joint_positions=_f64(pose.joint_positions),

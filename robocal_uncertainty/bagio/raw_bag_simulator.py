@@ -307,6 +307,61 @@ def _log_times(rng: np.random.Generator, stamps: NDArray[np.int64], latency: tup
     return np.maximum.accumulate(log - np.arange(log.size)) + np.arange(log.size)
 
 
+def _beam_times(
+    rng_times: np.random.Generator, rng_dropout: np.random.Generator, settings: RawBagSettings, duration: float
+) -> Array:
+    """Tracker sample times [s] with the beam interruptions (Poisson count, uniform lengths) removed."""
+    pt = _sample_times(rng_times, settings.tracker_rate_hz, duration, settings.stamp_jitter_s)
+    n_drop = int(rng_dropout.poisson(settings.dropout_rate_hz * duration))
+    drop_start = rng_dropout.uniform(0.0, duration, size=n_drop)
+    drop_end = drop_start + rng_dropout.uniform(*settings.dropout_s, size=n_drop)
+    beam = np.ones(pt.size, dtype=bool)
+    for lo, hi in zip(drop_start, drop_end):
+        beam &= ~((pt >= lo) & (pt < hi))
+    return pt[beam]
+
+
+def _static_windows(
+    simulated: SimulatedCampaign, settings: RawBagSettings, dwell_starts: Array, duration: float, *, six_dof: bool
+) -> tuple[StaticWindow, ...]:
+    """The true pose of each dwell and the stamps [ns] between which the arm stands still there."""
+    model = simulated.true_model
+    q_true = simulated.true_joint_positions
+    start_ns = settings.start_ns
+    true_points, true_rotations = forward_poses(model, model.parameter_vector(), q_true)
+    return tuple(
+        StaticWindow(
+            start_ns=start_ns + round(float(t0) * _NS_PER_S),
+            end_ns=start_ns + round(float(min(t0 + settings.dwell_s, duration)) * _NS_PER_S),
+            joint_positions=q_true[i],
+            point=true_points[i],
+            orientation=quaternion_from_matrix(true_rotations[i]) if six_dof else None,
+        )
+        for i, t0 in enumerate(dwell_starts)
+    )
+
+
+def _measured_points(simulated: SimulatedCampaign, params: Array, q_point: Array, rng: np.random.Generator) -> Array:
+    """True tool points [m] at the tracker's sample joints plus the tracker's noise at their distance."""
+    sim = simulated.settings
+    points = forward_points(simulated.true_model.layout, params, q_point)
+    if sim.frame == "tracker":
+        distance = np.linalg.norm(points, axis=-1)
+    else:
+        distance = np.linalg.norm(points - np.asarray(sim.tracker_xyz), axis=-1)
+    return points + sim.tracker_noise.sample(rng, distance)
+
+
+def _pose_records(
+    topic: str, frame_id: str, stamps: NDArray[np.int64], log: NDArray[np.int64], xyz: Array, quaternions: Array
+) -> list[RawRecord]:
+    """One PoseStamped record per tracker sample."""
+    return [
+        RawRecord(topic, POSE_STAMPED, int(t_log), encode_pose_stamped(int(t), frame_id, x, r))
+        for t, t_log, x, r in zip(stamps, log, xyz, quaternions)
+    ]
+
+
 def simulate_raw_recording(
     simulated: SimulatedCampaign,
     settings: RawBagSettings | None = None,
@@ -341,28 +396,13 @@ def simulate_raw_recording(
     home = model.joint_limits.mean(axis=1)
     waypoints = np.vstack([home, q_true] + ([home] if settings.return_home else []))
     starts, moves, duration = _trajectory(waypoints, settings)
-
     jt = _sample_times(rng_joint_t, settings.joint_rate_hz, duration, settings.stamp_jitter_s)
-    pt = _sample_times(rng_point_t, settings.tracker_rate_hz, duration, settings.stamp_jitter_s)
-    n_drop = int(rng_dropout.poisson(settings.dropout_rate_hz * duration))
-    drop_start = rng_dropout.uniform(0.0, duration, size=n_drop)
-    drop_end = drop_start + rng_dropout.uniform(*settings.dropout_s, size=n_drop)
-    beam = np.ones(pt.size, dtype=bool)
-    for lo, hi in zip(drop_start, drop_end):
-        beam &= ~((pt >= lo) & (pt < hi))
-    pt = pt[beam]
-
+    pt = _beam_times(rng_point_t, rng_dropout, settings, duration)
     params = model.parameter_vector()
     q_joint = _joints_at(jt, waypoints, settings)
     readings = q_joint + sim.encoder_noise.sample_joints(rng_encoder, q_joint.shape, model.prismatic)
     q_point = _joints_at(pt, waypoints, settings)
-    points = forward_points(model.layout, params, q_point)
-    if sim.frame == "tracker":
-        distance = np.linalg.norm(points, axis=-1)
-    else:
-        distance = np.linalg.norm(points - np.asarray(sim.tracker_xyz), axis=-1)
-    measured = points + sim.tracker_noise.sample(rng_tracker, distance)
-
+    measured = _measured_points(simulated, params, q_point, rng_tracker)
     start_ns = settings.start_ns
     joint_stamps = start_ns + np.round(jt * _NS_PER_S).astype(np.int64)
     point_stamps = start_ns + np.round(pt * _NS_PER_S).astype(np.int64)
@@ -379,29 +419,14 @@ def simulate_raw_recording(
         _, rotations = forward_poses(model, params, q_point)
         noise = rng_rotation.normal(0.0, float(sim.orientation_std or 0.0), size=(pt.size, 3))
         quaternions = quaternion_from_matrix(rotation_exp(noise) @ rotations)
-        records += [
-            RawRecord(settings.pose_topic, POSE_STAMPED, int(log), encode_pose_stamped(int(s), frame_id, x, r))
-            for s, log, x, r in zip(point_stamps, point_log, measured, quaternions)
-        ]
+        records += _pose_records(settings.pose_topic, frame_id, point_stamps, point_log, measured, quaternions)
     else:
         records += [
             RawRecord(settings.point_topic, POINT_STAMPED, int(log), encode_point_stamped(int(s), frame_id, x))
             for s, log, x in zip(point_stamps, point_log, measured)
         ]
     records.sort(key=lambda r: r.log_time_ns)  # stable: ties keep joints first
-
-    true_points, true_rotations = forward_poses(model, params, q_true)
-    dwell_starts = starts[~moves]
-    windows = tuple(
-        StaticWindow(
-            start_ns=start_ns + round(float(t0) * _NS_PER_S),
-            end_ns=start_ns + round(float(min(t0 + settings.dwell_s, duration)) * _NS_PER_S),
-            joint_positions=q_true[i],
-            point=true_points[i],
-            orientation=quaternion_from_matrix(true_rotations[i]) if six_dof else None,
-        )
-        for i, t0 in enumerate(dwell_starts)
-    )
+    windows = _static_windows(simulated, settings, starts[~moves], duration, six_dof=six_dof)
     truth = RawBagTruth(
         frame=sim.frame,
         frame_id=frame_id,

@@ -24,7 +24,7 @@ from robocal_uncertainty.cli._main import _build_parser as _build_parser
 
 if TYPE_CHECKING:
     from robocal_uncertainty.cli._main import main
-    from robocal_uncertainty.cli.demo import PAPER_TEST_JOINTS_DEG
+    from robocal_uncertainty.report.references import PAPER_TEST_JOINTS_DEG
 
 __all__ = ["PAPER_TEST_JOINTS_DEG", "main"]
 __getattr__, __dir__ = lazy_exports(__name__, __file__, __all__)

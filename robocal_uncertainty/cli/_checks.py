@@ -45,6 +45,13 @@ _POSITIVE_FLOATS = (("joint_motion_threshold_rad", "rad"), ("tracker_scatter_thr
 
 def check_options(args: argparse.Namespace) -> None:
     """Refuse bad option values before anything is read or computed (one line each)."""
+    _check_number_options(args)
+    _check_monte_carlo_options(args)
+    _check_study_options(args)
+
+
+def _check_number_options(args: argparse.Namespace) -> None:
+    """The options that are positive or non-negative integers or finite numbers."""
     for dest in _POSITIVE_INTS:
         value = getattr(args, dest, None)
         if value is not None and value < 1:
@@ -65,6 +72,10 @@ def check_options(args: argparse.Namespace) -> None:
         if value is not None and not (np.isfinite(value) and value > 0):
             msg = f"{flag(dest)} must be a finite number > 0 {unit}, got {value:g}"
             raise ConfigError(msg)
+
+
+def _check_monte_carlo_options(args: argparse.Namespace) -> None:
+    """--trials, --coverage and --lambda, and whether the trials can state the coverage interval."""
     trials = getattr(args, "trials", None)
     if isinstance(trials, str):
         parse_trials(trials)
@@ -90,6 +101,10 @@ def check_options(args: argparse.Namespace) -> None:
                 f"{recommended_trials(coverage)} or more, or --trials auto"
             )
             raise ConfigError(msg)
+
+
+def _check_study_options(args: argparse.Namespace) -> None:
+    """The options of particular verbs: lambda range, hold-out, folds, window, grid, suggest counts, dask."""
     lambda_range = getattr(args, "lambda_range", None)
     if lambda_range is not None:
         low, high = lambda_range

@@ -5,9 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from robocal_uncertainty.cli._options import add_force_arg, add_noise_args, add_urdf_chain_args
+
+if TYPE_CHECKING:
+    from robocal_uncertainty.app.compensation import Compensation
+    from robocal_uncertainty.core.campaign import Campaign
+    from robocal_uncertainty.uncertainty import EvaluationSettings
 
 
 def register(sub: Any) -> None:
@@ -100,24 +105,12 @@ def _campaign_path(args: argparse.Namespace, data: dict[str, Any]) -> str | None
     return str(named) if isinstance(named, str) and Path(named).exists() else None
 
 
-def run(args: argparse.Namespace) -> int:
+def _check_numbers_and_outputs(args: argparse.Namespace) -> None:
+    """Refuse non-positive IK limits and output files that exist (without --force), are inputs or repeat."""
     import numpy as np
 
-    from robocal_uncertainty.app.campaign_checks import check_campaign_joints
-    from robocal_uncertainty.app.compensation import compensate
     from robocal_uncertainty.app.output_paths import check_output_file
-    from robocal_uncertainty.cli._common import (
-        default_sources,
-        joint_configurations,
-        load_robot,
-        parse_sources_arg,
-        read_campaign_checked,
-    )
-    from robocal_uncertainty.cli._options import encoder_noise
-    from robocal_uncertainty.core.calibration_file import read_calibration
-    from robocal_uncertainty.core.inverse_kinematics import IkSettings
     from robocal_uncertainty.errors import ConfigError
-    from robocal_uncertainty.importers.targets import read_targets
 
     for value, option in ((args.max_joint_change, "--max-joint-change"), (args.condition_limit, "--condition-limit")):
         if not (np.isfinite(value) and value > 0):
@@ -137,6 +130,60 @@ def run(args: argparse.Namespace) -> int:
             msg = f"{option} {path} is named by another output option too"
             raise ConfigError(msg)
         written.append(Path(path).resolve())
+
+
+def _evaluation_settings(args: argparse.Namespace, campaign: Campaign | None) -> EvaluationSettings:
+    """The Monte Carlo settings of the statement (needs the calibration's campaign)."""
+    from robocal_uncertainty.cli._common import default_sources, parse_sources_arg
+    from robocal_uncertainty.cli._options import encoder_noise
+    from robocal_uncertainty.core import TrackerNoise
+    from robocal_uncertainty.errors import ConfigError
+    from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings
+
+    if campaign is None:
+        msg = (
+            "the uncertainty of the reached positions needs the calibration's campaign: give --campaign "
+            "(or --no-uncertainty)"
+        )
+        raise ConfigError(msg)
+    sources = parse_sources_arg(default_sources(args.sources, campaign))
+    return EvaluationSettings(
+        uncertainty=UncertaintySettings(
+            sources=sources,
+            tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
+            encoder_noise=encoder_noise(args),
+        ),
+        trials=args.trials,
+        seed=args.seed,
+        coverage=args.coverage,
+    )
+
+
+def _write_outputs(args: argparse.Namespace, result: Compensation) -> None:
+    """The CSV, JSON and URScript files asked for."""
+    if args.csv_out:
+        Path(args.csv_out).write_text(result.csv_text(), encoding="utf-8")
+        print(f"wrote {args.csv_out}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {args.json}")
+    if args.urscript:
+        text = result.urscript_text(acceleration=args.acceleration, velocity=args.velocity)
+        Path(args.urscript).write_text(text, encoding="utf-8")
+        print(f"wrote {args.urscript}")
+
+
+def run(args: argparse.Namespace) -> int:
+
+    from robocal_uncertainty.app.campaign_checks import check_campaign_joints
+    from robocal_uncertainty.app.compensation import compensate
+    from robocal_uncertainty.cli._common import joint_configurations, load_robot, read_campaign_checked
+    from robocal_uncertainty.core.calibration_file import read_calibration
+    from robocal_uncertainty.core.inverse_kinematics import IkSettings
+    from robocal_uncertainty.errors import ConfigError
+    from robocal_uncertainty.importers.targets import read_targets
+
+    _check_numbers_and_outputs(args)
     data = read_calibration(args.calibration)
     model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link, tool_point=args.tool_point)
     targets = read_targets(args.targets, orientation_convention=args.orientation_convention)
@@ -150,28 +197,7 @@ def run(args: argparse.Namespace) -> int:
     if path is not None and (seeds is None or not args.no_uncertainty):
         campaign = read_campaign_checked(args, path)
         check_campaign_joints(model, campaign, path)
-    options = None
-    if not args.no_uncertainty:
-        from robocal_uncertainty.core import TrackerNoise
-        from robocal_uncertainty.uncertainty import EvaluationSettings, UncertaintySettings
-
-        if campaign is None:
-            msg = (
-                "the uncertainty of the reached positions needs the calibration's campaign: give --campaign "
-                "(or --no-uncertainty)"
-            )
-            raise ConfigError(msg)
-        sources = parse_sources_arg(default_sources(args.sources, campaign))
-        options = EvaluationSettings(
-            uncertainty=UncertaintySettings(
-                sources=sources,
-                tracker_noise=TrackerNoise(a=args.tracker_noise_um * 1e-6, b=args.tracker_noise_um_per_m * 1e-6),
-                encoder_noise=encoder_noise(args),
-            ),
-            trials=args.trials,
-            seed=args.seed,
-            coverage=args.coverage,
-        )
+    options = None if args.no_uncertainty else _evaluation_settings(args, campaign)
     settings = IkSettings(max_joint_change_rad=args.max_joint_change, condition_limit=args.condition_limit)
     branch = _parse_branch(args.branch) if args.branch else None
     if branch is not None and seeds is not None:
@@ -190,16 +216,7 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     _print(result)
-    if args.csv_out:
-        Path(args.csv_out).write_text(result.csv_text(), encoding="utf-8")
-        print(f"wrote {args.csv_out}")
-    if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
-    if args.urscript:
-        text = result.urscript_text(acceleration=args.acceleration, velocity=args.velocity)
-        Path(args.urscript).write_text(text, encoding="utf-8")
-        print(f"wrote {args.urscript}")
+    _write_outputs(args, result)
     return 0
 
 

@@ -11,12 +11,10 @@ import numpy as np
 from robocal_uncertainty.cli._common import load_robot
 from robocal_uncertainty.cli._evaluation import evaluate_and_report
 from robocal_uncertainty.cli._options import add_force_arg, add_uncertainty_args
+from robocal_uncertainty.report.references import PAPER_TEST_JOINTS_DEG
 
 if TYPE_CHECKING:
     from robocal_uncertainty.uncertainty.sources import SourceRole
-
-PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
-"""The robot seed's test configuration (Table 2), degrees."""
 
 
 DEMO_ROLES: tuple[SourceRole, ...] = ("lambda", "pose_count", "pose_subset")
@@ -69,8 +67,8 @@ def run(args: argparse.Namespace) -> int:
         "simulated truth at the test joints: (" + ", ".join(f"{v * 1e3:.4f}" for v in truth) + ") mm; "
         "inside the 95 % intervals: " + ", ".join(f"{a} {'yes' if v else 'no'}" for a, v in zip("xyz", inside))
     )
-    from robocal_uncertainty.report.table2 import format_seed_comparison
+    from robocal_uncertainty.report.table2 import format_paper_comparison
 
     print()
-    print(format_seed_comparison(result))
+    print(format_paper_comparison(result))
     return 0

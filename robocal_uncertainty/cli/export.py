@@ -49,9 +49,10 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from robocal_uncertainty.app.export import export_calibration, load_robot_source
+    from robocal_uncertainty.app.export import export_calibration
     from robocal_uncertainty.app.output_paths import check_output_file
     from robocal_uncertainty.core.calibration_file import read_calibration
+    from robocal_uncertainty.core.robot_formats import load_robot_source
     from robocal_uncertainty.errors import ConfigError
 
     data = read_calibration(args.calibration)

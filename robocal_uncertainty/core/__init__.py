@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     )
     from robocal_uncertainty.core.observability import Observability, structural_observability
     from robocal_uncertainty.core.regularization import LCurve, lcurve
-    from robocal_uncertainty.core.robot_config import load_robot_model, robot_model_from_dict
+    from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, robot_model_from_dict
     from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
     from robocal_uncertainty.core.rotation import (
         chordal_mean,

@@ -2,10 +2,10 @@
 
 Each iteration linearises the measurements (points by default; any
 :class:`~robocal_uncertainty.core.measurement.MeasurementType`, whitened by its weights) around
-the current estimate and takes the
-seed's Tikhonov step ``E = (U^T U + Gamma^T Gamma)^-1 U^T dS`` with ``Gamma = lambda I`` on a
-column-scaled Jacobian (metres and radians do not mix unscaled). The penalty acts on the
-whole deviation from the nominal model, so the iteration converges to the minimiser of
+the current estimate and takes the robot paper's (Jiang et al.) Tikhonov step
+``E = (U^T U + Gamma^T Gamma)^-1 U^T dS`` with ``Gamma = lambda I`` on a column-scaled Jacobian
+(metres and radians do not mix unscaled). The penalty acts on the whole deviation from the
+nominal model, so the iteration converges to the minimiser of
 ``||S - F(p)||^2 + lambda^2 ||D (p - p_nominal)||^2`` rather than drifting.
 Lambda is chosen at the L-curve corner (default), by GCV, or fixed.
 """
@@ -17,7 +17,7 @@ import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.measurement import POINT, MeasurementType, stack_equations, stack_jacobian, stack_residual
-from robocal_uncertainty.core.observability import structural_observability
+from robocal_uncertainty.core.observability import Observability, structural_observability
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement
 from robocal_uncertainty.core.regularization import LCurve, lcurve
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_from_matrix, rpy_to_matrix
@@ -325,6 +325,8 @@ def _objective(residual: Array, x: Array, penalized: NDArray[np.bool_], lam: flo
 
 
 def _gauss_newton(
+    x_start: Array,
+    *,
     layout: ParameterLayout,
     measurement: MeasurementType,
     p0: Array,
@@ -335,7 +337,6 @@ def _gauss_newton(
     measured: Array,
     method: LambdaMethod,
     fixed_lambda: float,
-    x_start: Array,
     max_iterations: int,
     step_tolerance: float,
     start: tuple[Array, Array] | None = None,
@@ -469,6 +470,13 @@ def identify(
         max_iterations=max_iterations,
         step_tolerance=step_tolerance,
     )
+    return _fit_by_weighting(fit, campaign, weighting, accept_unconverged)
+
+
+def _fit_by_weighting(
+    fit: Callable[..., IdentificationResult], campaign: Campaign, weighting: str, accept_unconverged: bool
+) -> IdentificationResult:
+    """`fit` of `campaign` with the weights `weighting` names (pose measurements only; points as they are)."""
     measurement = campaign.measurement
     if not isinstance(measurement, PoseMeasurement):
         return fit(campaign, accept_unconverged=accept_unconverged)
@@ -542,17 +550,8 @@ def _variance_component_fit(
     return dataclasses.replace(result, weighting="variance_components", weighting_iterations=fits, warnings=warns)
 
 
-def _identify_weighted(
-    model: RobotModel,
-    campaign: Campaign,
-    *,
-    lambda_: str | float,
-    max_iterations: int,
-    step_tolerance: float,
-    accept_unconverged: bool,
-) -> IdentificationResult:
-    """:func:`identify` with the weights of ``campaign.measurement`` as they are."""
-    campaign, method, fixed_lambda = _validate(model, campaign, lambda_)
+def _check_iteration_settings(max_iterations: int, step_tolerance: float) -> None:
+    """Refuse an iteration cap or a step tolerance that no fit could honour."""
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
         msg = f"max_iterations must be a positive integer, got {max_iterations!r}"
         raise ConfigError(msg)
@@ -565,6 +564,225 @@ def _identify_weighted(
         # NaN or a negative tolerance can never be met: every call would end in a ConvergenceError.
         msg = f"step_tolerance must be a finite non-negative number, got {step_tolerance!r}"
         raise ConfigError(msg)
+
+
+@dataclass(frozen=True)
+class _BaseStart:
+    """Where the base starts and which parameters are candidates for the fit."""
+
+    params: Array
+    candidates: NDArray[np.bool_]
+    initialised: Literal["nominal", "rigid_fit", "identity"]
+    note: str | None
+
+
+def _base_start(model: RobotModel, campaign: Campaign, p0: Array) -> _BaseStart:
+    """The base fixed at the identity (base-frame campaign) or started as :func:`_initial_base` says."""
+    layout = model.layout
+    b0 = layout.base_index
+    candidates = np.ones(layout.size, dtype=bool)
+    if campaign.frame == "base":
+        p0[b0 : b0 + 6] = 0.0
+        candidates[b0 : b0 + 6] = False
+        return _BaseStart(params=p0, candidates=candidates, initialised="identity", note=None)
+    p_model = p0
+    p0, base_init = _initial_base(model, campaign.measurement, p0, campaign.joint_positions, campaign.points)
+    note = None
+    if base_init == "rigid_fit":
+        # A known base that the data contradict is replaced (correctly): say so.
+        note = _replaced_base_note(model, p_model[b0 : b0 + 6], p0[b0 : b0 + 6])
+    return _BaseStart(params=p0, candidates=candidates, initialised=base_init, note=note)
+
+
+def _penalized_columns(model: RobotModel, est: NDArray[np.intp]) -> NDArray[np.bool_]:
+    """Which estimated parameters the Tikhonov term holds near nominal."""
+    layout = model.layout
+    penalized = est < layout.base_index  # the base (last six parameters) is never regularised
+    r0 = layout.tool_rotation_index
+    if r0 is not None:
+        # Nor is the tool rotation: like the base, a mounting the nominal model says little about.
+        penalized &= (est < r0) | (est >= r0 + 3)
+    if not model.tool_known:
+        # Nor is a tool point the model does not know: a penalty would hold it near the tip link.
+        t0 = layout.tool_index
+        penalized &= (est < t0) | (est >= t0 + 3)
+    return penalized
+
+
+def _check_pose_count(campaign: Campaign, est: NDArray[np.intp]) -> None:
+    """Refuse a campaign with fewer equations than identifiable parameters."""
+    dim = campaign.measurement.dimension
+    n_eq = dim * campaign.n_poses
+    if n_eq < est.size:
+        msg = (
+            f"too few poses: {campaign.n_poses} poses give {n_eq} equations for "
+            f"{est.size} identifiable parameters (need at least {int(np.ceil(est.size / dim))} poses)"
+        )
+        raise IdentifiabilityError(msg)
+
+
+def _column_scale(layout: ParameterLayout, jac0: Array, est: NDArray[np.intp], n_poses: int) -> Array:
+    """Column norms of the nominal Jacobian; refuses a pose set that leaves a direction unseen."""
+    scale: Array = np.linalg.norm(jac0, axis=0)
+    _, s0, vt0 = np.linalg.svd(jac0 / scale, full_matrices=False)
+    if s0[-1] <= _DEGENERATE_RCOND * s0[0]:
+        weak = layout.names[est[int(np.argmax(np.abs(vt0[-1])))]]
+        msg = (
+            f"degenerate pose set: the {n_poses} poses identify only "
+            f"{int(np.sum(s0 > _DEGENERATE_RCOND * s0[0]))} of {est.size} identifiable parameters "
+            f"(vary the joints more; weakest direction involves {weak})"
+        )
+        raise IdentifiabilityError(msg)
+    return scale
+
+
+def _solve_with_restart(
+    solve: Callable[..., _Solution],
+    campaign: Campaign,
+    layout: ParameterLayout,
+    p0: Array,
+    est: NDArray[np.intp],
+    scale: Array,
+    start: tuple[Array, Array],
+) -> tuple[_Solution, int]:
+    """Gauss-Newton from the start, and once more from a re-fitted base when it did not converge.
+
+    Returns the better solution and the number of restarts (0 or 1).
+    """
+    measurement, q, measured = campaign.measurement, campaign.joint_positions, campaign.points
+    b0 = layout.base_index
+    solution = solve(np.zeros(est.size), start=start)
+    if solution.status == 0 or campaign.frame == "base":
+        return solution, 0
+    # Restart once with the base re-fitted rigidly to the current kinematic estimate:
+    # a poor start of the base is the usual reason for a slow or wandering iteration.
+    p_kin = solution.params.copy()
+    p_kin[b0 : b0 + 6] = 0.0
+    base = _rigid_base(layout, measurement, p_kin, q, measured)
+    if base is None:
+        return solution, 0
+    x_restart = solution.x.copy()
+    base_cols = est >= b0
+    x_restart[base_cols] = (base - p0[b0 : b0 + 6])[est[base_cols] - b0] * scale[base_cols]
+    second = solve(x_restart)
+    if second.status == 0 or _final_rms(layout, measurement, second.params, q, measured) < _final_rms(
+        layout, measurement, solution.params, q, measured
+    ):
+        return second, 1
+    return solution, 1
+
+
+def _check_converged(
+    status: int, restarts: int, max_iterations: int, rms_before: float, rms_after: float, accept_unconverged: bool
+) -> None:
+    """Refuse an unconverged fit unless the caller accepts it."""
+    if status != 0 and not accept_unconverged:
+        msg = (
+            f"identification did not converge in {max_iterations} iterations"
+            f"{' (and a restart)' if restarts else ''}: residual RMS {rms_after * 1e3:.4g} mm "
+            f"(before {rms_before * 1e3:.4g} mm); the result would be wrong. Check units, joint names "
+            "and the robot model, or accept it explicitly (--accept-unconverged)"
+        )
+        raise ConvergenceError(msg)
+
+
+@dataclass(frozen=True)
+class _Linearization:
+    """First-order statistics of the Tikhonov estimate at the solution, per full parameter."""
+
+    whitened: Array
+    singular_values: Array
+    effective_parameters: float
+    std: Array
+    data_only_std: Array
+    data_share: Array
+
+
+def _linearization(
+    measurement: MeasurementType,
+    residuals: Array,
+    jac: Array,
+    est: NDArray[np.intp],
+    scale: Array,
+    penalized: NDArray[np.bool_],
+    lam: float,
+    size: int,
+) -> _Linearization:
+    """Covariance of the Tikhonov estimate with residual-scatter noise, and its data share."""
+    whitened, unscaled = stack_equations(measurement, residuals, jac, est)
+    a_mat = unscaled / scale
+    s_final = cast(Array, np.linalg.svd(a_mat, compute_uv=False))
+    n_eq = residuals.size
+    # First-order covariance of the Tikhonov estimate with residual-scatter noise.
+    ata = a_mat.T @ a_mat
+    reg = lam**2 * np.diag(penalized.astype(np.float64))
+    inv = cast(Array, np.linalg.inv(ata + reg))
+    dof_used = float(np.trace(inv @ ata))
+    sigma2 = float(np.sum(whitened**2)) / max(n_eq - dof_used, 1.0)
+    cov_x = sigma2 * inv @ ata @ inv
+    std = np.full(size, np.nan)
+    std[est] = np.sqrt(np.diag(cov_x)) / scale
+    share, data_std = _data_determination(ata, inv, sigma2)
+    data_share = np.full(size, np.nan)
+    data_share[est] = share
+    data_only_std = np.full(size, np.nan)
+    data_only_std[est] = data_std / scale
+    return _Linearization(
+        whitened=whitened,
+        singular_values=s_final,
+        effective_parameters=dof_used,
+        std=std,
+        data_only_std=data_only_std,
+        data_share=data_share,
+    )
+
+
+def _fit_warnings(
+    base_note: str | None, cond: float, status: int, measurement: MeasurementType, whitened: Array
+) -> tuple[str, ...]:
+    """The warnings a fit carries: a replaced base, ill-conditioning, acceptance, weighting."""
+    warns: list[str] = [] if base_note is None else [base_note]
+    if cond > 1e6:
+        warns.append(f"ill-conditioned pose set: condition number {cond:.3g} of the scaled Jacobian")
+    if status != 0:
+        warns.append(IDENTIFICATION_MESSAGES[status] + " (accepted by the caller)")
+    mismatch = _weighting_mismatch(measurement, whitened)
+    if mismatch is not None:
+        warns.append(mismatch)
+    return tuple(warns)
+
+
+def _full_mask(size: int, est: NDArray[np.intp], values: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """A full-parameter mask holding `values` at the estimated columns, False elsewhere."""
+    out = np.zeros(size, dtype=bool)
+    out[est] = values
+    return out
+
+
+def _full_values(size: int, est: NDArray[np.intp], values: Array) -> Array:
+    """A full-parameter vector holding `values` at the estimated columns, zero elsewhere."""
+    out = np.zeros(size)
+    out[est] = values
+    return out
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """The linearised problem at the starting point: what is estimated, scaled and penalised."""
+
+    model: RobotModel
+    p0: Array
+    base: _BaseStart
+    observability: Observability
+    tool_initialised: Literal["nominal", "fit"]
+    est: NDArray[np.intp]
+    penalized: NDArray[np.bool_]
+    start: tuple[Array, Array]
+    scale: Array
+
+
+def _prepare(model: RobotModel, campaign: Campaign) -> _Problem:
+    """Starting point, identifiable columns, penalty and column scale of a fit of `campaign`."""
     measurement = campaign.measurement
     if measurement.measures_orientation:
         # Orientation data identify the tool frame's rotation in the flange frame.
@@ -574,25 +792,13 @@ def _identify_weighted(
     measured = campaign.points
     p0 = model.parameter_vector()
     check_point_scale(model, campaign)
-    b0 = layout.base_index
-    candidates = np.ones(layout.size, dtype=bool)
-    base_init: Literal["nominal", "rigid_fit", "identity"]
-    base_note: str | None = None
-    if campaign.frame == "base":
-        p0[b0 : b0 + 6] = 0.0
-        candidates[b0 : b0 + 6] = False
-        base_init = "identity"
-    else:
-        p_model = p0
-        p0, base_init = _initial_base(model, measurement, p0, q, measured)
-        if base_init == "rigid_fit":
-            # A known base that the data contradict is replaced (correctly): say so.
-            base_note = _replaced_base_note(model, p_model[b0 : b0 + 6], p0[b0 : b0 + 6])
+    base = _base_start(model, campaign, p0)
+    p0 = base.params
 
     # What the data can tell apart is decided on the nominal geometry (a tool point on the last
     # axis makes some columns exactly alike), before an unknown tool point is fitted: a fitted
     # point a fraction of a millimetre off the axis must not turn those into weak parameters.
-    obs = structural_observability(model, p0, candidates, measurement=measurement)
+    obs = structural_observability(model, p0, base.candidates, measurement=measurement)
     tool_init: Literal["nominal", "fit"] = "nominal"
     if not model.tool_known:
         fitted = _initial_tool(layout, measurement, p0, q, measured, refit_base=campaign.frame != "base")
@@ -600,118 +806,66 @@ def _identify_weighted(
             p0, tool_init = fitted, "fit"
 
     est = np.flatnonzero(obs.identifiable)
-    dim = measurement.dimension
-    n_eq = dim * campaign.n_poses
-    if n_eq < est.size:
-        msg = (
-            f"too few poses: {campaign.n_poses} poses give {n_eq} equations for "
-            f"{est.size} identifiable parameters (need at least {int(np.ceil(est.size / dim))} poses)"
-        )
-        raise IdentifiabilityError(msg)
-    penalized = est < b0  # the base (last six parameters) is never regularised
-    r0 = layout.tool_rotation_index
-    if r0 is not None:
-        # Nor is the tool rotation: like the base, a mounting the nominal model says little about.
-        penalized &= (est < r0) | (est >= r0 + 3)
-    if not model.tool_known:
-        # Nor is a tool point the model does not know: a penalty would hold it near the tip link.
-        t0 = layout.tool_index
-        penalized &= (est < t0) | (est >= t0 + 3)
-
+    _check_pose_count(campaign, est)
+    penalized = _penalized_columns(model, est)
     pred0, jac0_poses = measurement.predict_and_jacobian(layout, p0, q)
-    jac0 = stack_jacobian(measurement, jac0_poses, est)
-    scale = np.linalg.norm(jac0, axis=0)
-    _, s0, vt0 = np.linalg.svd(jac0 / scale, full_matrices=False)
-    if s0[-1] <= _DEGENERATE_RCOND * s0[0]:
-        weak = layout.names[est[int(np.argmax(np.abs(vt0[-1])))]]
-        msg = (
-            f"degenerate pose set: the {campaign.n_poses} poses identify only "
-            f"{int(np.sum(s0 > _DEGENERATE_RCOND * s0[0]))} of {est.size} identifiable parameters "
-            f"(vary the joints more; weakest direction involves {weak})"
-        )
-        raise IdentifiabilityError(msg)
-    residuals0 = measurement.residual(measured, pred0)
-    rms_before, max_before = residual_stats(_position_part(measurement, residuals0))
+    scale = _column_scale(layout, stack_jacobian(measurement, jac0_poses, est), est, campaign.n_poses)
+    return _Problem(
+        model=model,
+        p0=p0,
+        base=base,
+        observability=obs,
+        tool_initialised=tool_init,
+        est=est,
+        penalized=penalized,
+        start=(pred0, jac0_poses),
+        scale=scale,
+    )
 
+
+def _identify_weighted(
+    model: RobotModel,
+    campaign: Campaign,
+    *,
+    lambda_: str | float,
+    max_iterations: int,
+    step_tolerance: float,
+    accept_unconverged: bool,
+) -> IdentificationResult:
+    """:func:`identify` with the weights of ``campaign.measurement`` as they are."""
+    campaign, method, fixed_lambda = _validate(model, campaign, lambda_)
+    _check_iteration_settings(max_iterations, step_tolerance)
+    problem = _prepare(model, campaign)
+    model, measurement, layout = problem.model, campaign.measurement, problem.model.layout
+    q, measured = campaign.joint_positions, campaign.points
+    p0, est, scale, penalized = problem.p0, problem.est, problem.scale, problem.penalized
+    residuals0 = measurement.residual(measured, problem.start[0])
+    rms_before, max_before = residual_stats(_position_part(measurement, residuals0))
     solve = partial(
         _gauss_newton,
-        layout,
-        measurement,
-        p0,
-        est,
-        scale,
-        penalized,
-        q,
-        measured,
-        method,
-        fixed_lambda,
+        layout=layout,
+        measurement=measurement,
+        p0=p0,
+        est=est,
+        scale=scale,
+        penalized=penalized,
+        q=q,
+        measured=measured,
+        method=method,
+        fixed_lambda=fixed_lambda,
         max_iterations=max_iterations,
         step_tolerance=step_tolerance,
     )
-    solution = solve(np.zeros(est.size), start=(pred0, jac0_poses))
-    restarts = 0
-    if solution.status != 0 and campaign.frame != "base":
-        # Restart once with the base re-fitted rigidly to the current kinematic estimate:
-        # a poor start of the base is the usual reason for a slow or wandering iteration.
-        p_kin = solution.params.copy()
-        p_kin[b0 : b0 + 6] = 0.0
-        base = _rigid_base(layout, measurement, p_kin, q, measured)
-        if base is not None:
-            restarts = 1
-            x_restart = solution.x.copy()
-            base_cols = est >= b0
-            x_restart[base_cols] = (base - p0[b0 : b0 + 6])[est[base_cols] - b0] * scale[base_cols]
-            second = solve(x_restart)
-            if second.status == 0 or _final_rms(layout, measurement, second.params, q, measured) < _final_rms(
-                layout, measurement, solution.params, q, measured
-            ):
-                solution = second
-    status, lam, p, curve = solution.status, solution.lam, solution.params, solution.curve
+    solution, restarts = _solve_with_restart(solve, campaign, layout, p0, est, scale, problem.start)
+    status, lam, p = solution.status, solution.lam, solution.params
 
     # The last iterate's linearisation: no second evaluation of the chain at the solution.
-    pred, jac = solution.predicted, solution.jacobian
-    residuals = measurement.residual(measured, pred)
+    residuals = measurement.residual(measured, solution.predicted)
     rms_after, max_after = residual_stats(_position_part(measurement, residuals))
-    if status != 0 and not accept_unconverged:
-        msg = (
-            f"identification did not converge in {max_iterations} iterations"
-            f"{' (and a restart)' if restarts else ''}: residual RMS {rms_after * 1e3:.4g} mm "
-            f"(before {rms_before * 1e3:.4g} mm); the result would be wrong. Check units, joint names "
-            "and the robot model, or accept it explicitly (--accept-unconverged)"
-        )
-        raise ConvergenceError(msg)
-    whitened, a_mat = stack_equations(measurement, residuals, jac, est)
-    a_mat = a_mat / scale
-    s_final = np.linalg.svd(a_mat, compute_uv=False)
-    # First-order covariance of the Tikhonov estimate with residual-scatter noise.
-    ata = a_mat.T @ a_mat
-    reg = lam**2 * np.diag(penalized.astype(np.float64))
-    inv = np.linalg.inv(ata + reg)
-    dof_used = float(np.trace(inv @ ata))
-    sigma2 = float(np.sum(whitened**2)) / max(n_eq - dof_used, 1.0)
-    cov_x = sigma2 * inv @ ata @ inv
-    std = np.full(layout.size, np.nan)
-    std[est] = np.sqrt(np.diag(cov_x)) / scale
-    share, data_std = _data_determination(ata, inv, sigma2)
-    data_share = np.full(layout.size, np.nan)
-    data_share[est] = share
-    data_only_std = np.full(layout.size, np.nan)
-    data_only_std[est] = data_std / scale
-    estimated = np.zeros(layout.size, dtype=bool)
-    estimated[est] = True
-    full_scale = np.zeros(layout.size)
-    full_scale[est] = scale
-    full_penalized = np.zeros(layout.size, dtype=bool)
-    full_penalized[est] = penalized
-    warns: list[str] = [] if base_note is None else [base_note]
-    cond = float(s_final[0] / s_final[-1])
-    if cond > 1e6:
-        warns.append(f"ill-conditioned pose set: condition number {cond:.3g} of the scaled Jacobian")
-    if status != 0:
-        warns.append(IDENTIFICATION_MESSAGES[status] + " (accepted by the caller)")
-    mismatch = _weighting_mismatch(measurement, whitened.reshape(residuals.shape))
-    if mismatch is not None:
-        warns.append(mismatch)
+    _check_converged(status, restarts, max_iterations, rms_before, rms_after, accept_unconverged)
+    lin = _linearization(measurement, residuals, solution.jacobian, est, scale, penalized, lam, layout.size)
+    estimated = _full_mask(layout.size, est, np.ones(est.size, dtype=bool))
+    cond = float(lin.singular_values[0] / lin.singular_values[-1])
     return IdentificationResult(
         model=model.with_parameters(p),
         parameter_names=layout.names,
@@ -719,16 +873,16 @@ def _identify_weighted(
         estimate=p,
         estimated=estimated,
         identifiable=estimated.copy(),
-        candidates=candidates,
-        dependencies=obs.dependencies,
-        linearized_std=std,
-        data_only_std=data_only_std,
-        data_share=data_share,
+        candidates=problem.base.candidates,
+        dependencies=problem.observability.dependencies,
+        linearized_std=lin.std,
+        data_only_std=lin.data_only_std,
+        data_share=lin.data_share,
         lambda_=float(lam),
         lambda_method=method,
-        lcurve=curve,
-        column_scale=full_scale,
-        singular_values=s_final,
+        lcurve=solution.curve,
+        column_scale=_full_values(layout.size, est, scale),
+        singular_values=lin.singular_values,
         condition_number=cond,
         residuals=residuals,
         rms_before=rms_before,
@@ -739,12 +893,12 @@ def _identify_weighted(
         converged=status == 0,
         status=status,
         message=IDENTIFICATION_MESSAGES[status],
-        base_initialised=base_init,
-        tool_initialised=tool_init,
+        base_initialised=problem.base.initialised,
+        tool_initialised=problem.tool_initialised,
         n_poses=campaign.n_poses,
-        penalized=full_penalized,
-        effective_parameters=dof_used,
-        warnings=tuple(warns),
+        penalized=_full_mask(layout.size, est, penalized),
+        effective_parameters=lin.effective_parameters,
+        warnings=_fit_warnings(problem.base.note, cond, status, measurement, lin.whitened.reshape(residuals.shape)),
         measurement=measurement,
         rotation_rms_before=_rotation_rms(measurement, residuals0),
         rotation_rms_after=_rotation_rms(measurement, residuals),

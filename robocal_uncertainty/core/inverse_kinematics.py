@@ -212,6 +212,17 @@ def _errors(
     return task, scaled
 
 
+def _final_errors(
+    model: RobotModel, params: Array, q: Array, targets: Array, target_rotations: Array | None
+) -> tuple[Array, Array]:
+    """Distance [m] and rotation angle [rad] of each reached tool frame from its target (0 without rotations)."""
+    points, rotations, _ = joint_jacobian(model, params, q)
+    position_error = np.linalg.norm(targets - points, axis=1)
+    if target_rotations is None:
+        return position_error, np.zeros(q.shape[0])
+    return position_error, np.linalg.norm(rotation_log(target_rotations @ np.swapaxes(rotations, -1, -2)), axis=1)
+
+
 def solve_near(
     model: RobotModel,
     params: Array,
@@ -273,12 +284,7 @@ def solve_near(
         stalled = active & ~better & (damping > 1e6 * scale * scale)
         if np.all(~active | stalled):
             break
-    points, rotations, _ = joint_jacobian(model, params, q)
-    position_error = np.linalg.norm(targets - points, axis=1)
-    if target_rotations is None:
-        rotation_error = np.zeros(n)
-    else:
-        rotation_error = np.linalg.norm(rotation_log(target_rotations @ np.swapaxes(rotations, -1, -2)), axis=1)
+    position_error, rotation_error = _final_errors(model, params, q, targets, target_rotations)
     singular = np.linalg.svd(jac, compute_uv=False)
     condition = singular[:, 0] / np.maximum(singular[:, -1], 1e-300)
     branch_seed, names = branch_signs(model, params, seeds)

@@ -409,6 +409,14 @@ class NearbyPoints:
         for name, value in state.items():
             object.__setattr__(self, name, value)
 
+    def _check_readings(self, q: Array) -> None:
+        """Refuse joint readings whose poses are not the reference's."""
+        if q.shape[-2:] != self.joints.shape:
+            msg = (
+                f"joint_positions must have shape (..., {self.joints.shape[0]}, {self.layout.n_joints}), got {q.shape}"
+            )
+            raise ValueError(msg)
+
     def _walk(
         self, params: Array, joint_positions: Array, *, rotation: bool
     ) -> tuple[Array, tuple[int, ...], tuple[Array, Array, Array], list[tuple[Array, Array, Array]]]:
@@ -421,9 +429,7 @@ class NearbyPoints:
         """
         layout = self.layout
         p, q, shape = _prepare(layout, params, joint_positions)
-        if q.shape[-2:] != self.joints.shape:
-            msg = f"joint_positions must have shape (..., {self.joints.shape[0]}, {layout.n_joints}), got {q.shape}"
-            raise ValueError(msg)
+        self._check_readings(q)
         n_poses, n_joints = self.joints.shape
         n_batch = math.prod(shape[:-1])
         full = (n_batch, n_poses)
@@ -437,7 +443,6 @@ class NearbyPoints:
         largest = max(float(np.max(dq, initial=0.0)), -float(np.min(dq, initial=0.0)))
         largest += float(np.max(np.abs(dtheta), initial=0.0))
         direct = not largest <= _TAYLOR_LIMIT  # also for NaN
-        # The fixed angles of every joint at once (a call per joint costs more than the values).
         alphas = pf[:, :, [idx["alpha"] for idx in slices]]
         cos_alpha, sin_alpha = np.cos(alphas), np.sin(alphas)
         with_beta = [j for j, idx in enumerate(slices) if "beta" in idx]
@@ -447,18 +452,7 @@ class NearbyPoints:
         def column(k: int) -> Array:
             return pf[:, :, k]  # (n_batch, 1)
 
-        t0 = layout.tool_index
-        starts = [(column(t0), column(t0 + 1), column(t0 + 2))]
-        if rotation:
-            tool = _tool_rotation(layout, pf[:, 0, :])
-            if tool is None:
-                one, zero = np.ones((n_batch, 1)), np.zeros((n_batch, 1))
-                starts += [(one, zero, zero), (zero, zero, one)]
-            else:
-                r = tool[0][:, None]
-                starts += [(r[..., 0, 0], r[..., 1, 0], r[..., 2, 0]), (r[..., 0, 2], r[..., 1, 2], r[..., 2, 2])]
-        # Full-size copies of the starting vectors: every later operation runs in place.
-        vectors = [[np.array(np.broadcast_to(u, full)) for u in v] for v in starts]
+        vectors = _tool_vectors(layout, pf, full, rotation=rotation)
         b, b2, cos_b, sin_b, c, s, cos_x, sin_x, tmp, spare = (np.empty(full) for _ in range(10))
         if not direct:
             cos_series, sin_series = _series(largest, odd=False), _series(largest, odd=True)
@@ -501,6 +495,26 @@ class NearbyPoints:
         point = vectors[0]
         axes = [(v[0], v[1], v[2]) for v in vectors[1:]]
         return pf, shape, (point[0], point[1], point[2]), axes
+
+
+def _tool_vectors(layout: ParameterLayout, pf: Array, full: tuple[int, int], *, rotation: bool) -> list[list[Array]]:
+    """The tool point and (with `rotation`) the tool's x and z axes in the flange frame.
+
+    `pf` is (n_batch, 1, n_params); each component comes back as a full-size (n_batch, n_poses)
+    copy, so that every later operation of the walk runs in place.
+    """
+    n_batch = full[0]
+    t0 = layout.tool_index
+    starts = [(pf[:, :, t0], pf[:, :, t0 + 1], pf[:, :, t0 + 2])]
+    if rotation:
+        tool = _tool_rotation(layout, pf[:, 0, :])
+        if tool is None:
+            one, zero = np.ones((n_batch, 1)), np.zeros((n_batch, 1))
+            starts += [(one, zero, zero), (zero, zero, one)]
+        else:
+            r = tool[0][:, None]
+            starts += [(r[..., 0, 0], r[..., 1, 0], r[..., 2, 0]), (r[..., 0, 2], r[..., 1, 2], r[..., 2, 2])]
+    return [[np.array(np.broadcast_to(u, full)) for u in v] for v in starts]
 
 
 def _horner_into(coefficients: tuple[float, ...], b2: Array, out: Array) -> Array | float:

@@ -251,6 +251,62 @@ def _parse_joint(element: ET.Element, where: str) -> UrdfJoint:
     )
 
 
+def _parse_links(root: ET.Element, where: str) -> list[str]:
+    """The link names, each named once."""
+    links: list[str] = []
+    for element in root.findall("link"):
+        name = element.get("name")
+        if not name:
+            msg = f"{where}: a <link> has no name"
+            raise ConfigError(msg)
+        if name in links:
+            msg = f"{where}: link {name!r} is defined twice"
+            raise ConfigError(msg)
+        links.append(name)
+    return links
+
+
+def _parse_joints(root: ET.Element, links: list[str], where: str) -> list[UrdfJoint]:
+    """The joints, each named once, between defined links, no link the child of two joints."""
+    joints: list[UrdfJoint] = []
+    for element in root.findall("joint"):
+        joint = _parse_joint(element, where)
+        if any(j.name == joint.name for j in joints):
+            msg = f"{where}: joint {joint.name!r} is defined twice"
+            raise ConfigError(msg)
+        for end in (joint.parent, joint.child):
+            if end not in links:
+                msg = f"{where}: joint {joint.name!r} names link {end!r}, which the URDF does not define"
+                raise ConfigError(msg)
+        other = next((j for j in joints if j.child == joint.child), None)
+        if other is not None:
+            msg = (
+                f"{where}: link {joint.child!r} is the child of joints {other.name!r} and {joint.name!r}: "
+                "a kinematic loop (a URDF describes a tree)"
+            )
+            raise ConfigError(msg)
+        joints.append(joint)
+    return joints
+
+
+def _check_tree(robot: UrdfRobot) -> None:
+    """Refuse a kinematic loop or several root links."""
+    where, links = robot.where, robot.links
+    for link in links:
+        seen = {link}
+        up = robot.parent_joint(link)
+        while up is not None:
+            if up.parent in seen:
+                msg = f"{where}: joint {up.name!r} closes a kinematic loop through link {up.parent!r}"
+                raise ConfigError(msg)
+            seen.add(up.parent)
+            up = robot.parent_joint(up.parent)
+    roots = [link for link in links if robot.parent_joint(link) is None]
+    if len(roots) > 1:
+        msg = f"{where}: links {', '.join(repr(r) for r in roots)} have no parent: the URDF is not one tree"
+        raise ConfigError(msg)
+
+
 def parse_urdf(text: str, *, where: str = "URDF") -> UrdfRobot:
     """Parse URDF text (plain XML; xacro must be expanded first) into links and joints.
 
@@ -272,51 +328,13 @@ def parse_urdf(text: str, *, where: str = "URDF") -> UrdfRobot:
     if any("xacro" in (el.tag if isinstance(el.tag, str) else "") for el in root.iter()) or "${" in text:
         msg = f"{where} still holds xacro macros: expand it first (xacro robot.urdf.xacro > robot.urdf)"
         raise ConfigError(msg)
-    links: list[str] = []
-    for element in root.findall("link"):
-        name = element.get("name")
-        if not name:
-            msg = f"{where}: a <link> has no name"
-            raise ConfigError(msg)
-        if name in links:
-            msg = f"{where}: link {name!r} is defined twice"
-            raise ConfigError(msg)
-        links.append(name)
-    joints: list[UrdfJoint] = []
-    for element in root.findall("joint"):
-        joint = _parse_joint(element, where)
-        if any(j.name == joint.name for j in joints):
-            msg = f"{where}: joint {joint.name!r} is defined twice"
-            raise ConfigError(msg)
-        for end in (joint.parent, joint.child):
-            if end not in links:
-                msg = f"{where}: joint {joint.name!r} names link {end!r}, which the URDF does not define"
-                raise ConfigError(msg)
-        other = next((j for j in joints if j.child == joint.child), None)
-        if other is not None:
-            msg = (
-                f"{where}: link {joint.child!r} is the child of joints {other.name!r} and {joint.name!r}: "
-                "a kinematic loop (a URDF describes a tree)"
-            )
-            raise ConfigError(msg)
-        joints.append(joint)
+    links = _parse_links(root, where)
+    joints = _parse_joints(root, links, where)
     if not links:
         msg = f"{where} defines no links"
         raise ConfigError(msg)
     robot = UrdfRobot(name=root.get("name") or "robot", links=tuple(links), joints=tuple(joints), where=where)
-    for link in links:
-        seen = {link}
-        up = robot.parent_joint(link)
-        while up is not None:
-            if up.parent in seen:
-                msg = f"{where}: joint {up.name!r} closes a kinematic loop through link {up.parent!r}"
-                raise ConfigError(msg)
-            seen.add(up.parent)
-            up = robot.parent_joint(up.parent)
-    roots = [link for link in links if robot.parent_joint(link) is None]
-    if len(roots) > 1:
-        msg = f"{where}: links {', '.join(repr(r) for r in roots)} have no parent: the URDF is not one tree"
-        raise ConfigError(msg)
+    _check_tree(robot)
     return robot
 
 
@@ -541,6 +559,40 @@ def model_frames(model: RobotModel, q: Array | None = None) -> tuple[list[Array]
     return frames, current @ transform(model.tool_point, model.tool_rpy)
 
 
+@dataclass(frozen=True)
+class _DhRows:
+    """The modified-DH rows of a chain and the mount that puts joint 1's frame on its axis."""
+
+    mount_xyz: Array
+    mount_rpy: Array
+    alpha: Array
+    a: Array
+    theta: Array
+    d: Array
+    beta: Array
+    has_beta: tuple[bool, ...]
+
+
+def _dh_rows(joint_frames: list[Array], movable: tuple[UrdfJoint, ...]) -> _DhRows:
+    """Walk the joint axes (in the base link) into modified-DH rows, one line step per joint."""
+    axes = [frame[:3, :3] @ np.asarray(j.axis) for frame, j in zip(joint_frames, movable)]
+    points = [frame[:3, 3] for frame in joint_frames]
+    mount_xyz, mount_rpy = _frame_on_axis(points[0], axes[0])
+    n = len(movable)
+    alpha, a, beta, theta, d = (np.zeros(n) for _ in range(5))
+    has_beta = [False] * n
+    frame = transform(mount_xyz, mount_rpy)
+    for i in range(1, n):
+        row = _line_step(frame, points[i], axes[i])
+        theta[i - 1] += row.phi
+        d[i - 1] += row.s
+        alpha[i], a[i], beta[i], has_beta[i] = row.alpha, row.a, row.beta, row.has_beta
+        frame = frame @ _rot(2, row.phi) @ _trans(2, row.s) @ _rot(0, row.alpha) @ _trans(0, row.a)
+        if row.has_beta:
+            frame = frame @ _rot(1, row.beta)
+    return _DhRows(mount_xyz, mount_rpy, alpha, a, theta, d, beta, tuple(has_beta))
+
+
 def robot_model_from_urdf(
     robot: UrdfRobot,
     base_link: str | None = None,
@@ -576,21 +628,7 @@ def robot_model_from_urdf(
     chain = urdf_chain(robot, base_link, tip_link)
     joint_frames, _ = chain_frames(chain)
     movable = chain.movable
-    axes = [frame[:3, :3] @ np.asarray(j.axis) for frame, j in zip(joint_frames, movable)]
-    points = [frame[:3, 3] for frame in joint_frames]
-    mount_xyz, mount_rpy = _frame_on_axis(points[0], axes[0])
-    n = len(movable)
-    alpha, a, beta, theta, d = (np.zeros(n) for _ in range(5))
-    has_beta = [False] * n
-    frame = transform(mount_xyz, mount_rpy)
-    for i in range(1, n):
-        row = _line_step(frame, points[i], axes[i])
-        theta[i - 1] += row.phi
-        d[i - 1] += row.s
-        alpha[i], a[i], beta[i], has_beta[i] = row.alpha, row.a, row.beta, row.has_beta
-        frame = frame @ _rot(2, row.phi) @ _trans(2, row.s) @ _rot(0, row.alpha) @ _trans(0, row.a)
-        if row.has_beta:
-            frame = frame @ _rot(1, row.beta)
+    dh = _dh_rows(joint_frames, movable)
     limits = np.array(
         [[j.lower, j.upper] if j.type != "continuous" else [-2.0 * math.pi, 2.0 * math.pi] for j in movable],
         dtype=np.float64,
@@ -598,12 +636,12 @@ def robot_model_from_urdf(
     model = RobotModel(
         name=f"{robot.name}[{chain.base_link}->{chain.tip_link}]",
         joint_names=tuple(j.name for j in movable),
-        alpha=alpha,
-        a=a,
-        theta=theta,
-        d=d,
-        beta=beta,
-        has_beta=tuple(has_beta),
+        alpha=dh.alpha,
+        a=dh.a,
+        theta=dh.theta,
+        d=dh.d,
+        beta=dh.beta,
+        has_beta=dh.has_beta,
         joint_limits=limits,
         tool_point=np.zeros(3),
         base_xyz=np.zeros(3),
@@ -612,11 +650,17 @@ def robot_model_from_urdf(
         base_frame_id=chain.base_link,
         measurement_frame_id=measurement_frame_id,
         prismatic=tuple(j.type == "prismatic" for j in movable),
-        mount_xyz=mount_xyz,
-        mount_rpy=mount_rpy,
+        mount_xyz=dh.mount_xyz,
+        mount_rpy=dh.mount_rpy,
         mounted=True,
     )
-    # The tool: tip link in the last modified-DH frame, then the measured point in the tip link.
+    return _with_tool(model, chain, tool_point)
+
+
+def _with_tool(
+    model: RobotModel, chain: UrdfChain, tool_point: Array | tuple[float, float, float] | None
+) -> RobotModel:
+    """`model` with its tool: the tip link in the last modified-DH frame, then the measured point in it."""
     frames, _ = model_frames(model)
     _, tip = chain_frames(chain)
     last_t_tip = _inv(frames[-1]) @ tip
@@ -626,6 +670,30 @@ def robot_model_from_urdf(
         raise ConfigError(msg)
     point = last_t_tip[:3, :3] @ given + last_t_tip[:3, 3]
     return replace(model, tool_point=point, tool_rpy=urdf_rpy(last_t_tip[:3, :3]), tool_known=tool_point is not None)
+
+
+def _axis_offsets(chain: UrdfChain, nominal: RobotModel, base: Array) -> list[Array]:
+    """Per movable joint, its nominal frame in the nominal model frame on its axis.
+
+    Raises ConfigError when a joint does not turn (or slide) about that frame's z axis.
+    """
+    joint_nominal, _ = chain_frames(chain)
+    model_nominal, _ = model_frames(nominal)
+    offsets = []
+    for joint, j_frame, m_frame in zip(chain.movable, joint_nominal, model_nominal):
+        k = _inv(base @ m_frame) @ j_frame  # model frame i <- joint frame i
+        axis = k[:3, :3] @ np.asarray(joint.axis)
+        misfit = float(np.linalg.norm(axis - np.array([0.0, 0.0, 1.0])))
+        if joint.type != "prismatic":
+            misfit = max(misfit, float(math.hypot(k[0, 3], k[1, 3])))
+        if misfit > _AXIS_TOL:
+            msg = (
+                f"{chain.robot.where}: joint {joint.name!r} does not turn about the model's axis "
+                f"(misfit {misfit:.3g}): the URDF and robot model {nominal.name!r} describe different robots"
+            )
+            raise ConfigError(msg)
+        offsets.append(k)
+    return offsets
 
 
 def calibrated_joint_origins(
@@ -675,23 +743,8 @@ def calibrated_joint_origins(
         )
         raise ConfigError(msg)
     base = np.eye(4) if frame0 is None else np.asarray(frame0, dtype=np.float64)
-    joint_nominal, _ = chain_frames(chain)
-    model_nominal, _ = model_frames(nominal)
+    offsets = _axis_offsets(chain, nominal, base)
     model_cal, tool_cal = model_frames(calibrated)
-    offsets = []
-    for joint, j_frame, m_frame in zip(movable, joint_nominal, model_nominal):
-        k = _inv(base @ m_frame) @ j_frame  # model frame i <- joint frame i
-        axis = k[:3, :3] @ np.asarray(joint.axis)
-        misfit = float(np.linalg.norm(axis - np.array([0.0, 0.0, 1.0])))
-        if joint.type != "prismatic":
-            misfit = max(misfit, float(math.hypot(k[0, 3], k[1, 3])))
-        if misfit > _AXIS_TOL:
-            msg = (
-                f"{chain.robot.where}: joint {joint.name!r} does not turn about the model's axis "
-                f"(misfit {misfit:.3g}): the URDF and robot model {nominal.name!r} describe different robots"
-            )
-            raise ConfigError(msg)
-        offsets.append(k)
     origins: dict[str, tuple[Array, Array]] = {}
     current = chain.base_offset.copy()
     k_index = 0

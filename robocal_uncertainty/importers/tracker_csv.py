@@ -50,6 +50,7 @@ row counted from 1 (the first row after the header).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -292,6 +293,224 @@ def _read_rows(path: Path) -> tuple[str, list[list[str]], list[int]]:
     return separator, rows, lines
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """What the header says: the profile, the used columns and the frame of the points."""
+
+    profile: Profile
+    columns: list[_Column]
+    ignored: list[str]
+    frame: PointFrame
+    frame_id: str
+
+
+def _position_layout(
+    path: Path,
+    header: list[str],
+    profile: Profile,
+    *,
+    length_unit: str | None,
+    angle_unit: str | None,
+    joint_columns: tuple[str, ...] | list[str] | None,
+    frame: PointFrame | None,
+    frame_id: str | None,
+) -> _Layout:
+    """Joint, point and std columns of the file's profile (``auto`` resolved from the header)."""
+    cells = {cell.strip() for cell in header}
+    if profile == "auto":
+        profile = "ipa" if set(IPA_JOINTS + _IPA_POINT + _IPA_STD) <= cells else "generic"
+    if profile == "ipa":
+        if joint_columns is not None and tuple(joint_columns) != IPA_JOINTS:
+            msg = (
+                f"{path}: the ipa profile's joint columns are {list(IPA_JOINTS)}, "
+                f"got --joint-columns {list(joint_columns)}"
+            )
+            raise InputError(msg)
+        columns = _ipa_columns(path, header, length_unit, angle_unit)
+        used = {c.index for c in columns}
+        ignored = [cell.strip() for i, cell in enumerate(header) if i not in used]
+        if (frame or "tracker") != "tracker" or (frame_id or _IPA_FRAME_ID) != _IPA_FRAME_ID:
+            msg = f"{path}: the ipa profile is in frame 'tracker'/{_IPA_FRAME_ID!r}, got {frame!r}/{frame_id!r}"
+            raise InputError(msg)
+        return _Layout(profile, columns, ignored, "tracker", _IPA_FRAME_ID)
+    names = None if joint_columns is None else tuple(joint_columns)
+    columns, ignored = _generic_columns(path, header, length_unit, angle_unit, names)
+    if names is not None:
+        order = {n: i for i, n in enumerate(names)}
+        columns.sort(key=lambda c: (c.role != "joint", order.get(c.name, 0)))
+    frame = frame or "tracker"
+    frame_id = frame_id or ("base_link" if frame == "base" else "tracker")
+    return _Layout(profile, columns, ignored, frame, frame_id)
+
+
+def _orientation_convention(path: Path, profile: Profile, names: tuple[str, ...], convention: str | None) -> str:
+    """The Euler convention of the angle columns: the ipa profile's fixed one or the stated one."""
+    if profile == "ipa":
+        if names != IPA_ORIENTATION:
+            msg = f"{path}: the ipa profile's orientation columns are {list(IPA_ORIENTATION)}, got {list(names)}"
+            raise InputError(msg)
+        if convention not in (None, _IPA_CONVENTION):
+            msg = (
+                f"{path}: the ipa profile's orientations are {_IPA_CONVENTION} Euler angles, "
+                f"got --orientation-convention {convention}"
+            )
+            raise InputError(msg)
+        convention = _IPA_CONVENTION
+    elif convention is None:
+        msg = (
+            f"{path}: orientation columns need their Euler convention "
+            f"(import-csv --orientation-convention: {', '.join(EULER_CONVENTIONS)})"
+        )
+        raise InputError(msg)
+    if convention not in EULER_CONVENTIONS:
+        msg = f"{path}: unknown orientation convention {convention!r} (supported: {', '.join(EULER_CONVENTIONS)})"
+        raise InputError(msg)
+    return convention
+
+
+def _with_orientation(
+    path: Path,
+    header: list[str],
+    layout: _Layout,
+    orientation_columns: tuple[str, ...] | list[str] | None,
+    *,
+    unit: str | None,
+    convention: str | None,
+) -> tuple[_Layout, str | None]:
+    """`layout` with the angle (and angle std) columns added, and their Euler convention.
+
+    Unchanged, and no convention, when the call asks for no orientation (the ipa profile reads
+    its fixed angle columns when a unit or convention is given for them).
+    """
+    wants_orientation = orientation_columns is not None or (
+        layout.profile == "ipa" and (unit is not None or convention is not None)
+    )
+    if not wants_orientation:
+        return layout, None
+    names = tuple(orientation_columns) if orientation_columns is not None else IPA_ORIENTATION
+    convention = _orientation_convention(path, layout.profile, names, convention)
+    fixed = _IPA_ORIENTATION_UNIT if layout.profile == "ipa" else None
+    o_columns = _orientation_columns(path, header, names, unit, fixed)
+    o_indices = {c.index for c in o_columns}
+    ignored = [name for name in layout.ignored if name not in {c.name for c in o_columns}]
+    columns = [c for c in layout.columns if c.index not in o_indices] + o_columns
+    return dataclasses.replace(layout, columns=columns, ignored=ignored), convention
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """The values of the valid data rows, by role, SI units."""
+
+    joints: list[list[float]]
+    points: list[list[float]]
+    std: list[list[float]]
+    angles: list[list[float]]
+    angle_std: list[list[float]]
+    kept: list[int]
+    skipped: list[int]
+    has_std: bool
+    has_angle_std: bool
+
+
+def _collect_rows(
+    path: Path,
+    rows: list[list[str]],
+    lines: list[int],
+    columns: list[_Column],
+    separator: str,
+    *,
+    skip_invalid: bool,
+) -> _Rows:
+    """Parse every data row; a bad one raises (naming its line) or is skipped."""
+    header = rows[0]
+    joints = [c for c in columns if c.role == "joint"]
+    axes = {c.role + c.key: c for c in columns if c.role != "joint"}
+    has_std = "stdx" in axes
+    has_angle_std = "angle_stdx" in axes
+    wants_orientation = "anglex" in axes
+    out = _Rows([], [], [], [], [], [], [], has_std, has_angle_std)
+    for data_row, (row, line) in enumerate(zip(rows[1:], lines[1:], strict=True)):
+        try:
+            values = _parse_row(row, header, columns, separator)
+        except ValueError as err:
+            if not skip_invalid:
+                msg = f"{path}: line {line} (data row {data_row + 1}): {err}"
+                raise InputError(msg) from None
+            out.skipped.append(data_row)
+            continue
+        out.joints.append([values[c.index] for c in joints])
+        out.points.append([values[axes["point" + a].index] for a in "xyz"])
+        if has_std:
+            out.std.append([values[axes["std" + a].index] for a in "xyz"])
+        if wants_orientation:
+            out.angles.append([values[axes["angle" + a].index] for a in "xyz"])
+            if has_angle_std:
+                out.angle_std.append([values[axes["angle_std" + a].index] for a in "xyz"])
+        out.kept.append(data_row)
+    if not out.kept:
+        msg = f"{path}: no valid data row ({len(out.skipped)} skipped)"
+        raise InputError(msg)
+    return out
+
+
+def _pose_campaign_values(
+    path: Path, rows: _Rows, points: np.ndarray, point_std: np.ndarray | None, convention: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, PoseMeasurement]:
+    """Pose values, their std (position and rotation), its median per axis and the measurement it weighs."""
+    angles = np.array(rows.angles, dtype=np.float64)
+    points = pose_values(points, euler_to_matrix(angles, convention))
+    if point_std is None or not rows.has_angle_std:
+        msg = (
+            f"{path}: a 6-DOF campaign needs the standard deviations of the position and of the "
+            "orientation (std columns) to weigh the two kinds of residual"
+        )
+        raise InputError(msg)
+    rot_std = _rotation_std(angles, np.array(rows.angle_std, dtype=np.float64), convention)
+    point_std = np.concatenate((point_std, rot_std), axis=1)
+    median = np.median(point_std, axis=0)
+    if not (median > 0).all():
+        msg = f"{path}: the median standard deviation of each axis must be positive, got {median.tolist()}"
+        raise InputError(msg)
+    measurement = PoseMeasurement(
+        (float(median[0]), float(median[1]), float(median[2])),
+        (float(median[3]), float(median[4]), float(median[5])),
+    )
+    return points, point_std, median, measurement
+
+
+def _campaign(path: Path, layout: _Layout, data: _Rows, orientation_convention: str | None) -> Campaign:
+    """The campaign of the parsed rows, points only or poses (with an orientation convention)."""
+    columns = layout.columns
+    metadata: dict[str, object] = {
+        "source_file": path.name,
+        "source_format": "csv",
+        "profile": layout.profile,
+        "source_rows": data.kept,
+        "skipped_rows": data.skipped,
+        "units": {c.name: c.unit for c in columns},
+        "ignored_columns": layout.ignored,
+    }
+    points = np.array(data.points, dtype=np.float64)
+    point_std = np.array(data.std, dtype=np.float64) if data.has_std else None
+    measurement: MeasurementType = POINT
+    if orientation_convention is not None:
+        metadata["orientation_convention"] = orientation_convention
+        points, point_std, median, measurement = _pose_campaign_values(
+            path, data, points, point_std, orientation_convention
+        )
+        metadata["weights_std"] = {"position_m": median[:3].tolist(), "rotation_rad": median[3:].tolist()}
+    return Campaign(
+        joint_names=tuple(c.name for c in columns if c.role == "joint"),
+        joint_positions=np.array(data.joints, dtype=np.float64),
+        points=points,
+        frame=layout.frame,
+        frame_id=layout.frame_id,
+        point_std=point_std,
+        metadata=metadata,
+        measurement=measurement,
+    )
+
+
 def read_tracker_csv(
     path: str | Path,
     *,
@@ -355,140 +574,21 @@ def read_tracker_csv(
         raise InputError(msg)
     separator, rows, lines = _read_rows(path)
     header = rows[0]
-    cells = {cell.strip() for cell in header}
-    if profile == "auto":
-        profile = "ipa" if set(IPA_JOINTS + _IPA_POINT + _IPA_STD) <= cells else "generic"
-    if profile == "ipa":
-        if joint_columns is not None and tuple(joint_columns) != IPA_JOINTS:
-            msg = (
-                f"{path}: the ipa profile's joint columns are {list(IPA_JOINTS)}, "
-                f"got --joint-columns {list(joint_columns)}"
-            )
-            raise InputError(msg)
-        columns = _ipa_columns(path, header, length_unit, angle_unit)
-        used = {c.index for c in columns}
-        ignored = [cell.strip() for i, cell in enumerate(header) if i not in used]
-        if (frame or "tracker") != "tracker" or (frame_id or _IPA_FRAME_ID) != _IPA_FRAME_ID:
-            msg = f"{path}: the ipa profile is in frame 'tracker'/{_IPA_FRAME_ID!r}, got {frame!r}/{frame_id!r}"
-            raise InputError(msg)
-        frame, frame_id = "tracker", _IPA_FRAME_ID
-    else:
-        names = None if joint_columns is None else tuple(joint_columns)
-        columns, ignored = _generic_columns(path, header, length_unit, angle_unit, names)
-        if names is not None:
-            order = {n: i for i, n in enumerate(names)}
-            columns.sort(key=lambda c: (c.role != "joint", order.get(c.name, 0)))
-        frame = frame or "tracker"
-        frame_id = frame_id or ("base_link" if frame == "base" else "tracker")
-    wants_orientation = orientation_columns is not None or (
-        profile == "ipa" and (orientation_unit is not None or orientation_convention is not None)
-    )
-    if wants_orientation:
-        if profile == "ipa":
-            names_o = tuple(orientation_columns) if orientation_columns is not None else IPA_ORIENTATION
-            if names_o != IPA_ORIENTATION:
-                msg = f"{path}: the ipa profile's orientation columns are {list(IPA_ORIENTATION)}, got {list(names_o)}"
-                raise InputError(msg)
-            if orientation_convention not in (None, _IPA_CONVENTION):
-                msg = (
-                    f"{path}: the ipa profile's orientations are {_IPA_CONVENTION} Euler angles, "
-                    f"got --orientation-convention {orientation_convention}"
-                )
-                raise InputError(msg)
-            orientation_convention = _IPA_CONVENTION
-            fixed: str | None = _IPA_ORIENTATION_UNIT
-        else:
-            fixed = None
-            if orientation_convention is None:
-                msg = (
-                    f"{path}: orientation columns need their Euler convention "
-                    f"(import-csv --orientation-convention: {', '.join(EULER_CONVENTIONS)})"
-                )
-                raise InputError(msg)
-        if orientation_convention not in EULER_CONVENTIONS:
-            msg = (
-                f"{path}: unknown orientation convention {orientation_convention!r} "
-                f"(supported: {', '.join(EULER_CONVENTIONS)})"
-            )
-            raise InputError(msg)
-        assert orientation_columns is not None or profile == "ipa"
-        names_used = tuple(orientation_columns) if orientation_columns is not None else IPA_ORIENTATION
-        o_columns = _orientation_columns(path, header, names_used, orientation_unit, fixed)
-        o_indices = {c.index for c in o_columns}
-        ignored = [name for name in ignored if name not in {c.name for c in o_columns}]
-        columns = [c for c in columns if c.index not in o_indices] + o_columns
-    joints = [c for c in columns if c.role == "joint"]
-    axes = {c.role + c.key: c for c in columns if c.role != "joint"}
-    has_std = "stdx" in axes
-    has_angle_std = "angle_stdx" in axes
-    q_rows, p_rows, s_rows, kept, skipped = [], [], [], [], []
-    a_rows: list[list[float]] = []
-    as_rows: list[list[float]] = []
-    for data_row, (row, line) in enumerate(zip(rows[1:], lines[1:], strict=True)):
-        try:
-            values = _parse_row(row, header, columns, separator)
-        except ValueError as err:
-            if not skip_invalid:
-                msg = f"{path}: line {line} (data row {data_row + 1}): {err}"
-                raise InputError(msg) from None
-            skipped.append(data_row)
-            continue
-        q_rows.append([values[c.index] for c in joints])
-        p_rows.append([values[axes["point" + a].index] for a in "xyz"])
-        if has_std:
-            s_rows.append([values[axes["std" + a].index] for a in "xyz"])
-        if wants_orientation:
-            a_rows.append([values[axes["angle" + a].index] for a in "xyz"])
-            if has_angle_std:
-                as_rows.append([values[axes["angle_std" + a].index] for a in "xyz"])
-        kept.append(data_row)
-    if not kept:
-        msg = f"{path}: no valid data row ({len(skipped)} skipped)"
-        raise InputError(msg)
-    metadata: dict[str, object] = {
-        "source_file": path.name,
-        "source_format": "csv",
-        "profile": profile,
-        "source_rows": kept,
-        "skipped_rows": skipped,
-        "units": {c.name: c.unit for c in columns},
-        "ignored_columns": ignored,
-    }
-    points = np.array(p_rows, dtype=np.float64)
-    point_std = np.array(s_rows, dtype=np.float64) if has_std else None
-    measurement: MeasurementType = POINT
-    if wants_orientation:
-        assert orientation_convention is not None
-        angles = np.array(a_rows, dtype=np.float64)
-        points = pose_values(points, euler_to_matrix(angles, orientation_convention))
-        metadata["orientation_convention"] = orientation_convention
-        if point_std is None or not has_angle_std:
-            msg = (
-                f"{path}: a 6-DOF campaign needs the standard deviations of the position and of the "
-                "orientation (std columns) to weigh the two kinds of residual"
-            )
-            raise InputError(msg)
-        rot_std = _rotation_std(angles, np.array(as_rows, dtype=np.float64), orientation_convention)
-        point_std = np.concatenate((point_std, rot_std), axis=1)
-        median = np.median(point_std, axis=0)
-        if not (median > 0).all():
-            msg = f"{path}: the median standard deviation of each axis must be positive, got {median.tolist()}"
-            raise InputError(msg)
-        measurement = PoseMeasurement(
-            (float(median[0]), float(median[1]), float(median[2])),
-            (float(median[3]), float(median[4]), float(median[5])),
-        )
-        metadata["weights_std"] = {"position_m": median[:3].tolist(), "rotation_rad": median[3:].tolist()}
-    return Campaign(
-        joint_names=tuple(c.name for c in joints),
-        joint_positions=np.array(q_rows, dtype=np.float64),
-        points=points,
+    layout = _position_layout(
+        path,
+        header,
+        profile,
+        length_unit=length_unit,
+        angle_unit=angle_unit,
+        joint_columns=joint_columns,
         frame=frame,
         frame_id=frame_id,
-        point_std=point_std,
-        metadata=metadata,
-        measurement=measurement,
     )
+    layout, convention = _with_orientation(
+        path, header, layout, orientation_columns, unit=orientation_unit, convention=orientation_convention
+    )
+    data = _collect_rows(path, rows, lines, layout.columns, separator, skip_invalid=skip_invalid)
+    return _campaign(path, layout, data, convention)
 
 
 MAX_COORDINATE_M = 1000.0

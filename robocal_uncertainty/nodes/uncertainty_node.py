@@ -109,6 +109,7 @@ from robocal_uncertainty.nodes.qos import DIAGNOSTICS_QOS, SAMPLE_QOS, latched_q
 from robocal_uncertainty.pipeline.diagnostics import DiagnosticStatus, uncertainty_status
 from robocal_uncertainty.pipeline.markers import uncertainty_markers
 from robocal_uncertainty.pipeline.sample_store import SampleStore
+from robocal_uncertainty.report.references import PAPER_TEST_JOINTS_DEG
 from robocal_uncertainty.srv import CompensateTargets, SuggestPoses
 from robocal_uncertainty.uncertainty import (
     CalibrationUncertainty,
@@ -126,9 +127,6 @@ _LATENCY_LIMIT_S = 3600.0
 """A sample older than this on the node's clock is on another clock (a recording's)."""
 _CLOCK_SLACK_S = 1.0
 """Stamps this far ahead of the node's clock are tolerated (clock offsets between machines)."""
-
-SEED_TEST_JOINTS_DEG = [-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451]
-"""The robot seed's test configuration (Table 2), degrees."""
 
 # Parameters whose change re-runs the latest calibration's evaluation.
 _MONTE_CARLO = frozenset(
@@ -207,8 +205,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "test_joints_deg",
         None,
         "Test joint configurations in DEGREES, n_joints values per configuration, flattened; one result per "
-        "configuration (fixed at start); set this or test_joints_rad, not both; neither: the seed's test "
-        "configuration",
+        "configuration (fixed at start); set this or test_joints_rad, not both; neither: the robot paper's "
+        "test configuration (Jiang et al. Table 2)",
         "deg",
         read_only=True,
         check=_joints,
@@ -358,7 +356,7 @@ class UncertaintyNode(Node):
         if degrees is not None and radians is not None:
             raise ConfigError("parameters test_joints_deg and test_joints_rad are both set: give one")
         name = "test_joints_rad" if radians is not None else "test_joints_deg"
-        given = radians if radians is not None else degrees if degrees is not None else SEED_TEST_JOINTS_DEG
+        given = radians if radians is not None else degrees if degrees is not None else PAPER_TEST_JOINTS_DEG
         values = np.array(given, dtype=np.float64)
         if values.size % n:
             msg = f"parameter {name}: {values.size} values are not a multiple of the {n} joints"

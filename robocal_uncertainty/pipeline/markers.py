@@ -148,6 +148,69 @@ def _measured_points(result: CalibrationUncertainty, points: Array, frame: str) 
     return points
 
 
+def _region_markers(
+    result: CalibrationUncertainty, axes: list[tuple[Array, Array]], magnification: float
+) -> list[MarkerSpec]:
+    """Per test configuration: its coverage ellipsoid (magnified) and a label naming its size."""
+    frame_id = result.frame_id
+    p = result.coverage_probability
+    identity = np.array([0.0, 0.0, 0.0, 1.0])
+    markers: list[MarkerSpec] = []
+    for i, (pose, (semi, rotation)) in enumerate(zip(result.poses, axes)):
+        center = np.asarray(pose.mean, dtype=np.float64)
+        diameters = 2.0 * semi * magnification
+        markers.append(
+            MarkerSpec(
+                "coverage_region",
+                i,
+                "sphere",
+                frame_id,
+                center,
+                quaternion_from_matrix(rotation),
+                np.maximum(diameters, 1e-6),
+                REGION_COLOR,
+            )
+        )
+        label = f"config {i + 1}: {p * 100:g} % region, largest semi-axis {semi[0] * 1e6:.1f} um (x{magnification:g})"
+        markers.append(
+            MarkerSpec(
+                "coverage_label",
+                i,
+                "text",
+                frame_id,
+                center + np.array([0.0, 0.0, float(diameters[0]) / 2.0 + 0.03]),
+                identity,
+                np.array([0.0, 0.0, 0.02]),
+                TEXT_COLOR,
+                text=label,
+            )
+        )
+    return markers
+
+
+def _points_marker(
+    result: CalibrationUncertainty, campaign_points: Array, campaign_frame: str, point_diameter_m: float
+) -> MarkerSpec:
+    """The campaign's measured points, in the result's frame, as one sphere list."""
+    frame_id = result.frame_id
+    identity = np.array([0.0, 0.0, 0.0, 1.0])
+    pts = np.asarray(campaign_points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        msg = f"campaign_points must have shape (n, 3), got {pts.shape}"
+        raise InputError(msg)
+    return MarkerSpec(
+        "campaign_points",
+        0,
+        "sphere_list",
+        frame_id,
+        np.zeros(3),
+        identity,
+        np.full(3, point_diameter_m),
+        POINT_COLOR,
+        points=_measured_points(result, pts, campaign_frame),
+    )
+
+
 def uncertainty_markers(
     result: CalibrationUncertainty,
     *,
@@ -184,7 +247,6 @@ def uncertainty_markers(
     if scale is not None and not (scale > 0 and math.isfinite(scale)):
         msg = f"scale must be a finite number > 0, got {scale!r}"
         raise InputError(msg)
-    frame_id = result.frame_id
     p = result.coverage_probability
     axes = []
     for pose in result.poses:
@@ -195,55 +257,9 @@ def uncertainty_markers(
         axes.append(ellipsoid_axes(covariance, k))
     largest = max((float(a[0][0]) for a in axes), default=0.0)
     magnification = scale if scale is not None else visibility_scale(largest, target_m=target_size_m)
-    identity = np.array([0.0, 0.0, 0.0, 1.0])
-    markers: list[MarkerSpec] = []
-    for i, (pose, (semi, rotation)) in enumerate(zip(result.poses, axes)):
-        center = np.asarray(pose.mean, dtype=np.float64)
-        diameters = 2.0 * semi * magnification
-        markers.append(
-            MarkerSpec(
-                "coverage_region",
-                i,
-                "sphere",
-                frame_id,
-                center,
-                quaternion_from_matrix(rotation),
-                np.maximum(diameters, 1e-6),
-                REGION_COLOR,
-            )
-        )
-        label = f"config {i + 1}: {p * 100:g} % region, largest semi-axis {semi[0] * 1e6:.1f} um (x{magnification:g})"
-        markers.append(
-            MarkerSpec(
-                "coverage_label",
-                i,
-                "text",
-                frame_id,
-                center + np.array([0.0, 0.0, float(diameters[0]) / 2.0 + 0.03]),
-                identity,
-                np.array([0.0, 0.0, 0.02]),
-                TEXT_COLOR,
-                text=label,
-            )
-        )
+    markers = _region_markers(result, axes, magnification)
     if campaign_points is not None:
-        pts = np.asarray(campaign_points, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            msg = f"campaign_points must have shape (n, 3), got {pts.shape}"
-            raise InputError(msg)
-        markers.append(
-            MarkerSpec(
-                "campaign_points",
-                0,
-                "sphere_list",
-                frame_id,
-                np.zeros(3),
-                identity,
-                np.full(3, point_diameter_m),
-                POINT_COLOR,
-                points=_measured_points(result, pts, campaign_frame),
-            )
-        )
+        markers.append(_points_marker(result, campaign_points, campaign_frame, point_diameter_m))
     return tuple(markers)
 
 

@@ -269,6 +269,74 @@ def _cyclic_gc_paused(function: _F) -> _F:
     return wrapper  # type: ignore[return-value]
 
 
+@dataclass(frozen=True)
+class _DecodedBag:
+    """The joint and tracker messages of a raw recording, decoded, in log-time order."""
+
+    bag: Bag
+    tracker_topic: str
+    events: list[tuple[bool, Any]]
+    """(is a joint state, message) in log-time order."""
+    counts: dict[str, int]
+    undecodable: int
+
+    def majority_frame(self) -> str:
+        """The most frequent ``frame_id`` of the tracker messages."""
+        frames = Counter(str(m.header.frame_id) for is_joint, m in self.events if not is_joint)
+        if not frames:
+            msg = f"{self.bag.path}: no decodable message on {self.tracker_topic}"
+            raise BagError(msg)
+        return frames.most_common(1)[0][0]
+
+
+def _decode_bag(path: Path, joint_topic: str, tracker_topic: str, *, pose: bool) -> _DecodedBag:
+    """Open the recording, check its topics' types, and decode them in log-time order."""
+    bag = open_bag(path, (joint_topic, tracker_topic))
+    bag.topic_messages(joint_topic, JOINT_STATE)
+    if not pose:
+        _refuse_poses_as_points(bag, tracker_topic)
+    tracker_type = _tracker_type(bag, tracker_topic) if pose else POINT_STAMPED
+    bag.topic_messages(tracker_topic, tracker_type)
+    order = sorted(
+        (m for m in bag.contents.messages if m.channel.topic in (joint_topic, tracker_topic)),
+        key=lambda m: m.log_time_ns,
+    )
+    undecodable = 0
+    events: list[tuple[bool, Any]] = []
+    for message in order:
+        is_joint = message.channel.topic == joint_topic
+        decoded = bag.try_decode(message, JOINT_STATE if is_joint else tracker_type)
+        if decoded is None:
+            undecodable += 1
+        else:
+            events.append((is_joint, decoded))
+    counts = dict(Counter(m.channel.topic for m in order))
+    return _DecodedBag(bag, tracker_topic, events, counts, undecodable)
+
+
+def _feed(
+    pipeline: CalibrationPipeline,
+    pose_collector: AutoWindowCollector,
+    events: list[tuple[bool, Any]],
+    *,
+    calibrate: bool,
+) -> tuple[tuple[CalibrationSample, ...], IdentificationResult | None, Campaign | None]:
+    """Feed the messages to the collector and its samples to the pipeline; calibrate when asked."""
+    with pipeline:
+        samples: list[CalibrationSample] = []
+        for is_joint, message in events:
+            feed = feed_joint_state if is_joint else feed_tracker_message
+            for sample in feed(pose_collector, message):
+                samples.append(sample)
+                pipeline.add_sample(sample)
+        for sample in pose_collector.flush():
+            samples.append(sample)
+            pipeline.add_sample(sample)
+        calibration = pipeline.calibrate() if calibrate else None
+        campaign = pipeline.campaign
+    return tuple(samples), calibration, campaign
+
+
 @_cyclic_gc_paused
 def replay_bag(
     path: str | Path,
@@ -336,63 +404,43 @@ def replay_bag(
         msg = f"campaign file {campaign_path} exists already; replay writes a new one"
         raise CampaignError(msg)
     tracker_topic = point_topic if tracker_pose_topic is None else tracker_pose_topic
-    bag = open_bag(path, (joint_topic, tracker_topic))
-    bag.topic_messages(joint_topic, JOINT_STATE)
-    if tracker_pose_topic is None:
-        _refuse_poses_as_points(bag, point_topic)
-    tracker_type = POINT_STAMPED if tracker_pose_topic is None else _tracker_type(bag, tracker_pose_topic)
-    bag.topic_messages(tracker_topic, tracker_type)
-    order = sorted(
-        (m for m in bag.contents.messages if m.channel.topic in (joint_topic, tracker_topic)),
-        key=lambda m: m.log_time_ns,
-    )
-    undecodable = 0
-    events: list[tuple[bool, Any]] = []
-    for message in order:
-        is_joint = message.channel.topic == joint_topic
-        decoded = bag.try_decode(message, JOINT_STATE if is_joint else tracker_type)
-        if decoded is None:
-            undecodable += 1
-        else:
-            events.append((is_joint, decoded))
-    counts = dict(Counter(m.channel.topic for m in order))
-    if tracker_frame_id is None:
-        frames = Counter(str(m.header.frame_id) for is_joint, m in events if not is_joint)
-        if not frames:
-            msg = f"{path}: no decodable message on {tracker_topic}"
-            raise BagError(msg)
-        tracker_frame_id = frames.most_common(1)[0][0]
-    settings = collector or CollectorSettings()
+    decoded = _decode_bag(path, joint_topic, tracker_topic, pose=tracker_pose_topic is not None)
+    tracker_frame_id = decoded.majority_frame() if tracker_frame_id is None else tracker_frame_id
     # The collector node's detector: with auto_window, the window is learnt from the first
     # dwells as they arrive (pipeline.auto_window), so a live run finds the same samples.
-    pose_collector = AutoWindowCollector(model.joint_names, tracker_frame_id, settings, auto=auto_window, log=log)
+    pose_collector = AutoWindowCollector(
+        model.joint_names, tracker_frame_id, collector or CollectorSettings(), auto=auto_window, log=log
+    )
     pipeline = CalibrationPipeline(model, options=options, min_samples=min_samples, campaign_path=campaign_path)
-    with pipeline:
-        samples: list[CalibrationSample] = []
-        for is_joint, message in events:
-            feed = feed_joint_state if is_joint else feed_tracker_message
-            for sample in feed(pose_collector, message):
-                samples.append(sample)
-                pipeline.add_sample(sample)
-        for sample in pose_collector.flush():
-            samples.append(sample)
-            pipeline.add_sample(sample)
-        calibration = pipeline.calibrate() if calibrate else None
-        campaign = pipeline.campaign
+    fed = _feed(pipeline, pose_collector, decoded.events, calibrate=calibrate)
+    return _replay_result(decoded, model, pose_collector, fed, tracker_frame_id)
+
+
+def _replay_result(
+    decoded: _DecodedBag,
+    model: RobotModel,
+    pose_collector: AutoWindowCollector,
+    fed: tuple[tuple[CalibrationSample, ...], IdentificationResult | None, Campaign | None],
+    tracker_frame_id: str,
+) -> ReplayResult:
+    """What a replay found, with the collector's drops and, when no sample came, the likely reason."""
+    samples, calibration, campaign = fed
     settings = pose_collector.settings
     dropped = pose_collector.dropped
-    dropped["undecodable"] = undecodable
+    dropped["undecodable"] = decoded.undecodable
     return ReplayResult(
-        samples=tuple(samples),
+        samples=samples,
         campaign=campaign,
         calibration=calibration,
         dropped=dropped,
         rejected_dwells=pose_collector.rejected_dwells,
-        message_counts=counts,
+        message_counts=decoded.counts,
         tracker_frame_id=tracker_frame_id,
-        truncated=bag.truncated,
+        truncated=decoded.bag.truncated,
         collector=settings,
-        diagnosis="" if samples else _diagnose(bag, events, model, tracker_frame_id, settings, pose_collector),
+        diagnosis=""
+        if samples
+        else _diagnose(decoded.bag, decoded.events, model, tracker_frame_id, settings, pose_collector),
     )
 
 

@@ -1,4 +1,4 @@
-"""Reports of an uncertainty evaluation: JSON, seed Table 2, figures, sweeps, documents."""
+"""Reports of an uncertainty evaluation: JSON, the robot paper's Table 2, figures, sweeps, documents."""
 
 from typing import TYPE_CHECKING
 

@@ -11,7 +11,20 @@ documents give summary plots and a table of the worst configurations, show full 
 for a selection (by default the first
 :data:`~robocal_uncertainty.report.configurations.DEFAULT_HISTOGRAMS` and the worst; see
 the ``histograms`` argument of :func:`write_report`), and leave every configuration to
-``configurations.csv`` and ``report.json``.
+``configurations.csv`` and ``report.json``. With more than 10 configurations the documents
+give a table of the 10 worst and statistics over all, with Table 2, the GUM comparison and the
+budget in full only for the configurations with histograms and the worst one. A
+150-configuration report takes a few seconds and a few MB (``benchmarks/bench_report.py``).
+
+Files written by :func:`write_report`: ``report.json`` (see :mod:`.json_report`; every test
+configuration), ``configurations.csv`` (one row per test configuration, see
+:func:`~robocal_uncertainty.report.configurations.write_configurations_csv`), ``report.md``,
+``report.html`` (self-contained: figures embedded as data URIs unless ``embed_images`` is
+False), and the figures ``histograms_<i>.png`` and ``position_error_<i>.png`` per selected test
+configuration (1-based, see ``histograms``; with orientation also
+``rotation_histograms_<i>.png``), ``configurations.png`` and ``uncertainty_vs_reach.png`` when
+there are two or more test configurations, ``lcurve.png``, ``parameters.png`` and
+``sweep_<name>.png`` per sweep.
 """
 
 from __future__ import annotations
@@ -428,9 +441,58 @@ def _weighting_lines(cal: IdentificationResult) -> tuple[str, ...]:
     )
 
 
-def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> list[Block]:
+def _parameter_rows(cal: IdentificationResult, result: CalibrationUncertainty) -> list[tuple[str, ...]]:
+    """One row per estimated parameter: nominal, estimate and error rounded to u, u (MC, linearised)."""
     kinds = dict(zip(cal.model.layout.names, cal.model.layout.kinds))
     mc = dict(zip(result.parameter_names, result.parameters))
+    rows: list[tuple[str, ...]] = []
+    held = cal.held_by_regularisation
+    for i, name in enumerate(cal.parameter_names):
+        if not cal.estimated[i]:
+            continue
+        scale, unit, uscale, uunit = _param_display(kinds.get(name, "length"))
+        summary = mc.get(name)
+        u = summary.standard_uncertainty if summary is not None else float(cal.linearized_std[i])
+        if held[i]:
+            # The Tikhonov term, not the data, fixes it: no u of a measurement to state.
+            data_u = float(cal.data_only_std[i]) if cal.data_only_std is not None else math.inf
+            u = data_u if math.isfinite(data_u) else u
+            mc_cell = lin_cell = held_note(data_u, kinds.get(name, "length"))
+        else:
+            mc_cell = f"{format_significant(u * uscale)} {uunit}" if summary is not None else "n/a"
+            lin_cell = f"{format_significant(float(cal.linearized_std[i]) * uscale)} {uunit}"
+        rows.append(
+            (
+                name,
+                f"{cal.nominal[i] * scale:.6g} {unit}",
+                f"{round_to_uncertainty(cal.estimate[i] * scale, u * scale)} {unit}",
+                f"{round_to_uncertainty((cal.estimate[i] - cal.nominal[i]) * uscale, u * uscale)} {uunit}",
+                mc_cell,
+                lin_cell,
+            )
+        )
+    return rows
+
+
+def _dependency_blocks(cal: IdentificationResult) -> list[Block]:
+    """Why the candidates left at nominal are not identifiable, and the other dependencies."""
+    blocks: list[Block] = []
+    missing = [n for i, n in enumerate(cal.parameter_names) if cal.candidates[i] and not cal.estimated[i]]
+    if missing:
+        reasons = []
+        for name in missing:
+            why = [d for d in cal.dependencies if d.split(" ", 1)[0] == name]
+            text = "; ".join(describe_dependency(d) for d in why)
+            reasons.append(f"{name}: {text or 'not identifiable from position data'}")
+        blocks.append(Heading(3, "Not identifiable (kept at nominal)"))
+        blocks.append(BulletList(tuple(reasons)))
+    others = [d for d in cal.dependencies if d.split(" ", 1)[0] not in missing]
+    if others:
+        blocks.append(Paragraph("Other dependencies: " + "; ".join(describe_dependency(d) for d in others)))
+    return blocks
+
+
+def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> list[Block]:
     blocks: list[Block] = [
         Heading(2, "Calibration"),
         BulletList(
@@ -459,32 +521,7 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
             "data-only u (lambda = 0) is given instead."
         ),
     ]
-    rows = []
-    held = cal.held_by_regularisation
-    for i, name in enumerate(cal.parameter_names):
-        if not cal.estimated[i]:
-            continue
-        scale, unit, uscale, uunit = _param_display(kinds.get(name, "length"))
-        summary = mc.get(name)
-        u = summary.standard_uncertainty if summary is not None else float(cal.linearized_std[i])
-        if held[i]:
-            # The Tikhonov term, not the data, fixes it: no u of a measurement to state.
-            data_u = float(cal.data_only_std[i]) if cal.data_only_std is not None else math.inf
-            u = data_u if math.isfinite(data_u) else u
-            mc_cell = lin_cell = held_note(data_u, kinds.get(name, "length"))
-        else:
-            mc_cell = f"{format_significant(u * uscale)} {uunit}" if summary is not None else "n/a"
-            lin_cell = f"{format_significant(float(cal.linearized_std[i]) * uscale)} {uunit}"
-        rows.append(
-            (
-                name,
-                f"{cal.nominal[i] * scale:.6g} {unit}",
-                f"{round_to_uncertainty(cal.estimate[i] * scale, u * scale)} {unit}",
-                f"{round_to_uncertainty((cal.estimate[i] - cal.nominal[i]) * uscale, u * uscale)} {uunit}",
-                mc_cell,
-                lin_cell,
-            )
-        )
+    rows = _parameter_rows(cal, result)
     blocks.append(
         table(
             (
@@ -498,18 +535,7 @@ def _calibration(cal: IdentificationResult, result: CalibrationUncertainty) -> l
             rows,
         )
     )
-    missing = [n for i, n in enumerate(cal.parameter_names) if cal.candidates[i] and not cal.estimated[i]]
-    if missing:
-        reasons = []
-        for name in missing:
-            why = [d for d in cal.dependencies if d.split(" ", 1)[0] == name]
-            text = "; ".join(describe_dependency(d) for d in why)
-            reasons.append(f"{name}: {text or 'not identifiable from position data'}")
-        blocks.append(Heading(3, "Not identifiable (kept at nominal)"))
-        blocks.append(BulletList(tuple(reasons)))
-    others = [d for d in cal.dependencies if d.split(" ", 1)[0] not in missing]
-    if others:
-        blocks.append(Paragraph("Other dependencies: " + "; ".join(describe_dependency(d) for d in others)))
+    blocks += _dependency_blocks(cal)
     return blocks
 
 
@@ -579,116 +605,30 @@ def _settings(
     return blocks
 
 
-def write_report(
-    directory: str | Path,
-    result: CalibrationUncertainty,
-    *,
-    robot_name: str,
-    budget: Mapping[str, CalibrationUncertainty] | None = None,
-    sweeps: Sequence[Sweep] | None = None,
-    campaign_source: str | None = None,
-    extra_settings: Mapping[str, object] | None = None,
-    title: str | None = None,
-    embed_images: bool = True,
-    input_warnings: Sequence[str] = (),
-    histograms: HistogramSelection = None,
-) -> Path:
-    """Write the full uncertainty report into `directory` (created if needed).
-
-    Files written: ``report.json`` (see :mod:`.json_report`; every test configuration),
-    ``configurations.csv`` (one row per test configuration, see
-    :func:`~robocal_uncertainty.report.configurations.write_configurations_csv`),
-    ``report.md``, ``report.html`` (self-contained: figures embedded as data URIs unless
-    `embed_images` is False), and the figures ``histograms_<i>.png`` and
-    ``position_error_<i>.png`` per selected test configuration (1-based, see
-    `histograms`; with orientation also ``rotation_histograms_<i>.png``),
-    ``configurations.png`` and ``uncertainty_vs_reach.png`` when there
-    are two or more test configurations, ``lcurve.png``, ``parameters.png`` and
-    ``sweep_<name>.png`` per sweep.
-
-    With more than 10 test configurations
-    (:data:`~robocal_uncertainty.report.configurations.DETAIL_LIMIT`) the documents
-    summarise: a table of the 10 worst configurations and statistics over all, with
-    Table 2, the GUM comparison and the budget in full only for the configurations with
-    histograms and the worst one. A 150-configuration report takes a few seconds and a
-    few MB (``benchmarks/bench_report.py``).
-
-    Parameters
-    ----------
-    directory : str or Path
-    result : CalibrationUncertainty
-    robot_name : str
-    budget : mapping of str to CalibrationUncertainty, optional
-        Single-source runs for the uncertainty budget.
-    sweeps : sequence of Sweep, optional
-        Uncertainty vs lambda / number of equations (see :mod:`.sweeps`).
-    campaign_source : str, optional
-        Where the campaign came from.
-    extra_settings : mapping, optional
-        Further settings to record (JSON-serialisable).
-    title : str, optional
-        Document title; default names the robot.
-    embed_images : bool
-        Embed the PNGs in the HTML (True) or link them by file name.
-    input_warnings : sequence of str
-        Warnings about the input data, e.g. ``campaign.metadata.get("warnings", [])`` of a
-        campaign recovered from a truncated file; listed first in ``report.json``'s
-        ``warnings`` and in the Warnings section of ``report.md``/``report.html``.
-    histograms : None, int, "all" or sequence of int
-        Test configurations that get per-configuration histogram figures. ``None``
-        (default): all of them when there are at most 10, otherwise the first 6
-        (:data:`~robocal_uncertainty.report.configurations.DEFAULT_HISTOGRAMS`) and the
-        worst. An int N: the first N (0 for none). ``"all"``: every one (two figures per
-        configuration, three with orientation: about 0.25-0.4 MB and 0.3-0.5 s each). A sequence: those 0-based
-        configuration indices.
-
-    Returns
-    -------
-    Path
-        The report directory.
-
-    Raises
-    ------
-    ConfigError
-        `histograms` is not one of the forms above or names a configuration that does
-        not exist.
-    """
-    warnings = merge_warnings(input_warnings, result.warnings)
-    cs = summarize_configurations(result)
-    n_test = len(result.poses)
-    selected = select_configurations(histograms, n_test, cs.worst)
-    detail = list(range(n_test)) if n_test <= DETAIL_LIMIT else sorted({*selected, cs.worst})
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    title = title or f"Calibration uncertainty report: {robot_name}"
-    write_report_json(
-        out / "report.json",
-        result,
-        robot_name=robot_name,
-        campaign_source=campaign_source,
-        extra_settings=extra_settings,
-        budget=budget,
-        sweeps=sweeps,
-        input_warnings=input_warnings,
-    )
-    write_configurations_csv(out / "configurations.csv", result, cs)
+def _configuration_figures(result: CalibrationUncertainty, out: Path, cs: ConfigurationSummary) -> list[Figure]:
+    """The figures over all test configurations (two or more)."""
     figures: list[Figure] = []
-    if n_test > 1:
-        plot_configuration_summary(result, out / "configurations.png", summary=cs)
-        figures.append(
-            Figure(
-                "configurations.png",
-                "Standard uncertainty per axis and u_pos per test configuration, worst ringed; "
-                "semi-axes of the JCGM 102 coverage ellipsoid",
-            )
+    plot_configuration_summary(result, out / "configurations.png", summary=cs)
+    figures.append(
+        Figure(
+            "configurations.png",
+            "Standard uncertainty per axis and u_pos per test configuration, worst ringed; "
+            "semi-axes of the JCGM 102 coverage ellipsoid",
         )
-        plot_uncertainty_vs_reach(result, out / "uncertainty_vs_reach.png", summary=cs)
-        figures.append(
-            Figure(
-                "uncertainty_vs_reach.png",
-                "Standard uncertainty against the distance of the tool from the robot base",
-            )
+    )
+    plot_uncertainty_vs_reach(result, out / "uncertainty_vs_reach.png", summary=cs)
+    figures.append(
+        Figure(
+            "uncertainty_vs_reach.png",
+            "Standard uncertainty against the distance of the tool from the robot base",
         )
+    )
+    return figures
+
+
+def _pose_figures(result: CalibrationUncertainty, out: Path, selected: Sequence[int]) -> list[Figure]:
+    """Histograms and position error (and rotation histograms) of each selected test configuration."""
+    figures: list[Figure] = []
     for i in selected:
         name = f"histograms_{i + 1}.png"
         plot_axis_histograms(result, out / name, pose=i)
@@ -720,6 +660,12 @@ def write_report(
                     f"from the mean, mrad), test configuration {i + 1}, with coverage intervals and the GUM normal pdf",
                 )
             )
+    return figures
+
+
+def _fit_figures(result: CalibrationUncertainty, out: Path, sweeps: Sequence[Sweep]) -> list[Figure]:
+    """The L-curve, the parameter distributions and one figure per sweep."""
+    figures: list[Figure] = []
     plot_lcurve(result.calibration, out / "lcurve.png")
     figures.append(Figure("lcurve.png", "L-curve and GCV with the chosen λ"))
     if result.parameter_names:
@@ -731,7 +677,7 @@ def write_report(
                 "hatched panels marked 'held by regularisation': the Tikhonov term, not the data, fixes them",
             )
         )
-    for sw in sweeps or ():
+    for sw in sweeps:
         name = f"sweep_{''.join(c if c.isalnum() else '_' for c in sw.name)}.png"
         plot_uncertainty_vs(
             sw.values,
@@ -742,10 +688,32 @@ def write_report(
             log_x=sw.log_x,
         )
         figures.append(Figure(name, f"Standard uncertainty vs {sw.xlabel} (cf. {ROBOT_PAPER} Figs. 7-9)"))
+    return figures
 
-    blocks: list[Block] = [Heading(1, title)]
-    blocks += _summary(result, cs)
-    if n_test > 1:
+
+def _sweep_blocks(sweeps: Sequence[Sweep]) -> list[Block]:
+    """The Sweeps section: one table of standard uncertainties per sweep."""
+    blocks: list[Block] = [Heading(2, "Sweeps")]
+    for sw in sweeps:
+        rows = [
+            (f"{v:.4g}", *(_um(float(x)) for x in u), _um(float(np.linalg.norm(u))))
+            for v, u in zip(sw.values, sw.standard_uncertainty)
+        ]
+        blocks.append(Heading(3, f"{sw.name} ({sw.n_trials or '?'} trials per point)"))
+        blocks.append(table((sw.xlabel, "u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm"), rows))
+    return blocks
+
+
+def _result_sections(
+    result: CalibrationUncertainty,
+    cs: ConfigurationSummary,
+    detail: Sequence[int],
+    budget: Mapping[str, CalibrationUncertainty] | None,
+    sweeps: Sequence[Sweep] | None,
+) -> list[Block]:
+    """The report's sections from the summary to the sweeps (the same for Markdown and HTML)."""
+    blocks = _summary(result, cs)
+    if len(result.poses) > 1:
         blocks += _configurations(result, cs)
     blocks += _table2(result, detail, cs.worst)
     if budget:
@@ -753,20 +721,99 @@ def write_report(
     blocks += _gum(result, detail, cs)
     blocks += _calibration(result.calibration, result)
     if sweeps:
-        blocks.append(Heading(2, "Sweeps"))
-        for sw in sweeps:
-            rows = [
-                (f"{v:.4g}", *(_um(float(x)) for x in u), _um(float(np.linalg.norm(u))))
-                for v, u in zip(sw.values, sw.standard_uncertainty)
-            ]
-            blocks.append(Heading(3, f"{sw.name} ({sw.n_trials or '?'} trials per point)"))
-            blocks.append(table((sw.xlabel, "u_x / µm", "u_y / µm", "u_z / µm", "u_pos / µm"), rows))
-    blocks.append(Heading(2, "Figures"))
-    blocks += figures
-    blocks += _settings(result, campaign_source, extra_settings, robot_name)
-    blocks.append(Heading(2, "Warnings"))
-    blocks.append(BulletList(tuple(warnings)) if warnings else Paragraph("None."))
+        blocks += _sweep_blocks(sweeps)
+    return blocks
 
+
+def _detail_selection(histograms: HistogramSelection, n_test: int, worst: int) -> tuple[tuple[int, ...], list[int]]:
+    """Configurations with histograms, and those shown in full (every one up to DETAIL_LIMIT)."""
+    selected = select_configurations(histograms, n_test, worst)
+    detail = list(range(n_test)) if n_test <= DETAIL_LIMIT else sorted({*selected, worst})
+    return selected, detail
+
+
+def _warning_list(warnings: Sequence[str]) -> Block:
+    """The Warnings section's body: the list, or "None."."""
+    return BulletList(tuple(warnings)) if warnings else Paragraph("None.")
+
+
+def write_report(
+    directory: str | Path,
+    result: CalibrationUncertainty,
+    *,
+    robot_name: str,
+    budget: Mapping[str, CalibrationUncertainty] | None = None,
+    sweeps: Sequence[Sweep] | None = None,
+    campaign_source: str | None = None,
+    extra_settings: Mapping[str, object] | None = None,
+    title: str | None = None,
+    embed_images: bool = True,
+    input_warnings: Sequence[str] = (),
+    histograms: HistogramSelection = None,
+) -> Path:
+    """Write the full uncertainty report into `directory` (created if needed).
+
+    The files written, and how large reports are summarised: see the module documentation.
+
+    Parameters
+    ----------
+    directory : str or Path
+    result : CalibrationUncertainty
+    robot_name : str
+    budget : mapping of str to CalibrationUncertainty, optional
+        Single-source runs for the uncertainty budget.
+    sweeps : sequence of Sweep, optional
+        Uncertainty vs lambda / number of equations (see :mod:`.sweeps`).
+    campaign_source : str, optional
+        Where the campaign came from.
+    extra_settings : mapping, optional
+        Further settings to record (JSON-serialisable).
+    title : str, optional
+        Document title; default names the robot.
+    embed_images : bool
+        Embed the PNGs in the HTML (True) or link them by file name.
+    input_warnings : sequence of str
+        Warnings about the input data, e.g. ``campaign.metadata.get("warnings", [])`` of a
+        campaign recovered from a truncated file; listed first in ``report.json``'s
+        ``warnings`` and in the Warnings section of ``report.md``/``report.html``.
+    histograms : None, int, "all" or sequence of int
+        Test configurations that get per-configuration histogram figures, as
+        :func:`~robocal_uncertainty.report.configurations.select_configurations` reads it (two
+        figures each, three with orientation: about 0.25-0.4 MB and 0.3-0.5 s per configuration).
+
+    Returns
+    -------
+    Path
+        The report directory.
+
+    Raises
+    ------
+    ConfigError
+        `histograms` is not one of those forms or names a configuration that does not exist.
+    """
+    warnings = merge_warnings(input_warnings, result.warnings)
+    cs = summarize_configurations(result)
+    selected, detail = _detail_selection(histograms, len(result.poses), cs.worst)
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    title = title or f"Calibration uncertainty report: {robot_name}"
+    write_report_json(
+        out / "report.json",
+        result,
+        robot_name=robot_name,
+        campaign_source=campaign_source,
+        extra_settings=extra_settings,
+        budget=budget,
+        sweeps=sweeps,
+        input_warnings=input_warnings,
+    )
+    write_configurations_csv(out / "configurations.csv", result, cs)
+    figures = _configuration_figures(result, out, cs) if len(result.poses) > 1 else []
+    figures += _pose_figures(result, out, selected)
+    figures += _fit_figures(result, out, sweeps or ())
+    blocks: list[Block] = [Heading(1, title), *_result_sections(result, cs, detail, budget, sweeps)]
+    blocks += [Heading(2, "Figures"), *figures, *_settings(result, campaign_source, extra_settings, robot_name)]
+    blocks += [Heading(2, "Warnings"), _warning_list(warnings)]
     (out / "report.md").write_text(render_markdown(blocks), encoding="utf-8")
     (out / "report.html").write_text(render_html(blocks, title, out, embed=embed_images), encoding="utf-8")
     return out

@@ -463,6 +463,58 @@ def merge_warnings(*groups: Sequence[str]) -> list[str]:
     return out
 
 
+def _monte_carlo(result: CalibrationUncertainty) -> dict[str, Any]:
+    """The Monte Carlo run's settings, backend and convergence."""
+    return {
+        "n_trials": result.n_trials,
+        "seed": result.seed,
+        "block_size": result.block_size,
+        "backend": None
+        if result.backend is None
+        else {
+            "name": result.backend.name,
+            "version": result.backend.version,
+            "requested": result.backend.requested,
+        },
+        "coverage_probability": result.coverage_probability,
+        "converged": result.converged,
+        "convergence_tested": result.adaptive is not None,
+        "not_converged": list(getattr(result, "not_converged", ())),
+        "adaptive": None
+        if result.adaptive is None
+        else {
+            "converged": result.adaptive.converged,
+            "n_dig": result.adaptive.n_dig,
+            "n_sequences": result.adaptive.n_sequences,
+            "sequence_trials": result.adaptive.sequence_trials,
+            "max_trials": result.adaptive.max_trials,
+            "interval": result.adaptive.interval,
+        },
+    }
+
+
+def _parameters(result: CalibrationUncertainty) -> list[dict[str, Any]]:
+    """Each identified parameter's estimate, uncertainty and coverage intervals, in its unit."""
+    names = result.parameter_names
+    units = _param_units(result.calibration)
+    return [
+        {
+            "name": name,
+            "unit": units.get(name, "m"),
+            "estimate": ps.estimate,
+            "standard_uncertainty": ps.standard_uncertainty,
+            "expanded_uncertainty": ps.expanded_uncertainty,
+            "coverage_factor": ps.coverage_factor,
+            "probabilistically_symmetric": [
+                ps.probabilistically_symmetric.low,
+                ps.probabilistically_symmetric.high,
+            ],
+            "shortest": [ps.shortest.low, ps.shortest.high],
+        }
+        for name, ps in zip(names, result.parameters)
+    ]
+
+
 def uncertainty_to_dict(
     result: CalibrationUncertainty,
     *,
@@ -499,8 +551,6 @@ def uncertainty_to_dict(
     dict
         Only lists, dicts, str, finite floats, ints, bools and None.
     """
-    names = result.parameter_names
-    units = _param_units(result.calibration)
     summary = summarize_configurations(result)
     trust = result.model_adequacy.trust_note
     report: dict[str, Any] = {
@@ -510,32 +560,7 @@ def uncertainty_to_dict(
         "units": UNITS,
         "robot_name": robot_name,
         "campaign_source": campaign_source,
-        "monte_carlo": {
-            "n_trials": result.n_trials,
-            "seed": result.seed,
-            "block_size": result.block_size,
-            "backend": None
-            if result.backend is None
-            else {
-                "name": result.backend.name,
-                "version": result.backend.version,
-                "requested": result.backend.requested,
-            },
-            "coverage_probability": result.coverage_probability,
-            "converged": result.converged,
-            "convergence_tested": result.adaptive is not None,
-            "not_converged": list(getattr(result, "not_converged", ())),
-            "adaptive": None
-            if result.adaptive is None
-            else {
-                "converged": result.adaptive.converged,
-                "n_dig": result.adaptive.n_dig,
-                "n_sequences": result.adaptive.n_sequences,
-                "sequence_trials": result.adaptive.sequence_trials,
-                "max_trials": result.adaptive.max_trials,
-                "interval": result.adaptive.interval,
-            },
-        },
+        "monte_carlo": _monte_carlo(result),
         "output_frame": {
             "frame": result.frame,
             "frame_id": result.frame_id,
@@ -549,22 +574,7 @@ def uncertainty_to_dict(
         "configuration_summary": _configuration_summary(summary),
         "test_configurations": [_pose(i, p, result, summary) for i, p in enumerate(result.poses)],
         "calibration": calibration_to_dict(result.calibration),
-        "parameters": [
-            {
-                "name": name,
-                "unit": units.get(name, "m"),
-                "estimate": ps.estimate,
-                "standard_uncertainty": ps.standard_uncertainty,
-                "expanded_uncertainty": ps.expanded_uncertainty,
-                "coverage_factor": ps.coverage_factor,
-                "probabilistically_symmetric": [
-                    ps.probabilistically_symmetric.low,
-                    ps.probabilistically_symmetric.high,
-                ],
-                "shortest": [ps.shortest.low, ps.shortest.high],
-            }
-            for name, ps in zip(names, result.parameters)
-        ],
+        "parameters": _parameters(result),
         "budget": None if budget is None else _budget(budget),
         "sweeps": None if sweeps is None else _sweeps(sweeps),
         "warnings": merge_warnings(input_warnings, result.warnings, [trust] if trust else []),

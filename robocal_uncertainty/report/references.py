@@ -7,7 +7,7 @@ paper by its first author, with the full reference where it is first introduced.
 
 from __future__ import annotations
 
-__all__ = ["ROBOT_PAPER", "ROBOT_PAPER_REFERENCE"]
+__all__ = ["PAPER_TEST_JOINTS_DEG", "ROBOT_PAPER", "ROBOT_PAPER_REFERENCE"]
 
 ROBOT_PAPER = "Jiang et al."
 """Short name of the robot reference paper, e.g. ``Jiang et al. Table 2``."""
@@ -17,3 +17,6 @@ ROBOT_PAPER_REFERENCE = (
     "arm', Chinese Journal of Scientific Instrument, doi:10.19650/j.cnki.cjsi.J2209613"
 )
 """Full reference of the robot paper (authors, title, journal, DOI)."""
+
+PAPER_TEST_JOINTS_DEG: tuple[float, ...] = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
+"""The robot paper's test configuration [deg], at which its Table 2 states the tool position."""

@@ -1,4 +1,4 @@
-"""Text tables in the layout of the seed's Table 2, and a per-source budget.
+"""Text tables in the layout of the robot paper's Table 2 (Jiang et al.), and a per-source budget.
 
 Numbers are rounded to their uncertainty: the standard uncertainty keeps two
 significant digits, and every other length of the same axis (value, expanded
@@ -28,21 +28,21 @@ from robocal_uncertainty.uncertainty.calibration import (
 
 __all__ = [
     "LENGTH_UNITS",
+    "PAPER_TABLE2",
     "RELATIVE_NOTE",
-    "SEED_TABLE2",
-    "SeedTable2Axis",
+    "PaperTable2Axis",
     "budget_rows",
     "decimals_for",
     "format_budget",
-    "format_seed_comparison",
+    "format_paper_comparison",
     "format_significant",
     "format_table2",
     "gum_verdict",
     "orientation_lines",
     "orientation_rows",
+    "paper_difference_note",
     "pose_header",
     "round_to_uncertainty",
-    "seed_difference_note",
     "table2_rows",
 ]
 
@@ -199,7 +199,7 @@ def _grid(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
 
 
 def format_table2(result: CalibrationUncertainty, *, unit: str = "mm", orientation: bool = True) -> str:
-    """Seed Table 2 for every test configuration, as plain text.
+    """The paper's Table 2 for every test configuration, as plain text.
 
     Parameters
     ----------
@@ -355,8 +355,8 @@ def format_budget(budget: Mapping[str, CalibrationUncertainty]) -> str:
 
 
 @dataclass(frozen=True)
-class SeedTable2Axis:
-    """One column (x, y or z) of the seed's Table 2, in mm and % as printed.
+class PaperTable2Axis:
+    """One column (x, y or z) of the paper's Table 2, in mm and % as printed.
 
     Attributes
     ----------
@@ -365,7 +365,7 @@ class SeedTable2Axis:
     expanded_uncertainty : float [mm]
     coverage_interval : (float, float) [mm]
     relative_uncertainty : float [%]
-        The seed's "relative uncertainty", 100 U / |output value|.
+        The paper's "relative uncertainty", 100 U / |output value|.
     """
 
     output_value: float
@@ -383,20 +383,20 @@ class SeedTable2Axis:
 # As printed, U/u = 2.6 on every axis, and the x and y intervals reach 6.4-10.7 u from the
 # output value (the mean): more than the sqrt(39) u = 6.2 u that Cantelli's inequality allows a
 # 95 % probabilistically symmetric interval, so they are not such intervals of those samples.
-SEED_TABLE2: Mapping[str, SeedTable2Axis] = MappingProxyType(
+PAPER_TABLE2: Mapping[str, PaperTable2Axis] = MappingProxyType(
     {
-        "x": SeedTable2Axis(228.9195, 0.4774, 1.2412, (225.5416, 231.4231), 0.5422),
-        "y": SeedTable2Axis(-99.2792, 0.5063, 1.3164, (-102.5322, -93.8767), 1.3259),
-        "z": SeedTable2Axis(532.4152, 0.0316, 0.0821, (532.2508, 532.5565), 0.0154),
+        "x": PaperTable2Axis(228.9195, 0.4774, 1.2412, (225.5416, 231.4231), 0.5422),
+        "y": PaperTable2Axis(-99.2792, 0.5063, 1.3164, (-102.5322, -93.8767), 1.3259),
+        "z": PaperTable2Axis(532.4152, 0.0316, 0.0821, (532.2508, 532.5565), 0.0154),
     }
 )
-"""The seed's published Table 2 per axis (mm, %), exactly as printed."""
+"""The paper's published Table 2 per axis (mm, %), exactly as printed."""
 
 
-def seed_difference_note() -> str:
-    """Why our Table 2 differs from the seed's, in two sentences (one unwrapped line).
+def paper_difference_note() -> str:
+    """Why our Table 2 differs from the paper's, in two sentences (one unwrapped line).
 
-    Measured, not assumed: our Monte Carlo at the seed's test joints with its stated inputs and
+    Measured, not assumed: our Monte Carlo at the paper's test joints with its stated inputs and
     with larger ones, 5 simulated robots per scenario, 5000 trials each.
     """
     return (
@@ -411,24 +411,24 @@ def seed_difference_note() -> str:
     )
 
 
-def format_seed_comparison(result: CalibrationUncertainty, *, pose: int = 0, note: bool = True) -> str:
-    """The seed's Table 2 next to ours, per axis, in mm.
+def format_paper_comparison(result: CalibrationUncertainty, *, pose: int = 0, note: bool = True) -> str:
+    """The paper's Table 2 next to ours, per axis, in mm.
 
     Parameters
     ----------
     result : CalibrationUncertainty
-        Our evaluation; `pose` selects the test configuration (the seed's test joints are the
+        Our evaluation; `pose` selects the test configuration (the paper's test joints are the
         demo's first).
     pose : int
         Index of the test configuration compared.
     note : bool
-        Append :func:`seed_difference_note`.
+        Append :func:`paper_difference_note`.
 
     Returns
     -------
     str
         A header line and one row per axis: output value, standard uncertainty u, expanded
-        uncertainty U and coverage interval as "seed / ours" (the seed's digits as printed,
+        uncertainty U and coverage interval as "paper / ours" (the paper's digits as printed,
         ours rounded to two significant digits of u), and the ratio of the two u.
     """
     if isinstance(pose, bool) or not isinstance(pose, int) or not 0 <= pose < len(result.poses):
@@ -438,17 +438,17 @@ def format_seed_comparison(result: CalibrationUncertainty, *, pose: int = 0, not
     header = ["Axis", "Output value", "u", "U", "Coverage interval", f"u {ROBOT_PAPER.split()[0]}/ours"]
     rows = []
     for name, axis in zip("xyz", ours.axes):
-        seed = SEED_TABLE2[name]
+        paper = PAPER_TABLE2[name]
         u = axis.standard_uncertainty * 1e3
         low, high = (round_to_uncertainty(v * 1e3, u) for v in (axis.interval.low, axis.interval.high))
-        s_low, s_high = seed.coverage_interval
-        ratio = seed.standard_uncertainty / u if u > 0 else float("nan")
+        s_low, s_high = paper.coverage_interval
+        ratio = paper.standard_uncertainty / u if u > 0 else float("nan")
         rows.append(
             [
                 name,
-                f"{seed.output_value:.4f} / {round_to_uncertainty(axis.estimate * 1e3, u)}",
-                f"{seed.standard_uncertainty:.4f} / {round_to_uncertainty(u, u)}",
-                f"{seed.expanded_uncertainty:.4f} / {round_to_uncertainty(axis.expanded_uncertainty * 1e3, u)}",
+                f"{paper.output_value:.4f} / {round_to_uncertainty(axis.estimate * 1e3, u)}",
+                f"{paper.standard_uncertainty:.4f} / {round_to_uncertainty(u, u)}",
+                f"{paper.expanded_uncertainty:.4f} / {round_to_uncertainty(axis.expanded_uncertainty * 1e3, u)}",
                 f"({s_low:.4f}, {s_high:.4f}) / ({low}, {high})",
                 format_significant(ratio),
             ]
@@ -459,5 +459,5 @@ def format_seed_comparison(result: CalibrationUncertainty, *, pose: int = 0, not
     ]
     lines.extend(_grid(header, rows))
     if note:
-        lines.append(textwrap.fill(seed_difference_note(), width=100))
+        lines.append(textwrap.fill(paper_difference_note(), width=100))
     return "\n".join(lines) + "\n"

@@ -170,6 +170,68 @@ def pose_noise_covariances(
     return cov
 
 
+def _fit_gain(calibration: IdentificationResult, joint_positions: Array) -> tuple[Array, Array, Array]:
+    """Scaled Jacobian A, the fit's gain (so that H = A gain) and the equations' weights.
+
+    Noise reaches the residuals through the fit, r = (I - H) e: with the encoders' strongly
+    anisotropic covariance the residual covariance is (I - H) Sigma (I - H)^T, not Sigma.
+    With whitening weights w the fit solves on W A and W b, so H = A (A^T W^2 A + P)^-1 A^T W^2.
+    """
+    measurement = calibration.measurement
+    n, dim = np.shape(calibration.residuals)
+    n_eq = dim * n
+    layout = calibration.model.layout
+    est = np.flatnonzero(calibration.estimated)
+    _, jac = measurement.predict_and_jacobian(layout, calibration.estimate, joint_positions)
+    a_mat = jac.reshape(n_eq, layout.size)[:, est] / calibration.column_scale[est]
+    penalty = calibration.lambda_**2 * np.diag(calibration.penalized[est].astype(np.float64))
+    w = row_weights(measurement, n)
+    if w is None:
+        gain: Array = np.asarray(np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T), dtype=np.float64)
+        w_eq = np.ones(n_eq)
+    else:
+        a_w = stack_jacobian(measurement, jac, est) / calibration.column_scale[est]
+        gain = np.asarray(np.linalg.solve(a_w.T @ a_w + penalty, a_w.T * w), dtype=np.float64)
+        w_eq = w
+    return a_mat, gain, w_eq
+
+
+def _satterthwaite_test(sum_sq: float, tr1: float, tr2: float, residual_dof: float) -> tuple[float, float, float]:
+    """chi2, degrees of freedom and p-value of the residual sum of squares under adequacy.
+
+    The sum is a weighted sum of chi2(1); Satterthwaite's scaled chi2 matches its first two
+    moments (on the whitened residuals when the type weighs them). Without noise (``tr1 == 0``)
+    every residual is model error: chi2 infinite, p 0.
+    """
+    if tr1 > 0.0:
+        scale = tr2 / tr1
+        dof = tr1**2 / tr2
+        chi2 = sum_sq / scale
+        return chi2, dof, float(stats.chi2.sf(chi2, dof))
+    return float("inf"), max(residual_dof, 1.0), 0.0
+
+
+def _model_error(a_mat: Array, gain: Array, residuals: Array, blocks: Array, in_sample: Array) -> tuple[Array, Array]:
+    """Covariance of the model error and its draws (the residuals recoloured to it).
+
+    The larger of the in-sample estimate (residuals corrected for the fitted degrees of freedom)
+    and the leave-one-out one: with few poses the fit follows the model error and only the
+    prediction of a left-out pose shows it.
+    """
+    n = residuals.shape[0]
+    observed_cv, noise_cv = _leave_one_out_moments(a_mat, gain, residuals, blocks)
+    cross_validated = observed_cv - noise_cv
+    use_cv = np.trace(cross_validated) > np.trace(in_sample)
+    evals, evecs = np.linalg.eigh(cross_validated if use_cv else in_sample)
+    inadequacy = (evecs * np.clip(evals, 0.0, None)) @ evecs.T
+    centred = residuals - residuals.mean(axis=0)
+    s_evals, s_evecs = np.linalg.eigh(centred.T @ centred / n)
+    s_inv_sqrt = (s_evecs / np.sqrt(np.maximum(s_evals, np.finfo(float).tiny))) @ s_evecs.T
+    m_evals, m_evecs = np.linalg.eigh(inadequacy)
+    m_sqrt = (m_evecs * np.sqrt(np.clip(m_evals, 0.0, None))) @ m_evecs.T
+    return inadequacy, centred @ (m_sqrt @ s_inv_sqrt).T
+
+
 def assess_model_adequacy(
     calibration: IdentificationResult,
     joint_positions: Array,
@@ -197,40 +259,14 @@ def assess_model_adequacy(
     ModelAdequacy
     """
     residuals = np.asarray(calibration.residuals, dtype=np.float64)
-    measurement = calibration.measurement
     n, dim = residuals.shape
     n_eq = dim * n
     repeated = repeated_pose_count(joint_positions)
     noise = pose_noise_covariances(calibration, joint_positions, tracker_noise, encoder_noise, distances)
-    # Noise reaches the residuals through the fit, r = (I - H) e: with the encoders' strongly
-    # anisotropic covariance the residual covariance is (I - H) Sigma (I - H)^T, not Sigma.
-    # With whitening weights w the fit solves on W A and W b, so H = A (A^T W^2 A + P)^-1 A^T W^2.
-    layout = calibration.model.layout
-    est = np.flatnonzero(calibration.estimated)
-    _, jac = measurement.predict_and_jacobian(layout, calibration.estimate, joint_positions)
-    a_mat = jac.reshape(n_eq, layout.size)[:, est] / calibration.column_scale[est]
-    penalty = calibration.lambda_**2 * np.diag(calibration.penalized[est].astype(np.float64))
-    w = row_weights(measurement, n)
-    if w is None:
-        gain: Array = np.asarray(np.linalg.solve(a_mat.T @ a_mat + penalty, a_mat.T), dtype=np.float64)
-        w_eq = np.ones(n_eq)
-    else:
-        a_w = stack_jacobian(measurement, jac, est) / calibration.column_scale[est]
-        gain = np.asarray(np.linalg.solve(a_w.T @ a_w + penalty, a_w.T * w), dtype=np.float64)
-        w_eq = w
+    a_mat, gain, w_eq = _fit_gain(calibration, joint_positions)
     sum_sq = float(np.sum((residuals.reshape(n_eq) * w_eq) ** 2))
     blocks, tr1, tr2 = _residual_noise_moments(a_mat, gain, noise, w_eq)
-    # Sum of squares under adequacy: a weighted sum of chi2(1); Satterthwaite's scaled chi2
-    # matches its first two moments (on the whitened residuals when the type weighs them).
-    if tr1 > 0.0:
-        scale = tr2 / tr1
-        dof = tr1**2 / tr2
-        chi2 = sum_sq / scale
-        p_value = float(stats.chi2.sf(chi2, dof))
-    else:  # a noise-free statement: every residual is model error
-        dof = max(float(n_eq) - calibration.effective_parameters, 1.0)
-        chi2 = float("inf")
-        p_value = 0.0
+    chi2, dof, p_value = _satterthwaite_test(sum_sq, tr1, tr2, float(n_eq) - calibration.effective_parameters)
     noise_in_residuals = blocks.mean(axis=0)
     fitted_fraction = max(1.0 - calibration.effective_parameters / float(n_eq), 1.0 / float(n_eq))
     observed = residuals.T @ residuals / n
@@ -238,21 +274,8 @@ def assess_model_adequacy(
     inadequacy = np.zeros((dim, dim))
     draws = np.zeros_like(residuals)
     if not adequate:
-        observed_cv, noise_cv = _leave_one_out_moments(a_mat, gain, residuals, blocks)
-        # The larger of the in-sample estimate (residuals corrected for the fitted degrees of
-        # freedom) and the leave-one-out one: with few poses the fit follows the model error
-        # and only the prediction of a left-out pose shows it.
         in_sample = (observed - noise_in_residuals) / fitted_fraction
-        cross_validated = observed_cv - noise_cv
-        use_cv = np.trace(cross_validated) > np.trace(in_sample)
-        evals, evecs = np.linalg.eigh(cross_validated if use_cv else in_sample)
-        inadequacy = (evecs * np.clip(evals, 0.0, None)) @ evecs.T
-        centred = residuals - residuals.mean(axis=0)
-        s_evals, s_evecs = np.linalg.eigh(centred.T @ centred / n)
-        s_inv_sqrt = (s_evecs / np.sqrt(np.maximum(s_evals, np.finfo(float).tiny))) @ s_evecs.T
-        m_evals, m_evecs = np.linalg.eigh(inadequacy)
-        m_sqrt = (m_evecs * np.sqrt(np.clip(m_evals, 0.0, None))) @ m_evecs.T
-        draws = centred @ (m_sqrt @ s_inv_sqrt).T
+        inadequacy, draws = _model_error(a_mat, gain, residuals, blocks, in_sample)
     return ModelAdequacy(
         chi2=chi2,
         dof=dof,

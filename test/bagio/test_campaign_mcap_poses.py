@@ -12,7 +12,7 @@ from robocal_uncertainty.bagio import read_campaign, write_campaign
 from robocal_uncertainty.bagio.campaign_mcap import CampaignRecorder
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 from robocal_uncertainty.errors import InputError
 

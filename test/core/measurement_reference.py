@@ -17,7 +17,7 @@ import numpy as np
 
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.observability import structural_observability
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import (
     EncoderNoise,
     SimulationSettings,

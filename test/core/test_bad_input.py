@@ -12,7 +12,7 @@ import yaml
 
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import identify
-from robocal_uncertainty.core.robot_config import (
+from robocal_uncertainty.core.robot_formats.robot_yaml import (
     load_robot_model,
     robot_model_from_dict,
 )

@@ -21,7 +21,7 @@ from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.observability import structural_observability
 from robocal_uncertainty.core.regularization import lcurve, tikhonov_solve
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.simulation import (
     EncoderNoise,

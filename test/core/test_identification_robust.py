@@ -19,7 +19,7 @@ from robocal_uncertainty.core import (
     residual_stats,
     simulate_campaign,
 )
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.errors import ConvergenceError, IdentifiabilityError
 
 

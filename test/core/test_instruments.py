@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from robocal_uncertainty.core.robot_config import load_robot_model
 
 from robocal_uncertainty.core.instruments import (
     CmmInstrument,
@@ -22,7 +23,6 @@ from robocal_uncertainty.core.instruments import (
     point_displacements,
     point_error_sources,
 )
-from robocal_uncertainty.core.robot_config import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, draw_joint_positions, simulate_measurements
 from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY, TrialContext, UncertaintySettings
 

@@ -13,8 +13,8 @@ from robocal_uncertainty.core.joint_limits import DEGREES_HINT
 from robocal_uncertainty.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
-# The seed's test configuration (Table 2), degrees; joint2 must lie in [-265, -95] deg.
-SEED_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
+# The robot paper's test configuration (Table 2), degrees; joint2 must lie in [-265, -95] deg.
+PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +40,7 @@ def test_limits_come_from_the_yaml_in_degrees(paper_arm) -> None:
 
 
 def test_values_inside_the_limits_pass(paper_arm, ur10) -> None:
-    check_joint_limits(paper_arm, np.radians(SEED_JOINTS_DEG))
+    check_joint_limits(paper_arm, np.radians(PAPER_TEST_JOINTS_DEG))
     check_joint_limits(ur10, [0.0, -1.0, 1.0, 0.0, 1.0, 0.0])
     # Exactly on a limit is inside.
     check_joint_limits(ur10, ur10.joint_limits[:, 1])
@@ -56,7 +56,7 @@ def test_simulated_campaigns_pass(robot: str, frame: str, request: pytest.Fixtur
 
 
 def test_message_names_row_joint_value_and_limits(paper_arm) -> None:
-    q = np.radians(np.tile(SEED_JOINTS_DEG, (3, 1)))
+    q = np.radians(np.tile(PAPER_TEST_JOINTS_DEG, (3, 1)))
     q[2, 1] = -1.0  # joint2 at -57.3 deg, its limits are [-265, -95] deg
     msg = _message(paper_arm, q, what="campaign pose")
     assert msg.startswith("campaign pose 3 of 3: joint joint2 = -1 rad (-57.2958 deg)")
@@ -78,7 +78,9 @@ def test_first_offender_reported_with_the_count_of_the_others(ur10) -> None:
 
 
 def test_degrees_typed_as_radians_get_the_hint(paper_arm, ur10) -> None:
-    msg = _message(paper_arm, SEED_JOINTS_DEG, what="--joints configuration", degrees_hint="did you mean --degrees?")
+    msg = _message(
+        paper_arm, PAPER_TEST_JOINTS_DEG, what="--joints configuration", degrees_hint="did you mean --degrees?"
+    )
     assert msg.startswith("--joints configuration 1 of 1: joint joint1 = -7.5005 rad (-429.747 deg)")
     assert "[-175, 175] deg" in msg
     assert msg.endswith("; did you mean --degrees?")
@@ -86,7 +88,7 @@ def test_degrees_typed_as_radians_get_the_hint(paper_arm, ur10) -> None:
 
 
 def test_no_hint_when_the_values_do_not_fit_as_degrees_either(paper_arm) -> None:
-    q = np.array(SEED_JOINTS_DEG)
+    q = np.array(PAPER_TEST_JOINTS_DEG)
     q[1] = -300.0  # outside [-265, -95] in degrees too
     assert "did you mean" not in _message(paper_arm, q, degrees_hint="did you mean --degrees?")
 

@@ -18,7 +18,7 @@ from robocal_uncertainty.core.kinematics import (
     forward_points_and_jacobian,
     forward_poses,
 )
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import RobotModel
 
 REPO = Path(__file__).resolve().parents[2]
@@ -26,7 +26,7 @@ PAPER_YAML = REPO / "config" / "paper_arm.yaml"
 UR10_YAML = REPO / "config" / "ur10.yaml"
 
 # Seed paper, section 1: joint readings of the test pose [deg] and its flange position [mm].
-SEED_JOINTS_DEG = np.array([-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451])
+PAPER_TEST_JOINTS_DEG = np.array([-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451])
 SEED_POINT_MM = np.array([227.468, -98.454, 533.780])
 SEED_POINT_EXACT_MM = np.array([227.46845944, -98.45429403, 533.77976111])
 # Table 1 of the seed, rows (alpha_{i-1} [deg], a_{i-1} [mm], d_i [mm]), typed in here again.
@@ -103,12 +103,12 @@ def perturbed(model: RobotModel, rng: np.random.Generator, *, beta: bool) -> Rob
     )
 
 
-# --- the seed's test pose ---------------------------------------------------------------
+# --- the robot paper's test pose --------------------------------------------------------
 
 
 def test_seed_pose_independent_product_matches_paper() -> None:
     """The typed-in Table 1 as a plain product gives the seed's printed flange position."""
-    q = np.radians(SEED_JOINTS_DEG)
+    q = np.radians(PAPER_TEST_JOINTS_DEG)
     t = np.eye(4)
     for (alpha, a, d), qi in zip(SEED_TABLE1, q):
         t = t @ rot_x(np.radians(alpha)) @ trans(x=a) @ rot_z(qi) @ trans(z=d)
@@ -118,7 +118,7 @@ def test_seed_pose_independent_product_matches_paper() -> None:
 
 def test_seed_pose_forward_points_matches_paper_within_1um() -> None:
     model = load_robot_model(PAPER_YAML)
-    q = np.radians(SEED_JOINTS_DEG)[None, :]
+    q = np.radians(PAPER_TEST_JOINTS_DEG)[None, :]
     point_mm = forward_points(model, model.parameter_vector(), q)[0] * 1e3
     # Paper's printed value (3 decimals): within 1 um.
     assert np.max(np.abs(point_mm - SEED_POINT_MM)) < 1e-3

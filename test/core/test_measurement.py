@@ -32,7 +32,7 @@ from robocal_uncertainty.core.measurement import (
     stack_equations,
 )
 from robocal_uncertainty.core.observability import structural_observability
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel
 from robocal_uncertainty.core.simulation import (
     EncoderNoise,

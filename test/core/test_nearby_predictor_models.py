@@ -16,7 +16,7 @@ import pytest
 
 from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.core.urdf_model import load_urdf, robot_model_from_urdf
 
 URDF_DIR = Path(__file__).resolve().parents[1] / "data" / "urdf"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core.kinematics import forward_points, forward_poses, forward_poses_and_jacobian
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.core.rotation import (
     chordal_mean,

@@ -35,7 +35,7 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.kinematics import forward_poses
 from robocal_uncertainty.core.observability import structural_observability
 from robocal_uncertainty.core.pose_measurement import pose_values, split_pose_values
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.rotation import rotation_exp, rotation_log
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign

@@ -13,7 +13,7 @@ import pytest
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian, forward_poses
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement, pose_values, split_pose_values
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import rpy_to_matrix
 from robocal_uncertainty.core.rotation import rotation_log
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core.identification import identify
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 
 PAPER = Path(__file__).resolve().parents[2] / "config" / "paper_arm.yaml"

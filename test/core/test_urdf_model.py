@@ -10,7 +10,7 @@ import pytest
 
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian, forward_poses
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.core.urdf_model import load_urdf, parse_urdf, robot_model_from_urdf, urdf_chain
 from robocal_uncertainty.errors import ConfigError
 

@@ -19,7 +19,7 @@ from robocal_uncertainty.core import SimulationSettings, identify, load_robot_mo
 from robocal_uncertainty.core.identification import _initial_tool
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.measurement import POINT
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.core.urdf_model import load_urdf, robot_model_from_urdf, urdf_chain
 from robocal_uncertainty.uncertainty.model_adequacy import assess_model_adequacy
 

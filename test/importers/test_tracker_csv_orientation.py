@@ -20,7 +20,7 @@ import pytest
 from robocal_uncertainty.core.identification import fit_rigid_base, identify
 from robocal_uncertainty.core.kinematics import forward_poses
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement, split_pose_values
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_from_matrix
 from robocal_uncertainty.core.rotation import chordal_mean, euler_to_matrix, rotation_log
 from robocal_uncertainty.errors import ConfigError, InputError

@@ -23,7 +23,7 @@ import pytest
 from robocal_uncertainty.core import SimulationSettings, identify, load_robot_model, simulate_campaign
 from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.pose_measurement import PoseMeasurement
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.core.urdf_model import load_urdf, robot_model_from_urdf
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.kernels import (

@@ -13,7 +13,7 @@ import pytest
 from robocal_uncertainty.app import suggest_poses
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core import SimulationSettings, load_robot_model, simulate_campaign
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.kernels import CupyBackend, NumbaBackend
 

@@ -16,7 +16,7 @@ from robocal_uncertainty.bagio.messages import (
     pose_with_covariance,
     uncertainty_to_msgs,
 )
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings

@@ -22,7 +22,7 @@ from robocal_uncertainty.uncertainty import (
 )
 
 # Seed test configuration (section 3.2), in degrees.
-SEED_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
+PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
 TRIALS = 1000
 REPO = Path(__file__).resolve().parents[2]
 
@@ -39,7 +39,7 @@ class Setup:
 def setup() -> Setup:
     model = load_robot_model(REPO / "config" / "paper_arm.yaml")
     sim = simulate_campaign(model, SimulationSettings(), seed=1)
-    qt = np.radians(SEED_JOINTS_DEG)
+    qt = np.radians(PAPER_TEST_JOINTS_DEG)
     result = evaluate_uncertainty(
         model,
         sim.campaign,

@@ -13,7 +13,7 @@ import numpy as np
 
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.measurement import PointMeasurement
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 from robocal_uncertainty.report.configurations import _num
 from robocal_uncertainty.report.document import _weighting_lines

@@ -14,7 +14,7 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 BASE_BAG = REPO / "test" / "data" / "paper_arm_base_raw.mcap"
-SEED_TEST_JOINTS_DEG = "-7.5005 -234.4840 -106.7448 -92.3875 -61.5425 20.7451"
+PAPER_TEST_JOINTS_DEG = "-7.5005 -234.4840 -106.7448 -92.3875 -61.5425 20.7451"
 
 
 def add_installed_msg_module() -> None:

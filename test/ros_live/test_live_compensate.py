@@ -13,7 +13,15 @@ import yaml
 
 rclpy = pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import SEED_TEST_JOINTS_DEG, add_installed_msg_module, call, installed_share, run, spin_until, started
+from live_support import (
+    PAPER_TEST_JOINTS_DEG,
+    add_installed_msg_module,
+    call,
+    installed_share,
+    run,
+    spin_until,
+    started,
+)
 
 N_POSES = 30  # simulated; the collector finds most of them
 TRIALS = 500
@@ -57,7 +65,7 @@ def test_compensate_targets_live(ros_env, tmp_path) -> None:
     )
     command = ["ros2", "launch", "robocal_uncertainty", "robocal.launch.py", "robot_config:=paper_arm"]
     command += [f"config_file:={config_file}", f"campaign_path:={campaign}", "input_reliability:=reliable"]
-    command += [f"test_joints_deg:={SEED_TEST_JOINTS_DEG}"]
+    command += [f"test_joints_deg:={PAPER_TEST_JOINTS_DEG}"]
     try:
         with started(command, ros_env, tmp_path / "launch.log"):
             spin_until(executor, lambda: "status" in last, 90, "the nodes to start")

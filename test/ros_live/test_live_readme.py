@@ -16,7 +16,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import BASE_BAG, REPO, SEED_TEST_JOINTS_DEG, add_installed_msg_module, call, run, spin_until, started
+from live_support import BASE_BAG, PAPER_TEST_JOINTS_DEG, REPO, add_installed_msg_module, call, run, spin_until, started
 
 N_POSES = 30  # dwells of paper_arm_base_raw.mcap (test/data/make_raw_bags.py)
 
@@ -47,7 +47,7 @@ def test_readme_example_live_equals_offline_replay(ros_env, tmp_path) -> None:
     from robocal_uncertainty.pipeline import replay_bag
 
     readme = (REPO / "README.md").read_text(encoding="utf-8")
-    launch_args = ["robot_config:=paper_arm input_reliability:=reliable", f'test_joints_deg:="{SEED_TEST_JOINTS_DEG}"']
+    launch_args = ["robot_config:=paper_arm input_reliability:=reliable", f'test_joints_deg:="{PAPER_TEST_JOINTS_DEG}"']
     for text in launch_args:
         assert text in readme, f"the README's launch example no longer has {text}"
     assert "ros2 bag play -d 3 src/robocal_uncertainty/test/data/paper_arm_base_raw.mcap" in readme
@@ -77,7 +77,7 @@ def test_readme_example_live_equals_offline_replay(ros_env, tmp_path) -> None:
     try:
         command = ["ros2", "launch", "robocal_uncertainty", "robocal.launch.py", "robot_config:=paper_arm"]
         command += ["input_reliability:=reliable"]
-        command += [f"test_joints_deg:={SEED_TEST_JOINTS_DEG}", f"campaign_path:={campaign}"]
+        command += [f"test_joints_deg:={PAPER_TEST_JOINTS_DEG}", f"campaign_path:={campaign}"]
         with started(command, ros_env, tmp_path / "launch.log") as launch:
             spin_until(executor, lambda: "collector" in last and "status" in last, 90, "the nodes to start")
             record = ["ros2", "bag", "record", "-o", str(tmp_path / "outputs"), "--topics"]
@@ -151,7 +151,7 @@ def test_readme_example_live_equals_offline_replay(ros_env, tmp_path) -> None:
 
     # The installed command line: the offline replay of the same bag, same defaults.
     report = tmp_path / "offline"
-    test_joints = SEED_TEST_JOINTS_DEG.split()
+    test_joints = PAPER_TEST_JOINTS_DEG.split()
     cli = ["ros2", "run", "robocal_uncertainty", "robocal-uncertainty", "replay", str(BASE_BAG), "--robot", "paper_arm"]
     run([*cli, "--test-joints", *test_joints, "--degrees", "--out", str(report), "--no-progress"], ros_env, 300)
     expected = json.loads((report / "report.json").read_text())["test_configurations"][0]

@@ -14,7 +14,15 @@ import yaml
 
 rclpy = pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import SEED_TEST_JOINTS_DEG, add_installed_msg_module, call, installed_share, run, spin_until, started
+from live_support import (
+    PAPER_TEST_JOINTS_DEG,
+    add_installed_msg_module,
+    call,
+    installed_share,
+    run,
+    spin_until,
+    started,
+)
 
 N_POSES = 12
 TRIALS = 2000
@@ -71,7 +79,7 @@ def test_six_dof_campaign_live(ros_env, tmp_path) -> None:
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, DIAGNOSTICS_QOS)
     command = ["ros2", "launch", "robocal_uncertainty", "robocal.launch.py", "robot_config:=paper_arm"]
     command += [f"config_file:={config_file}", f"campaign_path:={campaign}", "input_reliability:=reliable"]
-    command += ["tracker_pose_topic:=/tracker/pose", f"test_joints_deg:={SEED_TEST_JOINTS_DEG}"]
+    command += ["tracker_pose_topic:=/tracker/pose", f"test_joints_deg:={PAPER_TEST_JOINTS_DEG}"]
     try:
         with started(command, ros_env, tmp_path / "launch.log") as launch:
             spin_until(executor, lambda: "status" in last, 90, "the nodes to start")
@@ -127,7 +135,7 @@ def test_six_dof_campaign_live(ros_env, tmp_path) -> None:
     # The offline replay of the same recording, with its defaults for a 6-DOF recording.
     report = tmp_path / "offline"
     cli = ["ros2", "run", "robocal_uncertainty", "robocal-uncertainty", "replay", str(bag), "--robot", "paper_arm"]
-    cli += ["--tracker-pose-topic", "/tracker/pose", "--test-joints", *SEED_TEST_JOINTS_DEG.split(), "--degrees"]
+    cli += ["--tracker-pose-topic", "/tracker/pose", "--test-joints", *PAPER_TEST_JOINTS_DEG.split(), "--degrees"]
     run([*cli, "--trials", str(TRIALS), "--out", str(report), "--no-progress"], ros_env, 300)
     expected = json.loads((report / "report.json").read_text())["test_configurations"][0]
     assert [u.mean.x, u.mean.y, u.mean.z] == expected["mean_m"]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.importers import read_tracker_csv
 from robocal_uncertainty.report.validation_report import write_validation_report
 from robocal_uncertainty.uncertainty.holdout import split_campaign, validate_holdout

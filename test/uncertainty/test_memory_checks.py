@@ -17,7 +17,7 @@ import pytest
 
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core.identification import identify
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.uncertainty.calibration import evaluate_uncertainty

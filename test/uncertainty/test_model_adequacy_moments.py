@@ -9,7 +9,7 @@ import pytest
 
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.measurement import row_weights, stack_jacobian
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, simulate_campaign
 from robocal_uncertainty.uncertainty.model_adequacy import _residual_noise_moments
 

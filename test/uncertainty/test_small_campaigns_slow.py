@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from robocal_uncertainty.core.robot_config import load_robot_model, resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,7 +11,7 @@ import pytest
 
 from robocal_uncertainty.core.identification import identify
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
-from robocal_uncertainty.core.robot_config import load_robot_model
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.robot_model import rpy_to_matrix
 from robocal_uncertainty.core.simulation import SimulationSettings, UnmodelledErrors, simulate_campaign
 from robocal_uncertainty.errors import ConfigError

@@ -21,14 +21,14 @@ from robocal_uncertainty.uncertainty import (
 )
 
 REPO = Path(__file__).resolve().parents[2]
-SEED_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
+PAPER_TEST_JOINTS_DEG = (-7.5005, -234.4840, -106.7448, -92.3875, -61.5425, 20.7451)
 
 
 @pytest.fixture(scope="module")
 def setup() -> SimpleNamespace:
     model = load_robot_model(REPO / "config" / "paper_arm.yaml")
     sim = simulate_campaign(model, SimulationSettings(), seed=1)
-    qt = np.radians(SEED_JOINTS_DEG)
+    qt = np.radians(PAPER_TEST_JOINTS_DEG)
     settings = UncertaintySettings(sources=("tracker", "encoder"))
     result = evaluate_uncertainty(model, sim.campaign, qt, uncertainty=settings, trials=200, seed=1)
     return SimpleNamespace(model=model, campaign=sim.campaign, test_joints=qt, result=result)

@@ -20,7 +20,7 @@ from robocal_uncertainty.core import (
     load_robot_model,
     simulate_campaign,
 )
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.uncertainty import UncertaintySettings, evaluate_uncertainty
 from robocal_uncertainty.uncertainty.holdout import split_campaign, validate_holdout
 

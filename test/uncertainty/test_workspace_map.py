@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from robocal_uncertainty.core import SimulationSettings, identify, load_robot_model, simulate_campaign
-from robocal_uncertainty.core.robot_config import resolve_robot_config
+from robocal_uncertainty.core.robot_formats.robot_yaml import resolve_robot_config
 from robocal_uncertainty.errors import ConfigError, InputError
 from robocal_uncertainty.montecarlo.executor import open_executor
 from robocal_uncertainty.report.map_report import weakest_region, write_map_report

@@ -101,6 +101,52 @@ def _rot_x(angle: float) -> np.ndarray:
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
+def _joint_rows(
+    joints: list[Any], to_m: float, to_rad: float, where: str
+) -> tuple[list[str], dict[str, list[float]], list[list[float]]]:
+    """Names, DH rows (SI) and limits [rad] of the ``joints`` list, each joint checked."""
+    names: list[str] = []
+    rows: dict[str, list[float]] = {"alpha": [], "a": [], "d": [], "theta": []}
+    limits: list[list[float]] = []
+    for i, joint in enumerate(joints, start=1):
+        if not isinstance(joint, dict):
+            msg = f"{where}: joint {i} must be a mapping"
+            raise ConfigError(msg)
+        unknown = _unknown_fields(joint, _JOINT_KEYS, f"joint {i} has unknown")
+        if unknown is not None:
+            raise ConfigError(f"{where}: {unknown}")
+        for key in ("name", "alpha", "a", "d"):
+            if key not in joint:
+                msg = f"{where}: joint {i} is missing '{key}'"
+                raise ConfigError(msg)
+        names.append(str(joint["name"]))
+        rows["alpha"].append(_number(joint["alpha"], f"joint {i} alpha") * to_rad)
+        rows["a"].append(_number(joint["a"], f"joint {i} a") * to_m)
+        rows["d"].append(_number(joint["d"], f"joint {i} d") * to_m)
+        rows["theta"].append(_number(joint.get("theta", 0.0), f"joint {i} theta") * to_rad)
+        lim = joint.get("limits", [-360.0 * ANGLE_UNITS["deg"] / to_rad, 360.0 * ANGLE_UNITS["deg"] / to_rad])
+        if not isinstance(lim, (list, tuple)) or len(lim) != 2:
+            msg = f"{where}: joint {i} limits must be [lower, upper]"
+            raise ConfigError(msg)
+        limits.append([_number(lim[0], f"joint {i} limits") * to_rad, _number(lim[1], f"joint {i} limits") * to_rad])
+    if len(set(names)) != len(names):
+        msg = f"{where}: joint names must be unique, got {names}"
+        raise ConfigError(msg)
+    return names, rows, limits
+
+
+def _base_mapping(data: dict[str, Any], where: str) -> dict[str, Any]:
+    """The ``base`` mapping (empty when absent), its fields checked."""
+    base = data.get("base", {})
+    if not isinstance(base, dict):
+        msg = f"{where}: 'base' must be a mapping with known, xyz, rpy"
+        raise ConfigError(msg)
+    unknown_base = _unknown_fields(base, _BASE_KEYS, "base has unknown")
+    if unknown_base is not None:
+        raise ConfigError(f"{where}: {unknown_base}")
+    return base
+
+
 def robot_model_from_dict(data: object, *, where: str = "robot config") -> RobotModel:
     """Build a :class:`RobotModel` from the parsed YAML mapping (see module docstring).
 
@@ -135,33 +181,7 @@ def robot_model_from_dict(data: object, *, where: str = "robot config") -> Robot
     if not isinstance(joints, list) or not joints:
         msg = f"{where}: 'joints' must be a non-empty list"
         raise ConfigError(msg)
-    names: list[str] = []
-    rows: dict[str, list[float]] = {"alpha": [], "a": [], "d": [], "theta": []}
-    limits: list[list[float]] = []
-    for i, joint in enumerate(joints, start=1):
-        if not isinstance(joint, dict):
-            msg = f"{where}: joint {i} must be a mapping"
-            raise ConfigError(msg)
-        unknown = _unknown_fields(joint, _JOINT_KEYS, f"joint {i} has unknown")
-        if unknown is not None:
-            raise ConfigError(f"{where}: {unknown}")
-        for key in ("name", "alpha", "a", "d"):
-            if key not in joint:
-                msg = f"{where}: joint {i} is missing '{key}'"
-                raise ConfigError(msg)
-        names.append(str(joint["name"]))
-        rows["alpha"].append(_number(joint["alpha"], f"joint {i} alpha") * to_rad)
-        rows["a"].append(_number(joint["a"], f"joint {i} a") * to_m)
-        rows["d"].append(_number(joint["d"], f"joint {i} d") * to_m)
-        rows["theta"].append(_number(joint.get("theta", 0.0), f"joint {i} theta") * to_rad)
-        lim = joint.get("limits", [-360.0 * ANGLE_UNITS["deg"] / to_rad, 360.0 * ANGLE_UNITS["deg"] / to_rad])
-        if not isinstance(lim, (list, tuple)) or len(lim) != 2:
-            msg = f"{where}: joint {i} limits must be [lower, upper]"
-            raise ConfigError(msg)
-        limits.append([_number(lim[0], f"joint {i} limits") * to_rad, _number(lim[1], f"joint {i} limits") * to_rad])
-    if len(set(names)) != len(names):
-        msg = f"{where}: joint names must be unique, got {names}"
-        raise ConfigError(msg)
+    names, rows, limits = _joint_rows(joints, to_m, to_rad, where)
     n = len(names)
     tool = np.array(_vector3(data.get("tool_point", [0.0, 0.0, 0.0]), f"{where}: tool_point")) * to_m
     alpha = np.array(rows["alpha"])
@@ -178,13 +198,7 @@ def robot_model_from_dict(data: object, *, where: str = "robot config") -> Robot
     ):
         msg = f"{where}: hayati_beta_joints must list joint numbers 1..{n}, got {beta_joints!r}"
         raise ConfigError(msg)
-    base = data.get("base", {})
-    if not isinstance(base, dict):
-        msg = f"{where}: 'base' must be a mapping with known, xyz, rpy"
-        raise ConfigError(msg)
-    unknown_base = _unknown_fields(base, _BASE_KEYS, "base has unknown")
-    if unknown_base is not None:
-        raise ConfigError(f"{where}: {unknown_base}")
+    base = _base_mapping(data, where)
     return RobotModel(
         name=str(data["name"]),
         joint_names=tuple(names),

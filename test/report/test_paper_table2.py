@@ -10,16 +10,16 @@ import pytest
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.report.references import ROBOT_PAPER_REFERENCE
 from robocal_uncertainty.report.table2 import (
-    SEED_TABLE2,
-    format_seed_comparison,
+    PAPER_TABLE2,
+    format_paper_comparison,
+    paper_difference_note,
     round_to_uncertainty,
-    seed_difference_note,
 )
 
 REPO = Path(__file__).resolve().parents[2]
 SEED_NAME = "000_ccde7396bea0450c.txt"
 SEED_CANDIDATES = (REPO / "shared" / "seeds" / SEED_NAME, REPO.parent / "shared" / "seeds" / SEED_NAME)
-# Row labels of Table 2 in the seed text, in the order of SeedTable2Axis's fields.
+# Row labels of Table 2 in the seed text, in the order of PaperTable2Axis's fields.
 LABELS = ("输出值/mm", "标准不确定度/mm", "扩展不确定度/mm", "包含区间/mm", "相对不确定度/%")
 
 
@@ -56,9 +56,9 @@ def _seed_table2() -> dict[str, list[object]]:
 
 def test_seed_table2_equals_the_seed_text():
     seed = _seed_table2()
-    assert list(SEED_TABLE2) == ["x", "y", "z"]
+    assert list(PAPER_TABLE2) == ["x", "y", "z"]
     for axis, (value, u, big_u, interval, relative) in seed.items():
-        row = SEED_TABLE2[axis]
+        row = PAPER_TABLE2[axis]
         assert row.output_value == value
         assert row.standard_uncertainty == u
         assert row.expanded_uncertainty == big_u
@@ -67,7 +67,7 @@ def test_seed_table2_equals_the_seed_text():
 
 
 def test_seed_table2_facts_stated_in_the_comment():
-    for row in SEED_TABLE2.values():
+    for row in PAPER_TABLE2.values():
         # U/u = 2.6 on every axis; relative uncertainty = 100 U/|y| (to the printed digits).
         assert row.expanded_uncertainty / row.standard_uncertainty == pytest.approx(2.6, abs=2e-3)
         assert 100 * row.expanded_uncertainty / abs(row.output_value) == pytest.approx(
@@ -77,16 +77,16 @@ def test_seed_table2_facts_stated_in_the_comment():
     # probabilistically symmetric interval); z stays within it.
     reach = {
         axis: max(abs(end - row.output_value) for end in row.coverage_interval) / row.standard_uncertainty
-        for axis, row in SEED_TABLE2.items()
+        for axis, row in PAPER_TABLE2.items()
     }
     assert reach["x"] > math.sqrt(39) and reach["y"] > math.sqrt(39)
     assert reach["z"] < math.sqrt(39)
     assert max(reach.values()) == pytest.approx(10.67, abs=0.01)
 
 
-def test_format_seed_comparison_shows_both(setup):
+def test_format_paper_comparison_shows_both(setup):
     result = setup.result
-    text = format_seed_comparison(result)
+    text = format_paper_comparison(result)
     lines = text.splitlines()
     assert lines[0] == "Jiang et al. Table 2 (real arm) / this run (test configuration 1), mm"
     head = lines.index(next(line for line in lines if line.startswith("Axis")))
@@ -94,7 +94,7 @@ def test_format_seed_comparison_shows_both(setup):
     assert lines[head].split()[-1] == "Jiang/ours"  # column "u Jiang/ours": never "seed", the random seed's word
     pose = result.poses[0]
     for axis, ours in zip("xyz", pose.axes):
-        seed = SEED_TABLE2[axis]
+        seed = PAPER_TABLE2[axis]
         row = next(line for line in lines if line.startswith(axis + " "))
         u = ours.standard_uncertainty * 1e3
         low = round_to_uncertainty(ours.interval.low * 1e3, u)
@@ -109,9 +109,9 @@ def test_format_seed_comparison_shows_both(setup):
         # Ratio of the two u, two significant digits.
         assert float(row.split()[-1]) == pytest.approx(seed.standard_uncertainty / u, rel=0.06)
     # Short: title, reference, grid (column names, rule, 3 rows), then the wrapped note.
-    assert " ".join(lines[head + 5 :]) == " ".join(seed_difference_note().split())
+    assert " ".join(lines[head + 5 :]) == " ".join(paper_difference_note().split())
     assert "seed" not in text.lower()
-    assert len(format_seed_comparison(result, note=False).splitlines()) == head + 5
+    assert len(format_paper_comparison(result, note=False).splitlines()) == head + 5
     assert all(len(line) <= 120 for line in lines)
 
 
@@ -128,14 +128,14 @@ def test_the_paper_is_named_as_its_text_names_it():
     assert "six DOF robot arm'" in ROBOT_PAPER_REFERENCE and "J2209613" in ROBOT_PAPER_REFERENCE
 
 
-def test_format_seed_comparison_rejects_a_bad_pose(setup):
+def test_format_paper_comparison_rejects_a_bad_pose(setup):
     for bad in (1, -1, True, "0"):
         with pytest.raises(ConfigError):
-            format_seed_comparison(setup.result, pose=bad)
+            format_paper_comparison(setup.result, pose=bad)
 
 
-def test_seed_difference_note_is_measured_not_a_placeholder():
-    note = seed_difference_note()
+def test_paper_difference_note_is_measured_not_a_placeholder():
+    note = paper_difference_note()
     assert "placeholder" not in note.lower() and "todo" not in note.lower()
     assert note.count(". ") + 1 <= 2  # one or two sentences
     for needle in ("0.01-0.04 mm", "0.03 mm", "0.5 mm"):
