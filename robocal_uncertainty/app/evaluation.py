@@ -89,7 +89,7 @@ def small_campaign_options(
     """Adapt the pose-count defaults to a campaign too small for them; return the notes.
 
     The defaults of ``min_poses`` (40 equations or 1.5 x the identifiable parameters) and
-    ``subset_size`` (33/53 of the poses) suit the seed's 53 poses. When a default does not
+    ``subset_size`` (33/53 of the poses) suit the reference paper's 53 poses. When a default does not
     fit the campaign and the ``n_poses`` or ``pose_choice`` source or the sweeps need it, it
     becomes the fewest poses that identify the model (identifiable parameters / 3); values
     the caller set are never changed.

@@ -1,6 +1,6 @@
 """Tikhonov regularisation of a linear least-squares step and choice of its parameter.
 
-For ``min ||b - A x||^2 + lambda^2 ||x||^2`` (the seed's ``Gamma = lambda I``), the SVD
+For ``min ||b - A x||^2 + lambda^2 ||x||^2`` (the reference paper's ``Gamma = lambda I``), the SVD
 ``A = U S V^T`` gives every quantity in closed form through the filter factors
 ``f_i = s_i^2 / (s_i^2 + lambda^2)``: the solution, its norm, the residual norm, the L-curve
 and its curvature (Hansen, "The L-curve and its use...", 2000) and the GCV function.

@@ -54,7 +54,7 @@ class ParameterErrorRanges:
     """Half-widths of the uniform true parameter errors [m] and [rad].
 
     The defaults (1 mm, 0.1 deg) give nominal absolute errors of 1-3 mm over the workspace,
-    typical of an uncalibrated arm of the seed's size.
+    typical of an uncalibrated arm of the reference paper's size.
     """
 
     length: float = 1e-3

@@ -1,4 +1,4 @@
-"""Blade-section parameters from a measured point cloud and the nominal section (seed §2).
+"""Blade-section parameters from a measured point cloud and the nominal section (the blade reference paper, §2).
 
 Each step is a pure function over arrays, SI units inside:
 

@@ -214,7 +214,7 @@ class ChordSolver:
     the trial's readings is replaced by its first-order expansion in the reading errors,
     ``F(p, Q + dQ) ~ F(p, Q) + J_q dQ``, which enters the right-hand side as one product
     ``dQ @ joint_map``. What that leaves out (second order in the micro-radian reading errors,
-    ~1e-4 of the step on the seed's case) is of the size of what the chord step itself leaves
+    ~1e-4 of the step on the reference paper's case) is of the size of what the chord step itself leaves
     out, so the next, exact step brings the trial as close to its solution as two exact steps
     did (~3e-8 of its deviation, against ~1e-4 after the first); each trial then stops by the
     same rule as before, and only the trials that need more steps take them.
@@ -399,7 +399,7 @@ class ChordSolver:
         relative_tolerance : float
             A trial stops when its step is below this fraction of its first step (the chord
             iteration contracts by ~1e-4 per step: two steps usually suffice, leaving ~3e-8
-            of the trial's deviation, ~1e-12 m on the seed's case against a 14-digit solution).
+            of the trial's deviation, ~1e-12 m on the reference paper's case against a 14-digit solution).
         linear_start : bool
             Take the first step from the first-order prediction ``reference + J_q dQ`` (no
             kinematics, see the class docstring); false evaluates the prediction at the

@@ -1,4 +1,4 @@
-"""Uncertainty of the tool position as one setting varies (seed Figs. 7-9).
+"""Uncertainty of the tool position as one setting varies (the robot reference paper's Figs. 7-9).
 
 Each point is a small Monte Carlo run (a few hundred trials by default): the curves show
 trends, not uncertainty statements. Every point uses the same root seed, so differences
@@ -281,7 +281,7 @@ def evaluate_sweeps(
     *,
     run: RunContext | None = None,
 ) -> tuple[Sweep, ...]:
-    """The report's sweeps: u against lambda (seed Fig. 7) and against the number of equations (Figs. 8-9).
+    """The report's sweeps: u against lambda (reference paper Fig. 7) and against the number of equations (Figs. 8-9).
 
     Lambda: 9 values spaced logarithmically from lambda*/10 to 10 lambda* (1e-4 .. 1e-1
     when lambda* = 0). Equations: 8 pose counts from max(1.5 n_estimated / 3, 40 / 3) poses

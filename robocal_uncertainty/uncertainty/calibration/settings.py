@@ -42,7 +42,7 @@ class EvaluationSettings:
     Attributes
     ----------
     uncertainty : UncertaintySettings
-        Sources and their models; default tracker and encoder noise at the seed's levels.
+        Sources and their models; default tracker and encoder noise at the reference paper's levels.
     lambda_ : {"auto", "gcv"} or float
         Lambda method of the calibration (when it is computed here; see
         :func:`~robocal_uncertainty.core.identification.identify`).

@@ -30,7 +30,7 @@ __all__ = ["LAMBDA", "N_POSES", "POSE_CHOICE", "LambdaSource", "PoseChoiceSource
 
 @dataclass(frozen=True, eq=False)
 class LambdaSource:
-    """Regularisation parameter uniform over its valid range (seed Sec. 4.3)."""
+    """Regularisation parameter uniform over its valid range (reference paper Sec. 4.3)."""
 
     low: float
     high: float

@@ -43,10 +43,10 @@ class UncertaintySettings:
         identification; None means [lambda*/5, 5 lambda*] around the chosen lambda*.
     min_poses : int or None
         Smallest pose count for the ``n_poses`` source; None means
-        max(ceil(40/3), ceil(1.5 n_identifiable / 3)) as the seed's 40 equations.
+        max(ceil(40/3), ceil(1.5 n_identifiable / 3)) as the reference paper's 40 equations.
     subset_size : int or None
         Pose count for the ``pose_choice`` source; None means round(33/53 n_poses),
-        the seed's ratio.
+        the reference paper's ratio.
     tracker_xyz : (float, float, float)
         Tracker position in the robot base frame [m], for MPE distances when the campaign
         is in the base frame.
