@@ -1,4 +1,4 @@
-"""Section inspection service: a blade section's parameters and their uncertainty (issue 9).
+"""Section inspection service: a blade section's parameters and their uncertainty.
 
 :func:`inspect_section` reads a measured section (a CMM text export, or the ``PointCloud2``
 messages of a bag), a nominal section (a file, or a shipped blade), an instrument YAML, and

@@ -1,4 +1,4 @@
-"""Blade-section inspection: point clouds, section algorithms and their CMM Monte Carlo (issue 9).
+"""Blade-section inspection: point clouds, section algorithms and their CMM Monte Carlo.
 
 ``read_point_cloud`` / ``read_nominal_section`` (and the shipped blade readers) give SI data;
 ``evaluate_section`` computes the reference paper's nine section parameters; ``section_uncertainty`` runs

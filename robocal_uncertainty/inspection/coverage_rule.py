@@ -30,8 +30,9 @@ __all__ = [
 ]
 
 COVERAGE_TOLERANCE = (0.92, 0.98)
-"""95 ± 3 % (issue 9). A measured coverage below the lower limit is never verified; one above the
-upper limit is conservative (the interval is wider than it needs to be) and is said so."""
+"""95 ± 3 %, the tolerance a 95 % coverage claim is held to here. A measured coverage below the
+lower limit is never verified; one above the upper limit is conservative (the interval is wider
+than it needs to be) and is said so."""
 
 MIN_STUDY_SCANS = 53
 """Fewest scans (unflagged, for a family) a study needs before it can verify a coverage: the

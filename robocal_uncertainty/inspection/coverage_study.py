@@ -1,4 +1,4 @@
-"""Coverage study of the section intervals over families of simulated parts (issue 23).
+"""Coverage study of the section intervals over families of simulated parts.
 
 Each scan of a family is one simulated part: the shipped Rotor 37 section at the reference paper's size
 (:data:`ROTOR37_SCALE`), 1 836 points (denser at the edges), the reference paper's offsets and twist, a

@@ -1,4 +1,4 @@
-"""Max/min intervals honest about what one scan cannot resolve (issue 23).
+"""Max/min intervals honest about what one scan cannot resolve.
 
 Why
 ---
