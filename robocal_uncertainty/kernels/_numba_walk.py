@@ -588,8 +588,7 @@ def chord_solve(
     x_out : (n_trials, k); steps : (n_trials,) int64; failed : (n_trials,) bool
         Results: the trial's parameters, steps taken, and whether the trial needs the numpy
         path (a residual rotation near pi, or a weighted normal matrix that is not positive definite).
-    n_chunks : int
-        See :func:`walk`.
+    n_chunks : int, as for :func:`walk`
     """
     n_trials = x_out.shape[0]
     ref_joints = problem[9]

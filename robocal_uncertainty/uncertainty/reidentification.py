@@ -434,21 +434,33 @@ class ChordSolver:
         w_rows = None if weights is None else np.repeat(weights, self.problem.measurement.dimension, axis=1)
         normal = self._weighted_normals(weights, lam2, x_start.size)
         q = np.asarray(joint_positions, dtype=np.float64)
-        # Step 1: at the start, from the first-order prediction or the exact one.
-        if linear_start:
-            rhs = self._linear_rhs(q, measured, weights, w_rows)
-        else:
-            pred = initial_prediction if initial_prediction is not None else self._predict(x, q)
-            r = stack_residual(self.problem.measurement, self.problem.measurement.residual(measured, pred))
-            if w_rows is not None:
-                r = r * w_rows
-            rhs = r @ self.jacobian
+        rhs = self._first_rhs(q, measured, weights, w_rows, x, linear_start, initial_prediction)
         rhs -= lam2 * (x * self.problem.penalty_mask)
         step = self._solve(rhs, lam2, normal)
         x += step
         first = np.maximum(np.linalg.norm(step, axis=1), np.finfo(float).tiny)
         done = self._exact_steps(x, q, measured, w_rows, (lam2, normal, first), max_iterations, relative_tolerance)
         return x, done
+
+    def _first_rhs(
+        self,
+        q: Array,
+        measured: Array,
+        weights: Array | None,
+        w_rows: Array | None,
+        x: Array,
+        linear_start: bool,
+        initial_prediction: Array | None,
+    ) -> Array:
+        """Right-hand side of the first step, at the start: from the first-order prediction
+        (`linear_start`) or the exact one (`initial_prediction`, computed when None)."""
+        if linear_start:
+            return self._linear_rhs(q, measured, weights, w_rows)
+        pred = initial_prediction if initial_prediction is not None else self._predict(x, q)
+        r = stack_residual(self.problem.measurement, self.problem.measurement.residual(measured, pred))
+        if w_rows is not None:
+            r = r * w_rows
+        return r @ self.jacobian
 
     def _compiled(
         self,
