@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robocal_uncertainty.core.robot_config import load_robot_model
 
 from robocal_uncertainty.core.instruments import (
     CmmInstrument,
@@ -23,6 +22,7 @@ from robocal_uncertainty.core.instruments import (
     point_displacements,
     point_error_sources,
 )
+from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model
 from robocal_uncertainty.core.simulation import SimulationSettings, draw_joint_positions, simulate_measurements
 from robocal_uncertainty.uncertainty.sources import SOURCE_REGISTRY, TrialContext, UncertaintySettings
 
