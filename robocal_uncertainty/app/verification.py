@@ -37,9 +37,10 @@ from robocal_uncertainty.uncertainty.sessions.between import (
     with_between_sessions,
 )
 from robocal_uncertainty.uncertainty.sessions.cross_validation import cross_validated_model_error
-from robocal_uncertainty.uncertainty.sessions.state import session_state
+from robocal_uncertainty.uncertainty.sessions.state import MODEL_ERROR_SOURCE, session_state
 from robocal_uncertainty.uncertainty.sessions.validated_level import validated_level
 from robocal_uncertainty.uncertainty.sessions.verification import verify_session
+from robocal_uncertainty.uncertainty.sources.registry import default_sources
 
 __all__ = [
     "SessionCalibration",
@@ -69,7 +70,7 @@ def calibrate_session(
     encoder_noise: EncoderNoise,
     lambda_: str | float = "auto",
     accept_unconverged: bool = False,
-    sources: tuple[str, ...] = ("tracker", "encoder", "residual"),
+    sources: tuple[str, ...] = default_sources(),
     campaign_name: str | None = None,
     cross_validation_folds: int = 5,
     later_sessions: Sequence[Campaign] = (),
@@ -190,7 +191,7 @@ def _session_record(
     record = functools.partial(session_state, sources=o.sources, campaign_name=o.campaign_name, settings=settings)
     state, adequacy = record(result, campaign, *noise, correlated=o.correlated_model_error)
     folds = o.cross_validation_folds
-    if not o.correlated_model_error and folds and not adequacy.adequate and "residual" in o.sources:
+    if not o.correlated_model_error and folds and not adequacy.adequate and MODEL_ERROR_SOURCE in o.sources:
         try:
             cv = cross_validated_model_error(model, campaign, *noise, folds=folds, lambda_=o.lambda_)
         except CalibError as err:

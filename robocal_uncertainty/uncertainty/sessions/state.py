@@ -30,8 +30,12 @@ from robocal_uncertainty.uncertainty.sessions.field import (
     estimate_model_error_field,
     model_error_dof,
 )
+from robocal_uncertainty.uncertainty.sources.registry import default_sources, source_with_role
 
-__all__ = ["session_state"]
+MODEL_ERROR_SOURCE = source_with_role("model_error")
+"""The registry's model-error source: in a record's sources, its model error is stated."""
+
+__all__ = ["MODEL_ERROR_SOURCE", "session_state"]
 
 Array = NDArray[np.float64]
 
@@ -53,7 +57,7 @@ def session_state(
     tracker_noise: TrackerNoise,
     encoder_noise: EncoderNoise,
     *,
-    sources: tuple[str, ...] = ("tracker", "encoder", "residual"),
+    sources: tuple[str, ...] = default_sources(),
     adequacy: ModelAdequacy | None = None,
     campaign_name: str | None = None,
     settings: dict[str, object] | None = None,
@@ -96,9 +100,9 @@ def session_state(
     noise = pose_noise_covariances(calibration, q, tracker_noise, encoder_noise, distances)
     b0 = calibration.model.layout.base_index
     r_wb = rpy_to_matrix(calibration.estimate[b0 + 3 : b0 + 6])
-    use_residual = "residual" in sources and not adequacy.adequate
+    use_residual = MODEL_ERROR_SOURCE in sources and not adequacy.adequate
     if model_error_from is not None:
-        use_residual = "residual" in sources and bool(np.any(model_error_from.model_error_covariance))
+        use_residual = MODEL_ERROR_SOURCE in sources and bool(np.any(model_error_from.model_error_covariance))
     error = _model_error(
         calibration, q, noise, r_wb, adequacy, use_residual, cross_validated, correlated, model_error_from
     )
@@ -194,7 +198,7 @@ def _extra(
             "dof": float(adequacy.dof),
             "p_value": float(adequacy.p_value),
             "significance": float(adequacy.significance),
-            "included": "residual" in sources,
+            "included": MODEL_ERROR_SOURCE in sources,
             "cross_validated": None if cross_validated is None else cross_validated.to_dict(),
         },
     }

@@ -16,6 +16,7 @@ from robocal_uncertainty.core.session import SessionState, ValidatedLevel
 from robocal_uncertainty.uncertainty.sessions.level import check_level
 from robocal_uncertainty.uncertainty.sessions.state import session_state
 from robocal_uncertainty.uncertainty.sessions.verification import verify_session
+from robocal_uncertainty.uncertainty.sources.registry import default_sources
 
 __all__ = ["LEVEL_FOLDS", "LEVEL_REPEATS", "validated_level"]
 
@@ -40,7 +41,7 @@ def validated_level(
     folds: int = LEVEL_FOLDS,
     seed: int = 0,
     repeats: int = LEVEL_REPEATS,
-    sources: tuple[str, ...] = ("tracker", "encoder", "residual"),
+    sources: tuple[str, ...] = default_sources(),
     correlated: bool = True,
     reference: SessionState | None = None,
 ) -> ValidatedLevel:
