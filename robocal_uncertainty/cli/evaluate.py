@@ -41,10 +41,11 @@ def run(args: argparse.Namespace) -> int:
     campaign, model = campaign_and_robot(args)
     test_q = read_test_joints(args, model)
     from robocal_uncertainty.uncertainty import parse_sources
+    from robocal_uncertainty.uncertainty.sources.registry import sources_given_options
 
     sources = parse_sources(default_sources(args.sources, campaign))
-    if args.between_session and "between_session" not in sources:
-        sources = (*sources, "between_session")
+    given = sources_given_options("session", vars(args))
+    sources = (*sources, *(name for name in given if name not in sources))
     evaluate_and_report(
         model,
         campaign,

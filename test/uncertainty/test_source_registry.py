@@ -192,3 +192,15 @@ def test_node_parameters_give_the_settings_the_command_line_gives() -> None:
         30,
         "field",
     )
+
+
+def test_a_given_source_option_asks_for_its_source() -> None:
+    # `evaluate --between-session CAL.json` adds the source whose option it is, found by the
+    # registry (the command names no source).
+    from robocal_uncertainty.uncertainty.sources.registry import sources_given_options
+
+    assert sources_given_options("session", {"between_session": "cal.json"}) == ("between_session",)
+    assert sources_given_options("session", {"between_session": None}) == ()
+    assert sources_given_options("session", {}) == ()
+    # An option of another group given does not count for this one.
+    assert sources_given_options("noise", {"between_session": "cal.json"}) == ()

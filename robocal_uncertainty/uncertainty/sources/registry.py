@@ -41,6 +41,7 @@ __all__ = [
     "source_parameters",
     "source_settings_fields",
     "source_with_role",
+    "sources_given_options",
     "sources_help",
     "sources_in_sweeps",
     "sources_with_role",
@@ -184,6 +185,17 @@ def sources_in_sweeps(sources: tuple[str, ...]) -> tuple[str, ...]:
 def source_options(group: OptionGroup) -> tuple[SourceOption, ...]:
     """The command-line options of the registered sources in `group`, in registry order."""
     return tuple(option for spec in SOURCE_REGISTRY.values() for option in spec.options if option.group == group)
+
+
+def sources_given_options(group: OptionGroup, values: Mapping[str, Any]) -> tuple[str, ...]:
+    """The registered sources with an option of `group` given in `values` (keyed by the option's
+    ``dest``; None means not given), in registry order: giving a source's own input (a
+    between-session file) asks for that source."""
+    return tuple(
+        name
+        for name, spec in SOURCE_REGISTRY.items()
+        if any(option.group == group and values.get(option.dest) is not None for option in spec.options)
+    )
 
 
 def source_parameters() -> tuple[NodeParameter, ...]:
