@@ -199,8 +199,10 @@ def _checked_test_joints(model: RobotModel, campaign: Campaign, test_joints: Arr
 
 def _noise_levels(model: RobotModel, settings: UncertaintySettings) -> tuple[float, float, float | Array]:
     """Tracker a [m], b [m/m] and encoder variance [rad^2, m^2] of the enabled sources (zero when off)."""
-    tracker_on = "tracker" in settings.sources
-    encoder_on = "encoder" in settings.sources
+    from robocal_uncertainty.uncertainty.sources.registry import source_with_role
+
+    tracker_on = source_with_role("point_noise") in settings.sources
+    encoder_on = source_with_role("reading_noise") in settings.sources
     a = settings.tracker_noise.a if tracker_on else 0.0
     b = settings.tracker_noise.b if tracker_on else 0.0
     encoder_var: float | Array = (settings.encoder_noise.half_width**2 / 3.0) if encoder_on else 0.0

@@ -110,6 +110,8 @@ def _print_orientation_fit(result: Any) -> None:
 
 
 def print_adequacy(result: Any) -> None:
+    from robocal_uncertainty.uncertainty.sources.registry import source_with_role
+
     ad = result.model_adequacy
     if ad.adequate:
         print(
@@ -121,7 +123,8 @@ def print_adequacy(result: Any) -> None:
         u = f"({', '.join(f'{v * 1e6:.1f}' for v in std[:3])}) um"
         if len(std) > 3:  # 6-DOF residuals: the rotation part is in rad
             u = f"position {u}, rotation ({', '.join(f'{v * 1e6:.1f}' for v in std[3:])}) urad"
-        used = "included" if "residual" in result.settings.sources else "NOT included: add --sources ...,residual"
+        residual = source_with_role("model_error")
+        used = "included" if residual in result.settings.sources else f"NOT included: add --sources ...,{residual}"
         print(
             f"Model adequacy: residuals exceed the stated noise (p = {ad.p_value:.3g}); model error "
             f"u = {u} per measurement-frame axis, {used}"

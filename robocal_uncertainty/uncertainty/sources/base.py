@@ -37,7 +37,7 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-SourceRole = Literal["lambda", "pose_count", "pose_subset", "model_error"]
+SourceRole = Literal["lambda", "pose_count", "pose_subset", "model_error", "point_noise", "reading_noise"]
 BatchField = Literal["points", "joints", "test_joints", "predictions"]
 ADDITIVE_FIELDS: tuple[str, ...] = ("points", "joints", "test_joints", "predictions")
 
@@ -338,14 +338,16 @@ class SourceSpec:
         GUM applicable (first-order propagation is meaningful).
     build : callable
         ``build(settings, context) -> Source`` for one evaluation.
-    role : {"lambda", "pose_count", "pose_subset", "model_error"} or None
+    role : {"lambda", "pose_count", "pose_subset", "model_error", "point_noise", "reading_noise"} or None
         What the preparation of an evaluation and the sweeps must know about the source,
         so that they never test a source's name: ``lambda`` draws the regularisation
         parameter (its range is prepared; the lambda sweep fixes it), ``pose_count`` draws the
         number of poses and ``pose_subset`` subsets of a fixed size (their pose counts are
         checked and adapted to a small campaign; the equations sweep draws subsets of each
         count), ``model_error`` draws the model error (the model-error field is estimated for
-        it). None: none of these.
+        it), ``point_noise`` and ``reading_noise`` draw the measuring instrument's point errors
+        and the joint readings' errors (the pose suggestion weights poses by them). None: none
+        of these.
     in_sweeps : bool
         Drawn at every point of the sweeps (the measurement and model noise whose
         uncertainty the sweeps show against lambda and the number of equations).
