@@ -15,6 +15,7 @@ from typing import Any
 
 from robocal_uncertainty.app.output_paths import check_output_file
 from robocal_uncertainty.bagio.campaign_mcap import write_campaign
+from robocal_uncertainty.bagio.raw_bag_simulator import RawBagSettings, RawBagTruth, write_raw_bag
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.simulation import (
     SessionSimulationSettings,
@@ -28,10 +29,12 @@ from robocal_uncertainty.core.simulation import (
 __all__ = [
     "SESSION_TRUTH_FORMAT",
     "TRUTH_FORMAT",
+    "RawRecordingFiles",
     "SessionFiles",
     "SimulationFiles",
     "session_path",
     "simulate",
+    "simulate_raw_recording_file",
     "simulate_sessions_files",
     "simulation_truth",
     "truth_path",
@@ -108,6 +111,62 @@ def simulate(
     write_campaign(campaign_path, sim.campaign, overwrite=overwrite)
     truth.write_text(json.dumps(simulation_truth(sim, model, seed=seed), indent=1) + "\n", encoding="utf-8")
     return SimulationFiles(campaign_path=campaign_path, truth_path=truth, simulation=sim)
+
+
+@dataclass(frozen=True, eq=False)
+class RawRecordingFiles:
+    """What :func:`simulate_raw_recording_file` wrote: the raw recording, the truth JSON, the
+    simulation and the recording's own truth (its static windows, also in the file)."""
+
+    recording_path: Path
+    truth_path: Path
+    simulation: SimulatedCampaign
+    recording: RawBagTruth
+
+
+def simulate_raw_recording_file(
+    model: RobotModel,
+    settings: SimulationSettings,
+    recording: RawBagSettings,
+    out: str | Path,
+    *,
+    seed: int,
+    overwrite: bool = False,
+) -> RawRecordingFiles:
+    """Simulate a campaign of `model` and write it as a raw recording, the truth beside it.
+
+    The recording is what a robot and a tracker publish during a campaign: joint states and
+    tracker points (or poses) streamed at their rates while the arm moves from pose to pose and
+    dwells at each, with stamp jitter, latency and beam dropouts. It is the input of ``replay``
+    and of the collector node (``ros2 bag play``), so a campaign's processing can be rehearsed
+    before the robot is measured, against a known truth.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Nominal model; the truth is nominal plus uniform errors.
+    settings : SimulationSettings
+        The simulated campaign (poses, frame, noise).
+    recording : RawBagSettings
+        Rates [Hz], dwell and move times [s] and the streams' imperfections.
+    out : str or Path
+        MCAP file to write; the campaign's truth goes to :func:`truth_path` of it.
+    seed : int
+        Seed of the simulation and of the recording's timing and noise (recorded in both).
+    overwrite : bool
+        Replace existing files (the command line's ``--force``).
+
+    Raises
+    ------
+    ConfigError
+        An output file exists (without `overwrite`) or cannot be written.
+    """
+    path = check_output_file(out, force=overwrite, option="--out")
+    truth = check_output_file(truth_path(path), force=overwrite, option="truth file")
+    sim = simulate_campaign(model, settings, seed=seed)
+    raw_truth = write_raw_bag(path, sim, recording, seed=seed, overwrite=overwrite)
+    truth.write_text(json.dumps(simulation_truth(sim, model, seed=seed), indent=1) + "\n", encoding="utf-8")
+    return RawRecordingFiles(recording_path=path, truth_path=truth, simulation=sim, recording=raw_truth)
 
 
 SESSION_TRUTH_FORMAT = "robocal_uncertainty/session_truth/1"
