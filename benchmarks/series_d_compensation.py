@@ -94,13 +94,28 @@ def stats(errors: np.ndarray) -> str:
     )
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The study's command line."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--train-poses", type=int, default=53)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--trials", type=int, default=5000)
     parser.add_argument("--workers", type=int, default=1)
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def print_conventions(flange: np.ndarray, rpy: np.ndarray) -> None:
+    """Which Euler convention the goals' roll/pitch/yaw use: the RMS angle between pose pairs of the
+    nominal flange rotations and of the goals read in each convention."""
+    print("Goal roll/pitch/yaw convention: RMS difference of the angles between 3000 pose pairs from the nominal")
+    print("UR10 at the recorded joints (invariant to the unknown base and tool rotations):")
+    for convention in EULER_CONVENTIONS:
+        rms = relative_angle_rms(flange, euler_to_matrix(rpy, convention))
+        print(f"  {convention:<14} {rms * 1e3:9.3f} mrad")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     t0 = time.perf_counter()
     campaign = read_tracker_csv(CSV)
     model = load_robot_model(resolve_robot_config("ur10"))
@@ -108,11 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     goals, rpy = read_goals(CSV, np.asarray(campaign.metadata["source_rows"], dtype=int))
 
     _, flange = forward_poses(model, model.parameter_vector(), q)
-    print("Goal roll/pitch/yaw convention: RMS difference of the angles between 3000 pose pairs from the nominal")
-    print("UR10 at the recorded joints (invariant to the unknown base and tool rotations):")
-    for convention in EULER_CONVENTIONS:
-        rms = relative_angle_rms(flange, euler_to_matrix(rpy, convention))
-        print(f"  {convention:<14} {rms * 1e3:9.3f} mrad")
+    print_conventions(flange, rpy)
 
     split = split_campaign(campaign.n_poses, n_train=args.train_poses, seed=args.seed)[0]
     train, held = split.train, split.held_out

@@ -204,7 +204,45 @@ def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
             print(f"wrote {out / stem}.mcap ({idx.size} poses of series {name})")
 
 
-def main() -> None:
+def six_dof_study(
+    model: RobotModel,
+    series6: dict[str, Campaign],
+    home: str,
+    away: str,
+    order: np.ndarray,
+    *,
+    away_poses: int,
+    dof_factor: float,
+    seed: int,
+    calibration: int,
+    checks: int,
+    summary: dict[str, list[float]],
+) -> None:
+    """6-DOF calibration on the `home` series' first 53 poses of `order` and its future coverage on the
+    `away` series (`away_poses` poses) after 10-pose re-registrations (the same random picks as the
+    3-DOF study of `calibration`)."""
+    six = identify(model.with_tool_rotation(), series6[home].subset(np.sort(order[:N_CAL])), accept_unconverged=True)
+    cov6 = np.array(
+        [
+            future_coverage_6dof(
+                six.model,
+                series6[away],
+                np.sort(np.random.default_rng([seed, ord(away), calibration, k]).choice(away_poses, 10, replace=False)),
+                dof_factor,
+            )
+            for k in range(checks)
+        ]
+    )
+    summary.setdefault(f"{home}->{away} 6-DOF future coverage, positions", []).append(float(cov6[:, 0].mean()))
+    summary.setdefault(f"{home}->{away} 6-DOF future coverage, rotations", []).append(float(cov6[:, 1].mean()))
+    print(
+        f"  6-DOF statement for {away} after a 10-pose re-registration: positions "
+        f"{cov6[:, 0].mean() * 100:.1f} %, rotations {cov6[:, 1].mean() * 100:.1f} % inside 95 %"
+    )
+
+
+def parse_args() -> argparse.Namespace:
+    """The study's command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calibrations", type=int, default=4, help="random 53-pose calibrations per series")
     parser.add_argument("--checks", type=int, default=8, help="random check subsets per size")
@@ -222,7 +260,11 @@ def main() -> None:
         help="only write the README's example campaigns to DIR (b53.mcap: 53 random poses of B; b10.mcap, "
         "d10.mcap, d200.mcap: checks of B's other poses and of D; d53.mcap likewise) and stop",
     )
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = parse_args()
     model = load_robot_model(ROOT / "robocal_uncertainty" / "data" / "ur10.yaml")
     series = {name: read_tracker_csv(path) for name, path in SERIES.items()}
     series6 = (
@@ -322,33 +364,18 @@ def main() -> None:
                 covs.append(future_coverage(calibrated, series[away], np.sort(pick), ref.dof_factor))
             summary.setdefault(f"{home}->{away} future coverage", []).append(float(np.mean(covs)))
             if args.six_dof:
-                six = identify(
-                    model.with_tool_rotation(), series6[home].subset(np.sort(order[:N_CAL])), accept_unconverged=True
-                )
-                cov6 = np.array(
-                    [
-                        future_coverage_6dof(
-                            six.model,
-                            series6[away],
-                            np.sort(
-                                np.random.default_rng([args.seed, ord(away), c, k]).choice(
-                                    series[away].n_poses, 10, replace=False
-                                )
-                            ),
-                            ref.dof_factor,
-                        )
-                        for k in range(args.checks)
-                    ]
-                )
-                summary.setdefault(f"{home}->{away} 6-DOF future coverage, positions", []).append(
-                    float(cov6[:, 0].mean())
-                )
-                summary.setdefault(f"{home}->{away} 6-DOF future coverage, rotations", []).append(
-                    float(cov6[:, 1].mean())
-                )
-                print(
-                    f"  6-DOF statement for {away} after a 10-pose re-registration: positions "
-                    f"{cov6[:, 0].mean() * 100:.1f} %, rotations {cov6[:, 1].mean() * 100:.1f} % inside 95 %"
+                six_dof_study(
+                    model,
+                    series6,
+                    home,
+                    away,
+                    order,
+                    away_poses=series[away].n_poses,
+                    dof_factor=ref.dof_factor,
+                    seed=args.seed,
+                    calibration=c,
+                    checks=args.checks,
+                    summary=summary,
                 )
             print(
                 f"  statement for {away} after a 10-pose re-registration: "

@@ -1143,7 +1143,9 @@ def section_uncertainty(
     }
     run = run_trials(block, seed=seed, n_trials=trials, adaptive=adaptive, **engine)
     p = coverage if adaptive is None else adaptive.coverage
-    return _section_result(prepared, block, run, p, inst, reference, curve, bins, keep_samples, repeats)
+    return _section_result(
+        prepared, block, run, p, inst, reference, curve, bins=bins, keep_samples=keep_samples, repeats=repeats
+    )
 
 
 def _section_result(
@@ -1154,6 +1156,7 @@ def _section_result(
     instrument: CmmInstrument,
     reference: ArrayLike | None,
     curve: NominalCurve,
+    *,
     bins: int | str,
     keep_samples: bool,
     repeats: NDArray[np.float64] | None,

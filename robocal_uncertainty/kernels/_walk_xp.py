@@ -72,14 +72,7 @@ def walk_xp(xp: Any, flat: FlatLayout, params: Any, qs: Any, reference: tuple[An
     q_ref, theta_ref, cos_ref, sin_ref = reference
     full = (n_trials, n_poses)
     v = [xp.broadcast_to(p[..., t0 + c], full) for c in range(3)]
-    axes: list[list[Any]] = []
-    if poses:
-        if r0 >= 0:
-            tool = _rpy(xp, p, r0)
-            axes = [[xp.broadcast_to(tool[r][c], full) for r in range(3)] for c in (0, 2)]
-        else:
-            one, zero = xp.ones(full), xp.zeros(full)
-            axes = [[one, zero, zero], [zero, zero, one]]
+    axes = _tool_axes(xp, p, r0, full) if poses else []
     vectors = [v, *axes]
     for j in range(flat.joints.shape[0] - 1, -1, -1):
         i_alpha, i_a, i_theta, i_d, i_beta, prismatic = (int(x) for x in flat.joints[j])
@@ -118,13 +111,29 @@ def walk_xp(xp: Any, flat: FlatLayout, params: Any, qs: Any, reference: tuple[An
         row = base[r]
         out[..., r] = row[0] * v[0] + row[1] * v[1] + row[2] * v[2] + p[..., b0 + r]
     if poses:
-        (xx, xy, xz), (zx, zy, zz) = vectors[1], vectors[2]
-        cols = ((xx, xy, xz), (zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx), (zx, zy, zz))
-        for r in range(3):
-            row = base[r]
-            for c, col in enumerate(cols):
-                out[..., 3 + 3 * r + c] = row[0] * col[0] + row[1] * col[1] + row[2] * col[2]
+        _write_rotation(out, base, vectors[1], vectors[2])
     return out
+
+
+def _tool_axes(xp: Any, p: Any, r0: int, full: tuple[int, int]) -> list[list[Any]]:
+    """The tool's x and z axes before the joints turn them: the tool rotation's first and third
+    columns (identity without a tool rotation, ``r0`` < 0), each a list of 3 arrays of shape `full`."""
+    if r0 >= 0:
+        tool = _rpy(xp, p, r0)
+        return [[xp.broadcast_to(tool[r][c], full) for r in range(3)] for c in (0, 2)]
+    one, zero = xp.ones(full), xp.zeros(full)
+    return [[one, zero, zero], [zero, zero, one]]
+
+
+def _write_rotation(out: Any, base: list[list[Any]], x_axis: list[Any], z_axis: list[Any]) -> None:
+    """``world_R_tool`` row by row into ``out[..., 3:12]``: the base rotation times the walked tool
+    x, y = z cross x and z axes."""
+    (xx, xy, xz), (zx, zy, zz) = x_axis, z_axis
+    cols = ((xx, xy, xz), (zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx), (zx, zy, zz))
+    for r in range(3):
+        row = base[r]
+        for c, col in enumerate(cols):
+            out[..., 3 + 3 * r + c] = row[0] * col[0] + row[1] * col[1] + row[2] * col[2]
 
 
 def as_numpy(values: Any) -> np.ndarray:

@@ -354,12 +354,12 @@ def _iter_blocks(
     seed: int,
     sizes: Callable[[int], int],
     n_blocks: int,
+    *,
     chunk_blocks: int,
     workers: int,
     mp_context: str | None,
     executor: object | None = None,
     task: tuple[_ChunkTask, tuple[Any, ...]] = (_evaluate_chunk, ()),
-    *,
     lookahead: int = 2,
 ) -> Generator[Any, None, None]:
     """Yield each block's result in block order, evaluating chunks lazily.
@@ -556,13 +556,13 @@ def run_trials(
         trial_block,
         adaptive,
         seed,
-        block_size,
-        chunk_blocks,
-        workers,
-        progress,
-        collector,
-        mp_context,
-        executor,
+        block_size=block_size,
+        chunk_blocks=chunk_blocks,
+        workers=workers,
+        progress=progress,
+        collector=collector,
+        mp_context=mp_context,
+        executor=executor,
     )
 
 
@@ -583,10 +583,10 @@ def _run_fixed(
         seed,
         sizes,
         n_blocks,
-        chunk_blocks,
-        workers,
-        mp_context,
-        executor,
+        chunk_blocks=chunk_blocks,
+        workers=workers,
+        mp_context=mp_context,
+        executor=executor,
     )
     done = 0
     try:
@@ -616,6 +616,7 @@ def _run_adaptive(
     trial_block: TrialBlock | StagedTrialBlock,
     settings: AdaptiveSettings,
     seed: int,
+    *,
     block_size: int,
     chunk_blocks: int,
     workers: int,
@@ -642,10 +643,10 @@ def _run_adaptive(
         seed,
         lambda _b: block_size,
         n_blocks,
-        chunk_blocks,
-        workers,
-        mp_context,
-        executor,
+        chunk_blocks=chunk_blocks,
+        workers=workers,
+        mp_context=mp_context,
+        executor=executor,
         lookahead=1,
     )
     try:
@@ -864,11 +865,11 @@ def reduce_trials(
         seed,
         sizes,
         n_blocks,
-        chunk_blocks,
-        workers,
-        mp_context,
-        executor,
-        (_reduce_chunk, (reduction, nonfinite)),
+        chunk_blocks=chunk_blocks,
+        workers=workers,
+        mp_context=mp_context,
+        executor=executor,
+        task=(_reduce_chunk, (reduction, nonfinite)),
     )
     try:
         moments, kept, n_dropped = _combine_reduced(

@@ -166,7 +166,19 @@ def sweep_lambda(
             cal = calibration
         else:
             cal = identify(model, campaign, lambda_=float(lam))
-        out[i] = _point_u(model, campaign, test_joints, fixed, cal, trials, seed, frame, run, pose, backend)
+        out[i] = _point_u(
+            model,
+            campaign,
+            test_joints,
+            fixed,
+            cal,
+            trials=trials,
+            seed=seed,
+            frame=frame,
+            run=run,
+            pose=pose,
+            backend=backend,
+        )
         if run is not None and run.progress is not None:
             run.progress((i + 1) * trials, lams.size * trials)
     return out
@@ -178,6 +190,7 @@ def _point_u(
     test_joints: ArrayLike,
     settings: UncertaintySettings,
     calibration: IdentificationResult,
+    *,
     trials: int,
     seed: int,
     frame: str,
@@ -257,7 +270,19 @@ def sweep_equations(
     out = np.empty((counts_f.size, 3))
     for i, n in enumerate(counts_f.astype(int)):
         point = dataclasses.replace(settings, sources=sources, subset_size=int(n))
-        out[i] = _point_u(model, campaign, test_joints, point, calibration, trials, seed, frame, run, pose, backend)
+        out[i] = _point_u(
+            model,
+            campaign,
+            test_joints,
+            point,
+            calibration,
+            trials=trials,
+            seed=seed,
+            frame=frame,
+            run=run,
+            pose=pose,
+            backend=backend,
+        )
         if run is not None and run.progress is not None:
             run.progress((i + 1) * trials, counts_f.size * trials)
     return out

@@ -7,6 +7,8 @@ p-value would be wrong; the draws give the p-value instead.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
@@ -14,7 +16,7 @@ from scipy import linalg
 from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.errors import ConfigError
 
-__all__ = ["chol_factor", "gls_chi2", "null_statistics", "sqrt_psd"]
+__all__ = ["NullNoise", "chol_factor", "gls_chi2", "null_statistics", "sqrt_psd"]
 
 Array = NDArray[np.float64]
 _NULL_BLOCK = 4096
@@ -40,15 +42,38 @@ def gls_chi2(r: Array, chol: Array, a_mat: Array) -> float:
     return float(rw @ rw)
 
 
+@dataclass(frozen=True)
+class NullNoise:
+    """The measurement noise of the check campaign's ``n`` poses, drawn for every null trial.
+
+    Attributes
+    ----------
+    distances : ndarray, shape (n,)
+        Tracker-to-target distance of each pose, m (the tracker noise grows with it).
+    tracker : TrackerNoise
+        The laser tracker's stated errors.
+    encoder : EncoderNoise
+        The joint encoders' stated errors.
+    joint_jacobian : ndarray, shape (n, 3, n_joints)
+        Target position per joint reading at each pose, m/rad (m/m for a prismatic joint).
+    prismatic : tuple of bool
+        Which joints are prismatic (their encoder noise is a length); empty: none.
+    """
+
+    distances: Array
+    tracker: TrackerNoise
+    encoder: EncoderNoise
+    joint_jacobian: Array
+    prismatic: tuple[bool, ...] = ()
+
+
 def null_statistics(
     trials: int,
     seed: int,
     chol: Array,
     a_mat: Array,
-    distances: Array,
-    tracker: TrackerNoise,
-    encoder: EncoderNoise,
-    joint_jacobian: Array,
+    noise: NullNoise,
+    *,
     model_error: Array,
     kin_jacobian: Array,
     kin_covariance: Array,
@@ -56,14 +81,15 @@ def null_statistics(
     model_error_dof: float | None = None,
     between_factor: Array | None = None,
     between_dof: float | None = None,
-    prismatic: tuple[bool, ...] = (),
     correlated_factor: Array | None = None,
     correlated_dof: float | None = None,
 ) -> Array:
     """The check statistic for `trials` draws of the errors "nothing changed" allows, shape (trials,).
 
     Blocks of :data:`_NULL_BLOCK` draws, each from its own ``SeedSequence(seed).spawn`` child:
-    the draws do not depend on anything but the seed and the count. `correlated_factor`
+    the draws do not depend on anything but the seed and the count. `noise` is the tracker and
+    encoder noise of the poses; the model error, parameter and between-session parts are
+    keyword-only so that two matrices of one shape cannot be swapped. `correlated_factor`
     (``F F^T`` = covariance over all the poses of a correlated model error and the parameter
     errors, shape (3 n, r)) is drawn normal and scaled by ``sqrt(nu / chi2_nu)`` per draw with
     ``nu`` = `correlated_dof`.
@@ -71,6 +97,8 @@ def null_statistics(
     if isinstance(trials, bool) or not isinstance(trials, int) or trials < 100:
         msg = f"null_trials must be an integer >= 100, got {trials!r}"
         raise ConfigError(msg)
+    distances, tracker, encoder, joint_jacobian = noise.distances, noise.tracker, noise.encoder, noise.joint_jacobian
+    prismatic = noise.prismatic
     n = distances.size
     n_joints = joint_jacobian.shape[-1]
     if a_mat.shape[1]:

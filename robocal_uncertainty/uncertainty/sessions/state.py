@@ -104,7 +104,15 @@ def session_state(
     if model_error_from is not None:
         use_residual = MODEL_ERROR_SOURCE in sources and bool(np.any(model_error_from.model_error_covariance))
     error = _model_error(
-        calibration, q, noise, r_wb, adequacy, use_residual, cross_validated, correlated, model_error_from
+        calibration,
+        q,
+        noise,
+        r_wb,
+        adequacy,
+        use_residual=use_residual,
+        cross_validated=cross_validated,
+        correlated=correlated,
+        model_error_from=model_error_from,
     )
     model_error, draws, me_field = error.covariance, error.draws, error.field
     names = tuple(n for n, e in zip(calibration.parameter_names, calibration.estimated) if e)
@@ -137,6 +145,7 @@ def _model_error(
     noise: Array,
     r_wb: Array,
     adequacy: ModelAdequacy,
+    *,
     use_residual: bool,
     cross_validated: CrossValidatedModelError | None,
     correlated: bool,

@@ -68,6 +68,7 @@ from robocal_uncertainty.uncertainty.sessions.check_campaign import (
 )
 from robocal_uncertainty.uncertainty.sessions.level import error_level, level_test, tolerance_check
 from robocal_uncertainty.uncertainty.sessions.null_distribution import (
+    NullNoise,
     chol_factor,
     gls_chi2,
     null_statistics,
@@ -353,31 +354,30 @@ def _null_draws(s: _Setup, fit: _Fit, null_trials: int, seed: int) -> Array:
         if s.between is None
         else effect_jacobian(s.layout, fit.p, s.q, state.between_session_names).reshape(3 * n, -1) @ sqrt_psd(s.between)
     )
-    common = (null_trials, seed, fit.chol, fit.a_mat, s.distances, s.tracker, s.encoder, jac[:, :, s.theta_cols])
+    noise = NullNoise(s.distances, s.tracker, s.encoder, jac[:, :, s.theta_cols], prismatic=s.model.prismatic)
+    common = (null_trials, seed, fit.chol, fit.a_mat, noise)
     if s.me_field is None:
         return null_statistics(
             *common,
-            r_new @ state.model_error_covariance @ r_new.T,
-            jac[:, :, kin].reshape(3 * n, kin.size) if kin.size else np.zeros((3 * n, 0)),
-            s.sigma_k,
-            None if state.model_error_draws is None else state.model_error_draws @ r_new.T,
-            state.model_error_dof,
-            between_factor,
-            state.between_session_dof,
-            prismatic=s.model.prismatic,
+            model_error=r_new @ state.model_error_covariance @ r_new.T,
+            kin_jacobian=jac[:, :, kin].reshape(3 * n, kin.size) if kin.size else np.zeros((3 * n, 0)),
+            kin_covariance=s.sigma_k,
+            model_error_draws=None if state.model_error_draws is None else state.model_error_draws @ r_new.T,
+            model_error_dof=state.model_error_dof,
+            between_factor=between_factor,
+            between_dof=state.between_session_dof,
         )
     # The correlated model error and the parameter errors it drives: one normal over all
     # the poses, its estimated scale widened by the estimate's degrees of freedom.
     return null_statistics(
         *common,
-        np.zeros((3, 3)),
-        np.zeros((3 * n, 0)),
-        np.zeros((0, 0)),
-        None,
-        None,
-        between_factor,
-        state.between_session_dof,
-        prismatic=s.model.prismatic,
+        model_error=np.zeros((3, 3)),
+        kin_jacobian=np.zeros((3 * n, 0)),
+        kin_covariance=np.zeros((0, 0)),
+        model_error_draws=None,
+        model_error_dof=None,
+        between_factor=between_factor,
+        between_dof=state.between_session_dof,
         correlated_factor=sqrt_psd(_correlated(s, jac, fit.p)),
         correlated_dof=state.model_error_dof,
     )
