@@ -32,7 +32,7 @@ deviations, segmentation and registration frozen at the measured cloud (as the b
 freezes them), ``e'`` the instrument's sources (:data:`ENVELOPE_DRAWS` draws, seeded). ``P`` is
 the profile (max - min per region; the per-point sources along the normals, the ``common``
 ones, a smooth scale error, left out: they barely change a profile), or the thickness and chord
-of :class:`~.section_mc.FrozenSectionModel` (every source, the 2-D displacements: a scale error
+of :class:`~.frozen_model.FrozenSectionModel` (every source, the 2-D displacements: a scale error
 changes a length). The interval is asymmetric and wider than the denoised Monte Carlo's; it is a
 coverage interval under the stated model (the true roughness somewhere between the two limits)
 and over-covers a part whose form is as smooth as the smooth limit, which the coverage study
@@ -58,6 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.core.instruments.cmm import ErrorSource
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.inspection.frozen_model import build_frozen_model
 from robocal_uncertainty.inspection.section import (
     PARAMETER_NAMES,
     SectionEvaluation,
@@ -207,9 +208,6 @@ def _length_errors(
     evaluation: SectionEvaluation, sources: Sequence[ErrorSource], draws: Sequence[NDArray[np.float64]]
 ) -> NDArray[np.float64]:
     """``Δ`` of the thickness and the chord at ``evaluation``'s points, shape (T, 2) [m]."""
-    # Imported here: section_mc imports this module.
-    from robocal_uncertainty.inspection.section_mc import build_frozen_model
-
     model = build_frozen_model(evaluation, sources, resegment_edges=False)
     trials = draws[0].shape[0]
     out = np.empty((trials, 2))

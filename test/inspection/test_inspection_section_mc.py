@@ -18,12 +18,12 @@ from robocal_uncertainty.core.instruments.cmm import SOURCE_NAMES, CmmInstrument
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.inspection.bias_correction import bias_corrections
 from robocal_uncertainty.inspection.coverage_study import FAMILIES, run_study
+from robocal_uncertainty.inspection.frozen_model import build_frozen_model
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import PointCloud, read_rotor37_section
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
 from robocal_uncertainty.inspection.section_mc import (
     SectionTrials,
-    build_frozen_model,
     full_section_trials,
     gum_source_budget,
     prepare_trials,

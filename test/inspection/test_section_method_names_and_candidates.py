@@ -17,17 +17,15 @@ from robocal_uncertainty.app.section_inspection import inspect_section, load_sec
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core.instruments.cmm import CmmInstrument
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.inspection.point_cloud import PointCloud
-from robocal_uncertainty.inspection.section import evaluate_section, point_to_polyline
-from robocal_uncertainty.inspection.section_mc import (
-    METHODS,
+from robocal_uncertainty.inspection.frozen_model import (
     _chord_candidates,
     _point_bounds,
     _segment_distance,
     _thickness_candidates,
-    canonical_method,
-    section_sources,
 )
+from robocal_uncertainty.inspection.point_cloud import PointCloud
+from robocal_uncertainty.inspection.section import evaluate_section, point_to_polyline
+from robocal_uncertainty.inspection.section_mc import METHODS, canonical_method, section_sources
 from robocal_uncertainty.inspection.segmentation import PRESSURE_SIDE, SUCTION_SIDE
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
 
