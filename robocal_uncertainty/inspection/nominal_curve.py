@@ -17,7 +17,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
-from robocal_uncertainty.inspection.point_cloud import NominalSection, as_points
+from robocal_uncertainty.core.instruments.cmm import as_points
+from robocal_uncertainty.inspection.point_cloud import NominalSection
 
 __all__ = ["ClosestPoints", "NominalCurve"]
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from robocal_uncertainty.errors import InputError
 
@@ -452,16 +452,3 @@ def read_cascade_profile(path: str | Path, *, chord_m: float) -> NominalSection:
     upper, lower = (np.array(z, dtype=np.float64) for z in zones)
     contour = np.concatenate([upper, lower[-2:0:-1]]) * chord_m
     return NominalSection(contour, f"{file.name} chord {chord_m * 1e3:g} mm")
-
-
-def as_points(values: ArrayLike, name: str) -> NDArray[np.float64]:
-    """``values`` as a finite (n, 2) float array [m], or an InputError naming ``name``."""
-    array = np.asarray(values, dtype=np.float64)
-    if array.ndim != 2 or array.shape[1] != 2:
-        msg = f"{name} must have shape (n, 2), got {array.shape}"
-        raise InputError(msg)
-    bad = ~np.isfinite(array)
-    if bad.any():
-        msg = f"{name} contain {int(bad.sum())} NaN/inf values"
-        raise InputError(msg)
-    return array

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal_uncertainty.core.instruments.cmm import as_points
 from robocal_uncertainty.errors import ConvergenceError, InputError
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
-from robocal_uncertainty.inspection.point_cloud import as_points
 
 __all__ = ["Registration", "polygon_centroid", "register_to_nominal", "registration_jacobian", "rotation"]
 

@@ -24,9 +24,10 @@ from dataclasses import astuple, dataclass, fields, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal_uncertainty.core.instruments.cmm import as_points
 from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
-from robocal_uncertainty.inspection.point_cloud import PointCloud, as_points
+from robocal_uncertainty.inspection.point_cloud import PointCloud
 from robocal_uncertainty.inspection.registration import Registration, register_to_nominal
 from robocal_uncertainty.inspection.segmentation import (
     PRESSURE_SIDE,

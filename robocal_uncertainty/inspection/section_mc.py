@@ -4,24 +4,12 @@ Batched model
 -------------
 Every trial perturbs every measured point by the CMM sources (:mod:`~robocal_uncertainty.core.instruments.cmm`) and
 re-evaluates the nine section parameters. Many trials are evaluated at once with the
-registration correspondences and the side regions frozen at the unperturbed solution
-(:mod:`.frozen_model`):
-
-- position, twist and profile: the registration is linearised at its solution (feet and normals
-  fixed; the perturbations are microns, the point spacing and edge radii a millimetre or more),
-  so the offsets and twist change by ``G @ dn`` (``G`` the least-squares solution matrix, ``dn``
-  the normal displacements) and the residuals by ``dn - A @ G @ dn``;
-- maximum thickness and chord: not linearised. The candidate pressure-side points,
-  suction-side segments and farthest pairs that could attain the max/min under *any* draw of
-  the bounded (rectangular) sources are selected once, from the bound on a point's
-  displacement, and the max/min is taken over them exactly in every trial; with bounded
-  sources this equals the full algorithm on the same frozen segmentation.
-- edge regions: grown per trial as the full algorithm grows them (:class:`EdgeWindows`): the
-  edge extreme point is the trial's farthest-pair end, and the radius error of each window
-  size whose outcome the draws can change is evaluated from the linearised circle fit. With
-  the regions frozen, a perturbation that moves the extreme point to its neighbour (common on
-  densely scanned edges) was missed and the edge-profile u differed from the full algorithm's
-  by 2-4 % on 1 836-point scans of blades twisted 0.3°.
+registration correspondences and the side regions frozen at the unperturbed solution; how
+each parameter is evaluated there (linearised registration, exact max/min over candidate
+sets, edge windows grown per trial) is described in :mod:`.frozen_model`. With the edge regions
+frozen, a perturbation that moves the extreme point to its neighbour (common on densely scanned
+edges) was missed and the edge-profile u differed from the full algorithm's by 2-4 % on 1 836-point
+scans of blades twisted 0.3°; the windows are therefore grown per trial.
 
 Method ``denoised`` (:func:`section_uncertainty`) builds the same model at the denoised cloud
 (:mod:`.denoise`) and states ``f(y) - Δ`` per trial instead of ``f(y + e')``.

@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
+from robocal_uncertainty.core.instruments.cmm import as_points
 from robocal_uncertainty.errors import InputError
-from robocal_uncertainty.inspection.point_cloud import as_points
 
 __all__ = [
     "LEADING_EDGE",

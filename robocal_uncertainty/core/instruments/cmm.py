@@ -42,6 +42,7 @@ __all__ = [
     "CmmInstrument",
     "ErrorSource",
     "SourceKind",
+    "as_points",
     "draw_bound",
     "load_instrument",
     "point_displacements",
@@ -120,7 +121,7 @@ class CmmInstrument:
         return self.mpe_a + np.asarray(length, dtype=np.float64) * 1e-3 / self.mpe_k
 
 
-def _as_points(values: ArrayLike, name: str) -> NDArray[np.float64]:
+def as_points(values: ArrayLike, name: str) -> NDArray[np.float64]:
     """``values`` as a finite (n, 2) float array [m], or an InputError naming ``name``."""
     array = np.asarray(values, dtype=np.float64)
     if array.ndim != 2 or array.shape[1] != 2:
@@ -306,8 +307,8 @@ def point_error_sources(
     tuple of ErrorSource
         In :data:`SOURCE_NAMES` order. A source of zero magnitude is kept (its draws are zero).
     """
-    p = _as_points(points, "points")
-    n = _as_points(normals, "normals")
+    p = as_points(points, "points")
+    n = as_points(normals, "normals")
     if n.shape != p.shape:
         msg = f"normals must have shape {p.shape}, got {n.shape}"
         raise InputError(msg)
