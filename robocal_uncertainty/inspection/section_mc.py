@@ -63,6 +63,7 @@ from robocal_uncertainty.montecarlo.engine import (
     MonteCarloResult,
     ProgressCallback,
     TrialsResult,
+    monte_carlo_result,
     run_trials,
 )
 from robocal_uncertainty.montecarlo.gum import GumResult, propagate_gum
@@ -621,20 +622,7 @@ def _monte_carlo_result(
     run: TrialsResult, p: float, bins: int | str, names: tuple[str, ...], *, keep_samples: bool
 ) -> MonteCarloResult:
     """The JCGM 101 summary of a finished run (``run_trials``' result) at coverage ``p``."""
-    summary = run.summary(p, bins=bins)
-    return MonteCarloResult(
-        outputs=summary.outputs,
-        covariance=summary.covariance,
-        coverage_probability=p,
-        samples=run.samples if keep_samples else None,
-        input_names=names,
-        input_columns=names,
-        n_trials=run.n_trials,
-        seed=run.seed,
-        block_size=run.block_size,
-        n_dropped=run.n_dropped,
-        adaptive=run.adaptive,
-    )
+    return monte_carlo_result(run, p, names=names, columns=names, bins=bins, keep_samples=keep_samples)
 
 
 def _gum_statements(

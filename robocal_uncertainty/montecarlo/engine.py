@@ -67,6 +67,7 @@ __all__ = [
     "TrialsResult",
     "block_rng",
     "monte_carlo",
+    "monte_carlo_result",
     "reduce_trials",
     "resolve_inputs",
     "run_trials",
@@ -1058,11 +1059,31 @@ def monte_carlo(
         mp_context=mp_context,
         executor=executor,
     )
-    summary = run.summary(p, bins=bins, expanded_from=expanded_from)
+    return monte_carlo_result(
+        run, p, names=names, columns=columns, bins=bins, keep_samples=keep_samples, expanded_from=expanded_from
+    )
+
+
+def monte_carlo_result(
+    run: TrialsResult,
+    coverage: float,
+    *,
+    names: tuple[str, ...],
+    columns: tuple[str, ...],
+    bins: int | str = 100,
+    keep_samples: bool = False,
+    expanded_from: MonteCarloIntervalKind = "probabilistically_symmetric",
+) -> MonteCarloResult:
+    """The JCGM 101 statement of a finished run (:func:`run_trials`' result) at `coverage`.
+
+    `names` and `columns` name the model's inputs and its output columns (see
+    :class:`MonteCarloResult`); `keep_samples` keeps the raw model values.
+    """
+    summary = run.summary(coverage, bins=bins, expanded_from=expanded_from)
     return MonteCarloResult(
         outputs=summary.outputs,
         covariance=summary.covariance,
-        coverage_probability=p,
+        coverage_probability=coverage,
         samples=run.samples if keep_samples else None,
         input_names=names,
         input_columns=columns,
