@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -92,14 +93,9 @@ def test_demo_prints_table2_and_writes_report(tmp_path: Path, capsys: pytest.Cap
         assert (out / name).stat().st_size > 0
 
 
-def test_import_csv_and_calibrate_real_ur10(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    campaign = tmp_path / "ur10.mcap"
-    csv = ROOT / "test" / "data" / "ur10_laser_tracker" / "measurements_iso_cubes.csv"
-    assert main(["import-csv", str(csv), "--out", str(campaign)]) == 0
-    assert main(["calibrate", str(campaign), "--robot", "ur10", "--json", str(tmp_path / "cal.json")]) == 0
-    out = capsys.readouterr().out
-    assert "632 poses" in out
-    cal = json.loads((tmp_path / "cal.json").read_text())
+def test_import_csv_and_calibrate_real_ur10(real_ur10_calibration: Any) -> None:
+    assert "632 poses" in real_ur10_calibration.printed
+    cal = json.loads(real_ur10_calibration.calibration.read_text())
     # Real robot: residual RMS after calibration is a few tenths of a millimetre.
     assert 1e-4 < cal["residual_rms_after_m"] < 6e-4 < cal["residual_rms_before_m"]
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -24,11 +25,9 @@ def ur10_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_fk_defaults_to_the_measurement_frame_of_a_tracker_calibration(
-    ur10_campaign: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    real_ur10_calibration: Any, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    cal = tmp_path / "cal.json"
-    assert main(["calibrate", str(ur10_campaign), "--robot", "ur10", "--json", str(cal)]) == 0
-    capsys.readouterr()
+    cal = real_ur10_calibration.calibration
     assert main(["fk", "--robot", "ur10", "--calibration", str(cal), "--joints", *UR10_JOINTS]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert "frame laser_tracker (measurement frame)" in lines[0]

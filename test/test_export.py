@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -141,12 +142,12 @@ def ur_description_fk(kinematics: dict[str, dict[str, float]], q: np.ndarray, po
     return out
 
 
-def test_ur_kinematics_of_the_shipped_series(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    campaign = tmp_path / "ur10.mcap"
-    assert main(["import-csv", str(UR10_CSV), "--out", str(campaign)]) == 0
-    assert main(["calibrate", str(campaign), "--robot", "ur10", "--json", str(tmp_path / "cal.json")]) == 0
+def test_ur_kinematics_of_the_shipped_series(
+    real_ur10_calibration: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cal = real_ur10_calibration.calibration
     out = tmp_path / "ur10_kinematics.yaml"
-    assert main(["export", str(tmp_path / "cal.json"), "--format", "ur-kinematics", "--out", str(out)]) == 0
+    assert main(["export", str(cal), "--format", "ur-kinematics", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "measured point in wrist_3_link" in printed
     doc = yaml.safe_load(out.read_text())["kinematics"]
@@ -160,7 +161,7 @@ def test_ur_kinematics_of_the_shipped_series(tmp_path: Path, capsys: pytest.Capt
     assert isinstance(doc["hash"], str) and doc["hash"].startswith("calib_")
     sidecar = json.loads((tmp_path / "ur10_kinematics.yaml.uncertainty.json").read_text())
     point = np.array(sidecar["measured_point_in_tip"]["xyz"])
-    data = read_calibration(tmp_path / "cal.json")
+    data = read_calibration(cal)
     calibrated = apply_calibration(load_robot_source("ur10").model, data)
     from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
 
