@@ -37,7 +37,12 @@ from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
-from robocal_uncertainty.uncertainty.field_kriging import krige, kriging_basis
+from robocal_uncertainty.uncertainty.field_kriging import (
+    cross_validated_factor,
+    krige,
+    kriging_basis,
+    leave_one_out_factor,
+)
 from robocal_uncertainty.uncertainty.model_adequacy import pose_noise_covariances
 from robocal_uncertainty.uncertainty.sessions.state import session_state
 
@@ -65,6 +70,10 @@ def one_split(model, campaign, train: np.ndarray, held: np.ndarray) -> dict[str,
     std_krig = np.sqrt(np.diagonal(kriged.covariance + noise_c, axis1=1, axis2=2))
     std_prior = np.sqrt(np.diagonal(kriged.prior_covariance + noise_c, axis1=1, axis2=2))
     k_t, k_n = kriged.coverage_factor(), stats.norm.ppf(0.975)
+    factor, _ = leave_one_out_factor(basis, calibrated.layout, calibrated.parameter_vector())
+    cv, _ = cross_validated_factor(basis, calibrated.layout, calibrated.parameter_vector())
+    std_cv = np.sqrt(np.diagonal(cv * kriged.covariance + noise_c, axis1=1, axis2=2))
+    std_loo = np.sqrt(np.diagonal(factor * kriged.covariance + noise_c, axis1=1, axis2=2))
     rms = lambda e: float(np.sqrt(np.mean(np.sum(e**2, axis=1))))  # noqa: E731
     return {
         "rms_plain": rms(err_plain),
@@ -72,6 +81,10 @@ def one_split(model, campaign, train: np.ndarray, held: np.ndarray) -> dict[str,
         "inside_t": np.mean(np.abs(err_krig / std_krig) <= k_t, axis=0),
         "inside_normal": np.mean(np.abs(err_krig / std_krig) <= k_n, axis=0),
         "inside_prior": np.mean(np.abs(err_plain / std_prior) <= k_t, axis=0),
+        "inside_loo": np.mean(np.abs(err_krig / std_loo) <= k_t, axis=0),
+        "loo": factor,
+        "cv": cv,
+        "inside_cv": np.mean(np.abs(err_krig / std_cv) <= k_t, axis=0),
         "nrms": np.sqrt(np.mean((err_krig / std_krig) ** 2, axis=0)),
         "c": basis.correlated_fraction,
         "l": basis.length_scale,
@@ -121,7 +134,9 @@ def main() -> int:
                 f"{_pct(mean('inside_normal'))}; lowest axis per split {each}), "
                 f"normalised RMS {' / '.join(f'{v:.2f}' for v in mean('nrms'))}; uncorrected field statement "
                 f"{_pct(mean('inside_prior'))}; c {mean('c'):.2f}, l {mean('l'):.2f} rad, dof {mean('dof'):.0f}, "
-                f"median kriging/prior std {mean('ratio'):.2f}",
+                f"median kriging/prior std {mean('ratio'):.2f}; leave-one-out factor {mean('loo'):.2f}, inside with it "
+                f"{_pct(mean('inside_loo'))}; cross-validated factor {mean('cv'):.2f}, "
+                f"inside with it {_pct(mean('inside_cv'))}",
                 flush=True,
             )
     return 0
