@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg
 
 from robocal_uncertainty.core.calibration_file import read_session_state
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
@@ -33,7 +32,15 @@ from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_
 from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError
 
-__all__ = ["FieldCorrection", "KrigedPoints", "KrigingBasis", "field_correction", "krige", "kriging_basis"]
+__all__ = [
+    "FieldCorrection",
+    "KrigedPoints",
+    "KrigingBasis",
+    "cross_validated_factors",
+    "field_correction",
+    "krige",
+    "kriging_basis",
+]
 
 Array = NDArray[np.float64]
 
@@ -130,9 +137,13 @@ class KrigingBasis:
     dof : float
         Degrees of freedom of the field's scale estimate: the intervals take Student-t
         quantiles with them (the scale is estimated, not known).
-    variance_factor : float
-        Factor on the kriging covariance from the calibration's own held-out folds
-        (:func:`cross_validated_factor`; 1: the field's covariance as estimated).
+    factor_ratios : ndarray, shape (b,)
+        Std ratios (:attr:`KrigedPoints.std_ratio` before any factor) at which
+        `factor_axes` were measured (empty: the field's covariance as estimated).
+    factor_axes : ndarray, shape (b, 3)
+        Per-axis (measurement frame) factors >= 1 on the kriging variance there, from the
+        calibration's own held-out folds (:func:`cross_validated_factors`); interpolated in the
+        std ratio, constant beyond the ends.
     """
 
     joint_positions: Array
@@ -144,7 +155,8 @@ class KrigingBasis:
     gain_names: tuple[str, ...]
     gain: Array
     dof: float = float("inf")
-    variance_factor: float = 1.0
+    factor_ratios: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
+    factor_axes: Array = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,6 +199,17 @@ class KrigedPoints:
 
 def _correlation(q_a: Array, q_b: Array, basis: KrigingBasis) -> Array:
     return basis.correlated_fraction * kernel_correlation(chordal_distance(q_a, q_b), basis.length_scale)
+
+
+def _widened(basis: KrigingBasis, post: Array, prior: Array) -> Array:
+    """`post` with each axis's variance scaled by the cross-validated factor at its std ratio."""
+    if basis.factor_ratios.size == 0:
+        return post
+    ratio = np.sqrt(np.clip(np.trace(post, axis1=1, axis2=2), 0.0, None) / np.trace(prior, axis1=1, axis2=2))
+    scale = np.sqrt(
+        np.stack([np.interp(ratio, basis.factor_ratios, basis.factor_axes[:, a]) for a in range(3)], axis=1)
+    )
+    return np.asarray(post * scale[:, :, None] * scale[:, None, :], dtype=np.float64)
 
 
 def _parameter_columns(layout: ParameterLayout, names: tuple[str, ...]) -> list[int]:
@@ -260,13 +283,15 @@ def krige(
         w3 = np.linalg.solve(chol, c_dz.T).T.reshape(n, 3, -1)
         explained = np.einsum("nia,nja->nij", w3, w3)
         prior[start : start + n] = 0.5 * (block + np.transpose(block, (0, 2, 1)))
-        post[start : start + n] = basis.variance_factor * (
-            prior[start : start + n] - 0.5 * (explained + np.transpose(explained, (0, 2, 1)))
+        post[start : start + n] = _widened(
+            basis, prior[start : start + n] - 0.5 * (explained + np.transpose(explained, (0, 2, 1))), block
         )
     return KrigedPoints(mean=mean, covariance=post, prior_covariance=prior, dof=float(basis.dof))
 
 
-def kriging_basis(data: dict[str, Any], model: RobotModel, *, where: str = "calibration") -> KrigingBasis:
+def kriging_basis(
+    data: dict[str, Any], model: RobotModel, *, where: str = "calibration", cross_validate: bool = True
+) -> KrigingBasis:
     """The correction's inputs from a calibration file (``model_error.field`` with its residuals).
 
     Parameters
@@ -277,6 +302,9 @@ def kriging_basis(data: dict[str, Any], model: RobotModel, *, where: str = "cali
         The robot with that calibration applied.
     where : str
         Names the file in errors.
+    cross_validate : bool
+        Widen the kriging variance by the calibration's own held-out folds
+        (:func:`cross_validated_factors`); False: the field's covariance as estimated.
 
     Raises
     ------
@@ -314,7 +342,7 @@ def kriging_basis(data: dict[str, Any], model: RobotModel, *, where: str = "cali
         state.tracker_noise.std(distances)
     )
     rotate = np.kron(np.eye(q_t.shape[0]), r_wb)
-    return KrigingBasis(
+    basis = KrigingBasis(
         joint_positions=q_t,
         residuals=r,
         noise=np.asarray(noise, dtype=np.float64),
@@ -325,76 +353,71 @@ def kriging_basis(data: dict[str, Any], model: RobotModel, *, where: str = "cali
         gain=me_field.gain @ rotate.T,
         dof=me_field.dof,
     )
-
-
-def leave_one_out_factor(basis: KrigingBasis, layout: ParameterLayout, parameters: Array) -> tuple[float, Array]:
-    """How far the field's own predictions of left-out calibration poses exceed their stated variance.
-
-    Leaving pose ``i`` out and refitting (generalised least squares over the field and noise
-    covariance ``C``) predicts its residual with error ``e_i = P_ii^-1 (P r)_i`` and covariance
-    ``P_ii^-1``, ``P = C^-1 - C^-1 A (A^T C^-1 A)^-1 A^T C^-1`` (``A`` the fit's Jacobian; the
-    closed form of universal kriging's leave-one-out, no refit run). The mean of
-    ``e_i^T P_ii e_i / 3`` is 1 when the field's covariance is right at the distances between
-    neighbouring poses; a kernel smoother than the error (or a correlated fraction of 1 where
-    part of the error is independent) shows as more.
-
-    Returns
-    -------
-    (float, ndarray of shape (n_t,))
-        The factor and each pose's ``e_i^T P_ii e_i / 3``.
-    """
-    q_t = np.asarray(basis.joint_positions, dtype=np.float64)
-    n_t = q_t.shape[0]
-    cols = _parameter_columns(layout, basis.gain_names)
-    c = basis.correlated_fraction
-    k_tt = np.kron(_correlation(q_t, q_t, basis) + (1.0 - c) * np.eye(n_t), basis.per_pose_covariance)
-    idx = np.arange(n_t)
-    k_tt.reshape(n_t, 3, n_t, 3)[idx, :, idx, :] += np.asarray(basis.noise, dtype=np.float64)
-    _, jac_t = forward_points_and_jacobian(layout, parameters, q_t)
-    a_mat = jac_t[:, :, cols].reshape(3 * n_t, len(cols))
-    u_a, sv, _ = np.linalg.svd(a_mat, full_matrices=False)
-    a_mat = u_a[:, : int(np.sum(sv > 1e-10 * sv[0]))]  # an orthonormal basis of the same span
-    chol = linalg.cho_factor(k_tt, lower=True)
-    ci_a = linalg.cho_solve(chol, a_mat)
-    ci_r = linalg.cho_solve(chol, np.asarray(basis.residuals, dtype=np.float64).reshape(-1))
-    p_r = ci_r - ci_a @ np.linalg.solve(a_mat.T @ ci_a, ci_a.T @ np.asarray(basis.residuals).reshape(-1))
-    ci_blocks = linalg.cho_solve(chol, np.eye(3 * n_t)).reshape(n_t, 3, n_t, 3)[idx, :, idx, :]
-    m_inv = np.linalg.inv(a_mat.T @ ci_a)
-    ci_a3 = ci_a.reshape(n_t, 3, -1)
-    p_blocks = ci_blocks - np.einsum("nia,ab,njb->nij", ci_a3, m_inv, ci_a3)
-    p_r3 = p_r.reshape(n_t, 3)
-    each = np.einsum("ni,ni->n", p_r3, np.linalg.solve(p_blocks, p_r3[..., None])[..., 0]) / 3.0
-    return float(np.mean(each)), np.asarray(each, dtype=np.float64)
+    if not cross_validate:
+        return basis
+    cross = cross_validated_factors(basis, layout, params)
+    return dataclasses.replace(basis, factor_ratios=cross.ratios, factor_axes=cross.factors)
 
 
 CROSS_VALIDATION_FOLDS = 5
-"""Folds of :func:`cross_validated_factor`."""
+"""Folds of :func:`cross_validated_factors`."""
+CROSS_VALIDATION_BINS = 3
+"""Std-ratio bins of :func:`cross_validated_factors` (equal numbers of poses)."""
 
 
-def cross_validated_factor(
+@dataclass(frozen=True, eq=False)
+class CrossValidation:
+    """The correction on the calibration's own held-out folds.
+
+    Attributes
+    ----------
+    ratios : ndarray, shape (b,)
+        Median std ratio of each bin.
+    factors : ndarray, shape (b, 3)
+        Per-axis variance factors (>= 1) that make each bin's mean squared standardised error 1.
+    standardised : ndarray, shape (n_t, 3)
+        Each pose's corrected error over its stated standard uncertainty (kriging and noise),
+        per axis, before the factors.
+    ratio : ndarray, shape (n_t,)
+        Each pose's std ratio.
+    """
+
+    ratios: Array
+    factors: Array
+    standardised: Array
+    ratio: Array
+
+
+def _bin_factor(err2: Array, post: Array, noise: Array) -> float:
+    """The factor f >= 1 with mean(err2 / (f post + noise)) = 1 (1 when already 1 or less at f = 1)."""
+    f = 1.0
+    for _ in range(50):
+        value = float(np.mean(err2 / (f * post + noise)))
+        if value <= 1.0 + 1e-6:
+            break
+        f *= value
+    return f
+
+
+def cross_validated_factors(
     basis: KrigingBasis,
     layout: ParameterLayout,
     parameters: Array,
     *,
     folds: int = CROSS_VALIDATION_FOLDS,
+    bins: int = CROSS_VALIDATION_BINS,
     seed: int = 0,
-) -> tuple[float, Array]:
-    """How far the correction's errors on the calibration's own held-out folds exceed their stated variance.
+) -> CrossValidation:
+    """Per-axis widening of the kriging variance from the calibration's own held-out folds.
 
     The poses are split into `folds` seeded folds; for each, the parameters are refitted
-    (linearised, least squares) on the other poses, the field corrects the fold's residuals
-    from theirs (:func:`krige`, the same computation as for a new configuration) and each
-    fold pose gives ``m_i = e_i^T (Cov_i + N_i)^-1 e_i / 3`` (``e_i`` the corrected error,
-    ``Cov_i`` its kriging covariance, ``N_i`` the pose's noise). The mean of ``m_i`` is 1 when
-    the field's covariance is right at the distances a new configuration has from the
-    calibration poses; on real series it is not (an exponential kernel fitted to repeated
-    poses is too confident a few tenths of a radian away), so the statement scales the
-    kriging covariance by it.
-
-    Returns
-    -------
-    (float, ndarray of shape (n_t,))
-        The mean of ``m_i`` and each pose's ``m_i``.
+    (linearised, least squares) on the other poses and the field corrects the fold's residuals
+    from theirs (:func:`krige`, the computation a new configuration gets). On real series the
+    field's covariance (an exponential kernel whose hyperparameters repeated poses dominate) is
+    right next to a calibration pose and too confident a few tenths of a radian away, and its
+    per-pose shape is not right on every axis: the folds' squared standardised errors, binned
+    by the std ratio (how much the correction knows there), give per-axis factors on the
+    kriging variance. Never below 1: the folds only widen the field's own statement.
     """
     q_t = np.asarray(basis.joint_positions, dtype=np.float64)
     n_t = q_t.shape[0]
@@ -403,25 +426,31 @@ def cross_validated_factor(
     cols = _parameter_columns(layout, basis.gain_names)
     _, jac_t = forward_points_and_jacobian(layout, parameters, q_t)
     jac = jac_t[:, :, cols]
-    fold_of = np.random.default_rng(np.random.SeedSequence([int(seed), n_t])).permutation(n_t) % max(int(folds), 2)
-    each = np.empty(n_t)
-    for f in range(max(int(folds), 2)):
+    n_folds = max(int(folds), 2)
+    fold_of = np.random.default_rng(np.random.SeedSequence([int(seed), n_t])).permutation(n_t) % n_folds
+    err2, post, ratio = np.empty((n_t, 3)), np.empty((n_t, 3)), np.empty(n_t)
+    plain = dataclasses.replace(basis, factor_ratios=np.zeros(0), factor_axes=np.zeros((0, 3)))
+    for f in range(n_folds):
         out, rest = np.flatnonzero(fold_of == f), np.flatnonzero(fold_of != f)
         a_rest = jac[rest].reshape(3 * rest.size, len(cols))
-        gain_rest = np.linalg.pinv(a_rest, rcond=1e-10)
+        gain_rest = np.asarray(np.linalg.pinv(a_rest, rcond=1e-10), dtype=np.float64)
         delta = gain_rest @ r[rest].reshape(-1)
-        refit_rest = r[rest] - (a_rest @ delta).reshape(-1, 3)
-        refit_out = r[out] - np.einsum("nik,k->ni", jac[out], delta)
         sub = dataclasses.replace(
-            basis,
+            plain,
             joint_positions=q_t[rest],
-            residuals=refit_rest,
+            residuals=r[rest] - (a_rest @ delta).reshape(-1, 3),
             noise=noise[rest],
             gain=gain_rest,
-            variance_factor=1.0,
         )
         kriged = krige(sub, layout, parameters, q_t[out])
-        err = refit_out - kriged.mean
-        cov = kriged.covariance + noise[out]
-        each[out] = np.einsum("ni,ni->n", err, np.linalg.solve(cov, err[..., None])[..., 0]) / 3.0
-    return float(np.mean(each)), each
+        err2[out] = (r[out] - np.einsum("nik,k->ni", jac[out], delta) - kriged.mean) ** 2
+        post[out] = np.diagonal(kriged.covariance, axis1=1, axis2=2)
+        ratio[out] = kriged.std_ratio
+    noise_diag = np.diagonal(noise, axis1=1, axis2=2)
+    order = np.argsort(ratio)
+    groups = np.array_split(order, max(1, min(int(bins), n_t // 30)))
+    ratios = np.array([np.median(ratio[g]) for g in groups])
+    factors = np.array([[_bin_factor(err2[g, a], post[g, a], noise_diag[g, a]) for a in range(3)] for g in groups])
+    return CrossValidation(
+        ratios=ratios, factors=factors, standardised=np.sqrt(err2 / (post + noise_diag)), ratio=ratio
+    )
