@@ -25,7 +25,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.calibration_file import read_session_state
+from robocal_uncertainty.core.calibration_file import apply_calibration, calibration_to_dict, read_session_state
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
 from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_correlation
@@ -36,6 +39,7 @@ __all__ = [
     "FieldCorrection",
     "KrigedPoints",
     "KrigingBasis",
+    "calibration_kriging_basis",
     "cross_validated_factors",
     "field_correction",
     "krige",
@@ -454,3 +458,21 @@ def cross_validated_factors(
     return CrossValidation(
         ratios=ratios, factors=factors, standardised=np.sqrt(err2 / (post + noise_diag)), ratio=ratio
     )
+
+
+def calibration_kriging_basis(
+    calibration: IdentificationResult, campaign: Campaign, tracker_noise: TrackerNoise, encoder_noise: EncoderNoise
+) -> KrigingBasis:
+    """:func:`kriging_basis` of a calibration made in this process (what its ``calibrate --json`` file would hold).
+
+    Raises
+    ------
+    ConfigError
+        The calibration's residuals show no model-error field (the model explains them).
+    """
+    from robocal_uncertainty.uncertainty.sessions.state import session_state  # the sessions import this module's peers
+
+    state, _ = session_state(calibration, campaign, tracker_noise, encoder_noise)
+    data = calibration_to_dict(calibration, robot=calibration.model.name, session=state)
+    model = apply_calibration(calibration.model, data, where="the calibration")
+    return kriging_basis(data, model, where="the calibration")
