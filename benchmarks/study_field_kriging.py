@@ -1,21 +1,18 @@
-"""How much the model-error field's conditional mean (kriging) improves held-out predictions.
+"""Held-out accuracy of the model-error field's correction (kriging) and whether its intervals hold.
 
-For random splits of the real UR10 series (B and D), calibrates on the training poses, estimates
-the field from the training residuals alone (as the residual source does), and predicts the
-held-out points twice: with the calibrated kinematics, and with the kinematics plus the best
-linear predictor of their error given the training residuals,
+For random splits of the real UR10 series (B and D), calibrates on the training poses as
+``calibrate --json`` does (the session record with its field, written to a calibration file's
+dict), and predicts the held-out points as ``fk --field-correction`` does: the calibrated
+kinematics plus the field's conditional mean given the training residuals,
+``E[delta_c | z] = Cov(delta_c, z) Cov(z)^-1 z`` (``z`` the residuals' contrasts orthogonal to the
+fit, ``delta_c`` the calibrated prediction's error; :mod:`robocal_uncertainty.uncertainty.field_kriging`).
+Prints per row the held-out 3-D RMS without and with the correction, the per-axis fraction of
+held-out points inside the 95 % interval of the corrected statement (kriging covariance widened
+by the calibration's own folds, plus the held-out point's stated noise; Student-t quantile), the
+normalised error RMS, the same coverage with the kriging variance as estimated (no widening) and
+of the uncorrected field statement, and the field's hyperparameters.
 
-``E[delta_c | z] = Cov(delta_c, z) Cov(z)^-1 z``, ``z = Q^T r_t = Q^T (e_t + eps_t)``,
-``delta_c = e_c - J_c G (e_t + eps_t)`` (``Q`` orthonormal, orthogonal to the fit's Jacobian ``A``)
-
-(``G`` the fit's gain, ``A`` its Jacobian, ``e`` the field, ``eps`` the stated noise). Prints the
-held-out 3-D RMS error with and without the correction, and the fraction of held-out points
-inside 95 % per-axis intervals from the kriging variance (``Cov(delta_c) - Cov(delta_c, z)
-Cov(z)^-1 Cov(z, delta_c)`` plus the held-out point's tracker noise).
-
-    python benchmarks/study_field_kriging.py --series B --train 200 500 1000 --splits 3
-
-This measures; no command applies the correction yet (a calibrated URDF cannot carry it).
+    python benchmarks/study_field_kriging.py --series D B --train 200 500 1000 --splits 5
 """
 
 from __future__ import annotations

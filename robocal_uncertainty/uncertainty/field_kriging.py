@@ -12,8 +12,14 @@ with ``z = Q^T r`` the residuals' contrasts (``Q`` orthonormal, orthogonal to th
 twice) and ``delta_c = e_c - J_c G (e_t + eps_t)`` (``G`` the fit's gain: what the calibration
 moved its prediction by). The correction fades to zero far from the calibration poses (``C_dz``
 goes with the field's correlation) and cannot be written into a kinematic model (it is not a
-parameter): it travels with the calibration's poses and residuals. This module is the
-computation; no command applies it yet.
+parameter): it travels with the calibration's poses and residuals (the calibration file's
+``model_error.field``; ``fk --field-correction``, ``map --field-correction``).
+
+:func:`krige` gives it per configuration (blocks of the same conditional covariance), with the
+kriging variance widened where the calibration's own held-out folds show it too narrow
+(:func:`cross_validated_factors`): the field's hyperparameters come from a likelihood that
+repeated poses dominate, and the kernel they give is too confident a few tenths of a radian from
+a pose (``benchmarks/study_field_kriging.py``).
 """
 
 from __future__ import annotations
