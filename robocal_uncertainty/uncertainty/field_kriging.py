@@ -46,6 +46,7 @@ __all__ = [
     "KrigedPoints",
     "KrigingBasis",
     "calibration_kriging_basis",
+    "corrected_statement",
     "cross_validated_factors",
     "field_correction",
     "krige",
@@ -482,3 +483,33 @@ def calibration_kriging_basis(
     data = calibration_to_dict(calibration, robot=calibration.model.name, session=state)
     model = apply_calibration(calibration.model, data, where="the calibration")
     return kriging_basis(data, model, where="the calibration")
+
+
+def corrected_statement(kriged: KrigedPoints, covariance: Array, rotation: Array | None = None) -> tuple[Array, Array]:
+    """A statement's shift and covariance once the field's correction is applied.
+
+    The kriging covariance replaces the field's prior; what the statement's covariance carries
+    beyond that prior (other sources, a different model-error scale) stays:
+    ``Cov = R Cov_krig R^T + psd(Cov_stated - R Cov_prior R^T)`` (``psd``: negative eigenvalues set
+    to 0, so the correction never removes more than the field's prior).
+
+    Parameters
+    ----------
+    kriged : KrigedPoints
+        At the statement's configurations (measurement frame).
+    covariance : ndarray, shape (n, 3, 3) [m^2]
+        The uncorrected statement's covariance per configuration, in the output frame.
+    rotation : ndarray, shape (3, 3), optional
+        Measurement frame to the output frame (default the identity).
+
+    Returns
+    -------
+    (ndarray of shape (n, 3), ndarray of shape (n, 3, 3))
+        The shift to add to the positions [m] and the corrected covariance [m^2].
+    """
+    rot = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+    post = np.einsum("ij,njk,lk->nil", rot, kriged.covariance, rot)
+    prior = np.einsum("ij,njk,lk->nil", rot, kriged.prior_covariance, rot)
+    vals, vecs = np.linalg.eigh(np.asarray(covariance, dtype=np.float64) - prior)
+    beyond = np.einsum("nij,nj,nkj->nik", vecs, np.clip(vals, 0.0, None), vecs)
+    return np.asarray(kriged.mean @ rot.T, dtype=np.float64), np.asarray(post + beyond, dtype=np.float64)

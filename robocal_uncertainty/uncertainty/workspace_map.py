@@ -38,7 +38,12 @@ from robocal_uncertainty.uncertainty.calibration import (
     first_order_standard_uncertainty,
     prepare_calibration_trials,
 )
-from robocal_uncertainty.uncertainty.field_kriging import KrigingBasis, calibration_kriging_basis, krige
+from robocal_uncertainty.uncertainty.field_kriging import (
+    KrigingBasis,
+    calibration_kriging_basis,
+    corrected_statement,
+    krige,
+)
 from robocal_uncertainty.uncertainty.memory import check_fits, grid_bytes, grid_size, map_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 from robocal_uncertainty.uncertainty.statement_check import GUM_DISAGREEMENT_FACTOR, spread_disagreements
@@ -109,7 +114,8 @@ class WorkspaceMap:
     field_correction : ndarray, shape (n, 3) [m], or None
         With ``field_correction=True``: the model-error field's conditional mean (kriging), added
         to `positions` and `mean`; `covariance` is then the kriging covariance plus what the
-        Monte Carlo carries beyond the field's own prior (:func:`_corrected_statement`).
+        Monte Carlo carries beyond the field's own prior
+        (:func:`~robocal_uncertainty.uncertainty.field_kriging.corrected_statement`).
     field_std_ratio : ndarray, shape (n,), or None
         Kriging std over the field's uncorrected std: near 0 next to a calibration pose, 1 far
         from all of them (there the correction knows nothing and the statement is the field's).
@@ -382,20 +388,14 @@ def map_workspace(
 
 
 def _corrected_statement(wmap: WorkspaceMap, basis: KrigingBasis) -> WorkspaceMap:
-    """The map with the field's correction: positions and means moved by the kriged mean, the
-    covariance ``Cov_krig + psd(Cov_MC - Cov_prior)`` (the kriging covariance replaces the
-    field's prior; what the Monte Carlo carries beyond that prior, other sources, stays)."""
+    """The map with the field's correction (:func:`~.field_kriging.corrected_statement`): positions
+    and means moved by the kriged mean, the kriging covariance in place of the field's prior."""
     calibration = wmap.calibration
     p = calibration.estimate
     kriged = krige(basis, calibration.model.layout, p, wmap.configurations)
     b0 = calibration.model.layout.base_index
     rot = rpy_to_matrix(p[b0 + 3 : b0 + 6]).T if wmap.frame == "base" else np.eye(3)
-    shift = kriged.mean @ rot.T
-    post = np.einsum("ij,njk,lk->nil", rot, kriged.covariance, rot)
-    prior = np.einsum("ij,njk,lk->nil", rot, kriged.prior_covariance, rot)
-    vals, vecs = np.linalg.eigh(wmap.covariance - prior)
-    beyond = np.einsum("nij,nj,nkj->nik", vecs, np.clip(vals, 0.0, None), vecs)
-    covariance = post + beyond
+    shift, covariance = corrected_statement(kriged, wmap.covariance, rot)
     std = np.sqrt(np.einsum("nii->ni", covariance))
     for array in (shift, covariance, std):
         array.setflags(write=False)
