@@ -14,8 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.core.kinematics import forward_points
-from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.uncertainty.field_kriging import KrigingBasis, krige
 
 __all__ = ["FRAMES", "ToolPoints", "tool_points"]
 
@@ -48,6 +49,16 @@ class ToolPoints:
         Its ``frame_id``.
     points : ndarray, shape (n, 3) [m]
         The points in `frame`.
+    correction : ndarray, shape (n, 3) [m], or None
+        The model-error field's conditional mean added to every point (in `frame`), when asked.
+    correction_covariance : ndarray, shape (n, 3, 3) [m^2], or None
+        Covariance of the corrected point's error (kriging variance, in `frame`): the field and,
+        through the fit, the parameters; a new measurement's own noise is not in it.
+    std_ratio : ndarray, shape (n,), or None
+        Kriging std over the uncorrected std (1: far from every calibration pose, the correction
+        knows nothing there).
+    coverage_factor : float or None
+        Per-axis 95 % coverage factor (Student-t with the field scale's degrees of freedom).
     """
 
     model: str
@@ -61,6 +72,10 @@ class ToolPoints:
     frame: str
     frame_id: str
     points: Array
+    correction: Array | None = None
+    correction_covariance: Array | None = None
+    std_ratio: Array | None = None
+    coverage_factor: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (lengths [m], angles [rad]): both frames' points where they differ."""
@@ -76,10 +91,26 @@ class ToolPoints:
         if self.points_measurement is not None:
             out["points_measurement_frame_m"] = self.points_measurement.tolist()
             out["measurement_frame_id"] = self.measurement_frame_id
+        if self.correction is not None and self.correction_covariance is not None:
+            out["field_correction"] = {
+                "frame_id": self.frame_id,
+                "correction_m": self.correction.tolist(),
+                "covariance_m2": self.correction_covariance.tolist(),
+                "std_ratio": None if self.std_ratio is None else self.std_ratio.tolist(),
+                "coverage_factor_95": self.coverage_factor,
+                "note": "points include the correction; a URDF or UR export cannot carry it",
+            }
         return out
 
 
-def tool_points(model: RobotModel, joints: Array, *, calibrated: bool, frame: str | None = None) -> ToolPoints:
+def tool_points(
+    model: RobotModel,
+    joints: Array,
+    *,
+    calibrated: bool,
+    frame: str | None = None,
+    field_correction: KrigingBasis | None = None,
+) -> ToolPoints:
     """Tool points of `model` at `joints`.
 
     Parameters
@@ -95,6 +126,10 @@ def tool_points(model: RobotModel, joints: Array, *, calibrated: bool, frame: st
         one distinct from the base, else the base frame. ``"measurement"`` of a model whose
         config states the base known at the measurement frame's origin gives those points
         labelled with the measurement frame (the frames coincide).
+    field_correction : KrigingBasis, optional
+        The calibration's model-error field with its residuals
+        (:func:`~robocal_uncertainty.uncertainty.field_kriging.kriging_basis`): its conditional
+        mean at `joints` is added to the points (both frames) and its kriging covariance kept.
 
     Raises
     ------
@@ -130,6 +165,22 @@ def tool_points(model: RobotModel, joints: Array, *, calibrated: bool, frame: st
         frame_id, points = model.measurement_frame_id, world_points
     else:
         frame_id, points = model.base_frame_id, base_points
+    extra: dict[str, Any] = {}
+    if field_correction is not None:
+        kriged = krige(field_correction, model.layout, p, q)
+        r_wb = rpy_to_matrix(p[b0 + 3 : b0 + 6])
+        base_mean = kriged.mean @ r_wb  # rows R^T m: the measurement-frame correction in the base frame
+        world_points = world_points + kriged.mean
+        base_points = base_points + base_mean
+        in_measurement = chosen == "measurement"
+        rot = np.eye(3) if in_measurement else r_wb.T
+        extra = {
+            "correction": kriged.mean if in_measurement else base_mean,
+            "correction_covariance": np.einsum("ij,njk,lk->nil", rot, kriged.covariance, rot),
+            "std_ratio": kriged.std_ratio,
+            "coverage_factor": kriged.coverage_factor(),
+        }
+        points = world_points if in_measurement else base_points
     return ToolPoints(
         model="calibrated" if calibrated else "nominal",
         robot=model.name,
@@ -142,4 +193,5 @@ def tool_points(model: RobotModel, joints: Array, *, calibrated: bool, frame: st
         frame=chosen,
         frame_id=frame_id,
         points=points,
+        **extra,
     )

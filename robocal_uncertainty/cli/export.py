@@ -71,6 +71,11 @@ def run(args: argparse.Namespace) -> int:
     Path(args.out).write_text(export.text, encoding="utf-8")
     sidecar.write_text(json.dumps(export.sidecar, indent=2) + "\n", encoding="utf-8")
     print(f"wrote {args.out} ({args.export_format}, robot {source.model.name!r})")
+    if isinstance(data.get("model_error"), dict) and data["model_error"].get("field") is not None:
+        print(
+            f"note: {args.out} cannot carry the model-error field's correction (a kriged offset, not a kinematic "
+            f"parameter): fk --field-correction --calibration {args.calibration} applies it"
+        )
     if export.tip_link:
         x, y, z = (1e3 * v for v in export.point_in_tip)
         print(f"measured point in {export.tip_link}: ({x:.4f}, {y:.4f}, {z:.4f}) mm (calibrated; not part of the URDF)")

@@ -62,6 +62,13 @@ def register(sub: Any) -> None:
     add_force_arg(p, "an earlier map report in --out")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_model_error_arg(p)
+    p.add_argument(
+        "--field-correction",
+        action="store_true",
+        help="add the model-error field's conditional mean given the calibration residuals (kriging) to every "
+        "position, with its covariance in the statement; the report shows the kriging std over the field's "
+        "uncorrected std per configuration (1: far from the calibration poses, where the field widens the statement)",
+    )
     add_frame_and_convergence_args(p)
     p.set_defaults(func=run, lambda_range=None, min_poses=None, subset_size=None)
 
@@ -102,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
                 executor=executor,
                 progress=progress,
                 backend=args.backend,
+                field_correction=args.field_correction,
             )
     finally:
         elapsed = finish()
@@ -118,6 +126,13 @@ def run(args: argparse.Namespace) -> int:
     worst = int(wmap.order[0])
     where = ", ".join(f"{v:.3f}" for v in wmap.positions[worst])
     print(f"weakest: configuration {worst + 1} at ({where}) m, reach {wmap.reach[worst]:.3f} m")
+    if wmap.field_std_ratio is not None and wmap.field_correction is not None:
+        size = np.linalg.norm(wmap.field_correction, axis=1)
+        print(
+            f"field correction: median {np.median(size) * 1e6:.1f} um, largest {np.max(size) * 1e6:.1f} um; kriging "
+            f"std / uncorrected std: median {np.median(wmap.field_std_ratio):.2f}, "
+            f"{np.mean(wmap.field_std_ratio >= 0.9):.0%} of the configurations at 0.9 or more (far from the poses)"
+        )
     for warning in wmap.warnings:
         print(f"warning: {warning}")
     print(f"map report written to {files.markdown.parent}")

@@ -45,8 +45,10 @@ model-error field), a JSON object with
     ``correlated_fraction``, ``length_scale_rad``, ``dof`` (of its variance estimate),
     ``hyper_covariance`` (of log scale, correlated fraction, log length), the restricted
     ``log_likelihood`` and ``independent_log_likelihood``, ``joint_positions_rad`` (the
-    calibration poses, model joint order) and ``gain`` (``names``, ``matrix``: the estimates'
-    change per base-frame point error at those poses, pose-major x y z); ``covariance_base_m2``
+    calibration poses, model joint order), ``gain`` (``names``, ``matrix``: the estimates'
+    change per base-frame point error at those poses, pose-major x y z) and ``residuals_m`` (the
+    calibration's residuals at those poses, measurement frame, n x 3: what the field's
+    correction, ``fk --field-correction``, conditions on); ``covariance_base_m2``
     is then the field's per-pose covariance.
 ``sources``
     Uncertainty sources of the statement.
@@ -216,7 +218,13 @@ def calibration_to_dict(
         "effective_parameters": result.effective_parameters,
     }
     if session is not None:
-        out.update(session_state_to_dict(session))
+        record = session_state_to_dict(session)
+        out.update(record)
+        field_record = record["model_error"]["field"]
+        residuals = np.asarray(result.residuals, dtype=np.float64)
+        if field_record is not None and residuals.shape == (session.n_poses, 3):
+            # The field's correction (kriging) conditions on these; a URDF cannot carry them.
+            field_record["residuals_m"] = _matrix(residuals)
     else:
         out.update({"session": None, "scope": "session", "between_session": None})
     return out

@@ -138,6 +138,9 @@ def _write_csv(path: Path, wmap: WorkspaceMap) -> Path:
     header = ["configuration", *(f"{name}_deg" for name in wmap.joint_names)]
     header += [f"{a}_mm" for a in "xyz"] + ["reach_mm", "nearest_pose_mm"]
     header += [f"u_{a}_um" for a in "xyz"] + ["u_pos_um", "region_a1_um", "region_a2_um", "region_a3_um"]
+    fielded = wmap.field_correction is not None and wmap.field_std_ratio is not None
+    if fielded:
+        header += [f"field_d{a}_um" for a in "xyz"] + ["field_std_ratio"]
     degrees = np.degrees(wmap.configurations)
     with path.open("w", encoding="utf-8", newline="") as fh:
         writer = csv.writer(fh)
@@ -148,6 +151,8 @@ def _write_csv(path: Path, wmap: WorkspaceMap) -> Path:
             row += [_num(wmap.reach[i], _MM), _num(wmap.nearest_pose_distance[i], _MM)]
             row += [_num(v, _UM) for v in wmap.standard_uncertainty[i]]
             row += [_num(wmap.position_uncertainty[i], _UM), *(_num(v, _UM) for v in wmap.region_semi_axes[i])]
+            if wmap.field_correction is not None and wmap.field_std_ratio is not None:
+                row += [*(_num(v, _UM) for v in wmap.field_correction[i]), f"{wmap.field_std_ratio[i]:.4f}"]
             writer.writerow(row)
     return path
 
@@ -202,6 +207,12 @@ def _write_json(path: Path, wmap: WorkspaceMap, weak: WeakestRegion) -> Path:
         "region_semi_axes": [_finite_or_none(row) for row in wmap.region_semi_axes[wmap.region_configurations]],
         "warnings": list(wmap.warnings),
     }
+    if wmap.field_correction is not None and wmap.field_std_ratio is not None:
+        document["field_correction"] = {
+            "correction": np.asarray(wmap.field_correction).tolist(),
+            "std_ratio": np.asarray(wmap.field_std_ratio).tolist(),
+            "note": "positions include the model-error field's conditional mean (kriging); a URDF cannot carry it",
+        }
     path.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
     return path
 
@@ -261,6 +272,28 @@ def _trend(rho: float, what: str) -> str:
     return f"u_pos {strength} {direction} with {what} (Spearman ρ = {rho:.2f})"
 
 
+def _field_lines(wmap: WorkspaceMap) -> list[str]:
+    """Where the field's correction knows the error and where it widens the statement."""
+    if wmap.field_correction is None or wmap.field_std_ratio is None:
+        return []
+    ratio = np.asarray(wmap.field_std_ratio)
+    size = np.linalg.norm(wmap.field_correction, axis=1) * _UM
+    far = ratio >= 0.9
+    return [
+        "## The model-error field's correction",
+        "",
+        "Positions include the field's conditional mean given the calibration residuals (kriging; "
+        f"median size {np.median(size):.1f} µm, largest {np.max(size):.1f} µm) and the statement its kriging "
+        "covariance. The std ratio (kriging std over the field's uncorrected std) is near 0 next to a "
+        "calibration pose and 1 far from all of them, where the correction knows nothing and the field "
+        f"widens the statement: median {np.median(ratio):.2f}, {np.mean(far):.0%} of the configurations at 0.9 "
+        f"or more (Spearman ρ of the ratio with the distance from the nearest calibration pose "
+        f"{_spearman(ratio, wmap.nearest_pose_distance):.2f}). A URDF or UR export cannot carry this correction; "
+        "the calibration file does.",
+        "",
+    ]
+
+
 def _markdown(wmap: WorkspaceMap, weak: WeakestRegion, files: tuple[str, str, str], worst: int) -> str:
     meta = _metadata(wmap)
     z_weak = np.percentile(wmap.positions[weak.indices, 2], [5, 95])
@@ -299,6 +332,7 @@ def _markdown(wmap: WorkspaceMap, weak: WeakestRegion, files: tuple[str, str, st
             f"{wmap.reach[i]:.3f} | {wmap.nearest_pose_distance[i] * _MM:.0f} |"
         )
     lines += ["", f"Table: `{files[0]}`; data: `{files[1]}`; plots: `{files[2]}`.", ""]
+    lines += _field_lines(wmap)
     if wmap.warnings:
         lines += ["## Warnings", "", *(f"- {w}" for w in wmap.warnings), ""]
     return "\n".join(lines)

@@ -12,18 +12,46 @@ with ``z = Q^T r`` the residuals' contrasts (``Q`` orthonormal, orthogonal to th
 twice) and ``delta_c = e_c - J_c G (e_t + eps_t)`` (``G`` the fit's gain: what the calibration
 moved its prediction by). The correction fades to zero far from the calibration poses (``C_dz``
 goes with the field's correlation) and cannot be written into a kinematic model (it is not a
-parameter): it travels with the calibration's poses and residuals. This module is the
-computation; no command applies it yet.
+parameter): it travels with the calibration's poses and residuals (the calibration file's
+``model_error.field``; ``fk --field-correction``, ``map --field-correction``).
+
+:func:`krige` gives it per configuration (blocks of the same conditional covariance), with the
+kriging variance widened where the calibration's own held-out folds show it too narrow
+(:func:`cross_validated_factors`): the field's hyperparameters come from a likelihood that
+repeated poses dominate, and the kernel they give is too confident a few tenths of a radian from
+a pose (``benchmarks/study_field_kriging.py``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["FieldCorrection", "field_correction"]
+from robocal_uncertainty.core.calibration_file import apply_calibration, calibration_to_dict, read_session_state
+from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.identification import IdentificationResult
+from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
+from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.measurement import POINT
+from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_correlation
+from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
+from robocal_uncertainty.errors import ConfigError
+
+__all__ = [
+    "FieldCorrection",
+    "KrigedPoints",
+    "KrigingBasis",
+    "calibration_kriging_basis",
+    "corrected_statement",
+    "cross_validated_factors",
+    "field_correction",
+    "krige",
+    "kriging_basis",
+]
 
 Array = NDArray[np.float64]
 
@@ -95,3 +123,393 @@ def field_correction(
         covariance=np.asarray(0.5 * (posterior + posterior.T), dtype=np.float64),
         prior_covariance=np.asarray(0.5 * (prior + prior.T), dtype=np.float64),
     )
+
+
+@dataclass(frozen=True, eq=False)
+class KrigingBasis:
+    """What the correction needs of a calibration: its poses, residuals and field (measurement frame).
+
+    Attributes
+    ----------
+    joint_positions : ndarray, shape (n_t, n_joints) [rad]
+        The calibration poses (model joint order).
+    residuals : ndarray, shape (n_t, 3) [m]
+        Measured minus calibrated points at those poses.
+    noise : ndarray, shape (n_t, 3, 3) [m^2]
+        Stated noise covariance of each measured point (tracker and encoders).
+    per_pose_covariance : ndarray, shape (3, 3) [m^2]
+        ``Sigma_m`` of the field (its per-pose covariance).
+    correlated_fraction, length_scale : float
+        ``c`` and ``l`` [rad] of the field.
+    gain_names : tuple of str, length k
+        The estimated parameters (what the fit absorbs).
+    gain : ndarray, shape (k, 3 n_t)
+        The fit's gain: change of those estimates per measured point error at the poses.
+    dof : float
+        Degrees of freedom of the field's scale estimate: the intervals take Student-t
+        quantiles with them (the scale is estimated, not known).
+    factor_ratios : ndarray, shape (b,)
+        Std ratios (:attr:`KrigedPoints.std_ratio` before any factor) at which
+        `factor_axes` were measured (empty: the field's covariance as estimated).
+    factor_axes : ndarray, shape (b, 3)
+        Per-axis (measurement frame) factors >= 1 on the kriging variance there, from the
+        calibration's own held-out folds (:func:`cross_validated_factors`); interpolated in the
+        std ratio, constant beyond the ends.
+    """
+
+    joint_positions: Array
+    residuals: Array
+    noise: Array
+    per_pose_covariance: Array
+    correlated_fraction: float
+    length_scale: float
+    gain_names: tuple[str, ...]
+    gain: Array
+    dof: float = float("inf")
+    factor_ratios: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
+    factor_axes: Array = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+
+
+@dataclass(frozen=True, eq=False)
+class KrigedPoints:
+    """The field's correction at some configurations, per configuration (measurement frame).
+
+    Attributes
+    ----------
+    mean : ndarray, shape (n, 3) [m]
+        What to add to the calibrated points.
+    covariance : ndarray, shape (n, 3, 3) [m^2]
+        Covariance of the corrected prediction's error (kriging variance: the field's part,
+        and through the fit's gain the parameters' part of the field and the noise).
+    prior_covariance : ndarray, shape (n, 3, 3) [m^2]
+        The same for the uncorrected prediction.
+    dof : float
+        Degrees of freedom of the scale (Student-t intervals).
+    """
+
+    mean: Array
+    covariance: Array
+    prior_covariance: Array
+    dof: float
+
+    @property
+    def std_ratio(self) -> Array:
+        """``sqrt(tr Cov / tr prior Cov)`` per configuration, shape (n,): 0 at a calibration pose
+        with no noise, 1 far from all of them (the correction knows nothing there)."""
+        post = np.trace(self.covariance, axis1=1, axis2=2)
+        prior = np.trace(self.prior_covariance, axis1=1, axis2=2)
+        return np.asarray(np.sqrt(np.clip(post, 0.0, None) / np.where(prior > 0, prior, 1.0)), dtype=np.float64)
+
+    def coverage_factor(self, probability: float = 0.95) -> float:
+        """Two-sided per-axis coverage factor: the Student-t quantile with :attr:`dof`."""
+        from scipy import stats
+
+        tail = 0.5 + 0.5 * probability
+        return float(stats.norm.ppf(tail) if not np.isfinite(self.dof) else stats.t.ppf(tail, self.dof))
+
+
+def _correlation(q_a: Array, q_b: Array, basis: KrigingBasis) -> Array:
+    return basis.correlated_fraction * kernel_correlation(chordal_distance(q_a, q_b), basis.length_scale)
+
+
+def _widened(basis: KrigingBasis, post: Array, prior: Array) -> Array:
+    """`post` with each axis's variance scaled by the cross-validated factor at its std ratio."""
+    if basis.factor_ratios.size == 0:
+        return post
+    ratio = np.sqrt(np.clip(np.trace(post, axis1=1, axis2=2), 0.0, None) / np.trace(prior, axis1=1, axis2=2))
+    scale = np.sqrt(
+        np.stack([np.interp(ratio, basis.factor_ratios, basis.factor_axes[:, a]) for a in range(3)], axis=1)
+    )
+    return np.asarray(post * scale[:, :, None] * scale[:, None, :], dtype=np.float64)
+
+
+def _parameter_columns(layout: ParameterLayout, names: tuple[str, ...]) -> list[int]:
+    index = {n: i for i, n in enumerate(layout.names)}
+    missing = [n for n in names if n not in index]
+    if missing:
+        msg = f"the field's gain names parameters the model does not have: {', '.join(missing[:3])}"
+        raise ConfigError(msg)
+    return [index[n] for n in names]
+
+
+def krige(
+    basis: KrigingBasis, layout: ParameterLayout, parameters: Array, joint_positions: Array, *, chunk: int = 256
+) -> KrigedPoints:
+    """The field's conditional mean and per-configuration covariance at `joint_positions`.
+
+    :func:`field_correction` per configuration block (the full cross-configuration covariance
+    is never formed, so a map of thousands of configurations stays linear in their number).
+
+    Parameters
+    ----------
+    basis : KrigingBasis
+    layout : ParameterLayout
+    parameters : ndarray, shape (n_params,) [m, rad]
+        The calibrated parameter vector.
+    joint_positions : ndarray, shape (n, n_joints) [rad]
+    chunk : int
+        Configurations per block (memory ``~ 9 n_t chunk`` floats).
+    """
+    q_t = np.asarray(basis.joint_positions, dtype=np.float64)
+    q_c = np.atleast_2d(np.asarray(joint_positions, dtype=np.float64))
+    n_t, n_c = q_t.shape[0], q_c.shape[0]
+    cols = _parameter_columns(layout, basis.gain_names)
+    s_m = np.asarray(basis.per_pose_covariance, dtype=np.float64)
+    c = basis.correlated_fraction
+    corr_tt = _correlation(q_t, q_t, basis) + (1.0 - c) * np.eye(n_t)
+    k_tt = np.kron(corr_tt, s_m)
+    idx = np.arange(n_t)
+    k_tt_blocks = k_tt.reshape(n_t, 3, n_t, 3)
+    k_tt_blocks[idx, :, idx, :] += np.asarray(basis.noise, dtype=np.float64)
+    _, jac_t = forward_points_and_jacobian(layout, parameters, q_t)
+    a_mat = jac_t[:, :, cols].reshape(3 * n_t, len(cols))
+    u_full, sv, _ = np.linalg.svd(a_mat, full_matrices=True)
+    rank = int(np.sum(sv > 1e-10 * sv[0])) if sv.size else 0
+    q_mat = u_full[:, rank:]
+    k_tt_q = k_tt @ q_mat
+    chol = np.linalg.cholesky(q_mat.T @ k_tt_q)
+    z = q_mat.T @ np.asarray(basis.residuals, dtype=np.float64).reshape(-1)
+    alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, z))
+    gain = np.asarray(basis.gain, dtype=np.float64)
+    # Through the fit's gain only k directions of the data reach a prediction: G K_tt G^T and
+    # G K_tt Q are formed once (k x k, k x m), never J_c G K_tt per configuration.
+    g_k_g = gain @ k_tt @ gain.T
+    g_k_q = gain @ k_tt_q
+    mean = np.empty((n_c, 3))
+    post = np.empty((n_c, 3, 3))
+    prior = np.empty((n_c, 3, 3))
+    for start in range(0, n_c, chunk):
+        q = q_c[start : start + chunk]
+        n = q.shape[0]
+        _, jac_c = forward_points_and_jacobian(layout, parameters, q)
+        j_c = jac_c[:, :, cols].reshape(3 * n, len(cols))
+        k_ct = np.kron(_correlation(q, q_t, basis), s_m)
+        c_dz = k_ct @ q_mat - j_c @ g_k_q  # Cov(delta_c, z)
+        mean[start : start + n] = (c_dz @ alpha).reshape(n, 3)
+        # Per-configuration blocks of Cov(delta_c) = K_cc - K_ct (J G)^T - J G K_tc + J G K_tt (J G)^T.
+        j3 = j_c.reshape(n, 3, len(cols))
+        parameters_part = np.einsum("nia,ab,njb->nij", j3, g_k_g, j3)
+        cross = np.einsum("nia,nja->nij", (k_ct @ gain.T).reshape(n, 3, len(cols)), j3)
+        block = s_m[None] + parameters_part - cross - np.transpose(cross, (0, 2, 1))
+        w3 = np.linalg.solve(chol, c_dz.T).T.reshape(n, 3, -1)
+        explained = np.einsum("nia,nja->nij", w3, w3)
+        prior[start : start + n] = 0.5 * (block + np.transpose(block, (0, 2, 1)))
+        post[start : start + n] = _widened(
+            basis, prior[start : start + n] - 0.5 * (explained + np.transpose(explained, (0, 2, 1))), block
+        )
+    return KrigedPoints(mean=mean, covariance=post, prior_covariance=prior, dof=float(basis.dof))
+
+
+def kriging_basis(
+    data: dict[str, Any], model: RobotModel, *, where: str = "calibration", cross_validate: bool = True
+) -> KrigingBasis:
+    """The correction's inputs from a calibration file (``model_error.field`` with its residuals).
+
+    Parameters
+    ----------
+    data : dict
+        A calibration file (:func:`~robocal_uncertainty.core.calibration_file.read_calibration`).
+    model : RobotModel
+        The robot with that calibration applied.
+    where : str
+        Names the file in errors.
+    cross_validate : bool
+        Widen the kriging variance by the calibration's own held-out folds
+        (:func:`cross_validated_factors`); False: the field's covariance as estimated.
+
+    Raises
+    ------
+    ConfigError
+        The file carries no model-error field, or not its residuals (one line).
+    """
+    state = read_session_state(data, where=where)
+    me_field = None if state is None else state.model_error_field
+    field_data = (data.get("model_error") or {}).get("field") if isinstance(data.get("model_error"), dict) else None
+    residuals = None if not isinstance(field_data, dict) else field_data.get("residuals_m")
+    if state is None or me_field is None or residuals is None:
+        what = "no model-error field (model_error.field)" if me_field is None else "the field without its residuals"
+        msg = (
+            f"{where} carries {what}, so there is no correction to apply: recalibrate with this version "
+            "('calibrate --json'; a field is estimated when the model error is significant)"
+        )
+        raise ConfigError(msg)
+    q_t = me_field.joint_positions
+    try:
+        r = np.asarray(residuals, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        msg = f"{where}: model_error.field.residuals_m is not a numeric n x 3 array"
+        raise ConfigError(msg) from err
+    if r.shape != (q_t.shape[0], 3) or not np.isfinite(r).all():
+        msg = f"{where}: model_error.field.residuals_m must be {q_t.shape[0]} x 3 finite values [m], got {r.shape}"
+        raise ConfigError(msg)
+    layout = model.layout
+    params = model.parameter_vector()
+    b0 = layout.base_index
+    r_wb = rpy_to_matrix(params[b0 + 3 : b0 + 6]) if state.frame == "tracker" else np.eye(3)
+    predicted = forward_points(layout, params, q_t)
+    distances = np.linalg.norm(predicted + r, axis=1) if state.frame == "tracker" else np.full(q_t.shape[0], 2.0)
+    jq = POINT.joint_jacobian(layout, params, q_t)
+    noise = state.encoder_noise.covariance(jq, model.prismatic) + POINT.instrument_covariance(
+        state.tracker_noise.std(distances)
+    )
+    rotate = np.kron(np.eye(q_t.shape[0]), r_wb)
+    basis = KrigingBasis(
+        joint_positions=q_t,
+        residuals=r,
+        noise=np.asarray(noise, dtype=np.float64),
+        per_pose_covariance=r_wb @ state.model_error_covariance @ r_wb.T,
+        correlated_fraction=me_field.correlated_fraction,
+        length_scale=me_field.length_scale,
+        gain_names=me_field.gain_names,
+        gain=me_field.gain @ rotate.T,
+        dof=me_field.dof,
+    )
+    if not cross_validate:
+        return basis
+    cross = cross_validated_factors(basis, layout, params)
+    return dataclasses.replace(basis, factor_ratios=cross.ratios, factor_axes=cross.factors)
+
+
+CROSS_VALIDATION_FOLDS = 5
+"""Folds of :func:`cross_validated_factors`."""
+CROSS_VALIDATION_BINS = 3
+"""Std-ratio bins of :func:`cross_validated_factors` (equal numbers of poses)."""
+
+
+@dataclass(frozen=True, eq=False)
+class CrossValidation:
+    """The correction on the calibration's own held-out folds.
+
+    Attributes
+    ----------
+    ratios : ndarray, shape (b,)
+        Median std ratio of each bin.
+    factors : ndarray, shape (b, 3)
+        Per-axis variance factors (>= 1) that make each bin's mean squared standardised error 1.
+    standardised : ndarray, shape (n_t, 3)
+        Each pose's corrected error over its stated standard uncertainty (kriging and noise),
+        per axis, before the factors.
+    ratio : ndarray, shape (n_t,)
+        Each pose's std ratio.
+    """
+
+    ratios: Array
+    factors: Array
+    standardised: Array
+    ratio: Array
+
+
+def _bin_factor(err2: Array, post: Array, noise: Array) -> float:
+    """The factor f >= 1 with mean(err2 / (f post + noise)) = 1 (1 when already 1 or less at f = 1)."""
+    f = 1.0
+    for _ in range(50):
+        value = float(np.mean(err2 / (f * post + noise)))
+        if value <= 1.0 + 1e-6:
+            break
+        f *= value
+    return f
+
+
+def cross_validated_factors(
+    basis: KrigingBasis,
+    layout: ParameterLayout,
+    parameters: Array,
+    *,
+    folds: int = CROSS_VALIDATION_FOLDS,
+    bins: int = CROSS_VALIDATION_BINS,
+    seed: int = 0,
+) -> CrossValidation:
+    """Per-axis widening of the kriging variance from the calibration's own held-out folds.
+
+    The poses are split into `folds` seeded folds; for each, the parameters are refitted
+    (linearised, least squares) on the other poses and the field corrects the fold's residuals
+    from theirs (:func:`krige`, the computation a new configuration gets). On real series the
+    field's covariance (an exponential kernel whose hyperparameters repeated poses dominate) is
+    right next to a calibration pose and too confident a few tenths of a radian away, and its
+    per-pose shape is not right on every axis: the folds' squared standardised errors, binned
+    by the std ratio (how much the correction knows there), give per-axis factors on the
+    kriging variance. Never below 1: the folds only widen the field's own statement.
+    """
+    q_t = np.asarray(basis.joint_positions, dtype=np.float64)
+    n_t = q_t.shape[0]
+    r = np.asarray(basis.residuals, dtype=np.float64)
+    noise = np.asarray(basis.noise, dtype=np.float64)
+    cols = _parameter_columns(layout, basis.gain_names)
+    _, jac_t = forward_points_and_jacobian(layout, parameters, q_t)
+    jac = jac_t[:, :, cols]
+    n_folds = max(int(folds), 2)
+    fold_of = np.random.default_rng(np.random.SeedSequence([int(seed), n_t])).permutation(n_t) % n_folds
+    err2, post, ratio = np.empty((n_t, 3)), np.empty((n_t, 3)), np.empty(n_t)
+    plain = dataclasses.replace(basis, factor_ratios=np.zeros(0), factor_axes=np.zeros((0, 3)))
+    for f in range(n_folds):
+        out, rest = np.flatnonzero(fold_of == f), np.flatnonzero(fold_of != f)
+        a_rest = jac[rest].reshape(3 * rest.size, len(cols))
+        gain_rest = np.asarray(np.linalg.pinv(a_rest, rcond=1e-10), dtype=np.float64)
+        delta = gain_rest @ r[rest].reshape(-1)
+        sub = dataclasses.replace(
+            plain,
+            joint_positions=q_t[rest],
+            residuals=r[rest] - (a_rest @ delta).reshape(-1, 3),
+            noise=noise[rest],
+            gain=gain_rest,
+        )
+        kriged = krige(sub, layout, parameters, q_t[out])
+        err2[out] = (r[out] - np.einsum("nik,k->ni", jac[out], delta) - kriged.mean) ** 2
+        post[out] = np.diagonal(kriged.covariance, axis1=1, axis2=2)
+        ratio[out] = kriged.std_ratio
+    noise_diag = np.diagonal(noise, axis1=1, axis2=2)
+    order = np.argsort(ratio)
+    groups = np.array_split(order, max(1, min(int(bins), n_t // 30)))
+    ratios = np.array([np.median(ratio[g]) for g in groups])
+    factors = np.array([[_bin_factor(err2[g, a], post[g, a], noise_diag[g, a]) for a in range(3)] for g in groups])
+    return CrossValidation(
+        ratios=ratios, factors=factors, standardised=np.sqrt(err2 / (post + noise_diag)), ratio=ratio
+    )
+
+
+def calibration_kriging_basis(
+    calibration: IdentificationResult, campaign: Campaign, tracker_noise: TrackerNoise, encoder_noise: EncoderNoise
+) -> KrigingBasis:
+    """:func:`kriging_basis` of a calibration made in this process (what its ``calibrate --json`` file would hold).
+
+    Raises
+    ------
+    ConfigError
+        The calibration's residuals show no model-error field (the model explains them).
+    """
+    from robocal_uncertainty.uncertainty.sessions.state import session_state  # the sessions import this module's peers
+
+    state, _ = session_state(calibration, campaign, tracker_noise, encoder_noise)
+    data = calibration_to_dict(calibration, robot=calibration.model.name, session=state)
+    model = apply_calibration(calibration.model, data, where="the calibration")
+    return kriging_basis(data, model, where="the calibration")
+
+
+def corrected_statement(kriged: KrigedPoints, covariance: Array, rotation: Array | None = None) -> tuple[Array, Array]:
+    """A statement's shift and covariance once the field's correction is applied.
+
+    The kriging covariance replaces the field's prior; what the statement's covariance carries
+    beyond that prior (other sources, a different model-error scale) stays:
+    ``Cov = R Cov_krig R^T + psd(Cov_stated - R Cov_prior R^T)`` (``psd``: negative eigenvalues set
+    to 0, so the correction never removes more than the field's prior).
+
+    Parameters
+    ----------
+    kriged : KrigedPoints
+        At the statement's configurations (measurement frame).
+    covariance : ndarray, shape (n, 3, 3) [m^2]
+        The uncorrected statement's covariance per configuration, in the output frame.
+    rotation : ndarray, shape (3, 3), optional
+        Measurement frame to the output frame (default the identity).
+
+    Returns
+    -------
+    (ndarray of shape (n, 3), ndarray of shape (n, 3, 3))
+        The shift to add to the positions [m] and the corrected covariance [m^2].
+    """
+    rot = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+    post = np.einsum("ij,njk,lk->nil", rot, kriged.covariance, rot)
+    prior = np.einsum("ij,njk,lk->nil", rot, kriged.prior_covariance, rot)
+    vals, vecs = np.linalg.eigh(np.asarray(covariance, dtype=np.float64) - prior)
+    beyond = np.einsum("nij,nj,nkj->nik", vecs, np.clip(vals, 0.0, None), vecs)
+    return np.asarray(kriged.mean @ rot.T, dtype=np.float64), np.asarray(post + beyond, dtype=np.float64)

@@ -15,6 +15,7 @@ Configurations come from :func:`grid_configurations`, :func:`sample_configuratio
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -25,7 +26,7 @@ from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.joint_limits import check_joint_limits
 from robocal_uncertainty.core.kinematics import forward_points
-from robocal_uncertainty.core.robot_model import RobotModel
+from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError, ConvergenceError, InputError
 from robocal_uncertainty.kernels import BackendInfo, resolve_backend
 from robocal_uncertainty.montecarlo.engine import ProgressCallback, ReducedTrials, reduce_trials
@@ -36,6 +37,12 @@ from robocal_uncertainty.uncertainty.calibration import (
     CalibrationTrials,
     first_order_standard_uncertainty,
     prepare_calibration_trials,
+)
+from robocal_uncertainty.uncertainty.field_kriging import (
+    KrigingBasis,
+    calibration_kriging_basis,
+    corrected_statement,
+    krige,
 )
 from robocal_uncertainty.uncertainty.memory import check_fits, grid_bytes, grid_size, map_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
@@ -104,6 +111,14 @@ class WorkspaceMap:
     warnings : tuple of str
     backend : BackendInfo or None
         The trial kernels that ran the trials (:mod:`robocal_uncertainty.kernels`).
+    field_correction : ndarray, shape (n, 3) [m], or None
+        With ``field_correction=True``: the model-error field's conditional mean (kriging), added
+        to `positions` and `mean`; `covariance` is then the kriging covariance plus what the
+        Monte Carlo carries beyond the field's own prior
+        (:func:`~robocal_uncertainty.uncertainty.field_kriging.corrected_statement`).
+    field_std_ratio : ndarray, shape (n,), or None
+        Kriging std over the field's uncorrected std: near 0 next to a calibration pose, 1 far
+        from all of them (there the correction knows nothing and the statement is the field's).
     """
 
     configurations: Array
@@ -128,6 +143,8 @@ class WorkspaceMap:
     calibration: IdentificationResult
     warnings: tuple[str, ...] = field(default=())
     backend: BackendInfo | None = None
+    field_correction: Array | None = None
+    field_std_ratio: Array | None = None
 
     def __len__(self) -> int:
         return int(self.configurations.shape[0])
@@ -302,6 +319,7 @@ def map_workspace(
     workers: int = 1,
     progress: ProgressCallback | None = None,
     backend: str = "numpy",
+    field_correction: bool = False,
 ) -> WorkspaceMap:
     """Monte Carlo uncertainty of the calibrated tool position at many configurations.
 
@@ -334,6 +352,10 @@ def map_workspace(
         processes without one (never change the result); ``progress(done, target)`` after each
         chunk; trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`,
         the same result to rounding).
+    field_correction : bool
+        Add the model-error field's conditional mean given the calibration residuals (kriging,
+        :mod:`~robocal_uncertainty.uncertainty.field_kriging`) to every position, with its
+        covariance in the statement, and record the std ratio per configuration.
 
     Raises
     ------
@@ -358,7 +380,35 @@ def map_workspace(
     blocks = (block_size, chunk_blocks, workers, executor, progress)
     run = _run_map(trial_block, q.shape[0], kept_configs, seed, trials, blocks)
     record = (frame, coverage, seed, block_size, backend)
-    return _assemble_map(model, campaign, q, run, kept_configs, calibration, settings, record)
+    wmap = _assemble_map(model, campaign, q, run, kept_configs, calibration, settings, record)
+    if not field_correction:
+        return wmap
+    basis = calibration_kriging_basis(calibration, campaign, settings.tracker_noise, settings.encoder_noise)
+    return _corrected_statement(wmap, basis)
+
+
+def _corrected_statement(wmap: WorkspaceMap, basis: KrigingBasis) -> WorkspaceMap:
+    """The map with the field's correction (:func:`~.field_kriging.corrected_statement`): positions
+    and means moved by the kriged mean, the kriging covariance in place of the field's prior."""
+    calibration = wmap.calibration
+    p = calibration.estimate
+    kriged = krige(basis, calibration.model.layout, p, wmap.configurations)
+    b0 = calibration.model.layout.base_index
+    rot = rpy_to_matrix(p[b0 + 3 : b0 + 6]).T if wmap.frame == "base" else np.eye(3)
+    shift, covariance = corrected_statement(kriged, wmap.covariance, rot)
+    std = np.sqrt(np.einsum("nii->ni", covariance))
+    for array in (shift, covariance, std):
+        array.setflags(write=False)
+    return dataclasses.replace(
+        wmap,
+        positions=wmap.positions + shift,
+        mean=wmap.mean + shift,
+        covariance=covariance,
+        standard_uncertainty=std,
+        position_uncertainty=np.sqrt(np.einsum("nii->n", covariance)),
+        field_correction=shift,
+        field_std_ratio=kriged.std_ratio,
+    )
 
 
 def _run_map(

@@ -199,3 +199,32 @@ def test_cli_map_errors(tmp_path: Path, capsys) -> None:
     assert "number of configurations must be an integer >= 1" in capsys.readouterr().err
     assert main([*args, "--grid", "2", "3", "--out", str(tmp_path / "b")]) == 1
     assert "grid steps must be 6 integers" in capsys.readouterr().err
+
+
+def test_map_field_correction_moves_positions_by_the_kriged_mean_and_shows_the_std_ratio(ur10, tmp_path: Path) -> None:
+    from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
+    from robocal_uncertainty.uncertainty.field_kriging import calibration_kriging_basis, krige
+
+    model, campaign = ur10
+    campaign = campaign.subset(np.sort(np.random.default_rng(29).permutation(campaign.n_poses)[:80]))
+    calibration = identify(model, campaign)
+    q_t = campaign.joint_positions
+    q = np.vstack((q_t[:3] + 0.01, q_t[3:6] + 0.4))
+    settings = UncertaintySettings(sources=("tracker", "encoder", "residual"))
+    run = {"trials": 200, "seed": 1, "block_size": 100, "calibration": calibration}
+    plain = map_workspace(model, campaign, q, settings=settings, **run)
+    fielded = map_workspace(model, campaign, q, settings=settings, field_correction=True, **run)
+    basis = calibration_kriging_basis(calibration, campaign, TrackerNoise(), EncoderNoise())
+    kriged = krige(basis, model.layout, calibration.estimate, q)
+    np.testing.assert_allclose(fielded.positions - plain.positions, kriged.mean, atol=1e-12)
+    np.testing.assert_allclose(fielded.field_std_ratio, kriged.std_ratio)
+    # The statement: the kriging covariance plus what the Monte Carlo carries beyond the field's prior.
+    extra = fielded.covariance - kriged.covariance
+    assert np.all(np.linalg.eigvalsh(extra) > -1e-18)
+    np.testing.assert_allclose(fielded.position_uncertainty**2, np.trace(fielded.covariance, axis1=1, axis2=2))
+    assert kriged.std_ratio[:3].max() < kriged.std_ratio[3:].min()  # next to a pose it knows more
+    files = write_map_report(fielded, tmp_path)
+    with files.table_csv.open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    np.testing.assert_allclose([float(r["field_std_ratio"]) for r in rows], kriged.std_ratio, atol=1e-4)
+    assert "The model-error field's correction" in files.markdown.read_text(encoding="utf-8")
