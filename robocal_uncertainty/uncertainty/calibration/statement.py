@@ -28,8 +28,11 @@ __all__ = ["state_uncertainty"]
 _BIAS_WARN_RATIO = 0.5
 
 
-def state_uncertainty(prep: Prepared, ev: EvaluationSettings, result: TrialsResult) -> CalibrationUncertainty:
-    """The uncertainty statement of the trials `result` (a ``run_trials`` result)."""
+def state_uncertainty(
+    prep: Prepared, ev: EvaluationSettings, result: TrialsResult, *, per_pose: bool = False
+) -> CalibrationUncertainty:
+    """The uncertainty statement of the trials `result` (a ``run_trials`` result); `per_pose` as
+    for :func:`~robocal_uncertainty.uncertainty.calibration.evaluation.evaluate_uncertainty`."""
     calibration = prep.calibration
     model = calibration.model
     test_q = prep.test_joints
@@ -39,9 +42,9 @@ def state_uncertainty(prep: Prepared, ev: EvaluationSettings, result: TrialsResu
     # Positions and parameters: the same columns (and numbers) with or without orientation.
     samples = result.samples[:, : dim * n_test + k]
     summary = summarize(samples, ev.coverage)
-    gum = gum_poses(prep, summary, ev.coverage, ev.n_dig)
+    gum = gum_poses(prep, summary, ev.coverage, ev.n_dig, per_pose=per_pose)
     orientations = (
-        orientation_uncertainty(prep, result.samples, summary, ev.coverage, ev.n_dig)
+        orientation_uncertainty(prep, result.samples, summary, ev.coverage, ev.n_dig, per_pose=per_pose)
         if ev.orientation
         else [None] * n_test
     )
@@ -50,10 +53,10 @@ def state_uncertainty(prep: Prepared, ev: EvaluationSettings, result: TrialsResu
     for i in range(n_test):
         cols = slice(dim * i, dim * (i + 1))
         axes = summary.outputs[cols]
+        region: EllipsoidalRegion | None = None
         try:
-            region: EllipsoidalRegion | None = coverage_region(result.samples[:, cols], ev.coverage)
+            region = coverage_region(result.samples[:, cols], ev.coverage) if not per_pose else None
         except (InputError, ConfigError) as err:
-            region = None
             warns.append(f"test configuration {i}: no coverage region ({err})")
         poses.append(
             PoseUncertainty(

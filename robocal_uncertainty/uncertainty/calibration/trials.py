@@ -72,10 +72,15 @@ class CalibrationTrials:
 
     def __call__(self, rng: np.random.Generator, n: int) -> Array:
         """Model values of n trials, shape (n, d n_test + k)."""
-        # Draw every input of the block first, each source from its own stream, so a
-        # source's values depend on the block and the source alone; the sub-batches
-        # below only bound memory.
-        values = [source.draw(source_generator(rng, stream_id(source.name)), n) for source in self.sources]
+        # Every source draws from its own stream, so a source's values depend on the block and
+        # the source alone; the sub-batches below only bound memory. A source whose draws are
+        # the same row by row (draws_by_rows) draws each sub-batch's rows when it is applied;
+        # the others draw the whole block first.
+        streams = [source_generator(rng, stream_id(source.name)) for source in self.sources]
+        values: list[Array | np.random.Generator] = [
+            stream if getattr(source, "draws_by_rows", False) else source.draw(stream, n)
+            for source, stream in zip(self.sources, streams)
+        ]
         n_test = self.test_joints.shape[0]
         k = self.x_hat.size
         out = np.empty((n, self.n_outputs))
@@ -88,8 +93,10 @@ class CalibrationTrials:
         self._evaluate_tests(params, qt_dev, pred, out)
         return out
 
-    def _reidentify(self, values: list[Array], n: int) -> tuple[Array, Array | None, Array | None]:
-        """Apply the drawn `values` and re-identify, in fixed sub-batches.
+    def _reidentify(
+        self, values: list[Array | np.random.Generator], n: int
+    ) -> tuple[Array, Array | None, Array | None]:
+        """Apply the drawn `values` (or draw from a source's generator) and re-identify, in fixed sub-batches.
 
         Returns the full parameter vector of every trial, shape (n, n_params), and the
         test-joint deviations and prediction offsets the sources set (None when none did).
@@ -102,7 +109,7 @@ class CalibrationTrials:
             t = sl.stop - sl.start
             batch = TrialBatch(n_trials=t)
             for source, value in zip(self.sources, values):
-                source.apply(value[sl], batch)
+                source.apply(source.draw(value, t) if isinstance(value, np.random.Generator) else value[sl], batch)
             # Every source perturbs the measured points with zero-mean errors, so the trials
             # stay centred on the calibration.
             # Source deviations are in the residual coordinates of the measurement type.

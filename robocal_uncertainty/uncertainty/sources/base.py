@@ -17,7 +17,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.montecarlo.distributions import Distribution
+from robocal_uncertainty.montecarlo.distributions import (
+    Distribution,
+    IndependentCopies,
+    IndependentNormal,
+    IndependentRectangular,
+    Normal,
+    Rectangular,
+)
 
 if TYPE_CHECKING:
     from robocal_uncertainty.uncertainty.sources.settings import UncertaintySettings
@@ -130,9 +137,14 @@ class TrialBatch:
     weights: Array | None = None
 
     def add(self, name: str, deviations: Array) -> None:
-        """Add ``deviations`` (shape (n_trials, ...)) to the additive field ``name``."""
+        """Add ``deviations`` (shape (n_trials, ...)) to the additive field ``name``.
+
+        The first source to touch a field hands its array over (no copy: a sub-batch of a
+        632-pose campaign holds megabytes per field); nothing writes into a batch's fields or
+        into a source's drawn values afterwards, a second source makes a new sum.
+        """
         current = getattr(self, name)
-        setattr(self, name, deviations.copy() if current is None else current + deviations)
+        setattr(self, name, deviations if current is None else current + deviations)
 
 
 OptionGroup = Literal["noise", "selection", "model", "session"]
@@ -310,6 +322,22 @@ class AdditiveSource:
 
     def draw(self, rng: np.random.Generator, n: int) -> Array:
         return np.asarray(self.distribution.sample(rng, n), dtype=np.float64).reshape(n, self.distribution.size)
+
+    @property
+    def draws_by_rows(self) -> bool:
+        """Whether ``draw(rng, a)`` then ``draw(rng, b)`` are the rows of ``draw(rng, a + b)``, bit for bit.
+
+        True for the distributions drawn by one uniform or normal fill of the generator, then
+        scaled value by value (each value takes the next values of the stream, nothing is
+        buffered between calls): a trial block may then draw them sub-batch by sub-batch, in
+        arrays that stay in the cache, instead of all its trials at once (hundreds of MB for
+        a 632-pose campaign, most of their cost the pages' first touch). False where a call
+        draws integers (a buffered 32-bit stream) or multiplies rows by a matrix.
+        """
+        dist = self.distribution
+        if isinstance(dist, IndependentCopies):
+            dist = dist.distribution
+        return isinstance(dist, (IndependentRectangular, IndependentNormal, Normal, Rectangular))
 
     def apply(self, values: Array, batch: TrialBatch) -> None:
         start = 0
