@@ -189,8 +189,9 @@ def future_coverage_6dof(
     return float(np.mean(inside[:, :3])), float(np.mean(inside[:, 3:]))
 
 
-def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
-    """The README's campaigns: 53 random poses of each series and checks of the others (seeded)."""
+def write_example(series: dict[str, Campaign], out: Path, seed: int, series6: dict[str, Campaign]) -> None:
+    """The README's campaigns: 53 random poses of each series and checks of the others (seeded);
+    with `series6` (``--six-dof``) also the same poses with their T-Mac orientations (``*_6dof.mcap``)."""
     from robocal_uncertainty.bagio import write_campaign
 
     out.mkdir(parents=True, exist_ok=True)
@@ -202,6 +203,9 @@ def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
         for stem, idx in parts.items():
             write_campaign(out / f"{stem}.mcap", series[name].subset(np.sort(idx)))
             print(f"wrote {out / stem}.mcap ({idx.size} poses of series {name})")
+            if series6:
+                write_campaign(out / f"{stem}_6dof.mcap", series6[name].subset(np.sort(idx)))
+                print(f"wrote {out / stem}_6dof.mcap (the same poses, positions and orientations)")
 
 
 def six_dof_study(
@@ -258,7 +262,8 @@ def parse_args() -> argparse.Namespace:
         "--write-example",
         metavar="DIR",
         help="only write the README's example campaigns to DIR (b53.mcap: 53 random poses of B; b10.mcap, "
-        "d10.mcap, d200.mcap: checks of B's other poses and of D; d53.mcap likewise) and stop",
+        "d10.mcap, d200.mcap: checks of B's other poses and of D; d53.mcap likewise; with --six-dof also *_6dof.mcap, "
+        "the same poses with their orientations) and stop",
     )
     return parser.parse_args()
 
@@ -273,7 +278,7 @@ def main() -> None:
         else {}
     )
     if args.write_example:
-        write_example(series, Path(args.write_example), args.seed)
+        write_example(series, Path(args.write_example), args.seed, series6)
         return
     print("series: " + ", ".join(f"{k} {v.n_poses} poses" for k, v in series.items()))
     print(
