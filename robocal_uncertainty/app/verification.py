@@ -128,7 +128,8 @@ def calibrate_session(
     )  # fmt: skip
     state, adequacy, warnings = _session_record(*point, options)
     if validate_level and campaign.measurement.measures_orientation and point[2] is not result:
-        state = _with_orientation_level(model, campaign, state, lambda_, retool, warnings)
+        weights = getattr(result.measurement, "weight_std", None)
+        state = _with_orientation_level(model, campaign, state, lambda_, retool, weights, warnings)
     if later_sessions:
         between = estimate_between_sessions(
             point[2].model, state, list(later_sessions), retool=retool, reference_campaign=point[1]
@@ -186,12 +187,15 @@ def _with_orientation_level(
     state: SessionState,
     lambda_: str | float,
     retool: bool,
+    weight_std: tuple[float, ...] | None,
     warnings: list[str],
 ) -> SessionState:
     """The session record with a 6-DOF calibration's validated orientation level (``verify``'s
     reference for the orientations of a 6-DOF check)."""
     try:
-        level = orientation_validated_level(model.with_tool_rotation(), campaign, lambda_=lambda_, retool=retool)
+        level = orientation_validated_level(
+            model.with_tool_rotation(), campaign, lambda_=lambda_, retool=retool, weight_std=weight_std
+        )
     except CalibError as err:
         warnings.append(f"no validated orientation level (verify then checks the positions alone): {err}")
         return state

@@ -17,7 +17,9 @@ times what the T-Mac's stated noise explains.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +27,7 @@ from numpy.typing import NDArray
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import fit_rigid_base, identify
 from robocal_uncertainty.core.kinematics import forward_points
+from robocal_uncertainty.core.pose_measurement import PoseMeasurement
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import BASE_NAMES, TOOL_NAMES, LevelTest, ToleranceCheck, ValidatedLevel
 from robocal_uncertainty.errors import IdentifiabilityError, InputError
@@ -173,6 +176,7 @@ def orientation_validated_level(
     folds: int = 5,
     repeats: int = 4,
     seed: int = 0,
+    weight_std: tuple[float, ...] | None = None,
 ) -> ValidatedLevel:
     """The 6-DOF calibration session's orientation error level on its own held-out poses.
 
@@ -188,15 +192,29 @@ def orientation_validated_level(
         Nominal model with the tool rotation.
     campaign : Campaign
         The 6-DOF calibration campaign.
+    weight_std : tuple of 6 float [m, m, m, rad, rad, rad], optional
+        The full calibration's weights (its variance components): each fold is calibrated with
+        them as stated, one fit instead of re-estimating them (ten fits) on fewer poses.
+        None: every fold estimates its own.
     """
     n = campaign.n_poses
+    weighting: Literal["stated", "variance_components"] = "variance_components"
+    if weight_std is not None and isinstance(campaign.measurement, PoseMeasurement):
+        meas = dataclasses.replace(
+            campaign.measurement,
+            position_std=(float(weight_std[0]), float(weight_std[1]), float(weight_std[2])),
+            rotation_std=(float(weight_std[3]), float(weight_std[4]), float(weight_std[5])),
+            weight_std=None,
+        )  # fmt: skip
+        campaign = dataclasses.replace(campaign, measurement=meas)
+        weighting = "stated"
     rng = np.random.default_rng(seed)
     levels, kepts, zs = [], [], []
     for _ in range(repeats):
         order = rng.permutation(n)
         for part in np.array_split(order, folds):
             train = campaign.subset(np.sort(np.setdiff1d(order, part)))
-            cal = identify(model, train, lambda_=lambda_, accept_unconverged=True)
+            cal = identify(model, train, lambda_=lambda_, accept_unconverged=True, weighting=weighting)
             level, kept, _, z = orientation_level(cal.model, campaign.subset(np.sort(part)), retool=retool)
             levels.append(level)
             kepts.append(kept)
