@@ -36,6 +36,7 @@ from robocal_uncertainty.uncertainty.sessions.between import (
     identifiable_effects,
     with_between_sessions,
 )
+from robocal_uncertainty.uncertainty.sessions.class_prior import ClassPrior, pooled_with_prior, prior_between_sessions
 from robocal_uncertainty.uncertainty.sessions.cross_validation import cross_validated_model_error
 from robocal_uncertainty.uncertainty.sessions.orientation import orientation_check, orientation_validated_level
 from robocal_uncertainty.uncertainty.sessions.state import MODEL_ERROR_SOURCE, session_state
@@ -79,6 +80,7 @@ def calibrate_session(
     retool: bool = True,
     correlated_model_error: bool = True,
     validate_level: bool = True,
+    class_prior: ClassPrior | None = None,
 ) -> SessionCalibration:
     """Identify `campaign` and record the session for verification and later sessions.
 
@@ -116,6 +118,11 @@ def calibrate_session(
         check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level.validated_level`,
         four splits into five folds):
         ``verify`` tests a check against it and states the check's error ratio.
+    class_prior : ClassPrior, optional
+        The stated between-session spread of the robot class
+        (:mod:`~robocal_uncertainty.uncertainty.sessions.class_prior`): with one session the
+        statement for a future session uses it; with `later_sessions` it is pooled with their
+        estimate. None (default): one session's statement is for that session only.
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     point = _point_calibration(model, campaign, result, lambda_)
@@ -134,7 +141,13 @@ def calibrate_session(
         between = estimate_between_sessions(
             point[2].model, state, list(later_sessions), retool=retool, reference_campaign=point[1]
         )
+        if class_prior is not None:
+            between = pooled_with_prior(between, class_prior)
         state = with_between_sessions(state, between)
+    elif class_prior is not None:
+        state = with_between_sessions(
+            state, prior_between_sessions(point[2].model, point[1], class_prior, retool=retool)
+        )
     if point[2] is not result and state.frame == "tracker":
         # Tracker move and tool change are reported against the parameters the file holds.
         b0 = result.model.layout.base_index
