@@ -317,6 +317,9 @@ def six_dof_checks(
             right = sum((t == "consistent") == truth for t in told)
             summary.setdefault(f"{key} three-way right", []).append(right / len(threes))
             summary.setdefault(f"{key} three-way wrong", []).append((len(told) - right) / len(threes))
+            summary.setdefault(f"{key} margin test agrees", []).append(
+                float(np.mean([(t != "drifted") == truth for t in threes]))
+            )
             cells.append(f"{n}: {sum(verdicts)}/{len(verdicts)} (orientations x{np.median(ratios):.2f})")
         print(
             f"  6-DOF {which:5s} checks consistent: " + "; ".join(cells)
@@ -444,6 +447,9 @@ def main() -> None:
                     summary.setdefault(f"{key} three-way inconclusive", []).append(1.0 - len(told) / len(threes))
                     summary.setdefault(f"{key} margin test not drifted", []).append(
                         float(np.mean([t != "drifted" for t in threes]))
+                    )
+                    summary.setdefault(f"{key} margin test agrees (coverage reference)", []).append(
+                        float(np.mean([(t != "drifted") == ref_ok for t in threes]))
                     )
                     cells.append(
                         f"{n}: {sum(verdicts)}/{len(verdicts)} (p {np.median(ps):.2g}, x{np.median(ratios):.2f})"
