@@ -81,6 +81,13 @@ def session_lines(state: Any) -> list[str]:
         f"{len(state.covariance_names)} parameters with covariance, model error u = "
         f"({me[0]:.1f}, {me[1]:.1f}, {me[2]:.1f}) um per axis (base frame, from {origin})"
     ]
+    orient = state.orientation_level
+    if orient is not None:
+        lines.append(
+            f"6-DOF: verify also tests a 6-DOF check's orientations against their validated level "
+            f"{np.sqrt(orient.level) * 1e3:.3f} mrad per component ({orient.dof * orient.dof_factor:.0f} degrees of "
+            f"freedom; {orient.repeats} splits into {orient.folds} folds of the {orient.poses} poses)"
+        )
     if state.scope == "session":
         lines.append(
             "statement scope: this session only (one session: a later tracker set-up, probe mounting or drift is "

@@ -93,6 +93,11 @@ def test_a_6dof_calibration_is_verified_on_positions_and_orientations(tmp_path: 
     ref = cal.state.orientation_level
     assert ref.folds == 5 and ref.repeats == 4 and ref.poses == 30
     assert 0.5 < np.sqrt(ref.level) / 2e-4 < 1.6  # the simulated orientation noise, 0.2 mrad
+    from robocal_uncertainty.cli.calibrate import session_lines
+
+    assert any(
+        line.startswith("6-DOF: verify also tests a 6-DOF check's orientations") for line in session_lines(cal.state)
+    )
     path = tmp_path / "cal6.json"
     write_calibration(path, cal.result, robot=model.name, session=cal.state)
     assert json.loads(path.read_text())["session"]["orientation_level"]["level"] == pytest.approx(ref.level)
