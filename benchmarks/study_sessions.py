@@ -30,8 +30,15 @@ is its complement), the cross-session agreement of the verdicts with the full se
 (the level test's and the 91 % rule's), the three-way rates, and the coverage of the
 future-session statement.
 
+With ``--six-dof`` each draw is also calibrated 6-DOF (positions and T-Mac orientations of the same
+53 poses, ``calibrate --json``: the point record and the validated orientation level) and checked
+by ``verify --retool`` on 6-DOF checks of 10, 20, 50 and 200 poses of both series (positions and
+orientations, each half at 2.5 %), against the full series' 91 % rule on positions and rotations;
+``--six-dof-only`` skips the point checks.
+
     python benchmarks/study_sessions.py                      # 4 calibrations x 8 checks per size
     python benchmarks/study_sessions.py --calibrations 8 --checks 16
+    python benchmarks/study_sessions.py --six-dof --six-dof-only   # the 6-DOF verify study (about 8 min)
 
 Run time: about 1 minute per calibration on two loaded cores.
 """
