@@ -30,8 +30,15 @@ is its complement), the cross-session agreement of the verdicts with the full se
 (the level test's and the 91 % rule's), the three-way rates, and the coverage of the
 future-session statement.
 
+With ``--six-dof`` each draw is also calibrated 6-DOF (positions and T-Mac orientations of the same
+53 poses, ``calibrate --json``: the point record and the validated orientation level) and checked
+by ``verify --retool`` on 6-DOF checks of 10, 20, 50 and 200 poses of both series (positions and
+orientations, each half at 2.5 %), against the full series' 91 % rule on positions and rotations;
+``--six-dof-only`` skips the point checks.
+
     python benchmarks/study_sessions.py                      # 4 calibrations x 8 checks per size
     python benchmarks/study_sessions.py --calibrations 8 --checks 16
+    python benchmarks/study_sessions.py --six-dof --six-dof-only   # the 6-DOF verify study (about 8 min)
 
 Run time: about 1 minute per calibration on two loaded cores.
 """
@@ -39,6 +46,7 @@ Run time: about 1 minute per calibration on two loaded cores.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -48,15 +56,17 @@ from scipy import stats
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from robocal_uncertainty.app.verification import calibrate_session
+from robocal_uncertainty.app.verification import calibrate_session, with_orientation
 from robocal_uncertainty.core import EncoderNoise, TrackerNoise, load_robot_model
 from robocal_uncertainty.core.campaign import Campaign
 from robocal_uncertainty.core.identification import fit_rigid_base, identify
 from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
+from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import BASE_NAMES, STATEMENT_TOLERANCE, TOOL_NAMES, ValidatedLevel
 from robocal_uncertainty.importers import read_tracker_csv
 from robocal_uncertainty.uncertainty.sessions.level import tolerance_check
+from robocal_uncertainty.uncertainty.sessions.orientation import orientation_level
 from robocal_uncertainty.uncertainty.sessions.verification import verify_session
 
 SERIES = {
@@ -189,8 +199,9 @@ def future_coverage_6dof(
     return float(np.mean(inside[:, :3])), float(np.mean(inside[:, 3:]))
 
 
-def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
-    """The README's campaigns: 53 random poses of each series and checks of the others (seeded)."""
+def write_example(series: dict[str, Campaign], out: Path, seed: int, series6: dict[str, Campaign]) -> None:
+    """The README's campaigns: 53 random poses of each series and checks of the others (seeded);
+    with `series6` (``--six-dof``) also the same poses with their T-Mac orientations (``*_6dof.mcap``)."""
     from robocal_uncertainty.bagio import write_campaign
 
     out.mkdir(parents=True, exist_ok=True)
@@ -202,6 +213,9 @@ def write_example(series: dict[str, Campaign], out: Path, seed: int) -> None:
         for stem, idx in parts.items():
             write_campaign(out / f"{stem}.mcap", series[name].subset(np.sort(idx)))
             print(f"wrote {out / stem}.mcap ({idx.size} poses of series {name})")
+            if series6:
+                write_campaign(out / f"{stem}_6dof.mcap", series6[name].subset(np.sort(idx)))
+                print(f"wrote {out / stem}_6dof.mcap (the same poses, positions and orientations)")
 
 
 def six_dof_study(
@@ -222,6 +236,9 @@ def six_dof_study(
     `away` series (`away_poses` poses) after 10-pose re-registrations (the same random picks as the
     3-DOF study of `calibration`)."""
     six = identify(model.with_tool_rotation(), series6[home].subset(np.sort(order[:N_CAL])), accept_unconverged=True)
+    six_dof_checks(
+        model, series6, home, away, order, seed=seed, calibration=calibration, checks=checks, summary=summary
+    )
     cov6 = np.array(
         [
             future_coverage_6dof(
@@ -241,6 +258,82 @@ def six_dof_study(
     )
 
 
+def orientation_coverage(model6: RobotModel, campaign6: Campaign, ref: ValidatedLevel) -> float:
+    """Fraction of `campaign6`'s rotation components inside the calibration's orientation statement
+    after re-registering tracker pose, tool point and tool rotation on every pose:
+    ``+-t_nu(0.975) sqrt(level_ref (1 - h_i))`` (as :func:`statement_coverage` for the positions)."""
+    level, _, _, z = orientation_level(model6, campaign6, retool=True)
+    return float(np.mean(np.abs(z) * np.sqrt(level / ref.level) <= stats.t.ppf(0.975, ref.dof * ref.dof_factor)))
+
+
+def six_dof_checks(
+    model: RobotModel,
+    series6: dict[str, Campaign],
+    home: str,
+    away: str,
+    order: np.ndarray,
+    *,
+    seed: int,
+    calibration: int,
+    checks: int,
+    summary: dict[str, list[float]],
+) -> None:
+    """``verify --retool`` of a 6-DOF calibration (``calibrate --json`` of the same 53 poses with their
+    orientations) on 6-DOF checks of 10, 20, 50 and 200 poses of its own series and of the other:
+    consistent rates (positions and orientations together, each at 2.5 %), and agreement with the full
+    series' verdict by the 91 % rule applied to positions and orientations (consistent when both hold)."""
+    cal = calibrate_session(
+        model.with_tool_rotation(),
+        series6[home].subset(np.sort(order[:N_CAL])),
+        tracker_noise=TrackerNoise(),
+        encoder_noise=EncoderNoise(),
+    )
+    state = cal.state
+    assert state is not None and state.validated_level is not None and state.orientation_level is not None
+    ref, oref = state.validated_level, state.orientation_level
+    six = cal.result.model
+    pools = {"same": (series6[home], order[N_CAL:]), "other": (series6[away], np.arange(series6[away].n_poses))}
+    for which, (camp, pool) in pools.items():
+        full = camp.subset(np.sort(pool))
+        cover_p = statement_coverage(six, dataclasses.replace(
+            full, points=np.asarray(full.measurement.positions(full.points)), measurement=POINT, point_std=None
+        ), ref)  # fmt: skip
+        cover_o = orientation_coverage(six, full, oref)
+        truth = bool(cover_p >= 0.95 - STATEMENT_TOLERANCE and cover_o >= 0.95 - STATEMENT_TOLERANCE)
+        key0 = f"6-DOF {home}->{home if which == 'same' else away}"
+        summary.setdefault(f"{key0} full series consistent (positions and rotations >= 91 %)", []).append(float(truth))
+        cells = []
+        for n in SIZES:
+            verdicts, threes, ratios = [], [], []
+            for k in range(checks):
+                rng = np.random.default_rng([seed, ord(home), calibration, n, k, len(which), 6])
+                check = camp.subset(np.sort(rng.choice(pool, n, replace=False)))
+                v = verify_session(six, state, check, retool=True, significance=0.025, null_trials=200, seed=k)
+                v = with_orientation(v, six, state, check, retool=True, significance=0.05)
+                verdicts.append(v.consistent)
+                ratios.append(v.orientation.level_test.ratio)
+                assert v.tolerance is not None
+                tri = {v.tolerance.verdict, v.orientation.tolerance.verdict}
+                threes.append(
+                    "drifted" if "drifted" in tri else ("consistent" if tri == {"consistent"} else "inconclusive")
+                )
+            key = f"{key0} {n}"
+            summary.setdefault(f"{key} consistent", []).append(float(np.mean(verdicts)))
+            summary.setdefault(f"{key} agree", []).append(float(np.mean(np.array(verdicts) == truth)))
+            told = [t for t in threes if t != "inconclusive"]
+            right = sum((t == "consistent") == truth for t in told)
+            summary.setdefault(f"{key} three-way right", []).append(right / len(threes))
+            summary.setdefault(f"{key} three-way wrong", []).append((len(told) - right) / len(threes))
+            summary.setdefault(f"{key} margin test agrees", []).append(
+                float(np.mean([(t != "drifted") == truth for t in threes]))
+            )
+            cells.append(f"{n}: {sum(verdicts)}/{len(verdicts)} (orientations x{np.median(ratios):.2f})")
+        print(
+            f"  6-DOF {which:5s} checks consistent: " + "; ".join(cells)
+            + f" (full series inside: positions {cover_p * 100:.1f} %, rotations {cover_o * 100:.1f} %)"
+        )  # fmt: skip
+
+
 def parse_args() -> argparse.Namespace:
     """The study's command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -255,10 +348,16 @@ def parse_args() -> argparse.Namespace:
         "session's positions and orientations after a 10-pose re-registration",
     )
     parser.add_argument(
+        "--six-dof-only",
+        action="store_true",
+        help="with --six-dof: skip the point checks (the 6-DOF calibrations, checks and coverage only)",
+    )
+    parser.add_argument(
         "--write-example",
         metavar="DIR",
         help="only write the README's example campaigns to DIR (b53.mcap: 53 random poses of B; b10.mcap, "
-        "d10.mcap, d200.mcap: checks of B's other poses and of D; d53.mcap likewise) and stop",
+        "d10.mcap, d200.mcap: checks of B's other poses and of D; d53.mcap likewise; with --six-dof also *_6dof.mcap, "
+        "the same poses with their orientations) and stop",
     )
     return parser.parse_args()
 
@@ -273,7 +372,7 @@ def main() -> None:
         else {}
     )
     if args.write_example:
-        write_example(series, Path(args.write_example), args.seed)
+        write_example(series, Path(args.write_example), args.seed, series6)
         return
     print("series: " + ", ".join(f"{k} {v.n_poses} poses" for k, v in series.items()))
     print(
@@ -315,8 +414,12 @@ def main() -> None:
                 f"{rule.tolerated_ratio:.3f}; a check says consistent under that rule from {rule.poses_needed} poses"
             )
             for which, camp, pool, truth in (
-                ("same", series[home], order[N_CAL:], ok_home),
-                ("other", series[away], np.arange(series[away].n_poses), ok_away),
+                ()
+                if args.six_dof_only
+                else (
+                    ("same", series[home], order[N_CAL:], ok_home),
+                    ("other", series[away], np.arange(series[away].n_poses), ok_away),
+                )
             ):
                 cells = []
                 for n in SIZES:
@@ -352,17 +455,26 @@ def main() -> None:
                     summary.setdefault(f"{key} margin test not drifted", []).append(
                         float(np.mean([t != "drifted" for t in threes]))
                     )
+                    summary.setdefault(f"{key} margin test agrees (coverage reference)", []).append(
+                        float(np.mean([(t != "drifted") == ref_ok for t in threes]))
+                    )
                     cells.append(
                         f"{n}: {sum(verdicts)}/{len(verdicts)} (p {np.median(ps):.2g}, x{np.median(ratios):.2f})"
                     )
                 print(f"  {which:5s} checks consistent: " + "; ".join(cells))
-            covs = []
-            for k in range(args.checks):
-                pick = np.random.default_rng([args.seed, ord(away), c, k]).choice(
-                    series[away].n_poses, 10, replace=False
+            covs = [
+                future_coverage(
+                    calibrated,
+                    series[away],
+                    np.sort(
+                        np.random.default_rng([args.seed, ord(away), c, k]).choice(
+                            series[away].n_poses, 10, replace=False
+                        )
+                    ),
+                    ref.dof_factor,
                 )
-                covs.append(future_coverage(calibrated, series[away], np.sort(pick), ref.dof_factor))
-            summary.setdefault(f"{home}->{away} future coverage", []).append(float(np.mean(covs)))
+                for k in range(0 if args.six_dof_only else args.checks)
+            ]
             if args.six_dof:
                 six_dof_study(
                     model,
@@ -377,10 +489,12 @@ def main() -> None:
                     checks=args.checks,
                     summary=summary,
                 )
-            print(
-                f"  statement for {away} after a 10-pose re-registration: "
-                f"{np.mean(covs) * 100:.1f} % of its other points' components inside 95 %"
-            )
+            if covs:
+                summary.setdefault(f"{home}->{away} future coverage", []).append(float(np.mean(covs)))
+                print(
+                    f"  statement for {away} after a 10-pose re-registration: "
+                    f"{np.mean(covs) * 100:.1f} % of its other points' components inside 95 %"
+                )
     print("\nsummary (mean over calibrations)")
     for key, values in summary.items():
         print(f"  {key}: {np.mean(values) * 100:.1f} % (calibrations: {', '.join(f'{v * 100:.0f}' for v in values)})")

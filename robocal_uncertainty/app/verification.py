@@ -28,7 +28,7 @@ from robocal_uncertainty.core.identification import IdentificationResult, identi
 from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.measurement import POINT
 from robocal_uncertainty.core.robot_model import RobotModel
-from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState
+from robocal_uncertainty.core.session import DEFAULT_NULL_TRIALS, DEFAULT_SIGNIFICANCE, SessionState, Verification
 from robocal_uncertainty.errors import CalibError, ConfigError
 from robocal_uncertainty.uncertainty.model_adequacy import ModelAdequacy
 from robocal_uncertainty.uncertainty.sessions.between import (
@@ -36,7 +36,9 @@ from robocal_uncertainty.uncertainty.sessions.between import (
     identifiable_effects,
     with_between_sessions,
 )
+from robocal_uncertainty.uncertainty.sessions.class_prior import ClassPrior, pooled_with_prior, prior_between_sessions
 from robocal_uncertainty.uncertainty.sessions.cross_validation import cross_validated_model_error
+from robocal_uncertainty.uncertainty.sessions.orientation import orientation_check, orientation_validated_level
 from robocal_uncertainty.uncertainty.sessions.state import MODEL_ERROR_SOURCE, session_state
 from robocal_uncertainty.uncertainty.sessions.validated_level import validated_level
 from robocal_uncertainty.uncertainty.sessions.verification import verify_session
@@ -49,6 +51,7 @@ __all__ = [
     "load_session_calibration",
     "scope_text",
     "verify",
+    "with_orientation",
 ]
 
 
@@ -77,6 +80,7 @@ def calibrate_session(
     retool: bool = True,
     correlated_model_error: bool = True,
     validate_level: bool = True,
+    class_prior: ClassPrior | None = None,
 ) -> SessionCalibration:
     """Identify `campaign` and record the session for verification and later sessions.
 
@@ -114,6 +118,11 @@ def calibrate_session(
         check (:func:`~robocal_uncertainty.uncertainty.sessions.validated_level.validated_level`,
         four splits into five folds):
         ``verify`` tests a check against it and states the check's error ratio.
+    class_prior : ClassPrior, optional
+        The stated between-session spread of the robot class
+        (:mod:`~robocal_uncertainty.uncertainty.sessions.class_prior`): with one session the
+        statement for a future session uses it; with `later_sessions` it is pooled with their
+        estimate. None (default): one session's statement is for that session only.
     """
     result = identify(model, campaign, lambda_=lambda_, accept_unconverged=accept_unconverged)
     point = _point_calibration(model, campaign, result, lambda_)
@@ -125,11 +134,20 @@ def calibrate_session(
         correlated_model_error, validate_level,
     )  # fmt: skip
     state, adequacy, warnings = _session_record(*point, options)
+    if validate_level and campaign.measurement.measures_orientation and point[2] is not result:
+        weights = getattr(result.measurement, "weight_std", None)
+        state = _with_orientation_level(model, campaign, state, lambda_, retool, weights, warnings)
     if later_sessions:
         between = estimate_between_sessions(
             point[2].model, state, list(later_sessions), retool=retool, reference_campaign=point[1]
         )
+        if class_prior is not None:
+            between = pooled_with_prior(between, class_prior)
         state = with_between_sessions(state, between)
+    elif class_prior is not None:
+        state = with_between_sessions(
+            state, prior_between_sessions(point[2].model, point[1], class_prior, retool=retool)
+        )
     if point[2] is not result and state.frame == "tracker":
         # Tracker move and tool change are reported against the parameters the file holds.
         b0 = result.model.layout.base_index
@@ -174,6 +192,29 @@ def _point_calibration(
         "tool points against it with this calibration's parameters"
     )
     return model, campaign, result, [warning]
+
+
+def _with_orientation_level(
+    model: RobotModel,
+    campaign: Campaign,
+    state: SessionState,
+    lambda_: str | float,
+    retool: bool,
+    weight_std: tuple[float, ...] | None,
+    warnings: list[str],
+) -> SessionState:
+    """The session record with a 6-DOF calibration's validated orientation level (``verify``'s
+    reference for the orientations of a 6-DOF check)."""
+    try:
+        level = orientation_validated_level(
+            model.with_tool_rotation(), campaign, lambda_=lambda_, retool=retool, weight_std=weight_std
+        )
+    except CalibError as err:
+        warnings.append(f"no validated orientation level (verify then checks the positions alone): {err}")
+        return state
+    extra = dict(state.extra)
+    extra["orientation_level"] = level.to_dict()
+    return dataclasses.replace(state, extra=extra)
 
 
 def _session_record(
@@ -299,18 +340,25 @@ def verify(
     """
     calibrated, state, _ = load_session_calibration(model, calibration_path)
     names = identifiable_effects(calibrated, check, retool=retool) if effects else ()
+    # A 6-DOF calibration on a 6-DOF check: positions and orientations, each half at half the
+    # significance (Bonferroni), so the check's false-alarm rate stays at `significance`.
+    six_dof = state.orientation_level is not None and calibrated.tool_rotation
+    six_dof = six_dof and check.measurement.measures_orientation
+    half = significance / 2.0 if six_dof else significance
     result = verify_session(
         calibrated,
         state,
         check,
         retool=retool,
-        significance=significance,
+        significance=half,
         tracker_noise=tracker_noise,
         encoder_noise=encoder_noise,
         null_trials=null_trials,
         seed=seed,
         effects=names,
     )
+    if six_dof:
+        result = with_orientation(result, calibrated, state, check, retool=retool, significance=significance)
     return VerificationRun(
         verification=result,
         calibration_path=Path(calibration_path),
@@ -318,4 +366,42 @@ def verify(
         state=state,
         robot=model.name,
         scope=state.scope,
+    )
+
+
+def with_orientation(
+    result: Verification, calibrated: RobotModel, state: SessionState, check: Campaign, *, retool: bool,
+    significance: float,
+) -> Verification:  # fmt: skip
+    """`result` (the positions, tested at half `significance`) with the orientation half added.
+
+    The check is consistent when both halves are; the verdict line names the half that drifted.
+    """
+    reference = state.orientation_level
+    if reference is None:
+        return result
+    half = significance / 2.0
+    orient = orientation_check(calibrated, reference, check, retool=retool, significance=half)
+    t = orient.level_test
+    i0, i1 = t.ratio_interval
+    words = (
+        f"orientation errors {t.ratio:.2f}x the calibration session's (95 % interval {i0:.2f}-{i1:.2f}; "
+        f"F test on {t.check_dof:.0f} and {t.reference_dof:.0f} degrees of freedom, p = {t.p_value:.3g} "
+        f"{'>=' if orient.consistent else '<'} {half:g})"
+    )
+    consistent = result.consistent and orient.consistent
+    if orient.consistent:
+        verdict = f"{result.verdict}; {words}"
+    elif result.consistent:
+        excess = float(np.sqrt(max(orient.level - reference.level, 0.0)))
+        verdict = (
+            f"drifted: the tool orientations deviate from the calibration by about {excess * 1e3:.3g} mrad per "
+            f"axis beyond its validated level: {words}; positions within theirs: {result.verdict.split(': ', 2)[-1]}"
+            "; re-calibrate"
+        )
+    else:
+        verdict = f"{result.verdict}; {words}"
+    note = f"6-DOF check: positions and orientations each tested at {half:g} (together {significance:g}, Bonferroni)"
+    return dataclasses.replace(
+        result, consistent=consistent, verdict=verdict, orientation=orient, warnings=(*result.warnings, note)
     )

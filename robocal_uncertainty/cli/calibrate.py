@@ -36,6 +36,13 @@ def register(sub: Any) -> None:
         "component, so that the statement holds for a future session",
     )
     p.add_argument(
+        "--class-prior",
+        metavar="PRIOR",
+        help="a stated between-session spread for the robot class (shipped: ur10; or a YAML file with its units and "
+        "source): with one session the statement then holds for a future session; with --sessions it is pooled "
+        "with their estimate (default: none, one session's statement is for that session only)",
+    )
+    p.add_argument(
         "--same-tool",
         action="store_true",
         help="the probe was not remounted between the sessions (default: re-register the tool point on each)",
@@ -74,6 +81,13 @@ def session_lines(state: Any) -> list[str]:
         f"{len(state.covariance_names)} parameters with covariance, model error u = "
         f"({me[0]:.1f}, {me[1]:.1f}, {me[2]:.1f}) um per axis (base frame, from {origin})"
     ]
+    orient = state.orientation_level
+    if orient is not None:
+        lines.append(
+            f"6-DOF: verify also tests a 6-DOF check's orientations against their validated level "
+            f"{np.sqrt(orient.level) * 1e3:.3f} mrad per component ({orient.dof * orient.dof_factor:.0f} degrees of "
+            f"freedom; {orient.repeats} splits into {orient.folds} folds of the {orient.poses} poses)"
+        )
     if state.scope == "session":
         lines.append(
             "statement scope: this session only (one session: a later tracker set-up, probe mounting or drift is "
@@ -87,10 +101,20 @@ def session_lines(state: Any) -> list[str]:
             parts.append(f"joint offsets {np.degrees(groups['joint_offsets']) * 1e3:.2f} mdeg")
         if "length_scale" in groups:
             parts.append(f"length scale {groups['length_scale'] * 1e6:.1f} ppm")
+        prior = between.get("class_prior")
+        origin = f"from {between.get('n_sessions')} sessions"
+        if prior is not None:
+            origin = (
+                "from the class prior alone"
+                if between.get("n_sessions") == 1
+                else f"from {between.get('n_sessions')} sessions pooled with the class prior"
+            )
         lines.append(
-            f"statement scope: future sessions (between-session component from {between.get('n_sessions')} sessions, "
+            f"statement scope: future sessions (between-session component {origin}, "
             f"{between.get('dof', state.between_session_dof):.0f}+ degrees of freedom: {', '.join(parts)} per session)"
         )
+        if prior is not None:
+            lines.append(f"class prior {prior['file']}: {prior['robot_class']}; source: {prior['source']}")
         ratios = between.get("level_ratios") or []
         if between.get("level_log_std") is not None and ratios:
             p_values = between.get("level_p_values") or []
@@ -120,6 +144,11 @@ def run(args: argparse.Namespace) -> int:
     if args.cross_validation_folds < 0 or args.cross_validation_folds == 1:
         msg = f"--cross-validation-folds must be 0 or at least 2, got {args.cross_validation_folds}"
         raise ConfigError(msg)
+    prior = None
+    if args.class_prior:
+        from robocal_uncertainty.uncertainty.sessions.class_prior import load_class_prior
+
+        prior = load_class_prior(args.class_prior)
     campaign, model = campaign_and_robot(args)
     later = []
     for path in args.sessions or ():
@@ -138,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
         correlated_model_error=not args.independent_model_error,
         later_sessions=later,
         retool=not args.same_tool,
+        class_prior=prior,
     )
     print_calibration(calibration.result)
     for warning in calibration.warnings:

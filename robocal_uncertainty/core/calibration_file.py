@@ -142,6 +142,7 @@ def session_state_to_dict(state: SessionState) -> dict[str, Any]:
             },
             "campaign": state.extra.get("campaign"),
             "validated_level": None if state.validated_level is None else state.validated_level.to_dict(),
+            "orientation_level": state.extra.get("orientation_level"),
         },
         "noise": {
             "tracker_noise_a_m": state.tracker_noise.a,
@@ -310,6 +311,7 @@ def read_session_state(data: dict[str, Any], *, where: str = "calibration") -> S
         "campaign": session.get("campaign"),
         "settings": data.get("settings") or {},
         "tool_point_m": (session.get("tool") or {}).get("point_m"),
+        "orientation_level": session.get("orientation_level"),
         "model_adequacy": {
             k: v
             for k, v in model_error.items()

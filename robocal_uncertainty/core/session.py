@@ -16,7 +16,7 @@ of a point calibration, which that package and the model-error field both use, s
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -239,6 +239,16 @@ class SessionState:
     model_error_field: ModelErrorField | None = None
     validated_level: ValidatedLevel | None = None
 
+    @property
+    def orientation_level(self) -> ValidatedLevel | None:
+        """A 6-DOF calibration's own tool-orientation error level on held-out poses [rad^2].
+
+        Recorded in ``extra`` (the file's ``session.orientation_level``); ``verify`` tests a 6-DOF
+        check's orientations against it. None for point calibrations and older files.
+        """
+        data = self.extra.get("orientation_level")
+        return ValidatedLevel.from_dict(data) if isinstance(data, dict) else None
+
     def covariance_of(self, names: tuple[str, ...] | list[str]) -> Array:
         """Sub-block of the parameter covariance for `names` (zero rows for names not estimated)."""
         index = {n: i for i, n in enumerate(self.covariance_names)}
@@ -364,6 +374,11 @@ class Verification:
         The check's level against what the statement tolerates (consistent, drifted or
         inconclusive, with the size a check would need); None without a validated level or
         with a between-session spread of the level (the future-session test).
+    orientation : OrientationCheck or None
+        A 6-DOF calibration checked on a 6-DOF check: the tool orientations' error level
+        against the calibration's (:mod:`~robocal_uncertainty.uncertainty.sessions.orientation`);
+        `consistent` then needs both halves, each tested at half the significance. None: the
+        positions alone.
     """
 
     consistent: bool
@@ -405,6 +420,7 @@ class Verification:
     level_z: Array | None = None
     level_trace: float = float("nan")
     tolerance: ToleranceCheck | None = None
+    orientation: Any = None  # OrientationCheck (uncertainty.sessions.orientation; core imports no uncertainty)
 
     def coverage_factors(self, coverage: float = 0.95) -> Array:
         """Per component: the t-quantile for `coverage` with its Welch-Satterthwaite dof, shape (n, 3).

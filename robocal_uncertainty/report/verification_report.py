@@ -23,6 +23,7 @@ from robocal_uncertainty.core.session import LENGTH_SCALE, ToleranceCheck, Verif
 
 __all__ = [
     "VERIFICATION_FORMAT",
+    "orientation_lines",
     "plot_verification",
     "tolerance_line",
     "verification_lines",
@@ -52,8 +53,10 @@ def verification_summary(result: Verification) -> str:
     What the calibration node's ``~/verify`` answers and logs; the full lines are
     :func:`verification_lines`.
     """
-    if result.consistent:
-        head = f"consistent (p = {result.p_value:.3g} >= {result.significance:g}"
+    positions_ok = result.p_value >= result.significance
+    if result.consistent or positions_ok:
+        word = "consistent" if result.consistent else "positions consistent"
+        head = f"{word} (p = {result.p_value:.3g} >= {result.significance:g}"
     else:
         head = (
             f"drifted by about {result.excess_std * 1e3:.3g} mm per axis beyond "
@@ -64,6 +67,13 @@ def verification_summary(result: Verification) -> str:
     if result.error_ratio is not None and result.error_ratio_interval is not None:
         lo, hi = result.error_ratio_interval
         parts.append(f"errors {result.error_ratio:.2f}x the calibration session's (95 % interval {lo:.2f}-{hi:.2f})")
+    o = result.orientation
+    if o is not None:
+        t = o.level_test
+        parts.append(
+            f"orientations {'consistent' if o.consistent else 'drifted'}: errors {t.ratio:.2f}x the calibration "
+            f"session's (p = {t.p_value:.3g} {'>=' if o.consistent else '<'} {o.significance:g})"
+        )
     move = result.move
     alike = inseparable(result)
     if alike:
@@ -130,11 +140,24 @@ def tolerance_line(check: ToleranceCheck) -> str:
     return head + f"consistent: the errors are within it (at most {check.upper_ratio:.2f}x, one-sided 95 %)"
 
 
+def orientation_lines(result: Verification) -> list[str]:
+    """A 6-DOF check's orientation half: its RMS and its tolerance line (empty for points)."""
+    o = result.orientation
+    if o is None:
+        return []
+    return [
+        f"orientations: RMS {o.rms * 1e3:.3f} mrad after re-registering {', '.join(o.reregistered)}; "
+        f"errors {o.level_test.ratio:.2f}x the calibration session's (p = {o.level_test.p_value:.3g})",
+        "orientations " + tolerance_line(o.tolerance),
+    ]
+
+
 def verification_lines(result: Verification, *, scope: str = "session") -> list[str]:
     """What ``verify`` prints: the verdict, the re-registration, the test and the worst poses."""
     lines = [result.verdict]
     if result.tolerance is not None:
         lines.append(tolerance_line(result.tolerance))
+    lines.extend(orientation_lines(result))
     move = result.move
     alike = inseparable(result)
     if alike:
@@ -235,6 +258,7 @@ def verification_to_dict(
             else list(result.error_ratio_interval),
             "tolerance": None if result.tolerance is None else result.tolerance.to_dict(),
         },
+        "orientation": None if result.orientation is None else result.orientation.to_dict(),
         "duplicate_poses_dropped": result.duplicates,
         "n_poses": result.n_poses,
         "rms_error_m": result.rms_error,
@@ -285,6 +309,7 @@ def verification_markdown(result: Verification, *, calibration: str, check_campa
         f"**{'Consistent' if result.consistent else 'Drifted'}.** {result.verdict}",
         "",
         *([] if result.tolerance is None else [tolerance_line(result.tolerance), ""]),
+        *(f"{line}\n" for line in orientation_lines(result)),
         "## Re-registration",
         "",
     ]

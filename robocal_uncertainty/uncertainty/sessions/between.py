@@ -88,6 +88,9 @@ class BetweenSessions:
         level), at least the spread that the F tests call significant. None: no validated level.
     level_dof : float
         Its degrees of freedom (``n_sessions - 1``).
+    class_prior : dict or None
+        The stated prior for the robot class the component comes from (one session) or is
+        pooled with (several; :mod:`~.class_prior`); None: the sessions alone.
     """
 
     names: tuple[str, ...]
@@ -103,11 +106,20 @@ class BetweenSessions:
     level_log_std: float | None = None
     level_dof: float = 0.0
     warnings: tuple[str, ...] = ()
+    class_prior: dict[str, object] | None = None
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary (the calibration file's ``between_session``)."""
+        if self.class_prior is None:
+            model = "random effects per group, moments; future session relative to the reference"
+        elif self.n_sessions == 1:
+            model = "class prior alone (one session); future session relative to the reference"
+        else:
+            model = "random effects per group, moments, pooled with the class prior; future session relative to "
+            model += "the reference"
         return {
-            "model": "random effects per group, moments; future session relative to the reference",
+            "model": model,
+            "class_prior": self.class_prior,
             "n_sessions": self.n_sessions,
             "group_std": dict(self.group_std),
             "group_dof": dict(self.group_dof),
@@ -364,6 +376,7 @@ def between_sessions_from_file(path: str | Path) -> BetweenSessions:
         n_sessions=int(summary.get("n_sessions", 0)),
         session_effects=np.asarray(summary.get("session_effects", np.zeros((0, k))), dtype=np.float64),
         session_effects_std=np.asarray(summary.get("session_effects_std", np.zeros((0, k))), dtype=np.float64),
+        class_prior=summary.get("class_prior"),
     )
 
 
