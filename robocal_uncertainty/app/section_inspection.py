@@ -455,6 +455,7 @@ def section_coverage_study(
     dask: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     estimate: Callable[[float], None] | None = None,
+    backend: str = "numpy",
 ) -> SectionInspection:
     """`run` with the coverage study of its own cloud: ``scans`` simulated scans per family.
 
@@ -480,6 +481,9 @@ def section_coverage_study(
         Where the scans run (never changes the outcome).
     progress, estimate
         ``progress(done, total)`` per scan; ``estimate(seconds)`` after the first scan.
+    backend : str
+        Trial kernels of the scans' Monte Carlo (``numpy``, ``numba``, ``auto``): never changes
+        an outcome beyond rounding; recorded in the study.
 
     Returns
     -------
@@ -507,5 +511,6 @@ def section_coverage_study(
         dask=dask,
         progress=progress,
         estimate=estimate,
+        backend=backend,
     )
     return dataclasses.replace(run, study=study)

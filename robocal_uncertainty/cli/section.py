@@ -227,6 +227,7 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
     from robocal_uncertainty.app.section_inspection import section_coverage_study
     from robocal_uncertainty.inspection.coverage_rule import MIN_STUDY_SCANS
     from robocal_uncertainty.inspection.coverage_study import FAMILIES
+    from robocal_uncertainty.kernels.section_kernels import resolve_section_backend
 
     scans = int(args.coverage_study)
     total = scans * len(FAMILIES)
@@ -234,7 +235,8 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
     start = time.perf_counter()
     print(
         f"Coverage study of this cloud: {scans} scans per family x {len(FAMILIES)} families = {total} simulated "
-        f"scans of its nominal, layout and instrument, {args.study_trials} trials each, study seed {args.study_seed}",
+        f"scans of its nominal, layout and instrument, {args.study_trials} trials each, study seed {args.study_seed}, "
+        f"trial kernels {resolve_section_backend(args.backend).describe()}",
         flush=True,
     )
     if scans < MIN_STUDY_SCANS:
@@ -268,4 +270,5 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
         dask=args.dask,
         progress=progress,
         estimate=estimate,
+        backend=args.backend,
     )

@@ -294,6 +294,7 @@ def _study_dict(study: ScenarioStudy) -> dict[str, Any]:
         "scans_per_family": study.scans,
         "scans_total": study.total_scans,
         "trials_per_scan": study.trials,
+        "trial_backend": None if study.backend is None else study.backend.describe(),
         "families": list(study.families),
         "elapsed_s": study.elapsed_s,
         "workers": study.workers,
