@@ -74,13 +74,15 @@ def _zero(distribution: Any) -> bool:
     return isinstance(distribution, Normal) and distribution.mean == 0.0 and distribution.std == 0.0
 
 
+# Writeable C-contiguous copies: numba types a read-only array (the frozen model's are) as
+# another type, which would compile the kernels a second time beside the warmed-up ones.
 def _int(values: Any, shape: tuple[int, ...] | None = None) -> NDArray[np.int64]:
-    array = np.ascontiguousarray(values, dtype=np.int64)
+    array = np.array(values, dtype=np.int64, order="C", copy=True)
     return array if shape is None else array.reshape(shape)
 
 
 def _float(values: Any) -> Array:
-    return np.ascontiguousarray(values, dtype=np.float64)
+    return np.array(values, dtype=np.float64, order="C", copy=True)
 
 
 def _sources(sources: Sequence[ErrorSource], normals: Array, subset: NDArray[np.intp]) -> tuple[Any, ...]:
@@ -276,7 +278,9 @@ class NumbaSectionKernel:
 
         warm_up()
         trials = draws[0].shape[0]
-        padded = [_float(d) for d in draws] + [np.zeros((trials, 0))] * (_MAX_SOURCES - len(draws))
+        given = [np.ascontiguousarray(d, dtype=np.float64) for d in draws]
+        given = [d if d.flags.writeable else d.copy() for d in given]
+        padded = given + [np.zeros((trials, 0))] * (_MAX_SOURCES - len(draws))
         out = np.empty((trials, 9))
         section_numba.drawn_trials(tuple(padded), self.packed, out)
         return out
