@@ -9,7 +9,8 @@ its time for 10^6 trials is extrapolated from ``--naive`` trials.
 
 Each backend of the section trial (``--backends``, default numpy and numba where installed;
 :mod:`robocal_uncertainty.kernels.section_kernels`) runs the same trials from the same seed in
-this one run: the time of the trials alone (wall and CPU of this process and its workers), of
+this one run: the time of the trials alone (wall; CPU and CPU per trial with one worker, where
+the CPU time is this process's own, the fairer figure on a shared machine), of
 the statements after them (GUM budget, roughness envelope, summaries), the ratio against
 numpy's trials, and the largest difference of the nine Monte Carlo estimates and standard
 uncertainties from numpy's, relative to the parameter's magnitude. The cloud's preparation
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import resource
 import time
 from pathlib import Path
@@ -138,7 +140,11 @@ def main() -> None:
         rows.append((resolve_section_backend(backend).describe(), result, trials_s, trials_cpu, statements_s))
     own, children = peak_mib()
 
-    print(f"points 1836, trials {args.trials}, workers {args.workers}, seed {args.seed}, method {args.method}")
+    load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
+    print(
+        f"points 1836, trials {args.trials}, workers {args.workers}, seed {args.seed}, method {args.method}; "
+        f"load average at the end {load}"
+    )
     print(f"shared preparation (evaluation, denoising, residual check): {prepare_s:.1f} s")
     reference = rows[0]
     print(
@@ -146,8 +152,12 @@ def main() -> None:
         f"{'statements s':>13s} {'total s':>8s} {'largest rel. diff':>18s}"
     )
     for name, result, trials_s, trials_cpu, statements_s in rows:
+        # Pool workers' CPU time is not counted until they exit: shown with one worker only.
+        cpu = f"{'-':>8s} {'-':>9s}"
+        if args.workers == 1:
+            cpu = f"{trials_cpu:8.1f} {trials_cpu / args.trials * 1e6:9.1f}"
         print(
-            f"{name:22s} {trials_s:9.1f} {trials_cpu:8.1f} {trials_cpu / args.trials * 1e6:9.1f} "
+            f"{name:22s} {trials_s:9.1f} {cpu} "
             f"{reference[2] / trials_s:8.2f}x {statements_s:13.1f} {prepare_s + trials_s + statements_s:8.1f} "
             f"{largest_difference(result, reference[1]):18.1e}"
         )
