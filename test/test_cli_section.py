@@ -306,6 +306,12 @@ def test_coverage_study_of_the_cloud(cloud_file: Path, tmp_path: Path, capsys: p
     assert all(c["scans"] == 1 for c in own["counts"].values()) and not own["verified_all"]
     assert not any(row["coverage_verified"] for row in data["parameters"])
     assert "## Coverage study of this cloud" in (out / "section.md").read_text()
+    # The scans' Monte Carlo ran on --backend auto, recorded and printed.
+    from robocal_uncertainty.kernels.section_kernels import resolve_section_backend
+
+    kernels = resolve_section_backend("auto").describe()
+    assert own["trial_backend"] == kernels and f"trial kernels {kernels}" in text
+    assert f"trial kernels {kernels}" in (out / "section.md").read_text()
     # Without a study the same cloud is outside the stored studies' scope: not verified.
     assert main([*argv, "--force", "--no-progress"]) == 0
     assert "NOT verified for this cloud" in capsys.readouterr().out

@@ -834,7 +834,8 @@ def _own_study_blocks(own: dict[str, Any]) -> list[Block]:
             f"/°C x {inst['temperature_deviation_degc']:g} °C",
             f"{own['scans_per_family']} scans per family ({', '.join(families)}), {own['scans_total']} in all, "
             f"{own['trials_per_scan']} trials each, study seed {own['study_seed']}, {own['elapsed_s']:.0f} s on "
-            f"{own['workers']} worker(s)",
+            f"{own['workers']} worker(s)"
+            + (f", trial kernels {own['trial_backend']}" if own.get("trial_backend") else ""),
             f"rule: {own['rule']}",
         )
     )
