@@ -1,4 +1,4 @@
-"""Benchmark: 10^6 Monte Carlo trials of the nine blade-section parameters on 1 836 points.
+"""Benchmark: 10^6 Monte Carlo trials of the nine blade-section parameters on 1 836 points, per backend.
 
 Scenario (issue 9 / the second reference paper): NASA Rotor 37 surface 2 scaled by 7.14 (maximum thickness 30.37 mm,
 the reference paper's 30.365 mm; chord 397 mm), a simulated 1 836-point scan with the reference paper's measured
@@ -7,28 +7,48 @@ with the reference paper's CMM (config/instruments/cmm_reference_paper.yaml). Th
 algorithm (registration, segmentation, thickness, chord, profile) per trial on the same draws;
 its time for 10^6 trials is extrapolated from ``--naive`` trials.
 
+Each backend of the section trial (``--backends``, default numpy and numba where installed;
+:mod:`robocal_uncertainty.kernels.section_kernels`) runs the same trials from the same seed in
+this one run: the time of the trials alone (wall; CPU and CPU per trial with one worker, where
+the CPU time is this process's own, the fairer figure on a shared machine), of
+the statements after them (GUM budget, roughness envelope, summaries), the ratio against
+numpy's trials, and the largest difference of the nine Monte Carlo estimates and standard
+uncertainties from numpy's, relative to the parameter's magnitude. The cloud's preparation
+(evaluation, denoising, residual check) is shared and timed once.
+
 Run: ``python benchmarks/bench_section_mc.py [--trials 1000000] [--workers 2] [--naive 100]
-[--method denoised|perturbed]`` (default ``denoised``, the CLI's: the Monte Carlo of the error around
-the denoised cloud; its MC mean is the bias-corrected estimate, the value column the measured one).
-Prints the time, peak memory (this process and its workers) and the results next to the reference paper's.
+[--method denoised|perturbed] [--backends numpy numba]`` (default method ``denoised``, the CLI's:
+the Monte Carlo of the error around the denoised cloud; its MC mean is the bias-corrected
+estimate, the value column the measured one). Prints the times, peak memory (this process and its
+workers) and the last backend's results next to the reference paper's.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import resource
 import time
 from pathlib import Path
 
 import numpy as np
 
-from robocal_uncertainty.core.instruments.cmm import load_instrument
+from robocal_uncertainty.core.instruments.cmm import CmmInstrument, load_instrument
 from robocal_uncertainty.inspection.nominal_curve import NominalCurve
 from robocal_uncertainty.inspection.point_cloud import read_rotor37_section
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES
-from robocal_uncertainty.inspection.section_mc import full_section_trials, section_uncertainty
+from robocal_uncertainty.inspection.section_mc import (
+    SectionUncertainty,
+    TrialSetup,
+    _section_result,
+    full_section_trials,
+    prepare_trials,
+)
 from robocal_uncertainty.inspection.simulate import simulate_section_scan
+from robocal_uncertainty.kernels import available_backends
+from robocal_uncertainty.kernels.section_kernels import SECTION_BACKENDS, resolve_section_backend, warm_up
+from robocal_uncertainty.montecarlo.engine import run_trials
 
 ROOT = Path(__file__).resolve().parents[1]
 ROTOR37 = ROOT / "test" / "inspection" / "data" / "nasa_rotor37_blade_geometry.dat"
@@ -53,6 +73,43 @@ def peak_mib() -> tuple[float, float]:
     return own, children
 
 
+def cpu_seconds() -> float:
+    """CPU time of this process and its finished children [s]."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def run_backend(
+    prepared: TrialSetup, curve: NominalCurve, instrument: CmmInstrument, backend: str, args: argparse.Namespace
+) -> tuple[SectionUncertainty, float, float, float]:
+    """Trials and statements on `backend`: (result, trials wall s, trials CPU s, statements s)."""
+    block = prepared.trials(backend=backend)
+    if backend == "numba":
+        warm_up()  # compiled or loaded from the disk cache before the clock starts (printed when compiled)
+    start, cpu = time.perf_counter(), cpu_seconds()
+    run = run_trials(
+        block, seed=args.seed, n_trials=args.trials, workers=args.workers, chunk_blocks=1 if args.workers == 1 else 4
+    )
+    trials_s, trials_cpu = time.perf_counter() - start, cpu_seconds() - cpu
+    start = time.perf_counter()
+    result = _section_result(
+        prepared, block, run, 0.95, instrument, None, curve, bins=100, keep_samples=False, repeats=None
+    )
+    return result, trials_s, trials_cpu, time.perf_counter() - start
+
+
+def largest_difference(result: SectionUncertainty, reference: SectionUncertainty) -> float:
+    """Largest |difference| of the MC estimates and standard uncertainties, relative to each parameter's magnitude."""
+    worst = 0.0
+    for a, b in zip(result.monte_carlo.outputs, reference.monte_carlo.outputs):
+        scale = max(abs(b.estimate), b.standard_uncertainty)
+        worst = max(
+            worst, abs(a.estimate - b.estimate) / scale, abs(a.standard_uncertainty - b.standard_uncertainty) / scale
+        )
+    return worst
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=1_000_000)
@@ -60,6 +117,8 @@ def main() -> None:
     parser.add_argument("--naive", type=int, default=100, help="trials of the per-trial full-algorithm baseline")
     parser.add_argument("--seed", type=int, default=2024)
     parser.add_argument("--method", choices=("denoised", "perturbed"), default="denoised")
+    installed = [name for name in SECTION_BACKENDS if name in available_backends()]
+    parser.add_argument("--backends", nargs="+", choices=SECTION_BACKENDS, default=installed)
     args = parser.parse_args()
 
     curve = NominalCurve(read_rotor37_section(ROTOR37, 2, scale=7.14))
@@ -73,20 +132,36 @@ def main() -> None:
     naive = (time.perf_counter() - start) / args.naive
 
     start = time.perf_counter()
-    result = section_uncertainty(
-        cloud,
-        curve,
-        seed=args.seed,
-        trials=args.trials,
-        instrument=instrument,
-        workers=args.workers,
-        method=args.method,
-    )
-    batched = time.perf_counter() - start
+    prepared = prepare_trials(cloud, curve, instrument=instrument, method=args.method)
+    prepare_s = time.perf_counter() - start
+    rows = []
+    for backend in args.backends:
+        result, trials_s, trials_cpu, statements_s = run_backend(prepared, curve, instrument, backend, args)
+        rows.append((resolve_section_backend(backend).describe(), result, trials_s, trials_cpu, statements_s))
     own, children = peak_mib()
 
-    print(f"points 1836, trials {args.trials}, workers {args.workers}, seed {args.seed}, method {args.method}")
-    print(f"batched: {batched:.1f} s (Monte Carlo, GUM budget and summaries)")
+    load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
+    print(
+        f"points 1836, trials {args.trials}, workers {args.workers}, seed {args.seed}, method {args.method}; "
+        f"load average at the end {load}"
+    )
+    print(f"shared preparation (evaluation, denoising, residual check): {prepare_s:.1f} s")
+    reference = rows[0]
+    print(
+        f"{'backend':22s} {'trials s':>9s} {'CPU s':>8s} {'us/trial':>9s} {'vs ' + reference[0].split()[0]:>9s} "
+        f"{'statements s':>13s} {'total s':>8s} {'largest rel. diff':>18s}"
+    )
+    for name, result, trials_s, trials_cpu, statements_s in rows:
+        # Pool workers' CPU time is not counted until they exit: shown with one worker only.
+        cpu = f"{'-':>8s} {'-':>9s}"
+        if args.workers == 1:
+            cpu = f"{trials_cpu:8.1f} {trials_cpu / args.trials * 1e6:9.1f}"
+        print(
+            f"{name:22s} {trials_s:9.1f} {cpu} "
+            f"{reference[2] / trials_s:8.2f}x {statements_s:13.1f} {prepare_s + trials_s + statements_s:8.1f} "
+            f"{largest_difference(result, reference[1]):18.1e}"
+        )
+    result = rows[-1][1]
     print(f"naive per-trial full algorithm: {naive * 1e3:.1f} ms/trial -> {naive * args.trials / 3600:.1f} h")
     print(f"peak memory: main {own:.0f} MiB, largest worker {children:.0f} MiB")
     print(f"thickness candidates {result.candidate_counts}")

@@ -58,6 +58,12 @@ def test_section_report_equals_api(cloud_file: Path, tmp_path: Path, capsys: pyt
     api = inspect_section(cloud_file, "rotor37", trials=int(TRIALS), seed=4)
     assert data["units"] == {"length": "m", "angle": "rad"}
     assert data["n_trials"] == 3000 and data["seed"] == 4
+    # --backend auto (the default): numba where installed, recorded with its version.
+    from robocal_uncertainty.kernels.section_kernels import resolve_section_backend
+
+    chosen = resolve_section_backend("auto")
+    assert data["backend"] == {"name": chosen.name, "version": chosen.version, "requested": "auto"}
+    assert f"backend {chosen.describe()}" in text
     for row, mc in zip(data["parameters"], api.result.monte_carlo.outputs):
         assert row["u"] == pytest.approx(mc.standard_uncertainty, rel=1e-12)
         assert row["symmetric_interval"] == pytest.approx(
@@ -271,6 +277,16 @@ def test_bad_repeat_scans_end_in_one_line(
     assert __import__("re").search(match, err), err
 
 
+def test_a_backend_without_a_section_kernel_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["section", "--demo", "--backend", "cupy", "--out", str(tmp_path / "r")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "robocal-uncertainty section: error: backend 'cupy' has no blade-section kernel: use numba or numpy "
+        "(auto picks numba where installed)"
+    )
+    assert not (tmp_path / "r").exists()
+
+
 def test_coverage_study_of_the_cloud(cloud_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--coverage-study N: the cloud's own study (its 400 points, its probe vectors, the seed's CMM);
     one scan per family verifies nothing, and the report says so and records the study."""
@@ -290,6 +306,12 @@ def test_coverage_study_of_the_cloud(cloud_file: Path, tmp_path: Path, capsys: p
     assert all(c["scans"] == 1 for c in own["counts"].values()) and not own["verified_all"]
     assert not any(row["coverage_verified"] for row in data["parameters"])
     assert "## Coverage study of this cloud" in (out / "section.md").read_text()
+    # The scans' Monte Carlo ran on --backend auto, recorded and printed.
+    from robocal_uncertainty.kernels.section_kernels import resolve_section_backend
+
+    kernels = resolve_section_backend("auto").describe()
+    assert own["trial_backend"] == kernels and f"trial kernels {kernels}" in text
+    assert f"trial kernels {kernels}" in (out / "section.md").read_text()
     # Without a study the same cloud is outside the stored studies' scope: not verified.
     assert main([*argv, "--force", "--no-progress"]) == 0
     assert "NOT verified for this cloud" in capsys.readouterr().out

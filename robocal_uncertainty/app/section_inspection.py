@@ -209,6 +209,7 @@ def _run(
     truth: NDArray[np.float64] | None,
     method: str,
     repeats: Sequence[PointCloud] = (),
+    backend: str = "numpy",
 ) -> SectionInspection:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         msg = f"seed must be an integer >= 0, got {seed!r}"
@@ -229,6 +230,7 @@ def _run(
         keep_samples=True,
         method=method,
         repeat_parameters=repeat_parameters,
+        backend=backend,
     )
     return SectionInspection(
         result=result,
@@ -314,6 +316,7 @@ def inspect_section(
     progress: ProgressCallback | None = None,
     method: str = "denoised",
     repeat_scans: Sequence[str | Path | PointCloud] | None = None,
+    backend: str = "numpy",
 ) -> SectionInspection:
     """Measure a section's nine parameters and their uncertainty.
 
@@ -346,6 +349,10 @@ def inspect_section(
         k >= 2 repeated scans of the same section (read as `cloud` is, same `unit`, `topic`,
         `message`), evaluated with the same algorithm against the same nominal; their standard
         deviations (ddof 1) enter ``result.gum_with_repeatability`` as the reference paper's u3.
+    backend : str
+        Trial kernels (``numpy``, ``numba`` or ``auto``; see
+        :func:`~robocal_uncertainty.inspection.section_mc.section_uncertainty`): the same
+        result to 1e-12 relative; recorded in ``result.backend``.
 
     Returns
     -------
@@ -377,6 +384,7 @@ def inspect_section(
         truth=None,
         method=method,
         repeats=repeats,
+        backend=backend,
     )
 
 
@@ -389,6 +397,7 @@ def section_demo(
     instrument: str | None = None,
     progress: ProgressCallback | None = None,
     method: str = "denoised",
+    backend: str = "numpy",
 ) -> SectionInspection:
     """The demo: a simulated CMM scan of the shipped Rotor 37 section, measured with noise.
 
@@ -396,6 +405,7 @@ def section_demo(
     0.0512° and a 5 µm three-wave form error (:data:`DEMO_SCENARIO`); 1 836 points are
     scanned and one draw of the instrument errors (seeded by `seed`) is added, as a real scan
     would carry. ``truth`` holds the true parameters (those of the noise-free scan).
+    ``backend`` as for :func:`inspect_section`.
     """
     from robocal_uncertainty.core.instruments.cmm import point_displacements
     from robocal_uncertainty.inspection.section_mc import section_sources
@@ -431,6 +441,7 @@ def section_demo(
         progress=progress,
         truth=clean.parameters.as_array(),
         method=method,
+        backend=backend,
     )
 
 
@@ -444,6 +455,7 @@ def section_coverage_study(
     dask: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     estimate: Callable[[float], None] | None = None,
+    backend: str = "numpy",
 ) -> SectionInspection:
     """`run` with the coverage study of its own cloud: ``scans`` simulated scans per family.
 
@@ -469,6 +481,9 @@ def section_coverage_study(
         Where the scans run (never changes the outcome).
     progress, estimate
         ``progress(done, total)`` per scan; ``estimate(seconds)`` after the first scan.
+    backend : str
+        Trial kernels of the scans' Monte Carlo (``numpy``, ``numba``, ``auto``): never changes
+        an outcome beyond rounding; recorded in the study.
 
     Returns
     -------
@@ -496,5 +511,6 @@ def section_coverage_study(
         dask=dask,
         progress=progress,
         estimate=estimate,
+        backend=backend,
     )
     return dataclasses.replace(run, study=study)

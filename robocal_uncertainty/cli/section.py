@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from robocal_uncertainty.cli._common import parse_trials, timed_progress
-from robocal_uncertainty.cli._options import add_dask_arg, add_force_arg
+from robocal_uncertainty.cli._options import add_backend_arg, add_dask_arg, add_force_arg
 from robocal_uncertainty.errors import ConfigError
 
 
@@ -68,6 +68,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--study-trials", type=int, default=2000, help="Monte Carlo trials per study scan (default %(default)s)"
     )
+    add_backend_arg(p)
     add_dask_arg(p)
     p.add_argument("--out", default="section_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
@@ -134,6 +135,9 @@ def _check_args(args: argparse.Namespace) -> None:
         raise ConfigError("--study-seed must be >= 0 and --study-trials >= 100")
     if args.dask is not None and args.coverage_study is None:
         raise ConfigError("--dask runs the scans of --coverage-study; give --coverage-study N")
+    from robocal_uncertainty.kernels.section_kernels import resolve_section_backend
+
+    resolve_section_backend(args.backend)  # an unknown, missing or kernel-less backend stops here
 
 
 def _inspect(args: argparse.Namespace, count: int | None, adaptive: Any, progress: Any) -> Any:
@@ -155,6 +159,7 @@ def _inspect(args: argparse.Namespace, count: int | None, adaptive: Any, progres
             instrument=args.instrument,
             progress=progress,
             method=args.method,
+            backend=args.backend,
         )
     return inspect_section(
         args.cloud,
@@ -171,6 +176,7 @@ def _inspect(args: argparse.Namespace, count: int | None, adaptive: Any, progres
         progress=progress,
         method=args.method,
         repeat_scans=args.repeat_scans,
+        backend=args.backend,
     )
 
 
@@ -189,6 +195,7 @@ def _print_and_write(run: Any, args: argparse.Namespace) -> None:
     print(
         f"{run.cloud.n_points} points ({run.cloud.source}{frame}); nominal {run.nominal}; instrument {run.instrument}; "
         f"{result.monte_carlo.n_trials} trials, seed {result.monte_carlo.seed}, {run.elapsed_s:.1f} s"
+        + ("" if result.backend is None else f", backend {result.backend.describe()}")
     )
     print()
     print(format_section_table(result, run.corrections, truth=run.truth, study=run.study))
@@ -220,6 +227,7 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
     from robocal_uncertainty.app.section_inspection import section_coverage_study
     from robocal_uncertainty.inspection.coverage_rule import MIN_STUDY_SCANS
     from robocal_uncertainty.inspection.coverage_study import FAMILIES
+    from robocal_uncertainty.kernels.section_kernels import resolve_section_backend
 
     scans = int(args.coverage_study)
     total = scans * len(FAMILIES)
@@ -227,7 +235,8 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
     start = time.perf_counter()
     print(
         f"Coverage study of this cloud: {scans} scans per family x {len(FAMILIES)} families = {total} simulated "
-        f"scans of its nominal, layout and instrument, {args.study_trials} trials each, study seed {args.study_seed}",
+        f"scans of its nominal, layout and instrument, {args.study_trials} trials each, study seed {args.study_seed}, "
+        f"trial kernels {resolve_section_backend(args.backend).describe()}",
         flush=True,
     )
     if scans < MIN_STUDY_SCANS:
@@ -261,4 +270,5 @@ def _coverage_study(run: Any, args: argparse.Namespace) -> Any:
         dask=args.dask,
         progress=progress,
         estimate=estimate,
+        backend=args.backend,
     )

@@ -76,6 +76,8 @@ from robocal_uncertainty.inspection.point_cloud import PointCloud, read_rotor37_
 from robocal_uncertainty.inspection.section import PARAMETER_NAMES, evaluate_section
 from robocal_uncertainty.inspection.section_mc import prepare_trials, section_sources
 from robocal_uncertainty.inspection.simulate import scan_parameters, simulate_section_scan
+from robocal_uncertainty.kernels.registry import BackendInfo
+from robocal_uncertainty.kernels.section_kernels import resolve_section_backend
 from robocal_uncertainty.montecarlo.engine import run_trials
 from robocal_uncertainty.montecarlo.summary import summarize
 
@@ -385,13 +387,15 @@ def study_scan(
     trials: int = 2000,
     root_seed: int = 23,
     scenario: StudyScenario | None = None,
+    backend: str = "numpy",
 ) -> ScanOutcome:
     """Simulate scan ``index`` of ``family``, run method ``denoised`` on it, compare with the truth.
 
     The part, the instrument-noise draw and the Monte Carlo seed come from
     ``SeedSequence(root_seed, spawn_key=(family index, index))``; ``scenario`` (default
     :func:`rotor37_scenario`, the stored study's) gives the nominal, layout, instrument,
-    placement and form scale.
+    placement and form scale. ``backend`` runs the scan's Monte Carlo (``numpy`` or ``numba``,
+    :mod:`robocal_uncertainty.kernels.section_kernels`): the same draws, values equal to rounding.
     """
     scene = rotor37_scenario() if scenario is None else scenario
     curve = scene.curve
@@ -422,7 +426,7 @@ def study_scan(
         measured = PointCloud(flat, true_scan.probe_vectors[clean.order], true_scan.source)
     setup = prepare_trials(measured, curve, instrument=scene.instrument, method="denoised")
     seed = int(mc_seq.generate_state(1)[0])
-    samples = run_trials(setup.trials(), seed=seed, n_trials=trials, block_size=trials).samples
+    samples = run_trials(setup.trials(backend=backend), seed=seed, n_trials=trials, block_size=trials).samples
     outputs = summarize(samples, 0.95, bins=10).outputs
     envelope = setup.envelope(seed, 0.95)
     inside = np.empty(len(PARAMETER_NAMES), dtype=bool)
@@ -437,9 +441,14 @@ def study_scan(
 
 
 def _scan_job(
-    family: str, index: int, trials: int, root_seed: int, scenario: StudyScenario | None = None
+    family: str,
+    index: int,
+    trials: int,
+    root_seed: int,
+    scenario: StudyScenario | None = None,
+    backend: str = "numpy",
 ) -> ScanOutcome:
-    return study_scan(family, index, trials=trials, root_seed=root_seed, scenario=scenario)
+    return study_scan(family, index, trials=trials, root_seed=root_seed, scenario=scenario, backend=backend)
 
 
 StudyProgress = Callable[[int, int], None]
@@ -479,6 +488,8 @@ def _run_jobs(
     executor: object | None,
     dask: str | None,
     progress: StudyProgress | None,
+    *,
+    backend: str = "numpy",
 ) -> list[ScanOutcome]:
     """Run (family, scan) jobs in this process or on an executor; outcomes in job order."""
     from robocal_uncertainty.montecarlo.executor import open_executor
@@ -487,11 +498,13 @@ def _run_jobs(
     with open_executor(workers=workers, executor=executor, dask=dask) as runner:
         if runner is None:
             for family, index in jobs:
-                out.append(_scan_job(family, index, trials, root_seed, scenario))
+                out.append(_scan_job(family, index, trials, root_seed, scenario, backend))
                 if progress is not None:
                     progress(len(out), len(jobs))
             return out
-        futures = [runner.submit(_scan_job, family, index, trials, root_seed, scenario) for family, index in jobs]
+        futures = [
+            runner.submit(_scan_job, family, index, trials, root_seed, scenario, backend) for family, index in jobs
+        ]
         for future in futures:
             out.append(future.result())
             if progress is not None:
@@ -604,6 +617,8 @@ class ScenarioStudy:
         Per family, :data:`~.coverage_rule.FamilyCounts`.
     cells : dict
         ``cells[family][parameter]`` with the Holm-adjusted verdict (:func:`~.coverage_rule.family_cells`).
+    backend : BackendInfo or None
+        Trial kernels of the scans' Monte Carlo (None when not recorded).
     """
 
     label: str
@@ -621,6 +636,7 @@ class ScenarioStudy:
     workers: int
     counts: dict[str, FamilyCounts]
     cells: dict[str, dict[str, FamilyCoverage]]
+    backend: BackendInfo | None = None
 
     def lowest(self, name: str) -> float:
         """Lowest coverage of parameter `name` over the families' unflagged scans (nan if none)."""
@@ -670,6 +686,7 @@ def run_scenario_study(
     dask: str | None = None,
     progress: StudyProgress | None = None,
     estimate: Callable[[float], None] | None = None,
+    backend: str = "numpy",
 ) -> ScenarioStudy:
     """The family study of `scenario`: `scans` scans per family, then the verdict per cell.
 
@@ -693,14 +710,18 @@ def run_scenario_study(
     estimate : callable, optional
         Called with the seconds the first scan took (run first, in this process) before the
         others start: for an expected time.
+    backend : str
+        Trial kernels of every scan's Monte Carlo: ``numpy``, ``numba`` or ``auto``
+        (:func:`~robocal_uncertainty.kernels.section_kernels.resolve_section_backend`); recorded.
 
     Returns
     -------
     ScenarioStudy
     """
     chosen = _check_study(scans, root_seed, families)
+    kernels = resolve_section_backend(backend)
     start = time.perf_counter()
-    first = study_scan(chosen[0], 0, trials=trials, root_seed=root_seed, scenario=scenario)
+    first = study_scan(chosen[0], 0, trials=trials, root_seed=root_seed, scenario=scenario, backend=kernels.name)
     if estimate is not None:
         estimate(time.perf_counter() - start)
     total = scans * len(chosen)
@@ -715,7 +736,7 @@ def run_scenario_study(
                 progress(done + 1, total)
 
         # Every job is one (family, scan) of the same streams run_study would use.
-        rest = _run_jobs(jobs, trials, root_seed, scenario, workers, executor, dask, shifted)
+        rest = _run_jobs(jobs, trials, root_seed, scenario, workers, executor, dask, shifted, backend=kernels.name)
     outcomes = [first, *rest]
     counts = family_counts(outcomes)
     return ScenarioStudy(
@@ -734,4 +755,5 @@ def run_scenario_study(
         workers=workers,
         counts=counts,
         cells=family_cells(counts, PARAMETER_NAMES),
+        backend=kernels,
     )

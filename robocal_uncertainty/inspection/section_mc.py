@@ -31,7 +31,8 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -56,6 +57,8 @@ from robocal_uncertainty.inspection.section import (
     SectionParameters,
     evaluate_section,
 )
+from robocal_uncertainty.kernels.registry import BackendInfo
+from robocal_uncertainty.kernels.section_kernels import NumbaSectionKernel, resolve_section_backend
 from robocal_uncertainty.montecarlo.distributions import Distribution, Normal, StudentT
 from robocal_uncertainty.montecarlo.engine import (
     DEFAULT_BLOCK_SIZE,
@@ -164,6 +167,10 @@ class SectionTrials:
         ``c = f(y) + f(x̂)``: ``c - f(x̂ + e') = f(y) - Δ`` with ``Δ = f(x̂ + e') - f(x̂)``, the
         value the measurand would have if the measured ``f(y)`` carried the error Δ (method
         ``denoised`` of :func:`section_uncertainty`, ``model`` built at the denoised cloud x̂).
+    backend : str
+        ``numpy`` (the frozen model's array operations, the reference) or ``numba`` (the
+        compiled trial of :mod:`robocal_uncertainty.kernels.section_kernels`): the same draws,
+        the values equal to rounding.
     """
 
     model: FrozenSectionModel
@@ -171,21 +178,35 @@ class SectionTrials:
     source_indices: tuple[int, ...]
     batch: int = 1000
     reflect: NDArray[np.float64] | None = None
+    backend: str = "numpy"
 
     def __call__(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Parameters of ``n`` trials, shape (n, 9) [m, rad]."""
         generators = [source_generator(rng, k) for k in self.source_indices]
-        out = np.empty((n, len(PARAMETER_NAMES)))
-        for start in range(0, n, self.batch):
-            size = min(self.batch, n - start)
-            draws = [s.draw(g, size) for s, g in zip(self.sources, generators)]
-            out[start : start + size] = self.evaluate_draws(draws)
+        if self.backend == "numpy":
+            out = np.empty((n, len(PARAMETER_NAMES)))
+            for start in range(0, n, self.batch):
+                size = min(self.batch, n - start)
+                draws = [s.draw(g, size) for s, g in zip(self.sources, generators)]
+                out[start : start + size] = self.evaluate_draws(draws)
+        else:
+            out = self.kernel.trials(generators, n, self.batch)
         if self.reflect is not None:
             np.subtract(self.reflect, out, out=out)
         return out
 
+    @cached_property
+    def kernel(self) -> NumbaSectionKernel:
+        """The compiled trial (backend ``numba``)."""
+        if self.backend != "numba":
+            msg = f"the section trial has no {self.backend!r} kernel"
+            raise ConfigError(msg)
+        return NumbaSectionKernel(self.model, self.sources)
+
     def evaluate_draws(self, draws: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
         """Parameters for given draws (one (T, n_draws) array per source), shape (T, 9)."""
+        if self.backend != "numpy":
+            return self.kernel.evaluate(draws)
         model = self.model
         trials = draws[0].shape[0]
         normal_shift = np.zeros((trials, model.points.shape[0]))
@@ -284,10 +305,11 @@ class TrialSetup:
             smooth_std=self.denoised.smooth_std,
         )
 
-    def trials(self, batch: int = 1000, *, resegment_edges: bool = True) -> SectionTrials:
-        """The batched trial block (model at ``centre``, see :func:`build_frozen_model`)."""
+    def trials(self, batch: int = 1000, *, resegment_edges: bool = True, backend: str = "numpy") -> SectionTrials:
+        """The batched trial block (model at ``centre``, see :func:`build_frozen_model`) on
+        ``backend`` (a resolved name: ``numpy`` or ``numba``)."""
         model = build_frozen_model(self.centre, self.sources, self.options, resegment_edges=resegment_edges)
-        return SectionTrials(model, self.sources, self.source_indices, batch, self.reflect)
+        return SectionTrials(model, self.sources, self.source_indices, batch, self.reflect, backend)
 
 
 def prepare_trials(
@@ -467,6 +489,8 @@ class SectionUncertainty:
         Points of the measured cloud (0 when not recorded).
     nominal_length : float
         Contour length of the nominal section [m] (nan when not recorded).
+    backend : BackendInfo or None
+        The backend that ran the trials and its version (None when not recorded).
     """
 
     parameters: SectionParameters
@@ -486,6 +510,7 @@ class SectionUncertainty:
     envelope: ResolutionEnvelope | None = None
     n_points: int = 0
     nominal_length: float = float("nan")
+    backend: BackendInfo | None = None
 
 
 def section_uncertainty(
@@ -510,6 +535,7 @@ def section_uncertainty(
     repeat_parameters: ArrayLike | None = None,
     method: str = "perturbed",
     denoise_half_width: float | None = None,
+    backend: str = "numpy",
 ) -> SectionUncertainty:
     """Monte Carlo of the nine section parameters under the CMM model, with the GUM comparison.
 
@@ -543,17 +569,22 @@ def section_uncertainty(
         ``seed`` is a deprecated alias of ``perturbed``.
     denoise_half_width : float, optional
         Smoothing window half-width of ``denoised`` [m]; None: chosen by Mallows' Cp.
+    backend : str
+        Trial kernels: ``numpy`` (the reference), ``numba`` (compiled, extra ``fast``) or ``auto``
+        (numba where installed); the same draws, the results equal to 1e-12 relative
+        (:mod:`robocal_uncertainty.kernels.section_kernels`). Recorded in the result.
 
     Returns
     -------
     SectionUncertainty
     """
     _check_batch(batch)
+    kernels = resolve_section_backend(backend)
     repeats = None if repeat_parameters is None else _check_repeats(repeat_parameters)
     inst = instrument or CmmInstrument()
     setup: dict[str, Any] = {"options": options, "reference": reference, "denoise_half_width": denoise_half_width}
     prepared = prepare_trials(cloud, curve, instrument=inst, sources=sources, method=canonical_method(method), **setup)
-    block = prepared.trials(batch)
+    block = prepared.trials(batch, backend=kernels.name)
     engine: dict[str, Any] = {
         "block_size": block_size,
         "chunk_blocks": chunk_blocks,
@@ -562,9 +593,10 @@ def section_uncertainty(
     }
     run = run_trials(block, seed=seed, n_trials=trials, adaptive=adaptive, **engine)
     p = coverage if adaptive is None else adaptive.coverage
-    return _section_result(
+    result = _section_result(
         prepared, block, run, p, inst, reference, curve, bins=bins, keep_samples=keep_samples, repeats=repeats
     )
+    return replace(result, backend=kernels)
 
 
 def _section_result(

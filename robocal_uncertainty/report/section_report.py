@@ -237,6 +237,9 @@ def section_report_dict(
         "n_trials": mc.n_trials,
         "seed": mc.seed,
         "block_size": mc.block_size,
+        "backend": None
+        if result.backend is None
+        else {"name": result.backend.name, "version": result.backend.version, "requested": result.backend.requested},
         "sources": list(result.sources),
         "instrument": {
             "name": inst.name,
@@ -257,6 +260,15 @@ def section_report_dict(
         "gum_with_repeatability": repeatability_budget(result),
         **(extra or {}),
     }
+
+
+def _backend_text(data: dict[str, Any]) -> str:
+    """``numba 0.59.0 (auto)`` from the JSON's ``backend``, or ``not recorded``."""
+    backend = data.get("backend")
+    if not backend:
+        return "not recorded"
+    requested = "" if backend["requested"] == backend["name"] else f" ({backend['requested']})"
+    return f"{backend['name']} {backend['version']}{requested}"
 
 
 def _study_dict(study: ScenarioStudy) -> dict[str, Any]:
@@ -282,6 +294,7 @@ def _study_dict(study: ScenarioStudy) -> dict[str, Any]:
         "scans_per_family": study.scans,
         "scans_total": study.total_scans,
         "trials_per_scan": study.trials,
+        "trial_backend": None if study.backend is None else study.backend.describe(),
         "families": list(study.families),
         "elapsed_s": study.elapsed_s,
         "workers": study.workers,
@@ -681,7 +694,7 @@ def section_report_blocks(data: dict[str, Any], console_table: str) -> list[Bloc
                 f"nominal: {data.get('nominal', '')}",
                 f"instrument: {data['instrument']['name']} ({data.get('instrument_file', '')})",
                 f"trials: {data['n_trials']}, random seed: {data['seed']}, block size {data['block_size']}, "
-                f"coverage probability {data['coverage_probability']}",
+                f"coverage probability {data['coverage_probability']}; trial kernels: {_backend_text(data)}",
                 f"sources: {', '.join(data['sources'])}; MPE/thermal reference point "
                 f"({', '.join(f'{v * 1e3:.3f}' for v in data['reference_point_m'])}) mm",
                 f"method: {data['method']}{denoise}",
@@ -821,7 +834,8 @@ def _own_study_blocks(own: dict[str, Any]) -> list[Block]:
             f"/°C x {inst['temperature_deviation_degc']:g} °C",
             f"{own['scans_per_family']} scans per family ({', '.join(families)}), {own['scans_total']} in all, "
             f"{own['trials_per_scan']} trials each, study seed {own['study_seed']}, {own['elapsed_s']:.0f} s on "
-            f"{own['workers']} worker(s)",
+            f"{own['workers']} worker(s)"
+            + (f", trial kernels {own['trial_backend']}" if own.get("trial_backend") else ""),
             f"rule: {own['rule']}",
         )
     )

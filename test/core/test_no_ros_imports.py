@@ -28,7 +28,10 @@ EXCLUDED_MODULES = ("robocal_uncertainty.__main__",)
 # Modules that are an optional extra's implementation and import it at module level (the
 # registry imports them only when that backend is asked for): without the extra installed
 # they may fail with exactly "No module named <extra>", and nothing else may.
-OPTIONAL_EXTRA_MODULES = {"robocal_uncertainty.kernels._numba_walk": "numba"}
+OPTIONAL_EXTRA_MODULES = {
+    "robocal_uncertainty.kernels._numba_walk": "numba",
+    "robocal_uncertainty.kernels.section_numba": "numba",
+}
 
 
 def package_modules() -> list[tuple[str, Path]]:
