@@ -104,7 +104,7 @@ SHAPE_TAU = np.linspace(0.0, 1.0, 17)
 ``d`` its dimension): 0 (one covariance over the whole workspace) to 1 (``k = d``, the fewest
 for which the local covariance is non-singular). The prior is uniform on it: the excess
 kurtosis of the errors (``2 / k``) is linear in ``tau``."""
-SHAPE_DRAWS = 1000
+SHAPE_DRAWS = 2000
 """Wishart draws of the Monte Carlo integral of the mixture's density (common random numbers
 over the grid, seeded)."""
 
@@ -623,6 +623,27 @@ def _wishart_factors(tau: float, d: int, uniforms: Array, normals: Array) -> Arr
     return np.asarray(factor / np.sqrt(k), dtype=np.float64).reshape(m, d, d)
 
 
+def _whiten_by_the_others(white: Array) -> Array:
+    """Every row of `white` (n, d) whitened by the mean outer product of the other rows, shape (n, d).
+
+    The leave-one-out prediction errors are whitened by a covariance estimated from the same
+    poses, each one included: an error far out in one direction has widened that covariance and
+    looks less extreme than the error of a configuration the calibration did not see would (at
+    53 poses, enough to hide much of the workspace variation of the shape). The covariance of the
+    others, ``S_-i = (n S - w_i w_i^T) / (n - 1)`` with ``S`` the mean outer product, takes it out.
+    """
+    w = np.asarray(white, dtype=np.float64)
+    n, d = w.shape
+    if n <= d + 1:
+        return w
+    total = w.T @ w
+    others = (total[None] - np.einsum("ni,nj->nij", w, w)) / (n - 1)
+    evals, evecs = np.linalg.eigh(others)
+    evals = np.maximum(evals, 1e-12 * np.max(evals, axis=1, keepdims=True))
+    coords = np.einsum("nji,nj->ni", evecs, w) / np.sqrt(evals)
+    return np.asarray(np.einsum("nij,nj->ni", evecs, coords), dtype=np.float64)
+
+
 def _shape_posterior(white: Array, n_eff: float, seed: int) -> Array:
     """Posterior probabilities over :data:`SHAPE_TAU` of how much the per-pose covariance varies
     over the workspace, from the whitened leave-one-out prediction errors `white` (n, d).
@@ -641,14 +662,15 @@ def _shape_posterior(white: Array, n_eff: float, seed: int) -> Array:
     errors is biased low), so it is not plugged in: its posterior (uniform prior on the grid,
     the mixture's density a Monte Carlo integral over :data:`SHAPE_DRAWS` seeded Wishart draws,
     the log-likelihood weighted by `n_eff` / n for the correlation between the poses' errors)
-    is drawn from, a draw at a time. The errors are first scaled to a mean square of one per
-    component (the scale is the leave-one-out estimate's business, not the shape's).
+    is drawn from, a draw at a time. Each error is first whitened by the covariance of the others
+    (:func:`_whiten_by_the_others`): the scale and the shape are estimated from the same poses, and a
+    configuration the calibration did not see is not among them.
     """
     from scipy.special import logsumexp
 
     w = np.asarray(white, dtype=np.float64)
     n, d = w.shape
-    w = w / np.sqrt(max(float(np.mean(w * w)), np.finfo(float).tiny))
+    w = _whiten_by_the_others(w)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5A4E]))
     uniforms = rng.uniform(size=(SHAPE_DRAWS, d))
     normals = rng.standard_normal((SHAPE_DRAWS, d, d))
