@@ -74,7 +74,7 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("calibrate", ["calibrate", "sim.mcap", "--robot", "ur10", "--json", "cal.json"]),
     ("evaluate", ["evaluate", "sim.mcap", "--robot", "ur10", "--trials", "2000", "--out", "evaluate", *TEST_JOINTS]),
     (
-        "evaluate_independent",
+        "evaluate_field",
         [
             "evaluate",
             "sim.mcap",
@@ -82,9 +82,9 @@ COMMANDS: list[tuple[str, list[str]]] = [
             "ur10",
             "--trials",
             "1000",
-            "--independent-model-error",
+            "--model-error-field",
             "--out",
-            "evaluate_independent",
+            "evaluate_field",
             *TEST_JOINTS,
         ],
     ),
