@@ -209,6 +209,9 @@ class FieldEstimate:
             head = "drawn independently from pose to pose: the correlated field is not identified by these poses"
             return f"{head} ({why})"
         scale = "" if self.scale_dof is None else f", its scale's uncertainty drawn with it ({dof} degrees of freedom)"
+        k = self.shape_dof
+        if k is not None:
+            scale += f", its shape varying over the workspace (Wishart, {k:.0f} degrees of freedom on average)"
         return (
             f"drawn as a field over the joint configurations (restricted maximum likelihood): u = {text}, "
             f"{self.correlated_fraction * 100:.0f} % correlated over {self.length_scale:.2f} rad, jointly over the "
