@@ -5,6 +5,8 @@
   pose left out in turn (brute-force least squares, not the hat-matrix identity).
 * The draws with an uncertain scale: Student-t marginals (``scipy.stats.t``), their covariance
   against the GUM's, and the GUM's factored sensitivities against that covariance.
+* The per-pose covariance varying over the workspace: its posterior on errors drawn with scipy's
+  Wishart covariances, and the draws' region against such a mixture.
 """
 
 from __future__ import annotations
@@ -13,7 +15,14 @@ import numpy as np
 from scipy import stats
 
 from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_correlation
-from robocal_uncertainty.uncertainty.model_error_draws import FieldEstimate, FieldNormal, _leave_one_out_dof
+from robocal_uncertainty.uncertainty.model_error_draws import (
+    SHAPE_TAU,
+    FieldEstimate,
+    FieldNormal,
+    _leave_one_out_dof,
+    _shape_posterior,
+    _whiten_by_the_others,
+)
 
 
 def test_leave_one_out_dof_matches_the_spread_of_brute_force_refits() -> None:
@@ -80,37 +89,81 @@ def test_uncertain_scale_draws_student_t_with_the_gum_covariance() -> None:
     np.testing.assert_allclose(white @ white.T, sens @ cov @ sens.T, rtol=1e-6)
 
 
-def test_tail_dof_from_the_kurtosis_of_the_prediction_errors() -> None:
-    """Multivariate t errors (a scale mixture of normals) give back about their degrees of
-    freedom; normal errors give normal tails (infinite, or far beyond the t's range)."""
-    rng = np.random.default_rng(8)
-    n, d = 400, 3
-    fit = np.linalg.svd(rng.normal(size=(n * d, 4)), full_matrices=False)[0]
-    unit, noise = np.eye(n * d), 1e-9 * np.eye(n * d)
-    tails = []
-    for seed in range(6):
+def _wishart_mixture(rng: np.random.Generator, n: int, d: int, k: float) -> np.ndarray:
+    """``n`` normal vectors, each with its own covariance ``W ~ Wishart(I / k, k)`` (scipy's)."""
+    covs = stats.wishart(df=k, scale=np.eye(d) / k).rvs(size=n, random_state=rng)
+    return np.einsum("nij,nj->ni", np.linalg.cholesky(covs), rng.normal(size=(n, d)))
+
+
+def test_shape_posterior_finds_a_covariance_that_varies_and_none_where_it_does_not() -> None:
+    """Errors whose covariance varies from pose to pose (Wishart, k = 6: a kurtosis 1.33 times
+    a normal's) put the posterior's mass away from ``tau = 0``; normal errors near it."""
+    rng = np.random.default_rng(12)
+    n, d = 200, 3
+    varying, constant = [], []
+    for seed in range(3):
         g = np.random.default_rng(seed)
-        mix = np.sqrt(6.0 / g.chisquare(6.0, size=(n, 1)))
-        tails.append(_leave_one_out_dof((g.normal(size=(n, d)) * mix).reshape(-1), fit, noise, unit, d, np.ones(d))[1])
-        gauss = _leave_one_out_dof(g.normal(size=n * d), fit, noise, unit, d, np.ones(d))[1]
-        assert gauss > 30.0
-    assert 4.5 < np.median(tails) < 10.0  # t_6; a sample kurtosis of t_6 is biased low and wide
+        varying.append(float(_shape_posterior(_wishart_mixture(g, n, d, 6.0), n, seed) @ SHAPE_TAU))
+        constant.append(float(_shape_posterior(g.normal(size=(n, d)), n, seed) @ SHAPE_TAU))
+    assert 0.3 < np.median(varying) < 0.8  # tau = d / k = 0.5
+    assert np.median(constant) < 0.2  # the uniform prior's mean is 0.5
+    # Fewer effective poses (correlated errors) leave the posterior nearer its prior.
+    few = _shape_posterior(rng.normal(size=(n, d)), 20.0, 0) @ SHAPE_TAU
+    assert few > np.median(constant)
+    # The whitened leave-one-out errors: unit covariance under the fitted field.
+    # Each error whitened by the covariance of the others (brute force: the other rows' mean outer product).
+    heavy = rng.standard_t(5, size=(40, d))
+    alone = _whiten_by_the_others(heavy)
+    for i in (0, 17):
+        others = np.delete(heavy, i, axis=0)
+        expected = heavy[i] @ np.linalg.solve(others.T @ others / 39, heavy[i])
+        np.testing.assert_allclose(alone[i] @ alone[i], expected, rtol=1e-10)
+    m = 80
+    fit = np.linalg.svd(rng.normal(size=(m * d, 4)), full_matrices=False)[0]
+    white, n_eff = _leave_one_out_dof(rng.normal(size=m * d), fit, 1e-9 * np.eye(m * d), np.eye(m * d), d, np.ones(d))[
+        1:
+    ]
+    assert abs(float(np.mean(white**2)) - 1.0) < 0.2  # 240 squares: sd 0.09
+    assert 0.9 * m < n_eff <= m  # independent errors: every pose counts
 
 
-def test_t_process_draws_keep_the_covariance_with_t_marginals() -> None:
+def test_varying_shape_draws_keep_the_covariance_with_the_mixture_region() -> None:
+    """Draws with the shape's posterior all on one ``tau``: the field's covariance, and at a test
+    configuration the 95 % region (squared Mahalanobis quantile) of scipy's Wishart mixture;
+    with the posterior spread over ``tau`` the mixture over it (the hyperparameter's uncertainty
+    drawn, not its posterior mean plugged in)."""
     rng = np.random.default_rng(9)
-    q_t = rng.uniform(-2, 2, (30, 6))
+    q_t = rng.uniform(-2, 2, (8, 6))
     q_c = rng.uniform(-2, 2, (2, 6))
     sigma = np.diag([4.0, 2.0, 1.0]) * 1e-8
-    est = FieldEstimate(correlated_fraction=0.95, length_scale=0.8, per_pose_covariance=sigma, tail_dof=7.0)
-    normal = FieldNormal(q_t, q_c, FieldEstimate(correlated_fraction=0.95, length_scale=0.8, per_pose_covariance=sigma))
-    # Innovations are ignored for a t-process: its tails do not average out over the poses.
-    draw = FieldNormal(q_t, q_c, est, innovations=rng.normal(size=(100, 3)))
-    samples = draw.sample(np.random.default_rng(2), 300_000)
+    base = {"correlated_fraction": 0.95, "length_scale": 0.8, "per_pose_covariance": sigma}
+    normal = FieldNormal(q_t, q_c, FieldEstimate(**base))
     cov = normal.covariance()
+    at = np.zeros(SHAPE_TAU.size)
+    at[8] = 1.0  # tau = 0.5, k = 6
+    # Innovations are ignored: a local covariance does not average out over the poses.
+    draw = FieldNormal(q_t, q_c, FieldEstimate(**base, shape_weights=at), innovations=rng.normal(size=(100, 3)))
+    samples = draw.sample(np.random.default_rng(2), 80_000)
     np.testing.assert_allclose(draw.covariance(), cov)
     scale = np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
     np.testing.assert_allclose(np.cov(samples.T) / scale, cov / scale, atol=0.03)
-    z = samples[:, -1] / np.sqrt(cov[-1, -1])
-    for p in (0.9, 0.975, 0.995):
-        np.testing.assert_allclose(np.quantile(z, p), stats.t.ppf(p, 7.0) * np.sqrt(5.0 / 7.0), rtol=0.03)
+
+    def region(w: np.ndarray) -> float:
+        """95 % quantile of the squared norm of whitened vectors over its mean."""
+        return float(np.quantile(np.sum(w * w, axis=1) / np.mean(np.sum(w * w, axis=1)), 0.95))
+
+    def white(values: np.ndarray) -> np.ndarray:
+        return values[:, -3:] / np.sqrt(np.diag(sigma))
+
+    mixture = _wishart_mixture(np.random.default_rng(4), 80_000, 3, 6.0)
+    np.testing.assert_allclose(region(white(samples)), region(mixture), rtol=0.02)
+    assert region(mixture) > 1.05 * stats.chi2.ppf(0.95, 3) / 3  # wider than one covariance everywhere
+    # Half the posterior at tau = 0, half at tau = 0.5: the region of that mixture, not of tau = 0.25.
+    half = np.zeros(SHAPE_TAU.size)
+    half[[0, 8]] = 0.5
+    spread = FieldNormal(q_t, q_c, FieldEstimate(**base, shape_weights=half)).sample(np.random.default_rng(3), 80_000)
+    both = np.concatenate((mixture[:40_000], np.random.default_rng(5).normal(size=(40_000, 3))))
+    plugged = _wishart_mixture(np.random.default_rng(6), 80_000, 3, 12.0)
+    got = region(white(spread))
+    np.testing.assert_allclose(got, region(both), rtol=0.02)
+    assert abs(got - region(both)) < abs(region(plugged) - region(both))
