@@ -99,7 +99,9 @@ def test_grown_edge_windows_equal_numpy(
     block = setup.trials(batch=100)
     edges = block.model.edges
     assert edges is not None and any(any(checks) for edge in edges for checks in edge.checks)
-    assert dataclasses.replace(block, backend="numba").kernel.fused
+    # The kernel draws its values itself where numba compiles Generators (>= 0.56); Humble's 0.55
+    # takes numpy's draws batch by batch: the values must be equal either way.
+    assert dataclasses.replace(block, backend="numba").kernel.fused == section_kernels._generators_supported()
     numba_values, numpy_values = _both(block)
     _close(numba_values, numpy_values)
     # The trials really vary the leading edge's extreme point and window.
