@@ -88,6 +88,23 @@ def test_fk_field_correction_refuses_a_calibration_without_the_field(
     assert "error:" in err and "no model-error field" in err
 
 
+def test_fk_field_correction_says_an_adequate_calibration_has_nothing_to_correct(
+    field_calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A calibration whose model passed the adequacy test estimates no field: the message must
+    # say so, not advise a recalibration that would end the same way.
+    data = read_calibration(field_calibration)
+    data["model_error"].update(field=None, adequate=True, p_value=0.27)
+    adequate = tmp_path / "adequate.json"
+    adequate.write_text(json.dumps(data), encoding="utf-8")
+    code = main(
+        ["fk", "--robot", "ur10", "--calibration", str(adequate), "--joints", *["0.1"] * 6, "--field-correction"]
+    )
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and len(err.splitlines()) == 1
+    assert "no significant model error (adequacy test p = 0.27)" in err and "recalibrate" not in err
+
+
 def test_export_says_the_urdf_cannot_carry_the_field_correction(
     field_calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -327,6 +327,16 @@ def kriging_basis(
     field_data = (data.get("model_error") or {}).get("field") if isinstance(data.get("model_error"), dict) else None
     residuals = None if not isinstance(field_data, dict) else field_data.get("residuals_m")
     if state is None or me_field is None or residuals is None:
+        adequacy = data.get("model_error")
+        if me_field is None and isinstance(adequacy, dict) and adequacy.get("adequate") is True:
+            # A calibration of this version whose kinematic model explains its points: advising a
+            # recalibration would send the user round in a circle.
+            msg = (
+                f"{where}: the calibration found no significant model error (adequacy test p = "
+                f"{float(adequacy.get('p_value', float('nan'))):.3g}), so it estimated no field and there is nothing "
+                "to correct: use fk without --field-correction"
+            )
+            raise ConfigError(msg)
         what = "no model-error field (model_error.field)" if me_field is None else "the field without its residuals"
         msg = (
             f"{where} carries {what}, so there is no correction to apply: recalibrate with this version "
