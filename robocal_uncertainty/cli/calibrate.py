@@ -146,8 +146,19 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(msg)
     prior = None
     if args.class_prior:
-        from robocal_uncertainty.uncertainty.sessions.class_prior import load_class_prior
+        from pathlib import Path
 
+        from robocal_uncertainty.uncertainty.sessions.class_prior import SHIPPED_CLASS_PRIORS, load_class_prior
+
+        # A shipped prior belongs to one shipped robot: another shipped robot (named, not a file
+        # the user vouches for) would get a statement from a class it is not in.
+        robot_is_shipped_name = Path(str(args.robot)).suffix == "" and "/" not in str(args.robot)
+        if args.class_prior in SHIPPED_CLASS_PRIORS and robot_is_shipped_name and args.robot != args.class_prior:
+            msg = (
+                f"--class-prior {args.class_prior} is the between-session prior of the {args.class_prior} class, "
+                f"not of --robot {args.robot}: give a prior file for that robot's class"
+            )
+            raise ConfigError(msg)
         prior = load_class_prior(args.class_prior)
     campaign, model = campaign_and_robot(args)
     later = []

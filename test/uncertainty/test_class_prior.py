@@ -135,3 +135,8 @@ def test_calibrate_says_which_between_session_component_it_used(tmp_path: Path, 
     assert "class prior shipped ur10 (robocal_uncertainty/data/ur10_between_sessions.yaml)" in out
     assert main(["calibrate", str(tmp_path / "s1.mcap"), "--robot", "ur10", "--class-prior", "nosuch"]) == 1
     assert "error: class prior nosuch: neither a shipped prior (ur10)" in capsys.readouterr().err
+    # The UR10's prior is not another shipped robot's: refused in one line, not applied silently.
+    assert main(["calibrate", str(tmp_path / "s1.mcap"), "--robot", "paper_arm", "--class-prior", "ur10"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "--class-prior ur10 is the between-session prior of the ur10 class, not of --robot paper_arm" in err
