@@ -5,7 +5,7 @@ For random splits of the real UR10 series (B and D), calibrates on the training 
 dict), and predicts the held-out points as ``fk --field-correction`` does: the calibrated
 kinematics plus the field's conditional mean given the training residuals,
 ``E[delta_c | z] = Cov(delta_c, z) Cov(z)^-1 z`` (``z`` the residuals' contrasts orthogonal to the
-fit, ``delta_c`` the calibrated prediction's error; :mod:`robocal_uncertainty.uncertainty.field_kriging`).
+fit, ``delta_c`` the calibrated prediction's error; :mod:`robocal_uncertainty.core.field_kriging`).
 Prints per row the held-out 3-D RMS without and with the correction, the per-axis fraction of
 held-out points inside the 95 % interval of the corrected statement (kriging covariance widened
 by the calibration's own folds, plus the held-out point's stated noise; Student-t quantile), the
@@ -29,14 +29,11 @@ sys.path.insert(0, str(ROOT))
 
 from robocal_uncertainty.core import identify
 from robocal_uncertainty.core.calibration_file import apply_calibration, calibration_to_dict
+from robocal_uncertainty.core.field_kriging import krige, kriging_basis
 from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
-from robocal_uncertainty.uncertainty.field_kriging import (
-    krige,
-    kriging_basis,
-)
 from robocal_uncertainty.uncertainty.model_adequacy import pose_noise_covariances
 from robocal_uncertainty.uncertainty.sessions.state import session_state
 

@@ -17,10 +17,10 @@ import pytest
 from robocal_uncertainty.cli import main
 from robocal_uncertainty.core import identify
 from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration, write_calibration
+from robocal_uncertainty.core.field_kriging import krige, kriging_basis
 from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
 from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
-from robocal_uncertainty.uncertainty.field_kriging import krige, kriging_basis
 from robocal_uncertainty.uncertainty.sessions.state import session_state
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -112,3 +112,41 @@ def test_export_says_the_urdf_cannot_carry_the_field_correction(
     assert main(["export", str(field_calibration), "--format", "urdf", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "cannot carry the model-error field's correction" in text
+
+
+def test_the_file_stores_the_folds_factors_and_fk_reads_them_back(
+    field_calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from robocal_uncertainty.core.field_cross_validation import cross_validated_factors
+
+    data = read_calibration(field_calibration)
+    record = data["model_error"]["field"]["cross_validation"]
+    model = apply_calibration(load_robot_model(resolve_robot_config("ur10")), data)
+    plain = kriging_basis(data, model, cross_validate=False)
+    # The stored factors are the folds' own, recomputed here from the file's field.
+    cross = cross_validated_factors(plain, model.layout, model.parameter_vector())
+    np.testing.assert_allclose(record["factors_xyz"], cross.factors, rtol=1e-12)
+    np.testing.assert_allclose(record["ratios"], cross.ratios, rtol=1e-12)
+    assert record["n_poses"] == 80 and record["folds"] == 5
+    assert kriging_basis(data, model).factors_source == "stored"
+    # An older file without them: computed now, said so, the same numbers.
+    del data["model_error"]["field"]["cross_validation"]
+    older = tmp_path / "older.json"
+    older.write_text(json.dumps(data))
+    joints = np.full((1, 6), 0.5)
+    stored = _fk_json(tmp_path / "a.json", field_calibration, joints, "--field-correction")
+    capsys.readouterr()
+    computed = _fk_json(tmp_path / "b.json", older, joints, "--field-correction")
+    assert "stores no cross-validated kriging factors" in capsys.readouterr().out
+    np.testing.assert_array_equal(
+        computed["field_correction"]["covariance_m2"], stored["field_correction"]["covariance_m2"]
+    )
+    # An edited file (residuals changed after the factors were computed) is refused in one line.
+    edited = read_calibration(field_calibration)
+    edited["model_error"]["field"]["residuals_m"][0][0] += 1e-6
+    path = tmp_path / "edited.json"
+    path.write_text(json.dumps(edited))
+    args = ["fk", "--robot", "ur10", "--calibration", str(path), "--field-correction", "--joints", *["0.5"] * 6]
+    assert main(args) == 1
+    err = capsys.readouterr().err.strip()
+    assert "computed from other poses, residuals or field" in err and len(err.splitlines()) == 1

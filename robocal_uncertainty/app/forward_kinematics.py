@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal_uncertainty.core.field_kriging import KrigingBasis, krige
 from robocal_uncertainty.core.kinematics import forward_points
 from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
 from robocal_uncertainty.errors import ConfigError
-from robocal_uncertainty.uncertainty.field_kriging import KrigingBasis, krige
 
 __all__ = ["FRAMES", "ToolPoints", "tool_points"]
 
@@ -128,7 +128,7 @@ def tool_points(
         labelled with the measurement frame (the frames coincide).
     field_correction : KrigingBasis, optional
         The calibration's model-error field with its residuals
-        (:func:`~robocal_uncertainty.uncertainty.field_kriging.kriging_basis`): its conditional
+        (:func:`~robocal_uncertainty.core.field_kriging.kriging_basis`): its conditional
         mean at `joints` is added to the points (both frames) and its kriging covariance kept.
 
     Raises

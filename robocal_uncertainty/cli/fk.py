@@ -10,6 +10,12 @@ from typing import Any
 from robocal_uncertainty.cli._common import joint_configurations, load_robot
 from robocal_uncertainty.cli._options import add_force_arg, add_urdf_chain_args
 
+FACTORS_COMPUTED_NOTE = (
+    "the calibration file stores no cross-validated kriging factors (written before they were stored): computed "
+    "now from its poses (5 refits; recalibrate with 'calibrate --json' to store them and skip this)"
+)
+"""What a correction of an older calibration file says (the commands with --field-correction)."""
+
 
 def register(sub: Any) -> None:
     """Add the ``fk`` command and its options to the subparsers `sub`."""
@@ -46,8 +52,8 @@ def run(args: argparse.Namespace) -> int:
 
     from robocal_uncertainty.app import tool_points
     from robocal_uncertainty.core.calibration_file import apply_calibration, read_calibration
+    from robocal_uncertainty.core.field_kriging import kriging_basis
     from robocal_uncertainty.errors import ConfigError
-    from robocal_uncertainty.uncertainty.field_kriging import kriging_basis
 
     model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link, tool_point=args.tool_point)
     basis = None
@@ -87,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
             + " ".join(f"u_{a}" for a in axes)
             + " ratio"
         )
+        if basis is not None and basis.factors_source == "computed":
+            print(f"# note: {FACTORS_COMPUTED_NOTE}")
         if basis is not None and basis.dof < 20:
             # Measured on held-out real poses: with 53 calibration poses (6 degrees of freedom) the
             # intervals held 98-99 % for a 5-7 % gain (benchmarks/study_field_kriging.py).

@@ -48,7 +48,11 @@ model-error field), a JSON object with
     calibration poses, model joint order), ``gain`` (``names``, ``matrix``: the estimates'
     change per base-frame point error at those poses, pose-major x y z) and ``residuals_m`` (the
     calibration's residuals at those poses, measurement frame, n x 3: what the field's
-    correction, ``fk --field-correction``, conditions on); ``covariance_base_m2``
+    correction, ``--field-correction``, conditions on) and ``cross_validation`` (the kriging
+    variance's per-axis factors from the calibration's own folds, ``ratios`` and ``factors_xyz``,
+    with ``folds``, ``bins``, ``seed``, ``n_poses`` and ``computed_from_sha256``, the digest of
+    the poses, residuals, noise, field and gain they were computed from; see
+    :mod:`robocal_uncertainty.core.field_cross_validation`); ``covariance_base_m2``
     is then the field's per-pose covariance.
 ``sources``
     Uncertainty sources of the statement.
@@ -226,9 +230,27 @@ def calibration_to_dict(
         if field_record is not None and residuals.shape == (session.n_poses, 3):
             # The field's correction (kriging) conditions on these; a URDF cannot carry them.
             field_record["residuals_m"] = _matrix(residuals)
+            field_record["cross_validation"] = _field_cross_validation(result, out)
     else:
         out.update({"session": None, "scope": "session", "between_session": None})
     return out
+
+
+def _field_cross_validation(result: IdentificationResult, data: dict[str, Any]) -> dict[str, Any] | None:
+    """``model_error.field.cross_validation`` of `data` (its field and residuals written): the
+    kriging variance's factors from the calibration's own folds, computed once here (seconds to
+    a minute) so that every correction reads them back; None where the folds cannot be kriged
+    (too few poses), and a correction computes or refuses then."""
+    # The kriging modules read this module's files: imported here, not at its top.
+    from robocal_uncertainty.core.field_cross_validation import factors_record
+    from robocal_uncertainty.core.field_kriging import kriging_basis
+
+    model = apply_calibration(result.model, data, where="the calibration")
+    basis = kriging_basis(data, model, where="the calibration", cross_validate=False)
+    try:
+        return factors_record(basis, model.layout, model.parameter_vector())
+    except (np.linalg.LinAlgError, ValueError):
+        return None
 
 
 def write_calibration(

@@ -1,480 +1,41 @@
-"""The model-error field as a correction: its conditional mean at new configurations (kriging).
+"""The model-error field's correction (kriging) applied to an uncertainty statement.
 
-A calibration's residuals carry what the kinematic model missed at its poses. Where the model
-error is a field correlated over the configurations, that information predicts the error at a
-nearby configuration: the best linear predictor of the prediction error ``delta_c`` given the
-residuals, and the covariance left after it, are Gaussian conditioning,
-
-``E[delta_c | z] = C_dz C_zz^-1 z``, ``Cov(delta_c | z) = C_dd - C_dz C_zz^-1 C_zd``,
-
-with ``z = Q^T r`` the residuals' contrasts (``Q`` orthonormal, orthogonal to the fit's Jacobian
-``A``: ``Q^T r = Q^T (e_t + eps_t)`` whatever the parameters, so nothing of the fit is counted
-twice) and ``delta_c = e_c - J_c G (e_t + eps_t)`` (``G`` the fit's gain: what the calibration
-moved its prediction by). The correction fades to zero far from the calibration poses (``C_dz``
-goes with the field's correlation) and cannot be written into a kinematic model (it is not a
-parameter): it travels with the calibration's poses and residuals (the calibration file's
-``model_error.field``; ``fk --field-correction``, ``map --field-correction``).
-
-:func:`krige` gives it per configuration (blocks of the same conditional covariance), with the
-kriging variance widened where the calibration's own held-out folds show it too narrow
-(:func:`cross_validated_factors`): the field's hyperparameters come from a likelihood that
-repeated poses dominate, and the kernel they give is too confident a few tenths of a radian from
-a pose (``benchmarks/study_field_kriging.py``).
+:mod:`~robocal_uncertainty.core.field_kriging` gives the field's conditional mean and kriging
+covariance at some configurations; this module puts them into the statements the commands make,
+one way for all of them (``fk``, ``map``, ``evaluate``, ``validate``, the uncertainty node): the
+positions move by the conditional mean and the kriging covariance takes the place of the field's
+prior in the statement's covariance (:func:`corrected_statement`); a Monte Carlo statement's trials
+are mapped affinely onto that mean and covariance, so its intervals, regions and held-out checks
+are computed as before, from trials (:func:`corrected_uncertainty`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal_uncertainty.core.calibration_file import apply_calibration, calibration_to_dict, read_session_state
+from robocal_uncertainty.core.calibration_file import apply_calibration, calibration_to_dict
 from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.field_kriging import KrigedPoints, KrigingBasis, krige, kriging_basis
 from robocal_uncertainty.core.identification import IdentificationResult
 from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
-from robocal_uncertainty.core.kinematics import forward_points, forward_points_and_jacobian
-from robocal_uncertainty.core.measurement import POINT
-from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_correlation
-from robocal_uncertainty.core.robot_model import ParameterLayout, RobotModel, rpy_to_matrix
-from robocal_uncertainty.errors import ConfigError
+from robocal_uncertainty.core.robot_model import rpy_to_matrix
+from robocal_uncertainty.errors import InputError
+from robocal_uncertainty.montecarlo.region import coverage_region
+from robocal_uncertainty.montecarlo.summary import summarize
+from robocal_uncertainty.uncertainty.calibration.results import N_AXES, CalibrationUncertainty, GumPose
 
 __all__ = [
-    "FieldCorrection",
-    "KrigedPoints",
-    "KrigingBasis",
     "calibration_kriging_basis",
     "corrected_statement",
-    "cross_validated_factors",
-    "field_correction",
-    "krige",
-    "kriging_basis",
+    "corrected_uncertainty",
+    "correction_warning",
+    "output_rotation",
 ]
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True, eq=False)
-class FieldCorrection:
-    """The field's conditional mean and covariance at the test configurations.
-
-    Attributes
-    ----------
-    mean : ndarray, shape (n_c,)
-        ``E[delta_c | z]``: what to add to the calibrated predictions (residual coordinates).
-    covariance : ndarray, shape (n_c, n_c)
-        ``Cov(delta_c | z)``: the prediction error's covariance once corrected (the kriging
-        variance; the parameters' own uncertainty through the fit is in it).
-    prior_covariance : ndarray, shape (n_c, n_c)
-        ``Cov(delta_c)``: the same without the correction.
-    """
-
-    mean: Array
-    covariance: Array
-    prior_covariance: Array
-
-
-def field_correction(
-    fit_jacobian: Array,
-    residuals: Array,
-    data_covariance: Array,
-    cross_covariance: Array,
-    test_covariance: Array,
-    prediction_gain: Array,
-) -> FieldCorrection:
-    """Conditional mean and covariance of the prediction error given the calibration's residuals.
-
-    Parameters
-    ----------
-    fit_jacobian : ndarray, shape (n_t, k)
-        ``A``: the fit's Jacobian at the calibration poses (its columns span what the fit absorbs).
-    residuals : ndarray, shape (n_t,)
-        ``r``: the calibration's residuals (measured minus predicted).
-    data_covariance : ndarray, shape (n_t, n_t)
-        ``Cov(e_t + eps_t)``: the field and the measurement noise at the calibration poses.
-    cross_covariance : ndarray, shape (n_c, n_t)
-        ``Cov(e_c, e_t)``: the field between the test configurations and the calibration poses.
-    test_covariance : ndarray, shape (n_c, n_c)
-        ``Cov(e_c)``: the field at the test configurations.
-    prediction_gain : ndarray, shape (n_c, n_t)
-        ``J_c G``: the change of the calibrated predictions per error of the calibration data.
-
-    Returns
-    -------
-    FieldCorrection
-    """
-    a_mat = np.asarray(fit_jacobian, dtype=np.float64)
-    u_full, sv, _ = np.linalg.svd(a_mat, full_matrices=True)
-    rank = int(np.sum(sv > 1e-10 * sv[0])) if sv.size else 0
-    q_mat = u_full[:, rank:]
-    k_tt = np.asarray(data_covariance, dtype=np.float64)
-    k_ct = np.asarray(cross_covariance, dtype=np.float64)
-    jg = np.asarray(prediction_gain, dtype=np.float64)
-    prior = np.asarray(test_covariance, dtype=np.float64) - k_ct @ jg.T - jg @ k_ct.T + jg @ k_tt @ jg.T
-    c_zz = q_mat.T @ k_tt @ q_mat
-    c_dz = (k_ct - jg @ k_tt) @ q_mat
-    gain = np.linalg.solve(c_zz, c_dz.T).T  # C_dz C_zz^-1
-    mean = gain @ (q_mat.T @ np.asarray(residuals, dtype=np.float64))
-    posterior = prior - gain @ c_dz.T
-    return FieldCorrection(
-        mean=np.asarray(mean, dtype=np.float64),
-        covariance=np.asarray(0.5 * (posterior + posterior.T), dtype=np.float64),
-        prior_covariance=np.asarray(0.5 * (prior + prior.T), dtype=np.float64),
-    )
-
-
-@dataclass(frozen=True, eq=False)
-class KrigingBasis:
-    """What the correction needs of a calibration: its poses, residuals and field (measurement frame).
-
-    Attributes
-    ----------
-    joint_positions : ndarray, shape (n_t, n_joints) [rad]
-        The calibration poses (model joint order).
-    residuals : ndarray, shape (n_t, 3) [m]
-        Measured minus calibrated points at those poses.
-    noise : ndarray, shape (n_t, 3, 3) [m^2]
-        Stated noise covariance of each measured point (tracker and encoders).
-    per_pose_covariance : ndarray, shape (3, 3) [m^2]
-        ``Sigma_m`` of the field (its per-pose covariance).
-    correlated_fraction, length_scale : float
-        ``c`` and ``l`` [rad] of the field.
-    gain_names : tuple of str, length k
-        The estimated parameters (what the fit absorbs).
-    gain : ndarray, shape (k, 3 n_t)
-        The fit's gain: change of those estimates per measured point error at the poses.
-    dof : float
-        Degrees of freedom of the field's scale estimate: the intervals take Student-t
-        quantiles with them (the scale is estimated, not known).
-    factor_ratios : ndarray, shape (b,)
-        Std ratios (:attr:`KrigedPoints.std_ratio` before any factor) at which
-        `factor_axes` were measured (empty: the field's covariance as estimated).
-    factor_axes : ndarray, shape (b, 3)
-        Per-axis (measurement frame) factors >= 1 on the kriging variance there, from the
-        calibration's own held-out folds (:func:`cross_validated_factors`); interpolated in the
-        std ratio, constant beyond the ends.
-    """
-
-    joint_positions: Array
-    residuals: Array
-    noise: Array
-    per_pose_covariance: Array
-    correlated_fraction: float
-    length_scale: float
-    gain_names: tuple[str, ...]
-    gain: Array
-    dof: float = float("inf")
-    factor_ratios: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
-    factor_axes: Array = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
-
-
-@dataclass(frozen=True, eq=False)
-class KrigedPoints:
-    """The field's correction at some configurations, per configuration (measurement frame).
-
-    Attributes
-    ----------
-    mean : ndarray, shape (n, 3) [m]
-        What to add to the calibrated points.
-    covariance : ndarray, shape (n, 3, 3) [m^2]
-        Covariance of the corrected prediction's error (kriging variance: the field's part,
-        and through the fit's gain the parameters' part of the field and the noise).
-    prior_covariance : ndarray, shape (n, 3, 3) [m^2]
-        The same for the uncorrected prediction.
-    dof : float
-        Degrees of freedom of the scale (Student-t intervals).
-    """
-
-    mean: Array
-    covariance: Array
-    prior_covariance: Array
-    dof: float
-
-    @property
-    def std_ratio(self) -> Array:
-        """``sqrt(tr Cov / tr prior Cov)`` per configuration, shape (n,): 0 at a calibration pose
-        with no noise, 1 far from all of them (the correction knows nothing there)."""
-        post = np.trace(self.covariance, axis1=1, axis2=2)
-        prior = np.trace(self.prior_covariance, axis1=1, axis2=2)
-        return np.asarray(np.sqrt(np.clip(post, 0.0, None) / np.where(prior > 0, prior, 1.0)), dtype=np.float64)
-
-    def coverage_factor(self, probability: float = 0.95) -> float:
-        """Two-sided per-axis coverage factor: the Student-t quantile with :attr:`dof`."""
-        from scipy import stats
-
-        tail = 0.5 + 0.5 * probability
-        return float(stats.norm.ppf(tail) if not np.isfinite(self.dof) else stats.t.ppf(tail, self.dof))
-
-
-def _correlation(q_a: Array, q_b: Array, basis: KrigingBasis) -> Array:
-    return basis.correlated_fraction * kernel_correlation(chordal_distance(q_a, q_b), basis.length_scale)
-
-
-def _widened(basis: KrigingBasis, post: Array, prior: Array) -> Array:
-    """`post` with each axis's variance scaled by the cross-validated factor at its std ratio."""
-    if basis.factor_ratios.size == 0:
-        return post
-    ratio = np.sqrt(np.clip(np.trace(post, axis1=1, axis2=2), 0.0, None) / np.trace(prior, axis1=1, axis2=2))
-    scale = np.sqrt(
-        np.stack([np.interp(ratio, basis.factor_ratios, basis.factor_axes[:, a]) for a in range(3)], axis=1)
-    )
-    return np.asarray(post * scale[:, :, None] * scale[:, None, :], dtype=np.float64)
-
-
-def _parameter_columns(layout: ParameterLayout, names: tuple[str, ...]) -> list[int]:
-    index = {n: i for i, n in enumerate(layout.names)}
-    missing = [n for n in names if n not in index]
-    if missing:
-        msg = f"the field's gain names parameters the model does not have: {', '.join(missing[:3])}"
-        raise ConfigError(msg)
-    return [index[n] for n in names]
-
-
-def krige(
-    basis: KrigingBasis, layout: ParameterLayout, parameters: Array, joint_positions: Array, *, chunk: int = 256
-) -> KrigedPoints:
-    """The field's conditional mean and per-configuration covariance at `joint_positions`.
-
-    :func:`field_correction` per configuration block (the full cross-configuration covariance
-    is never formed, so a map of thousands of configurations stays linear in their number).
-
-    Parameters
-    ----------
-    basis : KrigingBasis
-    layout : ParameterLayout
-    parameters : ndarray, shape (n_params,) [m, rad]
-        The calibrated parameter vector.
-    joint_positions : ndarray, shape (n, n_joints) [rad]
-    chunk : int
-        Configurations per block (memory ``~ 9 n_t chunk`` floats).
-    """
-    q_t = np.asarray(basis.joint_positions, dtype=np.float64)
-    q_c = np.atleast_2d(np.asarray(joint_positions, dtype=np.float64))
-    n_t, n_c = q_t.shape[0], q_c.shape[0]
-    cols = _parameter_columns(layout, basis.gain_names)
-    s_m = np.asarray(basis.per_pose_covariance, dtype=np.float64)
-    c = basis.correlated_fraction
-    corr_tt = _correlation(q_t, q_t, basis) + (1.0 - c) * np.eye(n_t)
-    k_tt = np.kron(corr_tt, s_m)
-    idx = np.arange(n_t)
-    k_tt_blocks = k_tt.reshape(n_t, 3, n_t, 3)
-    k_tt_blocks[idx, :, idx, :] += np.asarray(basis.noise, dtype=np.float64)
-    _, jac_t = forward_points_and_jacobian(layout, parameters, q_t)
-    a_mat = jac_t[:, :, cols].reshape(3 * n_t, len(cols))
-    u_full, sv, _ = np.linalg.svd(a_mat, full_matrices=True)
-    rank = int(np.sum(sv > 1e-10 * sv[0])) if sv.size else 0
-    q_mat = u_full[:, rank:]
-    k_tt_q = k_tt @ q_mat
-    chol = np.linalg.cholesky(q_mat.T @ k_tt_q)
-    z = q_mat.T @ np.asarray(basis.residuals, dtype=np.float64).reshape(-1)
-    alpha = np.linalg.solve(chol.T, np.linalg.solve(chol, z))
-    gain = np.asarray(basis.gain, dtype=np.float64)
-    # Through the fit's gain only k directions of the data reach a prediction: G K_tt G^T and
-    # G K_tt Q are formed once (k x k, k x m), never J_c G K_tt per configuration.
-    g_k_g = gain @ k_tt @ gain.T
-    g_k_q = gain @ k_tt_q
-    mean = np.empty((n_c, 3))
-    post = np.empty((n_c, 3, 3))
-    prior = np.empty((n_c, 3, 3))
-    for start in range(0, n_c, chunk):
-        q = q_c[start : start + chunk]
-        n = q.shape[0]
-        _, jac_c = forward_points_and_jacobian(layout, parameters, q)
-        j_c = jac_c[:, :, cols].reshape(3 * n, len(cols))
-        k_ct = np.kron(_correlation(q, q_t, basis), s_m)
-        c_dz = k_ct @ q_mat - j_c @ g_k_q  # Cov(delta_c, z)
-        mean[start : start + n] = (c_dz @ alpha).reshape(n, 3)
-        # Per-configuration blocks of Cov(delta_c) = K_cc - K_ct (J G)^T - J G K_tc + J G K_tt (J G)^T.
-        j3 = j_c.reshape(n, 3, len(cols))
-        parameters_part = np.einsum("nia,ab,njb->nij", j3, g_k_g, j3)
-        cross = np.einsum("nia,nja->nij", (k_ct @ gain.T).reshape(n, 3, len(cols)), j3)
-        block = s_m[None] + parameters_part - cross - np.transpose(cross, (0, 2, 1))
-        w3 = np.linalg.solve(chol, c_dz.T).T.reshape(n, 3, -1)
-        explained = np.einsum("nia,nja->nij", w3, w3)
-        prior[start : start + n] = 0.5 * (block + np.transpose(block, (0, 2, 1)))
-        post[start : start + n] = _widened(
-            basis, prior[start : start + n] - 0.5 * (explained + np.transpose(explained, (0, 2, 1))), block
-        )
-    return KrigedPoints(mean=mean, covariance=post, prior_covariance=prior, dof=float(basis.dof))
-
-
-def kriging_basis(
-    data: dict[str, Any], model: RobotModel, *, where: str = "calibration", cross_validate: bool = True
-) -> KrigingBasis:
-    """The correction's inputs from a calibration file (``model_error.field`` with its residuals).
-
-    Parameters
-    ----------
-    data : dict
-        A calibration file (:func:`~robocal_uncertainty.core.calibration_file.read_calibration`).
-    model : RobotModel
-        The robot with that calibration applied.
-    where : str
-        Names the file in errors.
-    cross_validate : bool
-        Widen the kriging variance by the calibration's own held-out folds
-        (:func:`cross_validated_factors`); False: the field's covariance as estimated.
-
-    Raises
-    ------
-    ConfigError
-        The file carries no model-error field, or not its residuals (one line).
-    """
-    state = read_session_state(data, where=where)
-    me_field = None if state is None else state.model_error_field
-    field_data = (data.get("model_error") or {}).get("field") if isinstance(data.get("model_error"), dict) else None
-    residuals = None if not isinstance(field_data, dict) else field_data.get("residuals_m")
-    if state is None or me_field is None or residuals is None:
-        adequacy = data.get("model_error")
-        if me_field is None and isinstance(adequacy, dict) and adequacy.get("adequate") is True:
-            # A calibration of this version whose kinematic model explains its points: advising a
-            # recalibration would send the user round in a circle.
-            msg = (
-                f"{where}: the calibration found no significant model error (adequacy test p = "
-                f"{float(adequacy.get('p_value', float('nan'))):.3g}), so it estimated no field and there is nothing "
-                "to correct: use fk without --field-correction"
-            )
-            raise ConfigError(msg)
-        what = "no model-error field (model_error.field)" if me_field is None else "the field without its residuals"
-        msg = (
-            f"{where} carries {what}, so there is no correction to apply: recalibrate with this version "
-            "('calibrate --json'; a field is estimated when the model error is significant)"
-        )
-        raise ConfigError(msg)
-    q_t = me_field.joint_positions
-    try:
-        r = np.asarray(residuals, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        msg = f"{where}: model_error.field.residuals_m is not a numeric n x 3 array"
-        raise ConfigError(msg) from err
-    if r.shape != (q_t.shape[0], 3) or not np.isfinite(r).all():
-        msg = f"{where}: model_error.field.residuals_m must be {q_t.shape[0]} x 3 finite values [m], got {r.shape}"
-        raise ConfigError(msg)
-    layout = model.layout
-    params = model.parameter_vector()
-    b0 = layout.base_index
-    r_wb = rpy_to_matrix(params[b0 + 3 : b0 + 6]) if state.frame == "tracker" else np.eye(3)
-    predicted = forward_points(layout, params, q_t)
-    distances = np.linalg.norm(predicted + r, axis=1) if state.frame == "tracker" else np.full(q_t.shape[0], 2.0)
-    jq = POINT.joint_jacobian(layout, params, q_t)
-    noise = state.encoder_noise.covariance(jq, model.prismatic) + POINT.instrument_covariance(
-        state.tracker_noise.std(distances)
-    )
-    rotate = np.kron(np.eye(q_t.shape[0]), r_wb)
-    basis = KrigingBasis(
-        joint_positions=q_t,
-        residuals=r,
-        noise=np.asarray(noise, dtype=np.float64),
-        per_pose_covariance=r_wb @ state.model_error_covariance @ r_wb.T,
-        correlated_fraction=me_field.correlated_fraction,
-        length_scale=me_field.length_scale,
-        gain_names=me_field.gain_names,
-        gain=me_field.gain @ rotate.T,
-        dof=me_field.dof,
-    )
-    if not cross_validate:
-        return basis
-    cross = cross_validated_factors(basis, layout, params)
-    return dataclasses.replace(basis, factor_ratios=cross.ratios, factor_axes=cross.factors)
-
-
-CROSS_VALIDATION_FOLDS = 5
-"""Folds of :func:`cross_validated_factors`."""
-CROSS_VALIDATION_BINS = 3
-"""Std-ratio bins of :func:`cross_validated_factors` (equal numbers of poses)."""
-
-
-@dataclass(frozen=True, eq=False)
-class CrossValidation:
-    """The correction on the calibration's own held-out folds.
-
-    Attributes
-    ----------
-    ratios : ndarray, shape (b,)
-        Median std ratio of each bin.
-    factors : ndarray, shape (b, 3)
-        Per-axis variance factors (>= 1) that make each bin's mean squared standardised error 1.
-    standardised : ndarray, shape (n_t, 3)
-        Each pose's corrected error over its stated standard uncertainty (kriging and noise),
-        per axis, before the factors.
-    ratio : ndarray, shape (n_t,)
-        Each pose's std ratio.
-    """
-
-    ratios: Array
-    factors: Array
-    standardised: Array
-    ratio: Array
-
-
-def _bin_factor(err2: Array, post: Array, noise: Array) -> float:
-    """The factor f >= 1 with mean(err2 / (f post + noise)) = 1 (1 when already 1 or less at f = 1)."""
-    f = 1.0
-    for _ in range(50):
-        value = float(np.mean(err2 / (f * post + noise)))
-        if value <= 1.0 + 1e-6:
-            break
-        f *= value
-    return f
-
-
-def cross_validated_factors(
-    basis: KrigingBasis,
-    layout: ParameterLayout,
-    parameters: Array,
-    *,
-    folds: int = CROSS_VALIDATION_FOLDS,
-    bins: int = CROSS_VALIDATION_BINS,
-    seed: int = 0,
-) -> CrossValidation:
-    """Per-axis widening of the kriging variance from the calibration's own held-out folds.
-
-    The poses are split into `folds` seeded folds; for each, the parameters are refitted
-    (linearised, least squares) on the other poses and the field corrects the fold's residuals
-    from theirs (:func:`krige`, the computation a new configuration gets). On real series the
-    field's covariance (an exponential kernel whose hyperparameters repeated poses dominate) is
-    right next to a calibration pose and too confident a few tenths of a radian away, and its
-    per-pose shape is not right on every axis: the folds' squared standardised errors, binned
-    by the std ratio (how much the correction knows there), give per-axis factors on the
-    kriging variance. Never below 1: the folds only widen the field's own statement.
-    """
-    q_t = np.asarray(basis.joint_positions, dtype=np.float64)
-    n_t = q_t.shape[0]
-    r = np.asarray(basis.residuals, dtype=np.float64)
-    noise = np.asarray(basis.noise, dtype=np.float64)
-    cols = _parameter_columns(layout, basis.gain_names)
-    _, jac_t = forward_points_and_jacobian(layout, parameters, q_t)
-    jac = jac_t[:, :, cols]
-    n_folds = max(int(folds), 2)
-    fold_of = np.random.default_rng(np.random.SeedSequence([int(seed), n_t])).permutation(n_t) % n_folds
-    err2, post, ratio = np.empty((n_t, 3)), np.empty((n_t, 3)), np.empty(n_t)
-    plain = dataclasses.replace(basis, factor_ratios=np.zeros(0), factor_axes=np.zeros((0, 3)))
-    for f in range(n_folds):
-        out, rest = np.flatnonzero(fold_of == f), np.flatnonzero(fold_of != f)
-        a_rest = jac[rest].reshape(3 * rest.size, len(cols))
-        gain_rest = np.asarray(np.linalg.pinv(a_rest, rcond=1e-10), dtype=np.float64)
-        delta = gain_rest @ r[rest].reshape(-1)
-        sub = dataclasses.replace(
-            plain,
-            joint_positions=q_t[rest],
-            residuals=r[rest] - (a_rest @ delta).reshape(-1, 3),
-            noise=noise[rest],
-            gain=gain_rest,
-        )
-        kriged = krige(sub, layout, parameters, q_t[out])
-        err2[out] = (r[out] - np.einsum("nik,k->ni", jac[out], delta) - kriged.mean) ** 2
-        post[out] = np.diagonal(kriged.covariance, axis1=1, axis2=2)
-        ratio[out] = kriged.std_ratio
-    noise_diag = np.diagonal(noise, axis1=1, axis2=2)
-    order = np.argsort(ratio)
-    groups = np.array_split(order, max(1, min(int(bins), n_t // 30)))
-    ratios = np.array([np.median(ratio[g]) for g in groups])
-    factors = np.array([[_bin_factor(err2[g, a], post[g, a], noise_diag[g, a]) for a in range(3)] for g in groups])
-    return CrossValidation(
-        ratios=ratios, factors=factors, standardised=np.sqrt(err2 / (post + noise_diag)), ratio=ratio
-    )
 
 
 def calibration_kriging_basis(
@@ -523,3 +84,103 @@ def corrected_statement(kriged: KrigedPoints, covariance: Array, rotation: Array
     vals, vecs = np.linalg.eigh(np.asarray(covariance, dtype=np.float64) - prior)
     beyond = np.einsum("nij,nj,nkj->nik", vecs, np.clip(vals, 0.0, None), vecs)
     return np.asarray(kriged.mean @ rot.T, dtype=np.float64), np.asarray(post + beyond, dtype=np.float64)
+
+
+def output_rotation(calibration: IdentificationResult, frame: str) -> Array:
+    """Measurement frame to the statement's output frame: the identity, or ``R_wb^T`` for the base frame."""
+    p = calibration.estimate
+    b0 = calibration.model.layout.base_index
+    return np.eye(3) if frame != "base" else np.asarray(rpy_to_matrix(p[b0 + 3 : b0 + 6]).T, dtype=np.float64)
+
+
+def correction_warning(kriged: KrigedPoints) -> str:
+    """The line a corrected statement carries: what was added, and where it holds."""
+    ratio = kriged.std_ratio
+    size = np.linalg.norm(kriged.mean, axis=1) * 1e6
+    return (
+        "positions include the model-error field's conditional mean given the calibration residuals (kriging; "
+        f"median {np.median(size):.1f} um, largest {np.max(size):.1f} um) and the statement its kriging covariance "
+        f"(kriging std / uncorrected std: median {np.median(ratio):.2f}); it holds for the calibration's session "
+        "only, and a URDF cannot carry it"
+    )
+
+
+def corrected_uncertainty(result: CalibrationUncertainty, basis: KrigingBasis) -> CalibrationUncertainty:
+    """A Monte Carlo statement with the field's correction at its test configurations.
+
+    Each configuration's position trials ``x`` are mapped to ``mean + d + L_c L^-1 (x - mean)``
+    (``d`` the conditional mean in the output frame, ``L`` and ``L_c`` Cholesky factors of the
+    trials' covariance and of the corrected one, :func:`corrected_statement`): the trials keep
+    their shape (the field scale's heavy tails) and get the corrected mean and covariance, so the
+    summaries, coverage intervals and regions are the Monte Carlo's, recomputed. The first-order
+    GUM statement gets the same shift and covariance; its JCGM 101 section 8 flags are those of
+    the uncorrected statement. Orientations and parameters are unchanged (the field is one of
+    positions).
+
+    Parameters
+    ----------
+    result : CalibrationUncertainty
+        The uncorrected statement (output frame measurement or base).
+    basis : KrigingBasis
+        The calibration's field (:func:`calibration_kriging_basis`), of ``result.calibration``.
+
+    Raises
+    ------
+    InputError
+        A configuration whose trials have no spread (no covariance to map).
+    """
+    calibration = result.calibration
+    n = len(result.poses)
+    q = np.stack([pose.joint_positions for pose in result.poses])
+    kriged = krige(basis, calibration.model.layout, calibration.estimate, q)
+    rot = output_rotation(calibration, result.frame)
+    stated = np.stack([pose.covariance for pose in result.poses])
+    shift, covariance = corrected_statement(kriged, stated, rot)
+    positions = result.samples[:, : N_AXES * n].reshape(-1, n, N_AXES)
+    mean = positions.mean(axis=0)
+    try:
+        l_old = np.linalg.cholesky(stated)
+        l_new = np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError as err:
+        msg = "a test configuration's trials have no spread in some direction: the field's correction cannot map them"
+        raise InputError(msg) from err
+    transform = l_new @ np.linalg.inv(l_old)
+    moved = mean + shift + np.einsum("nij,mnj->mni", transform, positions - mean)
+    samples = np.concatenate((moved.reshape(-1, N_AXES * n), result.samples[:, N_AXES * n :]), axis=1)
+    summary = summarize(samples[:, : N_AXES * n], result.coverage_probability)
+    gum_shift, gum_cov = corrected_statement(kriged, np.stack([pose.gum.covariance for pose in result.poses]), rot)
+    poses = []
+    for i, pose in enumerate(result.poses):
+        cols = slice(N_AXES * i, N_AXES * (i + 1))
+        axes = tuple(summary.outputs[cols])
+        region = None if pose.region is None else coverage_region(moved[:, i], result.coverage_probability)
+        poses.append(
+            dataclasses.replace(
+                pose,
+                mean=np.array([a.estimate for a in axes]),
+                covariance=summary.covariance[cols, cols],
+                axes=axes,
+                region=region,
+                gum=_corrected_gum(pose.gum, gum_shift[i], gum_cov[i]),
+            )
+        )
+    return dataclasses.replace(
+        result,
+        poses=tuple(poses),
+        samples=samples,
+        warnings=(*result.warnings, correction_warning(kriged)),
+    )
+
+
+def _corrected_gum(gum: GumPose, shift: Array, covariance: Array) -> GumPose:
+    """`gum` moved by `shift` with `covariance` (unchanged where not applicable)."""
+    if not gum.applicable or not np.isfinite(gum.covariance).all():
+        return gum
+    std = np.sqrt(np.clip(np.diagonal(covariance), 0.0, None))
+    return dataclasses.replace(
+        gum,
+        estimate=np.asarray(gum.estimate) + shift,
+        covariance=covariance,
+        standard_uncertainty=std,
+        expanded_uncertainty=gum.coverage_factor * std,
+    )

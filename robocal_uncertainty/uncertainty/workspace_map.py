@@ -23,10 +23,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal_uncertainty.core.campaign import Campaign
+from robocal_uncertainty.core.field_kriging import KrigingBasis, krige
 from robocal_uncertainty.core.identification import IdentificationResult, identify
 from robocal_uncertainty.core.joint_limits import check_joint_limits
 from robocal_uncertainty.core.kinematics import forward_points
-from robocal_uncertainty.core.robot_model import RobotModel, rpy_to_matrix
+from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError, ConvergenceError, InputError
 from robocal_uncertainty.kernels import BackendInfo, resolve_backend
 from robocal_uncertainty.montecarlo.engine import ProgressCallback, ReducedTrials, reduce_trials
@@ -39,10 +40,9 @@ from robocal_uncertainty.uncertainty.calibration import (
     prepare_calibration_trials,
 )
 from robocal_uncertainty.uncertainty.field_kriging import (
-    KrigingBasis,
     calibration_kriging_basis,
     corrected_statement,
-    krige,
+    output_rotation,
 )
 from robocal_uncertainty.uncertainty.memory import check_fits, grid_bytes, grid_size, map_bytes
 from robocal_uncertainty.uncertainty.sources import UncertaintySettings
@@ -391,11 +391,8 @@ def _corrected_statement(wmap: WorkspaceMap, basis: KrigingBasis) -> WorkspaceMa
     """The map with the field's correction (:func:`~.field_kriging.corrected_statement`): positions
     and means moved by the kriged mean, the kriging covariance in place of the field's prior."""
     calibration = wmap.calibration
-    p = calibration.estimate
-    kriged = krige(basis, calibration.model.layout, p, wmap.configurations)
-    b0 = calibration.model.layout.base_index
-    rot = rpy_to_matrix(p[b0 + 3 : b0 + 6]).T if wmap.frame == "base" else np.eye(3)
-    shift, covariance = corrected_statement(kriged, wmap.covariance, rot)
+    kriged = krige(basis, calibration.model.layout, calibration.estimate, wmap.configurations)
+    shift, covariance = corrected_statement(kriged, wmap.covariance, output_rotation(calibration, wmap.frame))
     std = np.sqrt(np.einsum("nii->ni", covariance))
     for array in (shift, covariance, std):
         array.setflags(write=False)

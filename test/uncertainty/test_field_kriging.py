@@ -12,11 +12,11 @@ import dataclasses
 
 import numpy as np
 
+from robocal_uncertainty.core.field_kriging import KrigingBasis, field_correction, krige
 from robocal_uncertainty.core.kinematics import forward_points_and_jacobian
 from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_correlation
 from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
 from robocal_uncertainty.core.robot_model import ParameterLayout
-from robocal_uncertainty.uncertainty.field_kriging import KrigingBasis, field_correction, krige
 
 
 def _kernel(q_a: np.ndarray, q_b: np.ndarray, c: float, ell: float, s2: float, same: bool) -> np.ndarray:

@@ -202,8 +202,9 @@ def test_cli_map_errors(tmp_path: Path, capsys) -> None:
 
 
 def test_map_field_correction_moves_positions_by_the_kriged_mean_and_shows_the_std_ratio(ur10, tmp_path: Path) -> None:
+    from robocal_uncertainty.core.field_kriging import krige
     from robocal_uncertainty.core.instruments import EncoderNoise, TrackerNoise
-    from robocal_uncertainty.uncertainty.field_kriging import calibration_kriging_basis, krige
+    from robocal_uncertainty.uncertainty.field_kriging import calibration_kriging_basis
 
     model, campaign = ur10
     campaign = campaign.subset(np.sort(np.random.default_rng(29).permutation(campaign.n_poses)[:80]))
