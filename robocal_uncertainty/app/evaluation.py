@@ -30,6 +30,7 @@ from robocal_uncertainty.uncertainty.budget import evaluate_budget
 from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
 from robocal_uncertainty.uncertainty.calibration.results import CalibrationUncertainty
 from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
+from robocal_uncertainty.uncertainty.field_kriging import corrected_uncertainty, field_basis
 from robocal_uncertainty.uncertainty.memory import check_fits, evaluation_bytes
 from robocal_uncertainty.uncertainty.sources import sources_with_role
 from robocal_uncertainty.uncertainty.statement_check import interval_trial_floor, recommended_trials
@@ -136,6 +137,7 @@ def evaluate(
     run: RunContext | None = None,
     phase_progress: PhaseProgress | None = None,
     input_warnings: Sequence[str] = (),
+    field_correction: bool = False,
 ) -> Evaluation:
     """Calibrate `campaign` and evaluate its uncertainty, budget and sweeps as `settings` say.
 
@@ -160,6 +162,12 @@ def evaluate(
     input_warnings : sequence of str
         Further warnings about the inputs (e.g. dropped messages of a replay), listed after
         the campaign's.
+    field_correction : bool
+        Add the model-error field's conditional mean given the calibration residuals (kriging)
+        to every test configuration's position, with the kriging covariance in the statement
+        (:func:`~robocal_uncertainty.uncertainty.field_kriging.corrected_uncertainty`, as
+        ``fk`` and ``map`` do; the budget and sweeps stay uncorrected). Refused (one line)
+        when the calibration estimates no field.
 
     Returns
     -------
@@ -171,8 +179,8 @@ def evaluate(
     ------
     ConfigError
         No test joints, invalid settings, a fixed trial count below 2/(1-p) for the
-        coverage probability asked (no trial beyond the interval's ends), or a size that
-        cannot fit in memory.
+        coverage probability asked (no trial beyond the interval's ends), a size that
+        cannot fit in memory, or `field_correction` for a calibration without a field.
     IdentifiabilityError, ConvergenceError
         The campaign cannot identify the model (see
         :func:`~robocal_uncertainty.core.identification.identify`).
@@ -186,6 +194,8 @@ def evaluate(
     settings, notes = small_campaign_options(campaign, calibration, settings)
     _check_memory(model, campaign, calibration, settings, run)
     uncertainty = evaluate_uncertainty(model, campaign, test_joints, settings, calibration=calibration, run=run)
+    if field_correction:
+        uncertainty = corrected_uncertainty(uncertainty, field_basis(calibration, campaign, settings.uncertainty))
     budget, sweeps, sweep_notes = _phases(model, campaign, calibration, settings, run, phase_progress)
     read_warnings: Any = campaign.metadata.get(READ_WARNINGS_KEY) or ()  # strings the reader stored
     inputs = _merge(read_warnings, input_warnings)

@@ -216,7 +216,14 @@ def evaluate_and_report(
         # --dask (evaluate only) or --workers: one executor for the main run, budget and sweeps.
         with open_executor(workers=args.workers, dask=getattr(args, "dask", None)) as executor:
             run = RunContext(executor=executor, progress=bars.main)
-            evaluation = evaluate(model, campaign, options, run=run, phase_progress=bars.phase)
+            evaluation = evaluate(
+                model,
+                campaign,
+                options,
+                run=run,
+                phase_progress=bars.phase,
+                field_correction=getattr(args, "field_correction", False),
+            )
     finally:
         bars.close()
     print_evaluation(evaluation, options, model, out_dir, bars, args)

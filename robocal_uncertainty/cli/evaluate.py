@@ -30,6 +30,13 @@ def register(sub: Any) -> None:
         help=f"comma list of {sources_help()} ({SOURCES_DEFAULT_HELP})",
     )
     add_source_args(p, "session")
+    p.add_argument(
+        "--field-correction",
+        action="store_true",
+        help="add the model-error field's conditional mean given the calibration residuals (kriging) to every test "
+        "position, with the kriging covariance in the statement (as fk and map do); helps near the calibration "
+        "poses of a dense campaign, fades far from them, holds in this session only; a URDF cannot carry it",
+    )
     p.add_argument("--out", default="robocal_report", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
     add_uncertainty_args(p, trials_default="auto")

@@ -35,6 +35,12 @@ def register(sub: Any) -> None:
         default=None,
         help=f"sources of the statement under test: {sources_help()} ({SOURCES_DEFAULT_HELP})",
     )
+    p.add_argument(
+        "--field-correction",
+        action="store_true",
+        help="check the statement with the model-error field's correction (kriging) from the training poses, as "
+        "evaluate --field-correction states it: the held-out RMS with and without it is printed",
+    )
     p.add_argument("--out", default="robocal_validation", help="report directory (default %(default)s)")
     add_force_arg(p, "an earlier report in --out")
     add_uncertainty_args(p, trials_default="5000")
@@ -43,7 +49,12 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from robocal_uncertainty.app import validate
-    from robocal_uncertainty.report.validation_report import format_validation, write_validation_report
+    from robocal_uncertainty.app.validation import validate_with_field_correction
+    from robocal_uncertainty.report.validation_report import (
+        format_field_correction,
+        format_validation,
+        write_validation_report,
+    )
 
     campaign, model = campaign_and_robot(args)
     options = evaluation_options(args, parse_sources_arg(default_sources(args.sources, campaign)), None)
@@ -51,26 +62,31 @@ def run(args: argparse.Namespace) -> int:
     if args.validation_campaign:
         validation_campaign = read_campaign_checked(args, args.validation_campaign)
         check_campaign_joints(model, validation_campaign, args.validation_campaign)
-    validation = validate(
-        model,
-        campaign,
-        options,
-        train_poses=args.train_poses,
-        holdout_fraction=args.holdout_fraction,
-        k_folds=args.k_folds,
-        validation_campaign=validation_campaign,
-        workers=args.workers,
-        progress=print,
-    )
+    split = {
+        "train_poses": args.train_poses,
+        "holdout_fraction": args.holdout_fraction,
+        "k_folds": args.k_folds,
+        "validation_campaign": validation_campaign,
+        "workers": args.workers,
+        "progress": print,
+    }
+    extra: dict[str, object] = {}
+    if args.field_correction:
+        validation, check = validate_with_field_correction(model, campaign, options, **split)
+        extra["field_correction"] = check.to_dict()
+    else:
+        validation = validate(model, campaign, options, **split)
     print()
     print(format_validation(validation))
+    if args.field_correction:
+        print(format_field_correction(extra["field_correction"]))  # type: ignore[arg-type]
     from robocal_uncertainty.app.output_paths import clear_earlier_report
 
     clear_earlier_report(args.out)
     out = write_validation_report(
         args.out,
         validation,
-        extra={"campaign": str(args.campaign), "robot": str(args.robot), "trials": int(options.trials)},
+        extra={"campaign": str(args.campaign), "robot": str(args.robot), "trials": int(options.trials), **extra},
     )
     print(f"report written to {out}")
     return 0

@@ -336,7 +336,7 @@ def kriging_basis(
             msg = (
                 f"{where}: the calibration found no significant model error (adequacy test p = "
                 f"{float(adequacy.get('p_value', float('nan'))):.3g}), so it estimated no field and there is nothing "
-                "to correct: use fk without --field-correction"
+                "to correct: leave out --field-correction"
             )
             raise ConfigError(msg)
         what = "no model-error field (model_error.field)" if me_field is None else "the field without its residuals"

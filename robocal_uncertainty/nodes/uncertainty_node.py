@@ -269,6 +269,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         False,
         "Evaluate an identification that did not converge instead of reporting the failure",
     ),
+    ParamSpec(
+        "field_correction",
+        False,
+        "Add the model-error field's conditional mean given the calibration residuals (kriging) to every published "
+        "position, with the kriging covariance in its statement (as evaluate --field-correction); helps near the "
+        "calibration poses of a dense campaign, fades far from them, holds in this session only; a calibration "
+        "whose model explains its points has no field and the evaluation fails with that reason",
+    ),
     ParamSpec("budget", False, "Also run each source alone (uncertainty budget; two or more sources)"),
     ParamSpec("budget_trials", 2000, "Trials of each budget run", "trials", low=1, high=100_000_000),
     ParamSpec("sweeps", False, "Also compute u against lambda and against the number of equations"),
@@ -341,6 +349,7 @@ class _Job:
     samples: tuple[CalibrationSample, ...]
     calibration: CalibrationResultMsg
     options: EvaluationSettings
+    field_correction: bool = False
 
 
 class UncertaintyNode(Node):
@@ -498,7 +507,8 @@ class UncertaintyNode(Node):
             return
         with self._wake:
             self._generation += 1
-            self._pending = _Job(self._generation, samples, msg, options)
+            correct = bool(self.get_parameter("field_correction").value)
+            self._pending = _Job(self._generation, samples, msg, options, correct)
             self._wake.notify()
 
     # -- worker ----------------------------------------------------------------------------
@@ -577,6 +587,7 @@ class UncertaintyNode(Node):
                 job.options,
                 calibration=calibration,
                 run=RunContext(executor=self._pool.executor(), progress=progress),
+                field_correction=job.field_correction,
             )
         except _Superseded:
             self.get_logger().info(f"Monte Carlo of the {n}-sample calibration superseded; abandoned")

@@ -132,6 +132,21 @@ def format_validation(validation: HoldoutValidation) -> str:
     return "\n".join(lines)
 
 
+def format_field_correction(check: Mapping[str, Any]) -> str:
+    """The held-out accuracy with and without the model-error field's correction (``validate
+    --field-correction``; `check` as ``FieldCorrectionCheck.to_dict`` writes it, m)."""
+    before, after = check["uncorrected_rms_3d_m"], check["corrected_rms_3d_m"]
+    per_axis = " / ".join(
+        f"{b * 1e3:.3f} -> {a * 1e3:.3f}" for b, a in zip(check["uncorrected_rms_m"], check["corrected_rms_m"])
+    )
+    return (
+        f"field correction (kriging, from each fold's training poses): held-out 3-D RMS {before * 1e3:.3f} mm "
+        f"without, {after * 1e3:.3f} mm with it ({(after / before - 1) * 100:+.1f} %); per axis x / y / z {per_axis} "
+        f"mm; corrected statement's u / uncorrected u: median {check['median_statement_ratio']:.2f} (the coverage "
+        "above is the corrected statement's)"
+    )
+
+
 def trust_warnings(validation: HoldoutValidation) -> list[str]:
     """``warning: NOT TRUSTWORTHY`` lines when a fold's statement is flagged as ``evaluate`` flags it:
     the coverage measured here is then of a statement its own campaign cannot back."""

@@ -26,12 +26,14 @@ from robocal_uncertainty.errors import InputError
 from robocal_uncertainty.montecarlo.region import coverage_region
 from robocal_uncertainty.montecarlo.summary import summarize
 from robocal_uncertainty.uncertainty.calibration.results import N_AXES, CalibrationUncertainty, GumPose
+from robocal_uncertainty.uncertainty.sources import UncertaintySettings
 
 __all__ = [
     "calibration_kriging_basis",
     "corrected_statement",
     "corrected_uncertainty",
     "correction_warning",
+    "field_basis",
     "output_rotation",
 ]
 
@@ -84,6 +86,16 @@ def corrected_statement(kriged: KrigedPoints, covariance: Array, rotation: Array
     vals, vecs = np.linalg.eigh(np.asarray(covariance, dtype=np.float64) - prior)
     beyond = np.einsum("nij,nj,nkj->nik", vecs, np.clip(vals, 0.0, None), vecs)
     return np.asarray(kriged.mean @ rot.T, dtype=np.float64), np.asarray(post + beyond, dtype=np.float64)
+
+
+def field_basis(calibration: IdentificationResult, campaign: Campaign, settings: UncertaintySettings) -> KrigingBasis:
+    """:func:`calibration_kriging_basis` with the noise models of `settings` (the statement's)."""
+    return calibration_kriging_basis(
+        calibration,
+        campaign.reorder_joints(calibration.model.joint_names),
+        settings.tracker_noise,
+        settings.encoder_noise,
+    )
 
 
 def output_rotation(calibration: IdentificationResult, frame: str) -> Array:

@@ -309,6 +309,9 @@ def _orientation_fold(
     return measured - mean, std, (measured[None] >= lo) & (measured[None] <= hi)
 
 
+StatementAdjustment = Callable[[CalibrationUncertainty, IdentificationResult, Campaign], CalibrationUncertainty]
+"""``adjust(result, calibration, training campaign)`` of :func:`validate_holdout`."""
+
 HOLDOUT_POSE_TRIALS = 3_200_000
 """Held-out poses x Monte Carlo trials evaluated at once (640 poses at 5000 trials): what bounds
 the memory of :func:`validate_holdout` whatever the number of held-out poses."""
@@ -418,6 +421,7 @@ def validate_holdout(
     levels: Sequence[float] = RELIABILITY_LEVELS,
     progress: Callable[[str], None] | None = None,
     backend: str = "numpy",
+    adjust_statement: StatementAdjustment | None = None,
 ) -> HoldoutValidation:
     """Calibrate on training poses, predict held-out measurements, count what the intervals hold.
 
@@ -447,6 +451,10 @@ def validate_holdout(
         Called with a one-line status per fold.
     backend : str
         Trial kernels (:attr:`~robocal_uncertainty.uncertainty.EvaluationSettings.backend`).
+    adjust_statement : callable, optional
+        ``adjust_statement(result, calibration, train)``: the statement checked in place of each
+        Monte Carlo chunk's `result` (e.g. with the model-error field's correction,
+        :func:`~robocal_uncertainty.uncertainty.field_kriging.corrected_uncertainty`).
 
     Returns
     -------
@@ -467,7 +475,7 @@ def validate_holdout(
     fold_results = []
     frame_comparison: FrameComparison | None = None
     chunk = _check_memory(model, folds, trials)
-    run = _FoldRun(settings, levels_arr, seed, chunk, mode, workers, trials, coverage, backend)
+    run = _FoldRun(settings, levels_arr, seed, chunk, mode, workers, trials, coverage, backend, adjust_statement)
     for f, (train, held_all) in enumerate(folds):
         calibration = identify(model, train, lambda_=lambda_)
         result, comparison = _run_fold(model, train, held_all, calibration, f, run, pooled)
@@ -599,6 +607,7 @@ class _FoldRun:
     trials: int
     coverage: float
     backend: str
+    adjust_statement: StatementAdjustment | None = None
 
 
 def _run_fold(
@@ -635,6 +644,8 @@ def _run_fold(
             run=RunContext(workers=run.workers),
             per_pose=True,  # each held-out pose is checked alone (_inside_regions draws its regions)
         )
+        if run.adjust_statement is not None:
+            result = run.adjust_statement(result, calibration, train)
         stats = _chunk_statistics(result, held, settings, run.levels, seed, f, c)
         if run.mode == "campaign" and c == 0:
             frame_comparison = _check_frame(calibration, held_all, stats[1], run.coverage)
