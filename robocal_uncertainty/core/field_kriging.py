@@ -263,18 +263,21 @@ def krige(
     k_tt_blocks[idx, :, idx, :] += np.asarray(basis.noise, dtype=np.float64)
     _, jac_t = forward_points_and_jacobian(layout, parameters, q_t)
     a_mat = jac_t[:, :, cols].reshape(3 * n_t, len(cols))
-    u_full, sv, _ = np.linalg.svd(a_mat, full_matrices=True)
+    # The contrasts' projector Q (Q^T K Q)^-1 Q^T, with Q orthogonal to the fit's directions U,
+    # is K^-1 - K^-1 U (U^T K^-1 U)^-1 U^T K^-1: one Cholesky factor of K and r columns, never
+    # the m x m contrasts' covariance (m = 3 n_t - r), a few times faster on large campaigns.
+    u_thin, sv, _ = np.linalg.svd(a_mat, full_matrices=False)
     rank = int(np.sum(sv > 1e-10 * sv[0])) if sv.size else 0
-    q_mat = u_full[:, rank:]
-    k_tt_q = k_tt @ q_mat
-    chol = np.linalg.cholesky(q_mat.T @ k_tt_q)
-    z = q_mat.T @ np.asarray(basis.residuals, dtype=np.float64).reshape(-1)
-    alpha = cho_solve((chol, True), z)
+    chol = np.linalg.cholesky(k_tt)
+    v_mat = solve_triangular(chol, u_thin[:, :rank], lower=True)  # L^-1 U
+    chol_m = np.linalg.cholesky(v_mat.T @ v_mat)  # U^T K^-1 U
+    y = solve_triangular(chol, np.asarray(basis.residuals, dtype=np.float64).reshape(-1), lower=True)
+    alpha = y - v_mat @ cho_solve((chol_m, True), v_mat.T @ y)  # L^-1 ... : X P r = (L^-1 X^T)^T alpha
     gain = np.asarray(basis.gain, dtype=np.float64)
     # Through the fit's gain only k directions of the data reach a prediction: G K_tt G^T and
-    # G K_tt Q are formed once (k x k, k x m), never J_c G K_tt per configuration.
-    g_k_g = gain @ k_tt @ gain.T
-    g_k_q = gain @ k_tt_q
+    # G K_tt are formed once (k x k, k x 3 n_t), never J_c G K_tt per configuration.
+    g_k = gain @ k_tt
+    g_k_g = g_k @ gain.T
     mean = np.empty((n_c, 3))
     post = np.empty((n_c, 3, 3))
     prior = np.empty((n_c, 3, 3))
@@ -284,16 +287,18 @@ def krige(
         _, jac_c = forward_points_and_jacobian(layout, parameters, q)
         j_c = jac_c[:, :, cols].reshape(3 * n, len(cols))
         k_ct = np.kron(_correlation(q, q_t, basis), s_m)
-        c_dz = k_ct @ q_mat - j_c @ g_k_q  # Cov(delta_c, z)
-        mean[start : start + n] = (c_dz @ alpha).reshape(n, 3)
+        # Cov(delta_c, data) = K_ct - J G K_tt, whitened: W = L^-1 Cov^T (triangular solve).
+        w_mat = solve_triangular(chol, (k_ct - j_c @ g_k).T, lower=True)
+        mean[start : start + n] = (w_mat.T @ alpha).reshape(n, 3)
         # Per-configuration blocks of Cov(delta_c) = K_cc - K_ct (J G)^T - J G K_tc + J G K_tt (J G)^T.
         j3 = j_c.reshape(n, 3, len(cols))
         parameters_part = np.einsum("nia,ab,njb->nij", j3, g_k_g, j3)
         cross = np.einsum("nia,nja->nij", (k_ct @ gain.T).reshape(n, 3, len(cols)), j3)
         block = s_m[None] + parameters_part - cross - np.transpose(cross, (0, 2, 1))
-        # Triangular solves: a general solve of the m x m factor costs three times more.
-        w3 = solve_triangular(chol, c_dz.T, lower=True).T.reshape(n, 3, -1)
-        explained = np.einsum("nia,nja->nij", w3, w3)
+        # Explained: X P X^T = W^T W - T^T T with T = chol(U^T K^-1 U)^-1 V^T W.
+        w3 = w_mat.T.reshape(n, 3, -1)
+        t3 = solve_triangular(chol_m, v_mat.T @ w_mat, lower=True).T.reshape(n, 3, -1)
+        explained = np.einsum("nia,nja->nij", w3, w3) - np.einsum("nia,nja->nij", t3, t3)
         prior[start : start + n] = 0.5 * (block + np.transpose(block, (0, 2, 1)))
         post[start : start + n] = _widened(
             basis, prior[start : start + n] - 0.5 * (explained + np.transpose(explained, (0, 2, 1))), block
