@@ -117,3 +117,23 @@ def _train_indices(n: int, n_train: int, seed: int) -> np.ndarray:
     from robocal_uncertainty.uncertainty.holdout import split_campaign
 
     return split_campaign(n, n_train=n_train, seed=seed)[0].train
+
+
+def test_validate_prints_and_records_the_correction(ur10_90, tmp_path: Path, capsys) -> None:
+    import json
+
+    from robocal_uncertainty.bagio import write_campaign
+    from robocal_uncertainty.cli import main
+
+    _, campaign = ur10_90
+    path = tmp_path / "ur10_90.mcap"
+    write_campaign(path, campaign)
+    common = ["--robot", "ur10", "--trials", "100", "--field-correction"]
+    validate_args = ["validate", str(path), *common, "--train-poses", "75", "--out", str(tmp_path / "v")]
+    assert main(validate_args) == 0
+    out = capsys.readouterr().out
+    check = json.loads((tmp_path / "v" / "validation.json").read_text())["extra_settings"]["field_correction"]
+    line = next(row for row in out.splitlines() if row.startswith("field correction (kriging"))
+    before, after = check["uncorrected_rms_3d_m"] * 1e3, check["corrected_rms_3d_m"] * 1e3
+    assert f"{before:.3f} mm without, {after:.3f} mm with it" in line
+    assert line in (tmp_path / "v" / "validation.md").read_text()

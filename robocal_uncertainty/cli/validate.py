@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(format_validation(validation))
     if args.field_correction:
-        print(format_field_correction(extra["field_correction"]))  # type: ignore[arg-type]
+        print(format_field_correction(check.to_dict()))
     from robocal_uncertainty.app.output_paths import clear_earlier_report
 
     clear_earlier_report(args.out)

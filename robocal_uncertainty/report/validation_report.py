@@ -228,5 +228,8 @@ def write_validation_report(
         ),
         "",
     ]
+    check = (extra or {}).get("field_correction")
+    if isinstance(check, Mapping):
+        md += [format_field_correction(check), ""]
     (out / "validation.md").write_text("\n".join(md), encoding="utf-8")
     return out
