@@ -334,6 +334,47 @@ def six_dof_checks(
         )  # fmt: skip
 
 
+def tally(
+    summary: dict[str, list[float]], key: str, verdicts: list[bool], threes: list[str], truth: bool, ref_ok: bool
+) -> None:
+    """One calibration's checks of one size: consistent rate, agreement with the full series'
+    level-test verdict (`truth`) and with its 91 % rule (`ref_ok`), the three-way verdict's right /
+    wrong / inconclusive (inconclusive never counted as agreement) and the margin test."""
+    summary.setdefault(f"{key} consistent", []).append(float(np.mean(verdicts)))
+    summary.setdefault(f"{key} agree", []).append(float(np.mean(np.array(verdicts) == truth)))
+    summary.setdefault(f"{key} agree (coverage reference)", []).append(float(np.mean(np.array(verdicts) == ref_ok)))
+    told = [t for t in threes if t != "inconclusive"]
+    right = sum((t == "consistent") == ref_ok for t in told)
+    summary.setdefault(f"{key} three-way right", []).append(right / len(threes))
+    summary.setdefault(f"{key} three-way wrong", []).append((len(told) - right) / len(threes))
+    summary.setdefault(f"{key} three-way inconclusive", []).append(1.0 - len(told) / len(threes))
+    summary.setdefault(f"{key} margin test not drifted", []).append(float(np.mean([t != "drifted" for t in threes])))
+    summary.setdefault(f"{key} margin test agrees (coverage reference)", []).append(
+        float(np.mean([(t != "drifted") == ref_ok for t in threes]))
+    )
+
+
+def print_threshold_bound(cross: dict[int, list[tuple[str, float, bool]]]) -> None:
+    """The best agreement any rule "drifted when the check's error ratio exceeds tau x the tolerated
+    ratio" reaches on these very cross-session checks, tau chosen after the fact (an upper bound
+    of every binary verdict on the check's error level: the level test and the tolerance rule are
+    such rules with fixed tau), for both directions with one tau and for each with its own."""
+    print(
+        "\nbest single-threshold agreement of a binary verdict on the check's error ratio (tau fitted to these checks)"
+    )
+    for n, rows in cross.items():
+        cells = []
+        for label, keep in (("both", None), ("B->D", "B->D"), ("D->B", "D->B")):
+            sel = [(x, ok) for d, x, ok in rows if keep is None or d == keep]
+            x = np.array([v for v, _ in sel])
+            ok = np.array([o for _, o in sel])
+            taus = np.concatenate(([0.0], np.sort(x)))
+            agree = np.array([np.mean((x <= t) == ok) for t in taus])
+            best = int(np.argmax(agree))
+            cells.append(f"{label} {agree[best] * 100:.1f} % (tau {taus[best]:.2f}, {x.size} checks)")
+        print(f"  {n} poses: " + "; ".join(cells))
+
+
 def parse_args() -> argparse.Namespace:
     """The study's command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -379,6 +420,7 @@ def main() -> None:
         f"seed {args.seed}, {args.calibrations} calibrations of {N_CAL} poses per series, {args.checks} checks per size"
     )
     summary: dict[str, list[float]] = {}
+    cross: dict[int, list[tuple[str, float, bool]]] = {}  # per size: direction, ratio / tolerated, reference
     for home, away in (("B", "D"), ("D", "B")):
         for c in range(args.calibrations):
             rng = np.random.default_rng([args.seed, ord(home), c])
@@ -438,26 +480,12 @@ def main() -> None:
                         ratios.append(v.error_ratio)
                         assert v.tolerance is not None
                         threes.append(v.tolerance.verdict)
-                    rate = float(np.mean(verdicts))
-                    agree = float(np.mean(np.array(verdicts) == truth))
-                    summary.setdefault(f"{home}->{home if which == 'same' else away} {n} consistent", []).append(rate)
                     key = f"{home}->{home if which == 'same' else away} {n}"
-                    summary.setdefault(f"{key} agree", []).append(agree)
-                    ref_ok = by_cover[which]
-                    summary.setdefault(f"{key} agree (coverage reference)", []).append(
-                        float(np.mean(np.array(verdicts) == ref_ok))
-                    )
-                    told = [t for t in threes if t != "inconclusive"]
-                    right = sum((t == "consistent") == ref_ok for t in told)
-                    summary.setdefault(f"{key} three-way right", []).append(right / len(threes))
-                    summary.setdefault(f"{key} three-way wrong", []).append((len(told) - right) / len(threes))
-                    summary.setdefault(f"{key} three-way inconclusive", []).append(1.0 - len(told) / len(threes))
-                    summary.setdefault(f"{key} margin test not drifted", []).append(
-                        float(np.mean([t != "drifted" for t in threes]))
-                    )
-                    summary.setdefault(f"{key} margin test agrees (coverage reference)", []).append(
-                        float(np.mean([(t != "drifted") == ref_ok for t in threes]))
-                    )
+                    tally(summary, key, verdicts, threes, truth, by_cover[which])
+                    if which == "other":
+                        cross.setdefault(n, []).extend(
+                            (f"{home}->{away}", float(r) / rule.tolerated_ratio, by_cover[which]) for r in ratios
+                        )
                     cells.append(
                         f"{n}: {sum(verdicts)}/{len(verdicts)} (p {np.median(ps):.2g}, x{np.median(ratios):.2f})"
                     )
@@ -495,6 +523,7 @@ def main() -> None:
                     f"  statement for {away} after a 10-pose re-registration: "
                     f"{np.mean(covs) * 100:.1f} % of its other points' components inside 95 %"
                 )
+    print_threshold_bound(cross)
     print("\nsummary (mean over calibrations)")
     for key, values in summary.items():
         print(f"  {key}: {np.mean(values) * 100:.1f} % (calibrations: {', '.join(f'{v * 100:.0f}' for v in values)})")
