@@ -25,6 +25,12 @@ calibrated on) and of the other series. Printed per calibration:
   h_i)`` (the check's own error level, its degrees of freedom, the re-registration's leverage
   at the point): the fraction inside over the ``--checks`` checks.
 
+Before the summary, per check size, the best agreement with the 91 % rule's reference that any
+binary verdict "drifted when the check's error ratio exceeds tau times the tolerated ratio" reaches
+on these cross-session checks, tau fitted to them after the fact (an upper bound for every such
+rule; the level test and the tolerance rule are two of them): one tau for both directions, each
+direction its own, and one tau that keeps at least 92 % of the same-session checks consistent.
+
 Summary rows give the same-session consistent rate against check size (the false-alarm rate
 is its complement), the cross-session agreement of the verdicts with the full series' verdict
 (the level test's and the 91 % rule's), the three-way rates, and the coverage of the
