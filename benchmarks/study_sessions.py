@@ -366,6 +366,8 @@ def print_threshold_bound(cross: dict[int, list[tuple[str, float, bool]]]) -> No
     of every binary verdict on the check's error level: the level test and the tolerance rule are
     such rules with fixed tau): for both directions with one tau, for each with its own, and for
     both with the tau that still keeps 92 % of the same-session checks consistent (95 - 3 %)."""
+    if not cross:
+        return
     print(
         "\nbest single-threshold agreement of a binary verdict on the check's error ratio (tau fitted to these checks)"
     )
