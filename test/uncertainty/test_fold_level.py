@@ -1,9 +1,9 @@
 """The validated level's fold path gives what a full verification of the fold gives.
 
-``fold_level`` skips the null draws and the verdict's statistics; the field's prediction
-covariance is assembled once per check and rotated per iteration. Both are checked here
-against the slow path on real UR10 poses (series D): the level numbers equal, the covariance
-equal to rounding to ``ModelErrorField.prediction_covariance``.
+``fold_level`` skips the null draws and the verdict's statistics, and assembles the field's
+prediction covariance once per check, rotated per iteration. Both are checked here against the
+slow path on real UR10 poses (series D): the level numbers and the covariance equal to rounding
+(``ModelErrorField.prediction_covariance``).
 """
 
 from __future__ import annotations
@@ -45,19 +45,17 @@ def test_fold_level_equals_the_verification_of_the_fold(fold) -> None:
     model, state, check = fold
     full = verify_session(model, state, check, retool=True, null_trials=100)
     quick = fold_level(model, state, check, retool=True)
-    assert (quick.level, quick.level_dof, quick.level_trace, quick.n_poses) == (
-        full.level,
-        full.level_dof,
-        full.level_trace,
-        full.n_poses,
-    )
+    # The fold path assembles the field's covariance its own way: equal to rounding.
+    assert (quick.level_dof, quick.n_poses) == (full.level_dof, full.n_poses)
+    assert quick.level == pytest.approx(full.level, rel=1e-11)
+    assert quick.level_trace == pytest.approx(full.level_trace, rel=1e-11)
     assert quick.level_z is not None and full.level_z is not None
-    np.testing.assert_array_equal(quick.level_z, full.level_z)
+    np.testing.assert_allclose(quick.level_z, full.level_z, rtol=0.0, atol=1e-9)
 
 
 def test_field_prediction_equals_the_fields_own_covariance(fold) -> None:
     model, state, check = fold
-    setup, p = verification._prepare(model, state, check, True, None, None)
+    setup, p = verification._prepare(model, state, check, True, None, None, rotated_field=True)
     p[setup.free] += np.random.default_rng(1).normal(scale=1e-3, size=setup.free.size)  # a rotated tracker
     _, jac = forward_points_and_jacobian(setup.layout, p, setup.q)
     r_wb = rpy_to_matrix(p[setup.b0 + 3 : setup.b0 + 6])
