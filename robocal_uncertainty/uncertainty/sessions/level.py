@@ -8,6 +8,10 @@ scale is fixed by one to a few degrees of freedom on real sessions.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
@@ -17,13 +21,51 @@ from robocal_uncertainty.core.session import (
     LevelTest,
     ToleranceCheck,
     ValidatedLevel,
-    Verification,
 )
 from robocal_uncertainty.errors import ConfigError, IdentifiabilityError
 
-__all__ = ["check_level", "error_level", "level_test", "tolerance_check"]
+__all__ = ["FoldLevel", "check_level", "error_level", "level_test", "tolerance_check"]
 
 Array = NDArray[np.float64]
+
+
+class _LevelOfACheck(Protocol):
+    """What :func:`check_level` reads of a fold check (a verification or a :class:`FoldLevel`)."""
+
+    @property
+    def level(self) -> float: ...
+    @property
+    def level_dof(self) -> float: ...
+    @property
+    def level_trace(self) -> float: ...
+    @property
+    def level_z(self) -> Array | None: ...
+    @property
+    def n_poses(self) -> int: ...
+
+
+@dataclass(frozen=True)
+class FoldLevel:
+    """A held-out fold's error level (:func:`error_level`) without the rest of a verification.
+
+    Attributes
+    ----------
+    level : float [m^2]
+        Mean square error per kept equation.
+    level_dof : float
+        ``3 n - k``.
+    level_trace : float
+        The kept equations ``m_kept``.
+    level_z : ndarray, shape (3 n,)
+        The standardised components.
+    n_poses : int
+    """
+
+    level: float
+    level_dof: float
+    level_trace: float
+    level_z: Array | None
+    n_poses: int
 
 
 def error_level(r: Array, a_mat: Array, shape: Array) -> tuple[float, float, Array, float]:
@@ -103,12 +145,12 @@ def level_test(
     return LevelTest(test, p_value, float(nu_c), float(nu_r), float(np.sqrt(t_stat)), interval)
 
 
-def check_level(verifications: list[Verification], *, seed: int = 0, repeats: int = 1) -> ValidatedLevel:
+def check_level(verifications: Sequence[_LevelOfACheck], *, seed: int = 0, repeats: int = 1) -> ValidatedLevel:
     """Pool held-out fold checks of the calibration session into its :class:`ValidatedLevel`.
 
     Parameters
     ----------
-    verifications : list of Verification
+    verifications : sequence of Verification or FoldLevel
         The fold checks of `repeats` splits (each split holds out every pose once).
     seed : int
         Seed of the splits (recorded).

@@ -15,7 +15,7 @@ from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.core.session import SessionState, ValidatedLevel
 from robocal_uncertainty.uncertainty.sessions.level import check_level
 from robocal_uncertainty.uncertainty.sessions.state import session_state
-from robocal_uncertainty.uncertainty.sessions.verification import verify_session
+from robocal_uncertainty.uncertainty.sessions.verification import fold_level
 from robocal_uncertainty.uncertainty.sources.registry import default_sources
 
 __all__ = ["LEVEL_FOLDS", "LEVEL_REPEATS", "validated_level"]
@@ -80,5 +80,5 @@ def validated_level(
                 model_error_from=reference,
             )
             check = campaign.subset(np.sort(part))
-            checks.append(verify_session(cal.model, state, check, retool=retool, null_trials=100))
+            checks.append(fold_level(cal.model, state, check, retool=retool))
     return check_level(checks, seed=seed, repeats=repeats)

@@ -61,12 +61,13 @@ from robocal_uncertainty.core.session import (
 )
 from robocal_uncertainty.errors import ConfigError, IdentifiabilityError, InputError
 from robocal_uncertainty.uncertainty.sessions.check_campaign import (
+    block_diagonal,
     check_campaign,
     effective_dof,
     pose_noise,
     unique_poses,
 )
-from robocal_uncertainty.uncertainty.sessions.level import error_level, level_test, tolerance_check
+from robocal_uncertainty.uncertainty.sessions.level import FoldLevel, error_level, level_test, tolerance_check
 from robocal_uncertainty.uncertainty.sessions.null_distribution import (
     NullNoise,
     chol_factor,
@@ -76,7 +77,7 @@ from robocal_uncertainty.uncertainty.sessions.null_distribution import (
 )
 from robocal_uncertainty.uncertainty.sessions.tracker_move import tracker_move
 
-__all__ = ["verify_session"]
+__all__ = ["fold_level", "verify_session"]
 
 Array = NDArray[np.float64]
 _DEGENERATE_RCOND = 1e-7
@@ -102,6 +103,9 @@ class _Setup:
     theta_cols: list[int]
     distances: Array
     between: Array | None
+    field_cross: Array | None = None
+    field_cols: tuple[int, ...] = ()
+    rotated_field: bool = False
 
     @property
     def layout(self) -> ParameterLayout:
@@ -204,6 +208,20 @@ def verify_session(
     return _verification(setup, fit, p_value, float(significance), null_trials, seed, retool, effects)
 
 
+def fold_level(model: RobotModel, state: SessionState, campaign: Campaign, *, retool: bool) -> FoldLevel:
+    """A held-out fold's error level: what :func:`verify_session` reports of it, and only that.
+
+    The same re-registration and level (``verify_session(...).level`` and its companions, the
+    same numbers), without the null draws, the residual statistics and the drift's size a
+    verdict needs: the validated level (:func:`~.validated_level.validated_level`) reads twenty
+    folds' levels and nothing else of them.
+    """
+    setup, p = _prepare(model, state, campaign, retool, None, None, rotated_field=True)
+    fit = _reregister(setup, p, retool)
+    level, level_dof, level_z, level_trace, _ = _check_level(setup, fit)
+    return FoldLevel(level=level, level_dof=level_dof, level_trace=level_trace, level_z=level_z, n_poses=setup.n)
+
+
 def _prepare(
     model: RobotModel,
     state: SessionState,
@@ -211,8 +229,17 @@ def _prepare(
     retool: bool,
     tracker_noise: TrackerNoise | None,
     encoder_noise: EncoderNoise | None,
+    *,
+    rotated_field: bool = False,
 ) -> tuple[_Setup, Array]:
-    """The check's unique poses and stated parts, and the parameters with the tracker pose fitted."""
+    """The check's unique poses and stated parts, and the parameters with the tracker pose fitted.
+
+    With `rotated_field` the field's prediction covariance is assembled once and rotated per
+    iteration (:func:`_field_prediction`): equal to rounding, but rounding that an ill-conditioned
+    re-registration (tracker pose and tool point acting almost alike) magnifies in its covariance
+    (1e-8 relative on a 10-pose UR10 check), so ``verify`` keeps the field's own assembly and only
+    the validated level's folds, which read the level (changed by 4e-13 relative), take this one.
+    """
     if model.tool_rotation:
         model = dataclasses.replace(model, tool_rotation=False)
     campaign, y, duplicates = unique_poses(*check_campaign(model, campaign, retool)[:2])
@@ -245,6 +272,9 @@ def _prepare(
     if me_field is not None and me_field.joint_positions.shape[1] != q.shape[1]:
         msg = f"the model-error field has {me_field.joint_positions.shape[1]} joints, the check {q.shape[1]}"
         raise InputError(msg)
+    field_cross, field_cols = (
+        _field_cross(me_field, state.model_error_covariance, q, kin_names) if rotated_field else (None, ())
+    )
     setup = _Setup(
         model=model,
         state=state,
@@ -261,13 +291,52 @@ def _prepare(
         theta_cols=joint_columns(layout),
         distances=np.linalg.norm(y, axis=1) if campaign.frame == "tracker" else np.full(n, 2.0),
         between=state.between_session_covariance if state.between_session_names else None,
+        field_cross=field_cross,
+        field_cols=field_cols,
+        rotated_field=rotated_field,
     )
     return setup, p
 
 
+def _field_cross(
+    me_field: ModelErrorField | None, per_pose_base: Array, q: Array, kin_names: tuple[str, ...]
+) -> tuple[Array | None, tuple[int, ...]]:
+    """``G K_tc`` of the field with both sides in the robot base frame, shape (k, 3 n), and its columns.
+
+    What the calibration's parameters absorbed of the field at the check poses does not depend
+    on the re-registration but through the tracker rotation, applied pose by pose
+    (:func:`_field_prediction`): computed once per check instead of at every iteration.
+    """
+    if me_field is None:
+        return None, ()
+    rows = [me_field.gain_names.index(nm) for nm in kin_names if nm in me_field.gain_names]
+    cols = tuple(c for c, nm in enumerate(kin_names) if nm in me_field.gain_names)
+    if not rows:
+        return None, ()
+    return np.asarray(me_field.gain[rows] @ me_field.cross_covariance(q, per_pose_base), dtype=np.float64), cols
+
+
+def _field_prediction(s: _Setup, r_wb: Array, jk: Array) -> Array:
+    """:meth:`ModelErrorField.prediction_covariance` at the tracker rotation `r_wb`, shape (3 n, 3 n) [m^2].
+
+    ``K_cc - J_c G K_tc - (J_c G K_tc)^T`` with ``G K_tc`` from :func:`_field_cross` turned
+    into the measurement frame pose by pose: the same matrix (to rounding) without the
+    Kronecker product over every calibration pose at each iteration of the re-registration.
+    """
+    assert s.me_field is not None
+    n = s.n
+    k_cc = s.me_field.covariance(s.q, r_wb @ s.state.model_error_covariance @ r_wb.T)
+    if s.field_cross is None:
+        return k_cc
+    g_ktc = (s.field_cross.reshape(-1, n, 3) @ r_wb.T).reshape(-1, 3 * n)
+    cross = jk[:, list(s.field_cols)] @ g_ktc
+    out = k_cc - cross - cross.T
+    return np.asarray(0.5 * (out + out.T), dtype=np.float64)
+
+
 def _covariance(s: _Setup, jac: Array, params: Array) -> Array:
     """Covariance of the check's residuals under "nothing changed", shape (3 n, 3 n) [m^2]."""
-    cov = linalg.block_diag(*pose_noise(jac, s.theta_cols, s.distances, s.tracker, s.encoder, s.model.prismatic))
+    cov = block_diagonal(pose_noise(jac, s.theta_cols, s.distances, s.tracker, s.encoder, s.model.prismatic))
     cov = cov + _correlated(s, jac, params)
     if s.between is not None:
         g = effect_jacobian(s.layout, params, s.q, s.state.between_session_names).reshape(3 * s.n, -1)
@@ -281,9 +350,13 @@ def _correlated(s: _Setup, jac: Array, params: Array) -> Array:
     r_wb = rpy_to_matrix(params[s.b0 + 3 : s.b0 + 6])
     jk = jac[:, :, kin].reshape(3 * n, kin.size)
     if s.me_field is None:
-        cov = linalg.block_diag(*([r_wb @ s.state.model_error_covariance @ r_wb.T] * n))
+        cov = block_diagonal(np.broadcast_to(r_wb @ s.state.model_error_covariance @ r_wb.T, (n, 3, 3)))
     else:
-        cov = s.me_field.prediction_covariance(s.q, s.state.model_error_covariance, r_wb, jk, s.kin_names)
+        cov = (
+            _field_prediction(s, r_wb, jk)
+            if s.rotated_field
+            else s.me_field.prediction_covariance(s.q, s.state.model_error_covariance, r_wb, jk, s.kin_names)
+        )
     if kin.size:
         cov = cov + jk @ s.sigma_k @ jk.T
     return np.asarray(cov, dtype=np.float64)
@@ -390,7 +463,7 @@ def _check_level(s: _Setup, fit: _Fit) -> tuple[float, float, Array, float, Leve
     # correlation length, which one campaign hardly fixes (on the UR10 series B and D it made a
     # 2x session read 1x); there the shape is the noise's.
     jac, kin, n = fit.jac, s.kin, s.n
-    shape = linalg.block_diag(*pose_noise(jac, s.theta_cols, s.distances, s.tracker, s.encoder, s.model.prismatic))
+    shape = block_diagonal(pose_noise(jac, s.theta_cols, s.distances, s.tracker, s.encoder, s.model.prismatic))
     if kin.size and not np.any(s.state.model_error_covariance):
         jk_flat = jac[:, :, kin].reshape(3 * n, kin.size)
         shape = shape + jk_flat @ s.sigma_k @ jk_flat.T
