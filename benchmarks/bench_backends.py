@@ -63,7 +63,7 @@ import numpy as np
 from robocal_uncertainty.core import SimulationSettings, identify, load_robot_model, simulate_campaign
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.kernels import NumbaBackend, resolve_backend
-from robocal_uncertainty.montecarlo.engine import run_trials
+from robocal_uncertainty.montecarlo.engine import DEFAULT_BLOCK_SIZE, block_rng, run_trials
 from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.uncertainty import (
     EvaluationSettings,
@@ -71,6 +71,7 @@ from robocal_uncertainty.uncertainty import (
     evaluate_uncertainty,
     prepare_calibration_trials,
 )
+from robocal_uncertainty.uncertainty.calibration.trials import _SUB_BATCH as SUB_BATCH
 from robocal_uncertainty.uncertainty.sources import stream_id
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -98,16 +99,23 @@ def per_trial(trials, n: int, threads: int, repeats: int) -> float:
     return best / n
 
 
-def draws_per_trial(trials, n: int, repeats: int, block: int = 10_000) -> float:
-    """CPU seconds per trial of the sources' draws alone."""
+def draws_per_trial(trials, n: int, repeats: int) -> float:
+    """CPU seconds per trial of the sources' draws alone, drawn as the trial block draws them:
+    per engine block of trials, a source drawn by one fill of its generator (``draws_by_rows``)
+    sub-batch by sub-batch, the others the whole block at once."""
     best = np.inf
     for _ in range(repeats):
-        root = np.random.SeedSequence(0)
         start = time.process_time()
-        for b in range(0, n, block):
-            rng = np.random.default_rng(root.spawn(1)[0])
+        for b, lo in enumerate(range(0, n, DEFAULT_BLOCK_SIZE)):
+            size = min(DEFAULT_BLOCK_SIZE, n - lo)
+            rng = block_rng(0, b)
             for source in trials.sources:
-                source.draw(source_generator(rng, stream_id(source.name)), min(block, n - b))
+                stream = source_generator(rng, stream_id(source.name))
+                if getattr(source, "draws_by_rows", False):
+                    for sub in range(0, size, SUB_BATCH):
+                        source.draw(stream, min(SUB_BATCH, size - sub))
+                else:
+                    source.draw(stream, size)
         best = min(best, time.process_time() - start)
     return best / n
 
