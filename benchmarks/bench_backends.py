@@ -11,7 +11,9 @@ from the same draws with each backend:
   draws, the re-identification and the test configuration), and the re-identification alone
   (``solver.solve`` on one sub-batch of the block's perturbed inputs: what the kernel
   replaces), with the ratios against numpy;
-- the chain walk alone: one kinematics pass of the re-identification for 256 trials.
+- the chain walk alone: one kinematics pass of the re-identification for 256 trials;
+- the ceiling the draws leave: numpy's time per trial over the draws' alone (what a backend
+  whose kernel cost nothing would reach; the draws must stay the same values).
 With ``--series-d N``: :func:`evaluate_uncertainty` of the shipped UR10 series D (632 poses,
 default sources tracker, encoder, residual; orientation; the README's test joints), N trials,
 preparation and summaries included (no budget, no sweeps), per backend.
@@ -61,7 +63,7 @@ import numpy as np
 from robocal_uncertainty.core import SimulationSettings, identify, load_robot_model, simulate_campaign
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.kernels import NumbaBackend, resolve_backend
-from robocal_uncertainty.montecarlo.engine import run_trials
+from robocal_uncertainty.montecarlo.engine import DEFAULT_BLOCK_SIZE, block_rng, run_trials
 from robocal_uncertainty.montecarlo.streams import source_generator
 from robocal_uncertainty.uncertainty import (
     EvaluationSettings,
@@ -69,6 +71,7 @@ from robocal_uncertainty.uncertainty import (
     evaluate_uncertainty,
     prepare_calibration_trials,
 )
+from robocal_uncertainty.uncertainty.calibration.trials import _SUB_BATCH as SUB_BATCH
 from robocal_uncertainty.uncertainty.sources import stream_id
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -96,16 +99,23 @@ def per_trial(trials, n: int, threads: int, repeats: int) -> float:
     return best / n
 
 
-def draws_per_trial(trials, n: int, repeats: int, block: int = 10_000) -> float:
-    """CPU seconds per trial of the sources' draws alone."""
+def draws_per_trial(trials, n: int, repeats: int) -> float:
+    """CPU seconds per trial of the sources' draws alone, drawn as the trial block draws them:
+    per engine block of trials, a source drawn by one fill of its generator (``draws_by_rows``)
+    sub-batch by sub-batch, the others the whole block at once."""
     best = np.inf
     for _ in range(repeats):
-        root = np.random.SeedSequence(0)
         start = time.process_time()
-        for b in range(0, n, block):
-            rng = np.random.default_rng(root.spawn(1)[0])
+        for b, lo in enumerate(range(0, n, DEFAULT_BLOCK_SIZE)):
+            size = min(DEFAULT_BLOCK_SIZE, n - lo)
+            rng = block_rng(0, b)
             for source in trials.sources:
-                source.draw(source_generator(rng, stream_id(source.name)), min(block, n - b))
+                stream = source_generator(rng, stream_id(source.name))
+                if getattr(source, "draws_by_rows", False):
+                    for sub in range(0, size, SUB_BATCH):
+                        source.draw(stream, min(SUB_BATCH, size - sub))
+                else:
+                    source.draw(stream, size)
         best = min(best, time.process_time() - start)
     return best / n
 
@@ -152,8 +162,11 @@ def _campaign(model, n_poses: int, six_dof: bool):
     return simulate_campaign(model, settings, seed=1).campaign
 
 
-def grid(args: argparse.Namespace, all_threads: int) -> dict[tuple[int, str, int], float]:
-    """Print the grid; return the seconds per trial by (poses, kind, threads; 0 for numpy)."""
+def grid(
+    args: argparse.Namespace, all_threads: int
+) -> tuple[dict[tuple[int, str, int], float], dict[tuple[int, str], float]]:
+    """Print the grid; return the seconds per trial by (poses, kind, threads; 0 for numpy), and
+    those of the draws alone by (poses, kind)."""
     model = load_robot_model(ROOT / "config/paper_arm.yaml")
     configs = [("numpy", 1)]
     if NumbaBackend().available():
@@ -166,6 +179,7 @@ def grid(args: argparse.Namespace, all_threads: int) -> dict[tuple[int, str, int
     print("-" * len(header))
     point_cost: dict[tuple[int, str, int], float] = {}
     reid_cost: dict[tuple[int, str, int], float] = {}
+    draw_cost: dict[tuple[int, str], float] = {}
     for n_poses in (53, 632):
         for six_dof in (False, True):
             campaign = _campaign(model, n_poses, six_dof)
@@ -200,7 +214,11 @@ def grid(args: argparse.Namespace, all_threads: int) -> dict[tuple[int, str, int
                     f"{rest * 1e6:>11.2f}{base[1] / rest:>7.2f}x{reid * 1e6:>10.2f}{base[2] / reid:>7.2f}x"
                     f"{walk * 1e6:>9.2f}{base[3] / walk:>7.2f}x"
                 )
-            print(f"{'':<22}random draws alone: {draws * 1e6:.2f} us/trial (the same for every backend)")
+            draw_cost[(n_poses, "6-DOF" if six_dof else "point")] = draws
+            print(
+                f"{'':<22}random draws alone: {draws * 1e6:.2f} us/trial (the same for every backend); "
+                f"a kernel that cost nothing would give {base[0] / draws:.1f}x numpy per trial"
+            )
     print()
     for key in sorted({(k[2]) for k in point_cost}):
         name = "numpy" if key == 0 else f"numba, {key} thread{'s' if key > 1 else ''}"
@@ -216,10 +234,14 @@ def grid(args: argparse.Namespace, all_threads: int) -> dict[tuple[int, str, int
             f"{'':<{len(name) + 2}}re-identification alone: 6-DOF / point {six_reid[0]:.2f}x (53 poses), "
             f"{six_reid[1]:.2f}x (632 poses); 632 / 53 poses {growth_reid:.1f}x"
         )
-    return point_cost
+    return point_cost, draw_cost
 
 
-def markdown_table(cost: dict[tuple[int, str, int], float], series: dict[int, tuple[float, float]]) -> None:
+def markdown_table(
+    cost: dict[tuple[int, str, int], float],
+    draw_cost: dict[tuple[int, str], float],
+    series: dict[int, tuple[float, float]],
+) -> None:
     """The README's table: µs per trial and the ratio against numpy, same run."""
     threads = sorted({key[2] for key in cost} - {0})
     names = ["numpy"] + [f"numba, {t} thread{'s' if t > 1 else ''}" for t in threads]
@@ -232,6 +254,14 @@ def markdown_table(cost: dict[tuple[int, str, int], float], series: dict[int, tu
                 f"{cost[(n_poses, kind, t)] * 1e6:.3g} µs, {base / cost[(n_poses, kind, t)]:.2f}x" for t in threads
             ]
             print(f"| {n_poses} poses, {kind} | " + " | ".join(cells) + " |")
+    for n_poses in (53, 632):
+        for kind in ("point", "6-DOF"):
+            draws = draw_cost[(n_poses, kind)]
+            ceiling = cost[(n_poses, kind, 0)] / draws
+            print(
+                f"| {n_poses} poses, {kind}: draws alone, any backend (ceiling) | {draws * 1e6:.3g} µs |"
+                + f" {ceiling:.1f}x |" * len(threads)
+            )
     six = [[cost[(p, "6-DOF", t)] / cost[(p, "point", t)] for t in [0, *threads]] for p in (53, 632)]
     print("| 6-DOF / point, 53 poses | " + " | ".join(f"{r:.2f}x" for r in six[0]) + " |")
     print("| 6-DOF / point, 632 poses | " + " | ".join(f"{r:.2f}x" for r in six[1]) + " |")
@@ -303,9 +333,9 @@ def main() -> int:
             print(f"backend {resolve_backend(name).describe()}")
     print(f"CPU cores: {os.cpu_count()}, numba threads: {all_threads}, BLAS threads: 1")
     print(f"load average at the start: {_load()}\n")
-    cost = grid(args, all_threads)
+    cost, draw_cost = grid(args, all_threads)
     series = series_d(args.series_d, all_threads) if args.series_d else {}
-    markdown_table(cost, series)
+    markdown_table(cost, draw_cost, series)
     print(f"\nload average at the end: {_load()}")
     return 0
 

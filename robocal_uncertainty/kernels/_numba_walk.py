@@ -53,45 +53,47 @@ def _trig(p: np.ndarray, i: int, p_ref: np.ndarray, cos_p: np.ndarray, sin_p: np
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _rpy(p: np.ndarray, k: int, p_ref: np.ndarray, cos_p: np.ndarray, sin_p: np.ndarray, out: np.ndarray) -> None:
-    """Row-major ``Rz(p[k+2]) Ry(p[k+1]) Rx(p[k])`` into out[0:9]."""
+def _rpy(
+    p: np.ndarray, k: int, p_ref: np.ndarray, cos_p: np.ndarray, sin_p: np.ndarray, out: np.ndarray, at: int
+) -> None:
+    """Row-major ``Rz(p[k+2]) Ry(p[k+1]) Rx(p[k])`` into out[at:at + 9] (indexed, not sliced:
+    a view of an array costs two atomic reference counts, per trial)."""
     cr, sr = _trig(p, k, p_ref, cos_p, sin_p)
     cp, sp = _trig(p, k + 1, p_ref, cos_p, sin_p)
     cy, sy = _trig(p, k + 2, p_ref, cos_p, sin_p)
-    out[0] = cy * cp
-    out[1] = cy * sp * sr - sy * cr
-    out[2] = cy * sp * cr + sy * sr
-    out[3] = sy * cp
-    out[4] = sy * sp * sr + cy * cr
-    out[5] = sy * sp * cr - cy * sr
-    out[6] = -sp
-    out[7] = cp * sr
-    out[8] = cp * cr
+    out[at + 0] = cy * cp
+    out[at + 1] = cy * sp * sr - sy * cr
+    out[at + 2] = cy * sp * cr + sy * sr
+    out[at + 3] = sy * cp
+    out[at + 4] = sy * sp * sr + cy * cr
+    out[at + 5] = sy * sp * cr - cy * sr
+    out[at + 6] = -sp
+    out[at + 7] = cp * sr
+    out[at + 8] = cp * cr
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _turn(u: np.ndarray, v: np.ndarray, c: np.ndarray, s: np.ndarray) -> None:
-    """``u, v = c u - s v, s u + c v`` elementwise, in place."""
-    for i in range(u.shape[0]):
-        a, b = u[i], v[i]
-        u[i] = c[i] * a - s[i] * b
-        v[i] = s[i] * a + c[i] * b
+def _turn(w: np.ndarray, iu: int, iv: int, c: np.ndarray, s: np.ndarray) -> None:
+    """Rows u = w[iu], v = w[iv]: ``u, v = c u - s v, s u + c v`` elementwise, in place."""
+    for i in range(w.shape[1]):
+        a, b = w[iu, i], w[iv, i]
+        w[iu, i] = c[i] * a - s[i] * b
+        w[iv, i] = s[i] * a + c[i] * b
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _turn_fixed(u: np.ndarray, v: np.ndarray, c: float, s: float) -> None:
-    """``u, v = c u - s v, s u + c v`` with constant c, s, in place."""
-    for i in range(u.shape[0]):
-        a, b = u[i], v[i]
-        u[i] = c * a - s * b
-        v[i] = s * a + c * b
+def _turn_fixed(w: np.ndarray, iu: int, iv: int, c: float, s: float) -> None:
+    """Rows u = w[iu], v = w[iv]: ``u, v = c u - s v, s u + c v`` with constant c, s, in place."""
+    for i in range(w.shape[1]):
+        a, b = w[iu, i], w[iv, i]
+        w[iu, i] = c * a - s * b
+        w[iv, i] = s * a + c * b
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def _series_turns(
-    x: np.ndarray,
-    y: np.ndarray,
-    z: np.ndarray,
+    v: np.ndarray,
+    m: int,
     cos: np.ndarray,
     sin: np.ndarray,
     has_beta: bool,
@@ -99,32 +101,32 @@ def _series_turns(
     a: float,
     translate: bool,
 ) -> None:
-    """One joint's turns of one vector (components x, y, z, each (n_poses,)) at every pose, in
-    place: about z by the joint angle (`cos`, `sin` per pose), about y by beta (when
+    """One joint's turns of vector m (components ``v[3 m: 3 m + 3]``, each (n_poses,)) at
+    every pose, in place: about z by the joint angle (`cos`, `sin` per pose), about y by beta (when
     `has_beta`), about x by alpha (`link` = cos beta, sin beta, cos alpha, sin alpha), then
     (with `translate`, the point) along x by `a`. One loop per case without a branch inside,
     so that the compiler vectorises it; the operations per pose are those of the pass over
     larger changes in :func:`_walk_trial`."""
     cb_, sb_, ca, sa = link
     if has_beta:
-        for i in range(x.shape[0]):
+        for i in range(v.shape[1]):
             c, s = cos[i], sin[i]
-            xi, yi, zi = x[i], y[i], z[i]
+            xi, yi, zi = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
             xi, yi = c * xi - s * yi, s * xi + c * yi
             zi, xi = cb_ * zi - sb_ * xi, sb_ * zi + cb_ * xi
             yi, zi = ca * yi - sa * zi, sa * yi + ca * zi
-            x[i] = xi + a if translate else xi
-            y[i] = yi
-            z[i] = zi
+            v[3 * m, i] = xi + a if translate else xi
+            v[3 * m + 1, i] = yi
+            v[3 * m + 2, i] = zi
     else:
-        for i in range(x.shape[0]):
+        for i in range(v.shape[1]):
             c, s = cos[i], sin[i]
-            xi, yi, zi = x[i], y[i], z[i]
+            xi, yi, zi = v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i]
             xi, yi = c * xi - s * yi, s * xi + c * yi
             yi, zi = ca * yi - sa * zi, sa * yi + ca * zi
-            x[i] = xi + a if translate else xi
-            y[i] = yi
-            z[i] = zi
+            v[3 * m, i] = xi + a if translate else xi
+            v[3 * m + 1, i] = yi
+            v[3 * m + 2, i] = zi
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -176,11 +178,10 @@ def _walk_trial(
                 if m == 0:
                     x, y, z = x + p[m0], y + p[m0 + 1], z + p[m0 + 2]
             v[3 * m, i], v[3 * m + 1, i], v[3 * m + 2, i] = x, y, z
-        oi = o[i]
         vx, vy, vz = v[0, i], v[1, i], v[2, i]
         for r in range(3):
             e0, e1, e2 = rot[3 * r], rot[3 * r + 1], rot[3 * r + 2]
-            oi[r] = e0 * vx + e1 * vy + e2 * vz + p[b0 + r]
+            o[i, r] = e0 * vx + e1 * vy + e2 * vz + p[b0 + r]
         if poses:
             xx, xy, xz = v[3, i], v[4, i], v[5, i]
             zx, zy, zz = v[6, i], v[7, i], v[8, i]
@@ -188,9 +189,9 @@ def _walk_trial(
             for r in range(3):
                 e0, e1, e2 = rot[3 * r], rot[3 * r + 1], rot[3 * r + 2]
                 # world_R_tool row r: columns x, y = z cross x, z.
-                oi[3 + 3 * r] = e0 * xx + e1 * xy + e2 * xz
-                oi[4 + 3 * r] = e0 * yx + e1 * yy + e2 * yz
-                oi[5 + 3 * r] = e0 * zx + e1 * zy + e2 * zz
+                o[i, 3 + 3 * r] = e0 * xx + e1 * xy + e2 * xz
+                o[i, 4 + 3 * r] = e0 * yx + e1 * yy + e2 * yz
+                o[i, 5 + 3 * r] = e0 * zx + e1 * zy + e2 * zz
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -207,24 +208,24 @@ def _start_vectors(
     """The base, mount and tool rotations into `rot`, and the vectors at the tool into `v`
     (see :func:`_walk_trial`)."""
     t0, r0, m0, b0 = blocks[0], blocks[1], blocks[2], blocks[3]
-    _rpy(p, b0 + 3, p_ref, cos_p, sin_p, rot[0:9])  # base, mount, tool rotations, row-major
+    _rpy(p, b0 + 3, p_ref, cos_p, sin_p, rot, 0)  # base, mount, tool rotations, row-major
     if m0 >= 0:
-        _rpy(p, m0 + 3, p_ref, cos_p, sin_p, rot[9:18])
+        _rpy(p, m0 + 3, p_ref, cos_p, sin_p, rot, 9)
     if r0 >= 0:
-        _rpy(p, r0, p_ref, cos_p, sin_p, rot[18:27])
+        _rpy(p, r0, p_ref, cos_p, sin_p, rot, 18)
     # v[3 m + c]: component c of vector m (the point; the tool's x and z axes) per pose.
-    v[0, :] = p[t0]
-    v[1, :] = p[t0 + 1]
-    v[2, :] = p[t0 + 2]
+    n_poses = v.shape[1]
+    for c in range(3):
+        for i in range(n_poses):
+            v[c, i] = p[t0 + c]
     if poses:
-        if r0 >= 0:
-            for c in range(3):
-                v[3 + c, :] = rot[18 + 3 * c]  # tool x axis: column 0
-                v[6 + c, :] = rot[20 + 3 * c]  # tool z axis: column 2
-        else:
-            v[3:9, :] = 0.0
-            v[3, :] = 1.0
-            v[8, :] = 1.0
+        for c in range(3):
+            # tool x axis: column 0 of the tool rotation; tool z axis: column 2
+            x_c = rot[18 + 3 * c] if r0 >= 0 else (1.0 if c == 0 else 0.0)
+            z_c = rot[20 + 3 * c] if r0 >= 0 else (1.0 if c == 2 else 0.0)
+            for i in range(n_poses):
+                v[3 + c, i] = x_c
+                v[6 + c, i] = z_c
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -265,8 +266,6 @@ def _joint_turns(
             b[i] = (q[i, j] - q_ref[j, i]) + dtheta
         for i in range(n_poses):
             largest = max(largest, abs(b[i]))
-    cr = cos_ref[j]
-    sr = sin_ref[j]
     if largest <= SERIES_LIMIT:
         # The usual case (every change within the series): the angles' cosines and sines
         # by the series, then the joint's turns of each vector in one pass over the poses,
@@ -280,24 +279,24 @@ def _joint_turns(
             b2 = bi * bi
             cb = 1.0 + b2 * (-0.5 + b2 * (1.0 / 24.0))
             sb = bi * (1.0 + b2 * (-1.0 / 6.0 + b2 * (1.0 / 120.0)))
-            cos[i] = cr[i] * cb - sr[i] * sb
-            sin[i] = sr[i] * cb + cr[i] * sb
+            cos[i] = cos_ref[j, i] * cb - sin_ref[j, i] * sb
+            sin[i] = sin_ref[j, i] * cb + cos_ref[j, i] * sb
         for m in range(n_vec):
-            _series_turns(v[3 * m], v[3 * m + 1], v[3 * m + 2], cos, sin, has_beta, (cb_, sb_, ca, sa), a, m == 0)
+            _series_turns(v, m, cos, sin, has_beta, (cb_, sb_, ca, sa), a, m == 0)
         return
     # A larger change somewhere: per pose the series or the angle's own cosine and sine.
     for i in range(n_poses):
         angle = theta if prismatic else q[i, j] + theta
-        cos[i], sin[i] = _cos_sin(b[i], cr[i], sr[i], angle)
+        cos[i], sin[i] = _cos_sin(b[i], cos_ref[j, i], sin_ref[j, i], angle)
     for m in range(n_vec):
-        _turn(v[3 * m], v[3 * m + 1], cos, sin)
+        _turn(v, 3 * m, 3 * m + 1, cos, sin)
     if joints[j, 4] >= 0:
         cb_, sb_ = _trig(p, joints[j, 4], p_ref, cos_p, sin_p)
         for m in range(n_vec):
-            _turn_fixed(v[3 * m + 2], v[3 * m], cb_, sb_)
+            _turn_fixed(v, 3 * m + 2, 3 * m, cb_, sb_)
     ca, sa = _trig(p, joints[j, 0], p_ref, cos_p, sin_p)
     for m in range(n_vec):
-        _turn_fixed(v[3 * m + 1], v[3 * m + 2], ca, sa)
+        _turn_fixed(v, 3 * m + 1, 3 * m + 2, ca, sa)
     a = p[joints[j, 1]]
     for i in range(n_poses):
         v[0, i] += a
@@ -449,11 +448,21 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
     return acc
 
 
+@numba.njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _dot_row(a: np.ndarray, matrix: np.ndarray, row: int, n: int) -> float:
+    """``a[:n] @ matrix[row, :n]``, indexed rather than sliced (a view of an array costs two
+    atomic reference counts, and these products run a hundred times per trial)."""
+    acc = 0.0
+    for i in range(n):
+        acc += a[i] * matrix[row, i]
+    return acc
+
+
 @numba.njit(cache=True, error_model="numpy")
 def _times(vector: np.ndarray, matrix_t: np.ndarray, out: np.ndarray) -> None:
     """``out = vector @ matrix`` for vector (n,) and the matrix transposed, matrix_t (k, n)."""
     for c in range(out.shape[0]):
-        out[c] = _dot(vector, matrix_t[c])
+        out[c] = _dot_row(vector, matrix_t, c, vector.shape[0])
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -471,26 +480,23 @@ def _eigen_step(
     pen_idx, free_idx, coupling, evecs, evecs_t, evals, normal_fp, free_inverse_t = factors
     n_pen = pen_idx.shape[0]
     n_free = free_idx.shape[0]
-    r_pen = rp[:n_pen]
-    r_free = rf[:n_free]
+    # rp[:n_pen] the penalised right-hand side, rf[:n_free] the free one, y the rotated solution.
     for f in range(n_free):
-        r_free[f] = rhs[free_idx[f]]
+        rf[f] = rhs[free_idx[f]]
     for a in range(n_pen):
-        r_pen[a] = rhs[pen_idx[a]]
+        rp[a] = rhs[pen_idx[a]]
         if n_free:
-            r_pen[a] -= _dot(r_free, coupling[a])
-    y_pen = y[:n_pen]
+            rp[a] -= _dot_row(rf, coupling, a, n_free)
     for e in range(n_pen):
-        y_pen[e] = _dot(r_pen, evecs_t[e]) / (evals[e] + lam2)
+        y[e] = _dot_row(rp, evecs_t, e, n_pen) / (evals[e] + lam2)
     for a in range(n_pen):
-        r_pen[a] = _dot(y_pen, evecs[a])
-        step[pen_idx[a]] = r_pen[a]
+        rp[a] = _dot_row(y, evecs, a, n_pen)
+        step[pen_idx[a]] = rp[a]
     if n_free:
-        y_free = y[:n_free]
         for f in range(n_free):
-            y_free[f] = rhs[free_idx[f]] - _dot(r_pen, normal_fp[f])
+            y[f] = rhs[free_idx[f]] - _dot_row(rp, normal_fp, f, n_pen)
         for f in range(n_free):
-            step[free_idx[f]] = _dot(y_free, free_inverse_t[f])
+            step[free_idx[f]] = _dot_row(y, free_inverse_t, f, n_free)
 
 
 @numba.njit(cache=True, error_model="numpy")
