@@ -439,27 +439,40 @@ def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tupl
     """The grid ``(c, l)`` of :func:`_hyper_posterior`, its posterior probabilities (the restricted
     likelihood with ``log s`` integrated out by Laplace's method, uniform priors in ``c`` and
     ``log l``; zeros where the likelihood fails everywhere) and each point's profile ``log s``."""
-    from scipy import optimize
+    from scipy import linalg, optimize
 
-    nll = system.nll
+    # In the contrasts Q^T r (Q an orthonormal basis orthogonal to the fit) the restricted
+    # likelihood is that of N(0, A + s B_cl), A = Q^T N Q, B_cl = Q^T K_cl Q. With A = L L^T and
+    # L^-1 B_cl L^-T = W diag(lambda) W^T: 2 nll = log|A| + sum log(1 + s lambda) + sum u^2 / (1 +
+    # s lambda), u = W^T L^-1 Q^T r; one eigendecomposition per (c, l), any s at O(m).
+    del log_s  # the profile maximum is found per point on the eigenvalues
+    fit, r = system.fit, system.residuals
+    basis = np.linalg.qr(fit, mode="complete")[0][:, fit.shape[1] :]
+    chol = linalg.cholesky(basis.T @ system.noise @ basis, lower=True)
+    g_mat = linalg.solve_triangular(chol, basis.T, lower=True)  # L^-1 Q^T, (m, n d)
+    y = g_mat @ r
     # Ordered by the length first: the systematic resampling stratifies along it.
     grid = [(float(c), float(ell)) for ell in HYPER_LENGTHS for c in HYPER_FRACTIONS]
     log_post = np.empty(len(grid))
     log_scales = np.empty(len(grid))
-    step = 0.05
     for g, (c, ell) in enumerate(grid):
-        log_l = float(np.log(ell))
-        res = optimize.minimize_scalar(
-            lambda a, c=c, log_l=log_l: nll(a, c, log_l),
-            bounds=(log_s - 8.0, log_s + 8.0),
-            method="bounded",
-            options={"xatol": 0.02},
-        )
-        a0, f0 = float(res.x), float(res.fun)
-        curvature = (nll(a0 + step, c, log_l) - 2.0 * f0 + nll(a0 - step, c, log_l)) / step**2
+        lam, vecs = np.linalg.eigh(g_mat @ system.unit_covariance(c, ell) @ g_mat.T)
+        lam = np.clip(lam, 0.0, None)
+        u2 = (vecs.T @ y) ** 2
+
+        def half_nll(a: float, lam: Array = lam, u2: Array = u2) -> float:
+            den = 1.0 + np.exp(a) * lam
+            return 0.5 * float(np.sum(np.log(den)) + np.sum(u2 / den))
+
+        hi = float(np.log(1e8 / max(float(lam.max()), 1e-300)))
+        res = optimize.minimize_scalar(half_nll, bounds=(hi - 30.0, hi), method="bounded", options={"xatol": 1e-3})
+        a0 = float(res.x)
+        # d^2 nll / d a^2 at a0, analytically: t = s lambda / (1 + s lambda).
+        t = np.exp(a0) * lam / (1.0 + np.exp(a0) * lam)
+        curvature = 0.5 * float(np.sum(t * (1.0 - t)) + np.sum(u2 / (1.0 + np.exp(a0) * lam) * t * (2.0 * t - 1.0)))
         log_scales[g] = a0
-        ok = bool(np.isfinite(f0) and np.isfinite(curvature))
-        log_post[g] = -f0 - 0.5 * np.log(max(curvature, 1e-12)) if ok else -np.inf
+        ok = bool(np.isfinite(res.fun) and np.isfinite(curvature))
+        log_post[g] = -float(res.fun) - 0.5 * np.log(max(curvature, 1e-12)) if ok else -np.inf
     if not np.any(np.isfinite(log_post)):
         return grid, np.zeros(len(grid)), log_scales
     post = np.exp(log_post - np.max(log_post))
