@@ -148,3 +148,22 @@ def test_correlated_scale_factors_keep_student_t_marginals() -> None:
     assert np.corrcoef(z[:, 0] ** 2, z[:, 1] ** 2)[0, 1] > 0.05
     indep = FieldNormal(q_t, q_c, FieldEstimate(**base)).sample(np.random.default_rng(9), 300_000)[:, -3:] / sd
     assert abs(np.corrcoef(indep[:, 0] ** 2, indep[:, 1] ** 2)[0, 1]) < 0.02
+
+
+def test_local_variance_lowers_the_scale_dof_as_brute_force_says() -> None:
+    """Errors z = sqrt(v) g whose local variance v is shared where the errors are correlated
+    (k blocks of m fully correlated poses): the mean of the squares has variance
+    (2 + 3 var(v)) / k, against a brute-force draw of such errors (scipy's gamma for v)."""
+    from robocal_uncertainty.uncertainty.model_error_draws import _leave_one_out_dof
+
+    k, m, var_v = 6, 4, 0.5
+    n = k * m
+    unit = np.kron(np.eye(k), np.ones((m, m))) + 1e-9 * np.eye(n)
+    fit = np.zeros((n, 0))
+    nu = _leave_one_out_dof(np.zeros(n), fit, 1e-12 * np.eye(n), unit, 1, np.ones(1), local_variance=var_v)[0][0]
+    rng = np.random.default_rng(12)
+    v = stats.gamma(a=1.0 / var_v, scale=var_v).rvs(size=(200_000, k), random_state=rng)
+    mean_sq = np.mean(v * rng.normal(size=(200_000, k)) ** 2, axis=1)
+    np.testing.assert_allclose(nu, 2.0 / np.var(mean_sq), rtol=0.03)
+    plain = _leave_one_out_dof(np.zeros(n), fit, 1e-12 * np.eye(n), unit, 1, np.ones(1))[0][0]
+    np.testing.assert_allclose(plain, k, rtol=1e-6)  # a normal field: k independent patches
