@@ -53,7 +53,15 @@ Wishart with mean ``I`` (the covariance, and with it the GUM statement, unchange
 varies (``tau = d / k``) is a hyperparameter that a small campaign determines poorly (a sample
 kurtosis of heavy-tailed errors is biased low: plugged in it gives back little of the
 variation), so each draw takes ``tau`` from its posterior given the leave-one-out prediction
-errors (:func:`_shape_posterior`). No constant is tuned to a data set.
+errors (:func:`_shape_posterior`).
+
+The correlation (``c``, ``l``) is a hyperparameter of the same kind: a few tens of poses leave the
+length to within a factor of several (the likelihood's maximum can lie at the end of the range),
+so the draws take it from its posterior as well (:func:`_hyper_posterior`), each hypothesis with
+the leave-one-out scale it implies. The scale's degrees of freedom take with them a local
+variance that varies over the workspace as the error does (:func:`_leave_one_out_dof`), and the
+components' scale factors share the common local scale the leave-one-out errors show
+(:func:`_scale_correlation`). No constant is tuned to a data set.
 """
 
 from __future__ import annotations
