@@ -335,6 +335,7 @@ def estimate_field(
     max_equations: int = FIELD_MAX_EQUATIONS,
     seed: int = 0,
     leave_one_out: bool = True,
+    correlation_posterior: bool = True,
 ) -> FieldEstimate:
     """The model-error field of a calibration by restricted maximum likelihood.
 
@@ -365,6 +366,9 @@ def estimate_field(
         False: the per-pose covariance is the likelihood's (``verify``'s session field, whose
         checks re-register and test against the validated level), without the leave-one-out
         scale and its degrees of freedom.
+    correlation_posterior : bool
+        False: no :attr:`~FieldEstimate.hypotheses` (the draws plug in the restricted-likelihood
+        correlation; for checks of the estimate itself).
     """
     system = _field_system(calibration, joint_positions, noise, shape, max_equations=max_equations, seed=seed)
     fun, log_s, c, log_l, independent_fun, bounds = _reml_optimum(system)
@@ -398,7 +402,7 @@ def estimate_field(
     local_variance = 2.0 * float(shape_weights @ SHAPE_TAU) / d
     scale_dof = _leave_one_out_dof(r, fit, n_cov, unit, d, factors, local_variance=local_variance)[0]
     hypotheses = []
-    for weight, c_h, l_h, log_s_h in _hyper_posterior(system, log_s, seed):
+    for weight, c_h, l_h, log_s_h in _hyper_posterior(system, log_s, seed) if correlation_posterior else []:
         unit_h = system.unit_covariance(c_h, l_h)
         scale_h = _leave_one_out_scale(r, fit, n_cov, unit_h, d, (float(np.exp(bounds[0])), float(np.exp(bounds[1]))))
         factors_h = _leave_one_out_components(
@@ -412,7 +416,7 @@ def estimate_field(
         per_pose_covariance=system.shape * np.outer(factors, factors),
         scale_dof=scale_dof,
         shape_weights=shape_weights,
-        hypotheses=tuple(hypotheses),
+        hypotheses=tuple(hypotheses) if correlation_posterior else None,
         scale_correlation=_scale_correlation(white),
         **common,
     )
