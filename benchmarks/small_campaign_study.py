@@ -14,6 +14,8 @@ simulated UR10 campaigns of 632 poses in a tracker frame with unmodelled joint e
 
     python benchmarks/small_campaign_study.py                 # UR10 series and simulations
     python benchmarks/small_campaign_study.py --series ur10   # the shipped series only
+    # the slow check's two 53-pose draws of the shipped series, each printed:
+    python benchmarks/small_campaign_study.py --series ur10 --sizes 53 --draws 2 --trials 1000 --per-draw
 
 Run time: about 2 minutes on two cores with the defaults.
 """
@@ -53,9 +55,10 @@ def study(
     trials: int,
     seed: int,
     model_error: str | None = None,
+    per_draw: bool = False,
 ) -> list[dict[str, float]]:
     """One row per size: pooled inside fraction, normalised RMS, flagged draws (`model_error`:
-    ``field`` or ``independent``, None the default statement's)."""
+    ``field`` or ``independent``, None the default statement's; `per_draw`: print each draw's)."""
     settings = UncertaintySettings() if model_error is None else UncertaintySettings(model_error=model_error)  # type: ignore[arg-type]
     rows = []
     for n in sizes:
@@ -66,6 +69,14 @@ def study(
                 model, campaign, splits=split, settings=settings, trials=trials, seed=seed + d, workers=1
             )
             k = val.n_held_out
+            if per_draw:
+                z = val.errors / val.standard_uncertainties
+                axes = ", ".join(f"{a.inside_fraction * 100:.1f}" for a in val.axes)
+                print(
+                    f"  {n} poses, draw {d}: region {val.region_inside_fraction * 100:.1f} %, per axis {axes} %, "
+                    f"normalised RMS {', '.join(f'{v:.3f}' for v in np.sqrt(np.mean(z**2, axis=0)))}",
+                    flush=True,
+                )
             inside += val.region_inside_fraction * k
             norm_sq += float(np.sum((val.errors / val.standard_uncertainties) ** 2))
             count += k
@@ -123,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="model error drawn (default: the default's)",
     )
+    parser.add_argument("--per-draw", action="store_true", help="print every draw's coverage too")
     args = parser.parse_args(argv)
     model = load_robot_model(resolve_robot_config("ur10"))
     sizes = tuple(args.sizes)
@@ -130,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         campaign = read_tracker_csv(UR10_CSV)
         _print(
             f"UR10 series ({campaign.n_poses} poses), {args.draws} draws per size",
-            study(model, campaign, sizes, args.draws, args.trials, args.seed, args.model_error),
+            study(model, campaign, sizes, args.draws, args.trials, args.seed, args.model_error, args.per_draw),
         )
     if args.series in ("simulated", "both"):
         for gear, sag in SIMULATED_ERRORS:
@@ -139,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"simulated UR10, 632 poses, gear error {gear * 1e6:.0f} urad, sag {sag * 1e6:.0f} urad "
                 f"(model error u = {', '.join(f'{v * 1e6:.0f}' for v in u)} um over all poses), "
                 f"{args.draws} draws per size",
-                study(model, campaign, sizes, args.draws, args.trials, args.seed, args.model_error),
+                study(model, campaign, sizes, args.draws, args.trials, args.seed, args.model_error, args.per_draw),
             )
     return 0
 

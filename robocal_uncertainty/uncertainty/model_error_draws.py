@@ -53,7 +53,15 @@ Wishart with mean ``I`` (the covariance, and with it the GUM statement, unchange
 varies (``tau = d / k``) is a hyperparameter that a small campaign determines poorly (a sample
 kurtosis of heavy-tailed errors is biased low: plugged in it gives back little of the
 variation), so each draw takes ``tau`` from its posterior given the leave-one-out prediction
-errors (:func:`_shape_posterior`). No constant is tuned to a data set.
+errors (:func:`_shape_posterior`).
+
+The correlation (``c``, ``l``) is a hyperparameter of the same kind: a few tens of poses leave the
+length to within a factor of several (the likelihood's maximum can lie at the end of the range),
+so the draws take it from its posterior as well (:func:`_hyper_posterior`), each hypothesis with
+the leave-one-out scale it implies. The scale's degrees of freedom take with them a local
+variance that varies over the workspace as the error does (:func:`_leave_one_out_dof`), and the
+components' scale factors share the common local scale the leave-one-out errors show
+(:func:`_scale_correlation`). No constant is tuned to a data set.
 """
 
 from __future__ import annotations
@@ -107,6 +115,50 @@ kurtosis of the errors (``2 / k``) is linear in ``tau``."""
 SHAPE_DRAWS = 2000
 """Wishart draws of the Monte Carlo integral of the mixture's density (common random numbers
 over the grid, seeded)."""
+HYPER_FRACTIONS = np.linspace(0.1, 0.9, 5)
+"""Grid of the correlated fraction ``c`` (cell centres of [0, 1]; uniform prior) over which the
+restricted likelihood is integrated (:func:`_hyper_posterior`)."""
+HYPER_LENGTHS = np.exp(
+    np.log(FIELD_LENGTH_BOUNDS[0]) + (np.arange(8) + 0.5) * np.log(FIELD_LENGTH_BOUNDS[1] / FIELD_LENGTH_BOUNDS[0]) / 8
+)
+"""Grid of the correlation length ``l`` [rad] (cell centres of the searched range in ``log l``;
+prior uniform in ``log l``, the scale-free prior of a length)."""
+HYPER_DRAWS = 8
+"""Hypotheses ``(c, l)`` the posterior is represented by in the draws (systematic resampling of
+the grid, seeded; each carries its own leave-one-out scale)."""
+
+
+@dataclass(frozen=True, eq=False)
+class FieldHypothesis:
+    """One ``(c, l)`` of the posterior of the field's correlation, with the scale it implies.
+
+    Attributes
+    ----------
+    weight : float
+        Its share of the draws (posterior probability; the weights of an estimate sum to 1).
+    correlated_fraction : float
+    length_scale : float [rad]
+    per_pose_covariance : ndarray, shape (d, d)
+        The leave-one-out per-pose covariance under this correlation (what the fit absorbs, and
+        with it the scale that explains the prediction errors, depends on it).
+    scale_dof : ndarray, shape (d,)
+        Effective degrees of freedom of that scale, per component.
+    """
+
+    weight: float
+    correlated_fraction: float
+    length_scale: float
+    per_pose_covariance: Array
+    scale_dof: Array
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "weight": float(self.weight),
+            "correlated_fraction": float(self.correlated_fraction),
+            "length_scale_rad": float(self.length_scale),
+            "standard_uncertainty": np.sqrt(np.clip(np.diag(self.per_pose_covariance), 0.0, None)).tolist(),
+            "scale_dof": np.asarray(self.scale_dof).tolist(),
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,6 +196,13 @@ class FieldEstimate:
         the inverse curvature of the restricted likelihood; zero rows for those at a bound.
     contrasts : int
         Residual equations orthogonal to the fit the likelihood is made of.
+    scale_correlation : float
+        Correlation in [0, 1) of the components' scale estimates (:func:`_scale_correlation`);
+        the draws' scale factors share it (0: independent per component).
+    hypotheses : tuple of FieldHypothesis, or None
+        The posterior of the correlation ``(c, l)`` the draws take it from, a hypothesis per draw
+        (:func:`_hyper_posterior`); None: the draws plug in ``c``, ``l`` and
+        :attr:`per_pose_covariance` above (the restricted-likelihood estimate, recorded either way).
     """
 
     correlated_fraction: float
@@ -160,6 +219,8 @@ class FieldEstimate:
     shape_weights: Array | None = None
     hyper_covariance: Array = field(default_factory=lambda: np.zeros((3, 3)))
     contrasts: int = 0
+    hypotheses: tuple[FieldHypothesis, ...] | None = None
+    scale_correlation: float = 0.0
 
     @property
     def identified(self) -> bool:
@@ -212,6 +273,12 @@ class FieldEstimate:
         k = self.shape_dof
         if k is not None:
             scale += f", its shape varying over the workspace (Wishart, {k:.0f} degrees of freedom on average)"
+        if self.hypotheses is not None and len(self.hypotheses) > 1:
+            lengths = [h.length_scale for h in self.hypotheses]
+            scale += (
+                f", its correlation drawn from its posterior ({len(self.hypotheses)} hypotheses, "
+                f"length {min(lengths):.2f}-{max(lengths):.2f} rad)"
+            )
         return (
             f"drawn as a field over the joint configurations (restricted maximum likelihood): u = {text}, "
             f"{self.correlated_fraction * 100:.0f} % correlated over {self.length_scale:.2f} rad, jointly over the "
@@ -239,6 +306,8 @@ class FieldEstimate:
             "shape_tau": None if self.shape_weights is None else SHAPE_TAU.tolist(),
             "shape_weights": None if self.shape_weights is None else np.asarray(self.shape_weights).tolist(),
             "shape_dof": self.shape_dof,
+            "scale_correlation": float(self.scale_correlation),
+            "hypotheses": None if self.hypotheses is None else [h.to_dict() for h in self.hypotheses],
         }
 
 
@@ -266,6 +335,7 @@ def estimate_field(
     max_equations: int = FIELD_MAX_EQUATIONS,
     seed: int = 0,
     leave_one_out: bool = True,
+    correlation_posterior: bool = True,
 ) -> FieldEstimate:
     """The model-error field of a calibration by restricted maximum likelihood.
 
@@ -296,6 +366,9 @@ def estimate_field(
         False: the per-pose covariance is the likelihood's (``verify``'s session field, whose
         checks re-register and test against the validated level), without the leave-one-out
         scale and its degrees of freedom.
+    correlation_posterior : bool
+        False: no :attr:`~FieldEstimate.hypotheses` (the draws plug in the restricted-likelihood
+        correlation; for checks of the estimate itself).
     """
     system = _field_system(calibration, joint_positions, noise, shape, max_equations=max_equations, seed=seed)
     fun, log_s, c, log_l, independent_fun, bounds = _reml_optimum(system)
@@ -322,12 +395,126 @@ def estimate_field(
         scale = float(np.exp(log_s))
     factors = _leave_one_out_components(r, fit, n_cov, unit, d, scale)
     scale_dof, white, n_eff = _leave_one_out_dof(r, fit, n_cov, unit, d, factors)
+    shape_weights = _shape_posterior(white, n_eff, seed)
+    # The shape's variation is a local variance varying over the workspace (W_jj of the Wishart:
+    # variance 2 / k = 2 tau / d), which the scale's degrees of freedom take with them where the
+    # sample kurtosis of a few tens of errors (biased low) shows less.
+    local_variance = 2.0 * float(shape_weights @ SHAPE_TAU) / d
+    scale_dof = _leave_one_out_dof(r, fit, n_cov, unit, d, factors, local_variance=local_variance)[0]
+    hypotheses = []
+    for weight, c_h, l_h, log_s_h in _hyper_posterior(system, log_s, seed) if correlation_posterior else []:
+        unit_h = system.unit_covariance(c_h, l_h)
+        scale_h = _leave_one_out_scale(r, fit, n_cov, unit_h, d, (float(np.exp(bounds[0])), float(np.exp(bounds[1]))))
+        factors_h = _leave_one_out_components(
+            r, fit, n_cov, unit_h, d, float(np.exp(log_s_h)) if scale_h is None else scale_h
+        )
+        dof_h = _leave_one_out_dof(r, fit, n_cov, unit_h, d, factors_h, local_variance=local_variance)[0]
+        hypotheses.append(
+            FieldHypothesis(weight, c_h, l_h, system.shape * np.outer(factors_h, factors_h), np.asarray(dof_h))
+        )
     return FieldEstimate(
         per_pose_covariance=system.shape * np.outer(factors, factors),
         scale_dof=scale_dof,
-        shape_weights=_shape_posterior(white, n_eff, seed),
+        shape_weights=shape_weights,
+        hypotheses=tuple(hypotheses) if correlation_posterior else None,
+        scale_correlation=_scale_correlation(white),
         **common,
     )
+
+
+def _scale_correlation(white: Array) -> float:
+    """Correlation of the components' scale estimates: the mean correlation between components
+    of the squared whitened leave-one-out prediction errors `white` (n, d), clipped to [0, 0.95].
+
+    The per-component scales are estimated from the same poses. Where the model error is larger
+    in some regions of the workspace than in others, in all components together, a campaign
+    that happened to sample the quieter (or the louder) regions misjudges every component's
+    scale the same way: the estimates are correlated, and a joint statement (the JCGM 102
+    region of several components) drawn with independent scale factors averages that common
+    error away and is too narrow. Errors whitened by their covariance have uncorrelated
+    components, so a correlation of their squares is the common local scale (zero for normal
+    errors of one covariance everywhere).
+    """
+    w2 = np.asarray(white, dtype=np.float64) ** 2
+    n, d = w2.shape
+    if d < 2 or n < 3:
+        return 0.0
+    sd = w2.std(axis=0)
+    if not np.all(sd > 0.0):
+        return 0.0
+    corr = np.corrcoef(w2.T)
+    mean_off = float((np.sum(corr) - d) / (d * (d - 1)))
+    return float(np.clip(mean_off, 0.0, 0.95))
+
+
+def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tuple[float, float]], Array, Array]:
+    """The grid ``(c, l)`` of :func:`_hyper_posterior`, its posterior probabilities (the restricted
+    likelihood with ``log s`` integrated out by Laplace's method, uniform priors in ``c`` and
+    ``log l``; zeros where the likelihood fails everywhere) and each point's profile ``log s``."""
+    from scipy import linalg, optimize
+
+    # In the contrasts Q^T r (Q an orthonormal basis orthogonal to the fit) the restricted
+    # likelihood is that of N(0, A + s B_cl), A = Q^T N Q, B_cl = Q^T K_cl Q. With A = L L^T and
+    # L^-1 B_cl L^-T = W diag(lambda) W^T: 2 nll = log|A| + sum log(1 + s lambda) + sum u^2 / (1 +
+    # s lambda), u = W^T L^-1 Q^T r; one eigendecomposition per (c, l), any s at O(m).
+    del log_s  # the profile maximum is found per point on the eigenvalues
+    fit, r = system.fit, system.residuals
+    basis = np.linalg.qr(fit, mode="complete")[0][:, fit.shape[1] :]
+    chol = linalg.cholesky(basis.T @ system.noise @ basis, lower=True)
+    g_mat = linalg.solve_triangular(chol, basis.T, lower=True)  # L^-1 Q^T, (m, n d)
+    y = g_mat @ r
+    # Ordered by the length first: the systematic resampling stratifies along it.
+    grid = [(float(c), float(ell)) for ell in HYPER_LENGTHS for c in HYPER_FRACTIONS]
+    log_post = np.empty(len(grid))
+    log_scales = np.empty(len(grid))
+    for g, (c, ell) in enumerate(grid):
+        lam, vecs = np.linalg.eigh(g_mat @ system.unit_covariance(c, ell) @ g_mat.T)
+        lam = np.clip(lam, 0.0, None)
+        u2 = (vecs.T @ y) ** 2
+
+        def half_nll(a: float, lam: Array = lam, u2: Array = u2) -> float:
+            den = 1.0 + np.exp(a) * lam
+            return 0.5 * float(np.sum(np.log(den)) + np.sum(u2 / den))
+
+        hi = float(np.log(1e8 / max(float(lam.max()), 1e-300)))
+        res = optimize.minimize_scalar(half_nll, bounds=(hi - 30.0, hi), method="bounded", options={"xatol": 1e-3})
+        a0 = float(res.x)
+        # d^2 nll / d a^2 at a0, analytically: t = s lambda / (1 + s lambda).
+        t = np.exp(a0) * lam / (1.0 + np.exp(a0) * lam)
+        curvature = 0.5 * float(np.sum(t * (1.0 - t)) + np.sum(u2 / (1.0 + np.exp(a0) * lam) * t * (2.0 * t - 1.0)))
+        log_scales[g] = a0
+        ok = bool(np.isfinite(res.fun) and np.isfinite(curvature))
+        log_post[g] = -float(res.fun) - 0.5 * np.log(max(curvature, 1e-12)) if ok else -np.inf
+    if not np.any(np.isfinite(log_post)):
+        return grid, np.zeros(len(grid)), log_scales
+    post = np.exp(log_post - np.max(log_post))
+    return grid, np.asarray(post / np.sum(post), dtype=np.float64), log_scales
+
+
+def _hyper_posterior(system: _FieldSystem, log_s: float, seed: int) -> list[tuple[float, float, float, float]]:
+    """Hypotheses ``(weight, c, l, log s)`` representing the posterior of the field's correlation.
+
+    The restricted likelihood of a few tens of poses determines the correlation length and the
+    correlated fraction poorly (at 53 UR10 poses the curvature's standard deviation of ``log l``
+    is often beyond 1, the maximum at a bound of the range), and a statement that plugs in the
+    maximum is too narrow where they matter: how much of the field the fit absorbed at its poses,
+    and how much is left at a test configuration near or far from them. They are therefore drawn,
+    like the scale and the shape's variation: the restricted likelihood (``s`` integrated out by
+    Laplace's method about its profile maximum) on the grid :data:`HYPER_FRACTIONS` x
+    :data:`HYPER_LENGTHS` (uniform priors in ``c`` and ``log l``), resampled systematically
+    (seeded) to at most :data:`HYPER_DRAWS` hypotheses with their weights.
+    """
+    grid, post, log_scales = _hyper_grid_posterior(system, log_s)
+    if not np.any(post > 0.0):
+        return []
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x4C43]))
+    positions = (rng.uniform() + np.arange(HYPER_DRAWS)) / HYPER_DRAWS
+    picked = np.minimum(np.searchsorted(np.cumsum(post), positions), len(grid) - 1)
+    chosen, counts = np.unique(picked, return_counts=True)
+    return [
+        (float(k) / HYPER_DRAWS, grid[g][0], grid[g][1], float(log_scales[g]))
+        for g, k in zip(chosen.tolist(), counts.tolist())
+    ]
 
 
 @dataclass(frozen=True, eq=False)
@@ -563,7 +750,15 @@ def _leave_one_out_components(
 
 
 def _leave_one_out_dof(
-    r: Array, fit: Array, noise: Array, unit: Array, d: int, factors: Array, *, heavy_tails: bool = True
+    r: Array,
+    fit: Array,
+    noise: Array,
+    unit: Array,
+    d: int,
+    factors: Array,
+    *,
+    heavy_tails: bool = True,
+    local_variance: float = 0.0,
 ) -> tuple[Array, Array, float]:
     """Effective degrees of freedom of each component's leave-one-out scale, shape (d,); the
     leave-one-out prediction errors whitened by their stated covariance, shape (n, d); and the
@@ -577,8 +772,15 @@ def _leave_one_out_dof(
     ``n`` when the field correlates the poses' errors, as the scale of a smooth error is seen
     by a few independent patches of the workspace only. Heavier tails than the normal's make
     a mean of squares more variable: ``nu_j`` is multiplied by ``2 / (kappa_j - 1)`` (``kappa_j``
-    the kurtosis of the observed ``z_ij``; the normal's 3 leaves it), never raised by it. The
-    effective number of poses is the mean of the ``nu_j`` before that (a normal field's).
+    the kurtosis of the observed ``z_ij``; the normal's 3 leaves it), never raised by it. Where
+    the tails come from a local variance ``v`` that varies smoothly over the workspace (on the
+    UR10 series the squared errors of nearest neighbours correlate by 0.3-0.4), the excess
+    variability of the squares is not independent from pose to pose either: with ``v``
+    correlated as the error itself (``C``, clipped at 0) and ``var(v) = kappa_j / 3 - 1``,
+    ``nu_j = 2 tr(C_j)^2 / (2 tr(C_j^2) + var(v) sum C_j o (1 + 2 C_j o C_j))``; the smaller of
+    the two is taken; `local_variance` is a lower bound on ``var(v)`` (the shape posterior's,
+    :func:`estimate_field`). The effective number of poses is the mean of the ``nu_j`` before
+    that (a normal field's).
     """
     n = r.size // d
     proj = np.eye(r.size) - fit @ fit.T
@@ -603,7 +805,16 @@ def _leave_one_out_dof(
         gaussian[j] = float(np.trace(cj)) ** 2 / tr2 if tr2 > 0.0 else float(n)
         zj = z[j::d]
         kurtosis = float(np.mean(zj**4)) / max(float(np.mean(zj**2)) ** 2, np.finfo(float).tiny)
-        out[j] = gaussian[j] * min(1.0, 2.0 / max(kurtosis - 1.0, np.finfo(float).tiny)) if heavy_tails else gaussian[j]
+        out[j] = gaussian[j]
+        if heavy_tails:
+            # z = sqrt(v) g: g the normal field, v a local variance (mean 1, variance kappa / 3 - 1)
+            # varying over the workspace as the error does (correlation C, clipped at 0):
+            # Cov(z_i^2, z_k^2) = 2 C_ik^2 + var(v) C_ik (1 + 2 C_ik^2).
+            var_v = max(kurtosis / 3.0 - 1.0, float(local_variance), 0.0)
+            spatial = float(np.sum(np.clip(cj, 0.0, 1.0) * (1.0 + 2.0 * cj * cj)))
+            mixed = 2.0 * float(np.trace(cj)) ** 2 / max(2.0 * tr2 + var_v * spatial, np.finfo(float).tiny)
+            independent = gaussian[j] * min(1.0, 2.0 / max(kurtosis - 1.0, np.finfo(float).tiny))
+            out[j] = min(independent, mixed)
     e = (block_inv @ (proj @ r)).reshape(n, d)
     white = np.empty((n, d))
     for i in range(n):
@@ -708,18 +919,23 @@ def standardised_innovations(residuals: Array) -> Array | None:
     return np.asarray(centred @ (evecs / np.sqrt(evals)) @ evecs.T, dtype=np.float64)
 
 
-def _scale_moments(dof: Array) -> Array:
+def _scale_moments(dof: Array, rho: float = 0.0) -> Array:
     """``M_jk = E[g_j g_k]`` of independent ``g_j = sqrt(nu_j / chi2(nu_j))``, shape (d, d):
     ``nu_j / (nu_j - 2)`` on the diagonal, ``E[g_j] E[g_k]`` off it (``E[g] = sqrt(nu / 2)
-    Gamma((nu - 1) / 2) / Gamma(nu / 2)``); 1 where ``nu`` is infinite."""
+    Gamma((nu - 1) / 2) / Gamma(nu / 2)``, plus ``rho`` times the product of their standard
+    deviations where they are correlated); 1 where ``nu`` is infinite."""
     from scipy.special import gammaln
 
     nu = np.asarray(dof, dtype=np.float64)
     finite = nu < _T_DOF_MAX
     nu = np.where(finite, nu, 3.0)
     mean = np.where(finite, np.sqrt(nu / 2.0) * np.exp(gammaln((nu - 1.0) / 2.0) - gammaln(nu / 2.0)), 1.0)
-    moments = np.outer(mean, mean)
-    np.fill_diagonal(moments, np.where(finite, nu / (nu - 2.0), 1.0))
+    second = np.where(finite, nu / (nu - 2.0), 1.0)
+    # Correlated factors (a Gaussian copula of correlation rho): Pearson's correlation of such
+    # near-normal factors is rho to first order.
+    sd = np.sqrt(np.clip(second - mean**2, 0.0, None))
+    moments = np.outer(mean, mean) + float(rho) * np.outer(sd, sd)
+    np.fill_diagonal(moments, second)
     return np.asarray(moments, dtype=np.float64)
 
 
@@ -734,6 +950,82 @@ def _psd_factor(matrix: Array) -> Array:
 
 
 @dataclass(frozen=True, eq=False)
+class _Correlation:
+    """The factors of one hypothesis's draw (see :class:`FieldNormal`): ``L`` (``C_tt = L L^T``),
+    ``B = c R_ct L^-T``, the conditional factor of the test configurations (a matrix, or its
+    diagonal beyond :data:`JOINT_TEST_MAX`), ``Sigma_m^(1/2)``, the scale's degrees of freedom
+    (None: known) and the GUM's factor of ``M o Sigma_m``."""
+
+    tt: Array
+    ct: Array
+    cc: Array
+    root: Array
+    dof: Array | None
+    gum_root: Array
+
+    @classmethod
+    def build(
+        cls, qt: Array, qc: Array, c: float, ell: float, sigma: Array, scale_dof: Array | None, rho: float = 0.0
+    ) -> _Correlation:
+        n_t = qt.shape[0]
+        c_tt = c * kernel_correlation(chordal_distance(qt, qt), ell) + (1.0 - c) * np.eye(n_t)
+        l_tt = _psd_factor(c_tt + _JITTER * np.eye(n_t))
+        r_ct = c * kernel_correlation(chordal_distance(qc, qt), ell)
+        # B = c R_ct L^-T: Cov(B z_t, L z_t) = c R_ct.
+        b = np.linalg.lstsq(l_tt, r_ct.T, rcond=None)[0].T
+        if qc.shape[0] <= JOINT_TEST_MAX:
+            c_cc = c * kernel_correlation(chordal_distance(qc, qc), ell) + (1.0 - c) * np.eye(qc.shape[0])
+            cc = _psd_factor(c_cc - b @ b.T + _JITTER * np.eye(qc.shape[0]))
+        else:
+            cc = np.sqrt(np.clip(1.0 - np.sum(b * b, axis=1), 0.0, None))
+        sigma = np.asarray(sigma, dtype=np.float64)
+        root = _psd_factor(sigma)
+        dof = None if scale_dof is None else np.asarray(scale_dof, dtype=np.float64)
+        if dof is not None and (dof.shape != (root.shape[0],) or bool(np.all(dof >= _T_DOF_MAX))):
+            dof = None
+        if dof is not None:
+            # A scale with fewer than MIN_SCALE_DOF degrees of freedom has no finite fourth moment
+            # (the estimate as a whole is then not drawn; a hypothesis of it is drawn at the floor).
+            dof = np.maximum(dof, MIN_SCALE_DOF)
+        gum_root = root if dof is None else _psd_factor(_scale_moments(dof, rho) * sigma)
+        return cls(l_tt, np.asarray(b, dtype=np.float64), cc, root, dof, gum_root)
+
+    def scalar_covariance(self) -> Array:
+        l_tt, b = self.tt, self.ct
+        cc = self.cc @ self.cc.T if self.cc.ndim == 2 else np.diag(self.cc**2)
+        top = np.hstack((l_tt @ l_tt.T, -(b @ l_tt.T).T))
+        bottom = np.hstack((-(b @ l_tt.T), b @ b.T + cc))
+        return np.asarray(np.vstack((top, bottom)), dtype=np.float64)
+
+    def instances(self, values: Array) -> Array:
+        """``F_s`` applied over the instance axis 1 of `values` (..., n_t + n_c, m), as drawn."""
+        n_t = self.tt.shape[0]
+        head, tail = values[:, :n_t], values[:, n_t:]
+        e_t = np.einsum("ts,nsm->ntm", self.tt, head, optimize=True)
+        e_c = np.einsum("ct,ntm->ncm", self.ct, head, optimize=True)
+        if self.cc.ndim == 2:
+            e_c = e_c + np.einsum("cs,nsm->ncm", self.cc, tail, optimize=True)
+        else:
+            e_c = e_c + self.cc[None, :, None] * tail
+        return np.asarray(np.concatenate((e_t, -e_c), axis=1), dtype=np.float64)
+
+    def whitened(self, sensitivities: Array, n_inst: int, d: int) -> Array:
+        n_out = sensitivities.shape[0]
+        per_component = sensitivities.reshape(n_out, n_inst, d) @ self.gum_root  # (o, N, d)
+        n_t = self.tt.shape[0]
+        head, tail = per_component[:, :n_t], per_component[:, n_t:]
+        # (S F)_t = S_t L_tt - S_c B, (S F)_c = -S_c L_cc.
+        out_t = np.einsum("ote,ts->ose", head, self.tt, optimize=True) - np.einsum(
+            "oce,ct->ote", tail, self.ct, optimize=True
+        )
+        if self.cc.ndim == 2:
+            out_c = -np.einsum("oce,cs->ose", tail, self.cc, optimize=True)
+        else:
+            out_c = -tail * self.cc[None, :, None]
+        return np.asarray(np.concatenate((out_t, out_c), axis=1).reshape(n_out, n_inst * d), dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False)
 class FieldNormal:
     """Joint draw of the field at calibration poses and (negated) at test configurations.
 
@@ -742,7 +1034,10 @@ class FieldNormal:
     ``-e_c`` (the test configurations'), see the module docstring. The draws are
     ``(F_s (x) Sigma_m^(1/2)) z``; ``z`` is standard normal, or, with `innovations`, resampled
     from them (the residuals' own distribution, standardised): the covariance is the same either
-    way, and with ``c = 0`` the latter is the independent residual bootstrap.
+    way, and with ``c = 0`` the latter is the independent residual bootstrap. With the
+    estimate's :attr:`~FieldEstimate.hypotheses` every draw first takes one of them (its
+    weight's share of the draws): its correlation ``F_s`` and its ``Sigma_m``, a mixture over
+    the posterior of the correlation.
 
     Parameters
     ----------
@@ -757,12 +1052,8 @@ class FieldNormal:
     test_joints: Array
     estimate: FieldEstimate
     innovations: Array | None = None
-    _tt: Array = field(init=False, repr=False)
-    _ct: Array = field(init=False, repr=False)
-    _cc: Array = field(init=False, repr=False)
-    _root: Array = field(init=False, repr=False)
-    _dof: Array | None = field(init=False, repr=False)
-    _gum_root: Array = field(init=False, repr=False)
+    _parts: tuple[_Correlation, ...] = field(init=False, repr=False)
+    _weights: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         qt = np.asarray(self.calibration_joints, dtype=np.float64)
@@ -770,68 +1061,67 @@ class FieldNormal:
         if qt.ndim != 2 or qc.ndim != 2 or qt.shape[1] != qc.shape[1]:
             msg = f"field draw: joint arrays of shapes {qt.shape} and {qc.shape} do not match"
             raise ConfigError(msg)
-        c = float(self.estimate.correlated_fraction)
-        ell = float(self.estimate.length_scale)
-        n_t = qt.shape[0]
-        c_tt = c * kernel_correlation(chordal_distance(qt, qt), ell) + (1.0 - c) * np.eye(n_t)
-        l_tt = _psd_factor(c_tt + _JITTER * np.eye(n_t))
-        r_ct = c * kernel_correlation(chordal_distance(qc, qt), ell)
-        # B = c R_ct L^-T: Cov(B z_t, L z_t) = c R_ct.
-        b = np.linalg.lstsq(l_tt, r_ct.T, rcond=None)[0].T
-        if qc.shape[0] <= JOINT_TEST_MAX:
-            c_cc = c * kernel_correlation(chordal_distance(qc, qc), ell) + (1.0 - c) * np.eye(qc.shape[0])
-            cc = _psd_factor(c_cc - b @ b.T + _JITTER * np.eye(qc.shape[0]))
+        est = self.estimate
+        if est.hypotheses:
+            parts = tuple(
+                _Correlation.build(
+                    qt,
+                    qc,
+                    float(h.correlated_fraction),
+                    float(h.length_scale),
+                    h.per_pose_covariance,
+                    h.scale_dof,
+                    float(est.scale_correlation),
+                )
+                for h in est.hypotheses
+            )
+            weights = np.array([float(h.weight) for h in est.hypotheses])
         else:
-            cc = np.sqrt(np.clip(1.0 - np.sum(b * b, axis=1), 0.0, None))
-        sigma = np.asarray(self.estimate.per_pose_covariance, dtype=np.float64)
-        root = _psd_factor(sigma)
-        dof = None if self.estimate.scale_dof is None else np.asarray(self.estimate.scale_dof, dtype=np.float64)
-        if dof is not None and (dof.shape != (root.shape[0],) or bool(np.all(dof >= _T_DOF_MAX))):
-            dof = None
-        object.__setattr__(self, "_tt", l_tt)
-        object.__setattr__(self, "_ct", b)
-        object.__setattr__(self, "_cc", cc)
-        object.__setattr__(self, "_root", root)
-        object.__setattr__(self, "_dof", dof)
-        object.__setattr__(self, "_gum_root", root if dof is None else _psd_factor(_scale_moments(dof) * sigma))
+            parts = (
+                _Correlation.build(
+                    qt,
+                    qc,
+                    float(est.correlated_fraction),
+                    float(est.length_scale),
+                    est.per_pose_covariance,
+                    est.scale_dof,
+                    float(est.scale_correlation),
+                ),
+            )
+            weights = np.ones(1)
+        object.__setattr__(self, "_parts", parts)
+        object.__setattr__(self, "_weights", weights / np.sum(weights))
 
     @property
     def dimension(self) -> int:
         """Components per configuration (d)."""
-        return int(self._root.shape[0])
+        return int(self._parts[0].root.shape[0])
 
     @property
     def size(self) -> int:
-        return int(self._tt.shape[0] + self._ct.shape[0]) * self.dimension
+        return int(self._parts[0].tt.shape[0] + self._parts[0].ct.shape[0]) * self.dimension
+
+    @property
+    def whitened_size(self) -> int:
+        """Columns of :meth:`whitened_sensitivities` (one block of :attr:`size` per hypothesis)."""
+        return self.size * len(self._parts)
 
     def mean_vector(self) -> Array:
         return np.zeros(self.size)
 
     def scalar_covariance(self) -> Array:
-        """Correlation (scalar) of ``(e_t, -e_c)`` as drawn, shape (n_t + n_c, n_t + n_c)."""
-        l_tt, b = self._tt, self._ct
-        cc = self._cc @ self._cc.T if self._cc.ndim == 2 else np.diag(self._cc**2)
-        top = np.hstack((l_tt @ l_tt.T, -(b @ l_tt.T).T))
-        bottom = np.hstack((-(b @ l_tt.T), b @ b.T + cc))
-        return np.asarray(np.vstack((top, bottom)), dtype=np.float64)
+        """Correlation (scalar) of ``(e_t, -e_c)`` as drawn, shape (n_t + n_c, n_t + n_c) (over
+        the hypotheses, their weighted mean)."""
+        return np.asarray(sum(w * p.scalar_covariance() for w, p in zip(self._weights, self._parts)), dtype=np.float64)
 
     def covariance(self) -> Array:
         """Covariance of the drawn vector, shape (size, size) (the GUM's input covariance):
-        ``C_s (x) (M o Sigma_m)``, ``M`` the second moments of the drawn scale factors."""
-        root = self._gum_root
-        return np.asarray(np.kron(self.scalar_covariance(), root @ root.T), dtype=np.float64)
-
-    def _instances(self, values: Array) -> Array:
-        """``F_s`` applied over the instance axis 1 of `values` (..., n_t + n_c, m), as drawn."""
-        n_t = self._tt.shape[0]
-        head, tail = values[:, :n_t], values[:, n_t:]
-        e_t = np.einsum("ts,nsm->ntm", self._tt, head, optimize=True)
-        e_c = np.einsum("ct,ntm->ncm", self._ct, head, optimize=True)
-        if self._cc.ndim == 2:
-            e_c = e_c + np.einsum("cs,nsm->ncm", self._cc, tail, optimize=True)
-        else:
-            e_c = e_c + self._cc[None, :, None] * tail
-        return np.asarray(np.concatenate((e_t, -e_c), axis=1), dtype=np.float64)
+        ``C_s (x) (M o Sigma_m)``, ``M`` the second moments of the drawn scale factors, summed
+        over the hypotheses with their weights."""
+        total = np.zeros((self.size, self.size))
+        for w, p in zip(self._weights, self._parts):
+            total += w * np.kron(p.scalar_covariance(), p.gum_root @ p.gum_root.T)
+        return total
 
     def sample(self, rng: np.random.Generator, n: int) -> Array:
         """``n`` draws, shape (n, size): ``(F_s (x) diag(g) Sigma_m^(1/2) B) z`` with one standard
@@ -844,52 +1134,77 @@ class FieldNormal:
         ``k = d / tau`` (``E[B B^T] = I``: the field's covariance; a local covariance of the draw,
         kept however many calibration poses a test configuration's error is conditioned on,
         where resampled innovations would average out). Otherwise ``z`` is resampled from the
-        innovations when given. Consumed in a fixed order."""
-        n_t, n_c, d = self._tt.shape[0], self._ct.shape[0], self.dimension
+        innovations when given. With several hypotheses of the correlation, each draw first
+        takes one (``F_s``, ``Sigma_m`` and ``nu`` are then its). Consumed in a fixed order."""
+        n = int(n)
+        n_inst, d = self.size // self.dimension, self.dimension
+        many = len(self._parts) > 1
+        which = rng.choice(len(self._parts), size=n, p=self._weights) if many else np.zeros(n, dtype=np.int64)
         weights = self.estimate.shape_weights
         varying = weights is not None and float(np.asarray(weights)[0]) < 1.0
         if self.innovations is None or varying:
-            z = rng.standard_normal((int(n), n_t + n_c, d))
+            z = rng.standard_normal((n, n_inst, d))
         else:
-            z = self.innovations[rng.integers(0, self.innovations.shape[0], size=(int(n), n_t + n_c))]
-        values = self._instances(z)
+            z = self.innovations[rng.integers(0, self.innovations.shape[0], size=(n, n_inst))]
+        if many:
+            values = np.empty((n, n_inst, d))
+            for k, part in enumerate(self._parts):
+                mask = which == k
+                values[mask] = part.instances(z[mask])
+        else:
+            values = self._parts[0].instances(z)
         if varying:
-            tau = SHAPE_TAU[rng.choice(SHAPE_TAU.size, size=int(n), p=np.asarray(weights, dtype=np.float64))]
-            k = d / np.where(tau > 0.0, tau, 1.0)  # tau = 0 (W = I) is replaced below
-            factor = np.tril(rng.standard_normal((int(n), d, d)), -1)
-            chi2 = rng.chisquare(k[:, None] - np.arange(d))
+            tau = SHAPE_TAU[rng.choice(SHAPE_TAU.size, size=n, p=np.asarray(weights, dtype=np.float64))]
+            k_w = d / np.where(tau > 0.0, tau, 1.0)  # tau = 0 (W = I) is replaced below
+            factor = np.tril(rng.standard_normal((n, d, d)), -1)
+            chi2 = rng.chisquare(k_w[:, None] - np.arange(d))
             factor[:, np.arange(d), np.arange(d)] = np.sqrt(chi2)
-            factor = np.where((tau > 0.0)[:, None, None], factor / np.sqrt(k)[:, None, None], np.eye(d))
+            factor = np.where((tau > 0.0)[:, None, None], factor / np.sqrt(k_w)[:, None, None], np.eye(d))
             values = np.einsum("nij,nsj->nsi", factor, values, optimize=True)
-        values = values @ self._root.T
-        if self._dof is not None:
-            finite = self._dof < _T_DOF_MAX
-            dof = np.where(finite, self._dof, 3.0)
-            factor_g = np.where(finite, np.sqrt(dof / rng.chisquare(dof, size=(int(n), d))), 1.0)
-            values = values * factor_g[:, None, :]
-        return np.asarray(values.reshape(int(n), self.size), dtype=np.float64)
+        if many:
+            for k, part in enumerate(self._parts):
+                mask = which == k
+                values[mask] = values[mask] @ part.root.T
+            dofs = np.stack([np.full(d, _T_DOF_MAX) if p.dof is None else p.dof for p in self._parts])[which]
+            if any(p.dof is not None for p in self._parts):
+                finite = dofs < _T_DOF_MAX
+                dof = np.where(finite, dofs, 3.0)
+                values = values * np.where(finite, np.sqrt(dof / self._chi2(rng, dof)), 1.0)[:, None, :]
+        else:
+            part = self._parts[0]
+            values = values @ part.root.T
+            if part.dof is not None:
+                finite = part.dof < _T_DOF_MAX
+                dof = np.where(finite, part.dof, 3.0)
+                factor_g = np.where(finite, np.sqrt(dof / self._chi2(rng, np.broadcast_to(dof, (n, d)))), 1.0)
+                values = values * factor_g[:, None, :]
+        return np.asarray(values.reshape(n, self.size), dtype=np.float64)
+
+    def _chi2(self, rng: np.random.Generator, dof: Array) -> Array:
+        """Chi-square variates of degrees of freedom `dof` (n, d), the components of a row
+        correlated by :attr:`FieldEstimate.scale_correlation` (a Gaussian copula; independent
+        draws where it is zero)."""
+        rho = float(self.estimate.scale_correlation)
+        if rho <= 0.0:
+            return np.asarray(rng.chisquare(dof), dtype=np.float64)
+        from scipy import special, stats
+
+        n, d = dof.shape
+        u = np.sqrt(1.0 - rho) * rng.standard_normal((n, d)) + np.sqrt(rho) * rng.standard_normal((n, 1))
+        prob = np.clip(special.ndtr(u), 1e-15, 1.0 - 1e-15)
+        return np.asarray(stats.chi2.ppf(prob, dof), dtype=np.float64)
 
     def whitened_sensitivities(self, sensitivities: Array) -> Array:
         """``S (F_s (x) Sigma_m^(1/2))``: sensitivities to the standard normal `z` the draws are
-        made of, shape (n_out, size), so ``S Cov S^T`` is their Gram matrix (the GUM's
-        propagation without the dense covariance of the draws).
+        made of, shape (n_out, :attr:`whitened_size`), so their Gram matrix is ``S Cov S^T`` (the
+        GUM's propagation without the dense covariance of the draws); with several hypotheses one
+        block per hypothesis, scaled by the square root of its weight.
 
         Parameters
         ----------
         sensitivities : ndarray, shape (n_out, size)
             Derivatives of the outputs by the drawn vector ``(e_t, -e_c)``, pose-major.
         """
-        n_out = sensitivities.shape[0]
         n_inst, d = self.size // self.dimension, self.dimension
-        per_component = sensitivities.reshape(n_out, n_inst, d) @ self._gum_root  # (o, N, d)
-        n_t = self._tt.shape[0]
-        head, tail = per_component[:, :n_t], per_component[:, n_t:]
-        # (S F)_t = S_t L_tt - S_c B, (S F)_c = -S_c L_cc.
-        out_t = np.einsum("ote,ts->ose", head, self._tt, optimize=True) - np.einsum(
-            "oce,ct->ote", tail, self._ct, optimize=True
-        )
-        if self._cc.ndim == 2:
-            out_c = -np.einsum("oce,cs->ose", tail, self._cc, optimize=True)
-        else:
-            out_c = -tail * self._cc[None, :, None]
-        return np.asarray(np.concatenate((out_t, out_c), axis=1).reshape(n_out, self.size), dtype=np.float64)
+        blocks = [np.sqrt(w) * p.whitened(sensitivities, n_inst, d) for w, p in zip(self._weights, self._parts)]
+        return blocks[0] if len(blocks) == 1 else np.asarray(np.hstack(blocks), dtype=np.float64)

@@ -120,7 +120,7 @@ def smooth_gum(prep: Prepared, coverage: float, *, angular: bool = False, per_po
         if isinstance(src.distribution, FieldNormal):
             # The field's draws are F z with z standard normal: propagate z through S F, the
             # same factor the Monte Carlo draws with, never the dense covariance of the draws.
-            inputs[src.name] = IndependentNormal(np.ones(src.distribution.size))
+            inputs[src.name] = IndependentNormal(np.ones(src.distribution.whitened_size))
             block = src.distribution.whitened_sensitivities(block)
         elif src.distribution is not None:
             inputs[src.name] = src.distribution
