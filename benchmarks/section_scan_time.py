@@ -9,7 +9,10 @@ prints where one scan's time goes (cProfile, cumulative, the package's functions
 
 Run: ``python benchmarks/section_study_clouds.py --out section_clouds`` then
 ``python benchmarks/section_scan_time.py section_clouds/rotor37_400.txt ... [--scans 3]
-[--backend auto|numpy|numba] [--profile]`` (the scans' Monte Carlo on that backend, default auto).
+[--backend auto|numpy|numba] [--profile]`` (the scans' denoising and Monte Carlo on that
+backend, default auto). ``--backend`` given twice (``--backend numpy --backend numba``) times
+both on the same scans, alternating scan by scan so that a changing machine load falls on both
+alike, and prints their ratio and whether the outcomes agree.
 """
 
 from __future__ import annotations
@@ -48,11 +51,15 @@ def main() -> None:
     parser.add_argument("clouds", nargs="+", type=Path, help="clouds of section_study_clouds.py")
     parser.add_argument("--scans", type=int, default=3, help="scans timed per cloud (default %(default)s)")
     parser.add_argument("--per-family", type=int, default=200, help="N for the projected study time")
-    parser.add_argument("--backend", default="auto", help="trial kernels of the scans' Monte Carlo (default auto)")
+    parser.add_argument(
+        "--backend",
+        action="append",
+        help="denoising and trial kernels of the scans (default auto); twice: both, alternating",
+    )
     parser.add_argument("--profile", action="store_true", help="print where the first scan's time goes")
     args = parser.parse_args()
-    backend = resolve_section_backend(args.backend)
-    if backend.name == "numba":
+    backends = [resolve_section_backend(name) for name in (args.backend or ["auto"])]
+    if any(b.name == "numba" for b in backends):
         warm_up()  # compiled or loaded from the disk cache before any scan is timed
     for path in args.clouds:
         nominal = NOMINALS[path.stem.split("_")[0]]
@@ -60,26 +67,39 @@ def main() -> None:
         curve = load_section_nominal(nominal)
         scenario = scenario_from_cloud(read_point_cloud(path), curve, resolve_instrument(instrument)[0])
         scenario.landmarks  # noqa: B018  (built once per study, not per scan)
-        seconds, outcomes = [], []
+        if any(b.name == "numba" for b in backends):  # the denoising's kernels compiled before timing
+            study_scan("smooth", 0, trials=100, scenario=scenario, backend="numba")
+        seconds: dict[str, list[float]] = {b.name: [] for b in backends}
+        outcomes: dict[str, list[str]] = {b.name: [] for b in backends}
         for index in range(args.scans):
-            start = time.perf_counter()
-            profiler = cProfile.Profile() if args.profile and index == 0 else None
-            if profiler is not None:
-                profiler.enable()
-            outcome = study_scan("smooth", index, scenario=scenario, backend=backend.name)
-            seconds.append(time.perf_counter() - start)
-            if profiler is not None:
-                profiler.disable()
-                _print_profile(profiler)
-            outcomes.append("".join("1" if v else "0" for v in outcome.inside) + ("F" if outcome.flagged else ""))
-        per_scan = statistics.median(seconds)
-        total = per_scan * 4 * args.per_family / 60.0
-        print(
-            f"{path.name}: {scenario.n_points} points, {per_scan:.2f} s per scan (median of {args.scans}, "
-            f"trials on {backend.describe()}); "
-            f"N = {args.per_family} per family: {total:.1f} min on 1 worker; outcomes {' '.join(outcomes)}",
-            flush=True,
-        )
+            for backend in backends:
+                start = time.perf_counter()
+                profiler = cProfile.Profile() if args.profile and index == 0 else None
+                if profiler is not None:
+                    profiler.enable()
+                outcome = study_scan("smooth", index, scenario=scenario, backend=backend.name)
+                seconds[backend.name].append(time.perf_counter() - start)
+                if profiler is not None:
+                    profiler.disable()
+                    print(f"  {backend.name}:")
+                    _print_profile(profiler)
+                flags = "".join("1" if v else "0" for v in outcome.inside) + ("F" if outcome.flagged else "")
+                outcomes[backend.name].append(flags)
+        for backend in backends:
+            per_scan = statistics.median(seconds[backend.name])
+            total = per_scan * 4 * args.per_family / 60.0
+            print(
+                f"{path.name}: {scenario.n_points} points, {per_scan:.2f} s per scan (median of {args.scans}, "
+                f"denoising and trials on {backend.describe()}); "
+                f"N = {args.per_family} per family: {total:.1f} min on 1 worker; "
+                f"outcomes {' '.join(outcomes[backend.name])}",
+                flush=True,
+            )
+        if len(backends) == 2:
+            first, second = (b.name for b in backends)
+            ratio = statistics.median(seconds[first]) / statistics.median(seconds[second])
+            same = "the same" if outcomes[first] == outcomes[second] else "DIFFERENT"
+            print(f"  {first} / {second}: {ratio:.2f}x per scan; outcomes {same}", flush=True)
 
 
 if __name__ == "__main__":

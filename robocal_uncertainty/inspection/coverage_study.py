@@ -424,7 +424,7 @@ def study_scan(
         # As the user's export: the probe vectors travel with the points (here in contour order).
         flat = np.column_stack([noisy, np.zeros(noisy.shape[0])])
         measured = PointCloud(flat, true_scan.probe_vectors[clean.order], true_scan.source)
-    setup = prepare_trials(measured, curve, instrument=scene.instrument, method="denoised")
+    setup = prepare_trials(measured, curve, instrument=scene.instrument, method="denoised", backend=backend)
     seed = int(mc_seq.generate_state(1)[0])
     samples = run_trials(setup.trials(backend=backend), seed=seed, n_trials=trials, block_size=trials).samples
     outputs = summarize(samples, 0.95, bins=10).outputs

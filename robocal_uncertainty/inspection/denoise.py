@@ -141,6 +141,7 @@ def smooth_normal_deviation(
     half_width: float,
     *,
     at: ArrayLike | None = None,
+    backend: str = "numpy",
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Local quadratic (plus local translation at turning normals) fit of a closed contour's deviations.
 
@@ -158,6 +159,8 @@ def smooth_normal_deviation(
         Window half-width in ``parameter`` [m], below period / 2.
     at : array_like of int, shape (m,), optional
         Indices of the points to fit at (default all).
+    backend : str
+        ``numpy`` (the reference) or ``numba`` (compiled window loops, the same fit to rounding).
 
     Returns
     -------
@@ -170,8 +173,85 @@ def smooth_normal_deviation(
     r = np.asarray(deviation, dtype=np.float64)
     nrm = np.asarray(normal, dtype=np.float64)
     centre = np.arange(u.shape[0]) if at is None else np.asarray(at, dtype=np.intp)
+    if _compiled(backend):
+        fit, _, leverage, _ = _compiled_fit(u, nrm, period, half_width, centre, r, np.zeros(r.shape[0]))
+        return fit, leverage
     weights, source, leverage = _smoother_rows(u, nrm, period, half_width, centre)
     return np.einsum("iw,iw->i", weights, r[source]), leverage
+
+
+def _compiled(backend: str) -> bool:
+    """Whether ``backend`` runs the local fits compiled (``numba``) or in numpy (``numpy``)."""
+    if backend not in ("numpy", "numba"):
+        msg = f"the denoising runs on numpy or numba, got backend {backend!r}"
+        raise ConfigError(msg)
+    return backend == "numba"
+
+
+def _windows(
+    u: NDArray[np.float64], period: float, half_width: float, centre: NDArray[np.intp]
+) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp]]:
+    """``(tripled, lo, hi)``: the parameters over three periods and each centre's window ``tripled[lo:hi]``."""
+    if not 0 < half_width < period / 2:
+        msg = f"half_width must be in (0, period/2 = {period / 2:.6g} m), got {half_width!r}"
+        raise ConfigError(msg)
+    tripled = np.concatenate([u - period, u, u + period])
+    lo = np.searchsorted(tripled, u[centre] - half_width, side="right")
+    hi = np.searchsorted(tripled, u[centre] + half_width, side="left")
+    return tripled, lo, hi
+
+
+def _coefficients(moments: NDArray[np.float64], half_width: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per centre ``c`` (m, 5) with hat-row weights ``w_j (x_j · c)``, and the leverage (m,), from the moments.
+
+    The algebra of :func:`_local_weights` on the weighted moments ``Σ w xxᵀ`` (m, 5, 5): the
+    polynomial row ``e0ᵀ inv_p`` plus, per kept translation direction, its gain times the
+    P-orthogonal translation column, collected into one vector of regressor coefficients.
+    """
+    gram_p = moments[:, :3, :3]
+    if np.any(np.linalg.cond(gram_p) > 1e12):
+        msg = f"a {half_width * 1e3:.3g} mm window holds too few points for a local quadratic"
+        raise InputError(msg)
+    inv_p = np.linalg.inv(gram_p)
+    b = inv_p @ moments[:, :3, 3:5]
+    leverage: NDArray[np.float64] = np.array(inv_p[:, 0, 0], dtype=np.float64)
+    gram_q = moments[:, 3:5, 3:5] - np.swapaxes(b, 1, 2) @ moments[:, :3, 3:5]
+    value, vector = np.linalg.eigh(gram_q)
+    keep = value > TRANSLATION_THRESHOLD**2 * moments[:, 0, 0, np.newaxis]
+    g = np.zeros((moments.shape[0], 2))
+    for k in range(2):
+        direction = vector[:, :, k]
+        at_centre = -np.einsum("il,il->i", b[:, 0, :], direction)
+        gain = np.where(keep[:, k], at_centre / np.where(keep[:, k], value[:, k], 1.0), 0.0)
+        g += gain[:, np.newaxis] * direction
+        leverage += gain * at_centre
+    coef = np.empty((moments.shape[0], 5))
+    coef[:, :3] = inv_p[:, 0, :] - np.einsum("ilk,ik->il", b, g)
+    coef[:, 3:] = g
+    return coef, leverage
+
+
+def _compiled_fit(
+    u: NDArray[np.float64],
+    nrm: NDArray[np.float64],
+    period: float,
+    half_width: float,
+    centre: NDArray[np.intp],
+    r: NDArray[np.float64],
+    variance: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``(fit, sd, leverage, coef)`` at ``centre`` by the compiled window loops (no hat rows kept)."""
+    from robocal_uncertainty.kernels import section_denoise_numba as kernels
+
+    tripled, lo, hi = _windows(u, period, half_width, centre)
+    nrm = np.ascontiguousarray(nrm)
+    moments = np.empty((centre.shape[0], 5, 5))
+    kernels.window_moments(tripled, nrm, lo, hi, centre, float(half_width), moments)
+    coef, leverage = _coefficients(moments, half_width)
+    fit = np.empty(centre.shape[0])
+    sd = np.empty(centre.shape[0])
+    kernels.window_fit(tripled, nrm, lo, hi, centre, float(half_width), coef, r, variance, fit, sd)
+    return fit, sd, leverage, coef
 
 
 def _local_weights(
@@ -457,6 +537,7 @@ def denoise_section(
     *,
     half_width: float | None = None,
     check_seed: int = 0,
+    backend: str = "numpy",
 ) -> DenoisedCloud:
     """Denoised reference cloud of a measured section, and the residual check.
 
@@ -475,6 +556,9 @@ def denoise_section(
         intervals (see the module docstring).
     check_seed : int
         Root seed of the residual check's null draws.
+    backend : str
+        ``numpy`` (the reference) or ``numba``: the local fits' window loops compiled, the same
+        cloud to rounding (the hat matrix's entries summed in another order).
 
     Returns
     -------
@@ -491,11 +575,15 @@ def denoise_section(
         candidates = (float(half_width),)
     n = reg.residual.shape[0]
     r = reg.residual
-    risks = _cp_risks(reg.parameter, r, reg.normal, variance, period, candidates)
+    compiled = _compiled(backend)
+    risks = _cp_risks(reg.parameter, r, reg.normal, variance, period, candidates, backend)
     best = int(np.argmin(risks))
     tried = candidates[: best + 1] if half_width is None else candidates
-    fit, smooth, sd, chosen, rows = _local_choice(reg.parameter, r, reg.normal, variance, period, tried)
-    hat = _hat_matrix(rows, chosen, n)
+    if compiled:
+        fit, smooth, sd, chosen, hat = _compiled_local_choice(reg.parameter, r, reg.normal, variance, period, tried)
+    else:
+        fit, smooth, sd, chosen, rows = _local_choice(reg.parameter, r, reg.normal, variance, period, tried)
+        hat = _hat_matrix(rows, chosen, n)
     # Twicing (Tukey): smooth the residuals once more and add them back, r̂ = (2S - S²) r. A local
     # quadratic flattens a peak narrower than its window, and a flattened peak gives the Monte
     # Carlo more points near the maximum, hence too large a noise bias and an interval below the
@@ -531,6 +619,7 @@ def _cp_risks(
     variance: NDArray[np.float64],
     period: float,
     candidates: Sequence[float],
+    backend: str = "numpy",
 ) -> list[float]:
     """Mallows' Cp risk of each candidate half-width [m²], scaled to all points."""
     n = r.shape[0]
@@ -541,7 +630,7 @@ def _cp_risks(
     subset = np.arange(0, n, stride)
     risks = []
     for h in candidates:
-        fit, leverage = smooth_normal_deviation(u, r, normal, period, h, at=subset)
+        fit, leverage = smooth_normal_deviation(u, r, normal, period, h, at=subset, backend=backend)
         v = variance[subset]
         risk = ((r[subset] - fit) ** 2).sum() - v.sum() + 2.0 * (v * leverage).sum()
         risks.append(float(risk) * n / subset.shape[0])
@@ -589,6 +678,50 @@ def _local_choice(
         chosen[alive] = k
         rows.append((weights, source))
     return fits[chosen, everywhere], fits[len(tried) - 1].copy(), sd, chosen, rows
+
+
+def _compiled_local_choice(
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    variance: NDArray[np.float64],
+    period: float,
+    tried: Sequence[float],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.intp], sparse.csr_matrix]:
+    """:func:`_local_choice` and :func:`_hat_matrix` by the compiled window loops.
+
+    Returns ``(fit, smooth, smooth_sd, chosen, hat)``; only the chosen window's hat row of each
+    point is built (the numpy path keeps every candidate's rows).
+    """
+    from robocal_uncertainty.kernels import section_denoise_numba as kernels
+
+    n = r.shape[0]
+    everywhere = np.arange(n)
+    lower = np.full(n, -np.inf)
+    upper = np.full(n, np.inf)
+    alive = np.ones(n, dtype=bool)
+    chosen = np.zeros(n, dtype=np.intp)
+    fits = np.empty((len(tried), n))
+    coefs = np.empty((len(tried), n, 5))
+    sd = np.zeros(n)
+    for k, h in enumerate(tried):
+        fits[k], sd, _, coefs[k] = _compiled_fit(u, normal, period, h, everywhere, r, variance)
+        lower = np.maximum(lower, fits[k] - ICI_FACTOR * sd)
+        upper = np.minimum(upper, fits[k] + ICI_FACTOR * sd)
+        alive &= lower <= upper
+        chosen[alive] = k
+    widths = np.asarray(tried, dtype=np.float64)[chosen]
+    tripled = np.concatenate([u - period, u, u + period])
+    lo = np.searchsorted(tripled, u - widths, side="right")
+    hi = np.searchsorted(tripled, u + widths, side="left")
+    indptr = np.empty(n + 1, dtype=np.intp)
+    size = int((hi - lo).sum())
+    indices = np.empty(size, dtype=np.intp)
+    data = np.empty(size)
+    coef = np.ascontiguousarray(coefs[chosen, everywhere])
+    kernels.window_rows(tripled, np.ascontiguousarray(normal), lo, hi, everywhere, widths, coef, indptr, indices, data)
+    hat = sparse.csr_matrix((data, indices, indptr), shape=(n, n))
+    return fits[chosen, everywhere], fits[len(tried) - 1].copy(), sd, chosen, hat
 
 
 def _hat_matrix(

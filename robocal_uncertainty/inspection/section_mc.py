@@ -322,11 +322,13 @@ def prepare_trials(
     reference: ArrayLike | None = None,
     method: str = "perturbed",
     denoise_half_width: float | None = None,
+    backend: str = "numpy",
 ) -> TrialSetup:
     """Evaluate the measured cloud and, for ``denoised``, denoise and evaluate it again.
 
     Parameters as for :func:`section_uncertainty`. The probe vectors of a PointCloud orient
-    the probing error at both clouds.
+    the probing error at both clouds. ``backend`` (a resolved name, ``numpy`` or ``numba``)
+    runs the denoising's local fits (:func:`~.denoise.denoise_section`).
 
     Returns
     -------
@@ -341,7 +343,7 @@ def prepare_trials(
     every = section_sources(evaluation, instrument, probe_vectors=probe, reference=reference)
     # The noise variance of every per-point source weights the window choice and the residual
     # check, whichever sources the Monte Carlo enables: it is the noise in the measured points.
-    denoised = denoise_section(evaluation, every, curve.period, half_width=denoise_half_width)
+    denoised = denoise_section(evaluation, every, curve.period, half_width=denoise_half_width, backend=backend)
     if method == "perturbed":
         enabled = tuple(every[k] for k in indices)
         return TrialSetup(evaluation, evaluation, enabled, indices, None, None, options, denoised.check, enabled)
@@ -583,6 +585,7 @@ def section_uncertainty(
     repeats = None if repeat_parameters is None else _check_repeats(repeat_parameters)
     inst = instrument or CmmInstrument()
     setup: dict[str, Any] = {"options": options, "reference": reference, "denoise_half_width": denoise_half_width}
+    setup["backend"] = kernels.name
     prepared = prepare_trials(cloud, curve, instrument=inst, sources=sources, method=canonical_method(method), **setup)
     block = prepared.trials(batch, backend=kernels.name)
     engine: dict[str, Any] = {
