@@ -321,12 +321,7 @@ def _smoother_rows(
     centre: NDArray[np.intp],
 ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.float64]]:
     """:func:`_local_weights` at ``centre``, in chunks; rows zero-padded to a common width."""
-    if not 0 < half_width < period / 2:
-        msg = f"half_width must be in (0, period/2 = {period / 2:.6g} m), got {half_width!r}"
-        raise ConfigError(msg)
-    tripled = np.concatenate([u - period, u, u + period])
-    lo = np.searchsorted(tripled, u[centre] - half_width, side="right")
-    hi = np.searchsorted(tripled, u[centre] + half_width, side="left")
+    tripled, lo, hi = _windows(u, period, half_width, centre)
     width = int((hi - lo).max())
     weights = np.zeros((centre.shape[0], width))
     source = np.zeros((centre.shape[0], width), dtype=np.intp)
