@@ -31,6 +31,7 @@ EXCLUDED_MODULES = ("robocal_uncertainty.__main__",)
 OPTIONAL_EXTRA_MODULES = {
     "robocal_uncertainty.kernels._numba_walk": "numba",
     "robocal_uncertainty.kernels.section_numba": "numba",
+    "robocal_uncertainty.kernels.section_denoise_numba": "numba",
 }
 
 
