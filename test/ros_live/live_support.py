@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import subprocess
@@ -106,6 +107,14 @@ def run(command: list[str], env: dict[str, str], timeout_s: float = 120.0, cwd: 
     text = out.decode(errors="replace")
     assert proc.returncode == 0, f"{' '.join(command)} exited {proc.returncode}:\n{text[-3000:]}"
     return text
+
+
+def play_every_message(bag: Path, topics: tuple[str, ...], env: dict[str, str], folder: Path) -> None:
+    """``ros2 bag play`` of ``bag`` after 3 s, ``topics`` kept all and reliable (no sample lost to the QoS)."""
+    overrides = folder / "play_qos.yaml"
+    keep_all = {"history": "keep_all", "reliability": "reliable", "durability": "volatile"}
+    overrides.write_text(json.dumps(dict.fromkeys(topics, keep_all)))
+    run(["ros2", "bag", "play", "-d", "3", str(bag), "--qos-profile-overrides-path", str(overrides)], env, 180)
 
 
 def spin_until(executor: Any, condition: Callable[[], bool], timeout_s: float, what: str = "") -> None:

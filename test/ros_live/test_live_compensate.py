@@ -18,6 +18,7 @@ from live_support import (
     add_installed_msg_module,
     call,
     installed_share,
+    play_every_message,
     run,
     spin_until,
     started,
@@ -69,14 +70,7 @@ def test_compensate_targets_live(ros_env, tmp_path) -> None:
     try:
         with started(command, ros_env, tmp_path / "launch.log"):
             spin_until(executor, lambda: "status" in last, 90, "the nodes to start")
-            overrides = tmp_path / "play_qos.yaml"
-            keep_all = {"history": "keep_all", "reliability": "reliable", "durability": "volatile"}
-            overrides.write_text(json.dumps({"/joint_states": keep_all, "/tracker/point": keep_all}))
-            run(
-                ["ros2", "bag", "play", "-d", "3", str(bag), "--qos-profile-overrides-path", str(overrides)],
-                ros_env,
-                180,
-            )
+            play_every_message(bag, ("/joint_states", "/tracker/point"), ros_env, tmp_path)
 
             def done() -> int | None:
                 state = json.loads(last["status"].data)

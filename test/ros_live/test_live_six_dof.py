@@ -19,6 +19,7 @@ from live_support import (
     add_installed_msg_module,
     call,
     installed_share,
+    play_every_message,
     run,
     spin_until,
     started,
@@ -83,14 +84,7 @@ def test_six_dof_campaign_live(ros_env, tmp_path) -> None:
     try:
         with started(command, ros_env, tmp_path / "launch.log") as launch:
             spin_until(executor, lambda: "status" in last, 90, "the nodes to start")
-            overrides = tmp_path / "play_qos.yaml"
-            keep_all = {"history": "keep_all", "reliability": "reliable", "durability": "volatile"}
-            overrides.write_text(json.dumps({"/joint_states": keep_all, "/tracker/pose": keep_all}))
-            run(
-                ["ros2", "bag", "play", "-d", "3", str(bag), "--qos-profile-overrides-path", str(overrides)],
-                ros_env,
-                180,
-            )
+            play_every_message(bag, ("/joint_states", "/tracker/pose"), ros_env, tmp_path)
 
             def final() -> bool:
                 state = json.loads(last["status"].data)

@@ -14,7 +14,7 @@ import yaml
 
 rclpy = pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import add_installed_msg_module, call, installed_share, run, spin_until, started
+from live_support import add_installed_msg_module, call, installed_share, play_every_message, run, spin_until, started
 
 N_CHECK = 10
 NULL_TRIALS = 4000
@@ -83,14 +83,7 @@ def test_verify_service_live_equals_the_command_line(ros_env, tmp_path) -> None:
             client = node.create_client(Trigger, "/calibration_node/verify")
             early = call(executor, client, Trigger.Request())
             assert not early.success and "no samples held" in early.message, early.message
-            overrides = tmp_path / "play_qos.yaml"
-            keep_all = {"history": "keep_all", "reliability": "reliable", "durability": "volatile"}
-            overrides.write_text(json.dumps({"/joint_states": keep_all, "/tracker/point": keep_all}))
-            run(
-                ["ros2", "bag", "play", "-d", "3", str(bag), "--qos-profile-overrides-path", str(overrides)],
-                ros_env,
-                180,
-            )
+            play_every_message(bag, ("/joint_states", "/tracker/point"), ros_env, tmp_path)
 
             def samples() -> int:
                 return int(json.loads(last["collector"].data).get("samples", -1)) if "collector" in last else -1

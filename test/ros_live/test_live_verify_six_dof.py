@@ -17,7 +17,7 @@ import yaml
 
 rclpy = pytest.importorskip("rclpy", reason="live ROS tests: rclpy is not importable (ROS 2 not sourced)")
 
-from live_support import add_installed_msg_module, call, installed_share, run, spin_until, started
+from live_support import add_installed_msg_module, call, installed_share, play_every_message, run, spin_until, started
 
 N_CAL = 30
 N_CHECK = 10
@@ -84,14 +84,7 @@ def test_six_dof_verify_service_live_equals_the_command_line(ros_env, tmp_path) 
         with started(command, ros_env, tmp_path / "launch.log") as launch:
             spin_until(executor, lambda: "collector" in last, 90, "the nodes to start")
             client = node.create_client(Trigger, "/calibration_node/verify")
-            overrides = tmp_path / "play_qos.yaml"
-            keep_all = {"history": "keep_all", "reliability": "reliable", "durability": "volatile"}
-            overrides.write_text(json.dumps({"/joint_states": keep_all, "/tracker/pose": keep_all}))
-            run(
-                ["ros2", "bag", "play", "-d", "3", str(bag), "--qos-profile-overrides-path", str(overrides)],
-                ros_env,
-                180,
-            )
+            play_every_message(bag, ("/joint_states", "/tracker/pose"), ros_env, tmp_path)
 
             def samples() -> int:
                 return int(json.loads(last["collector"].data).get("samples", -1)) if "collector" in last else -1
