@@ -210,6 +210,7 @@ def _run(
     method: str,
     repeats: Sequence[PointCloud] = (),
     backend: str = "numpy",
+    executor: object | None = None,
 ) -> SectionInspection:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         msg = f"seed must be an integer >= 0, got {seed!r}"
@@ -231,6 +232,7 @@ def _run(
         method=method,
         repeat_parameters=repeat_parameters,
         backend=backend,
+        executor=executor,
     )
     return SectionInspection(
         result=result,
@@ -317,6 +319,7 @@ def inspect_section(
     method: str = "denoised",
     repeat_scans: Sequence[str | Path | PointCloud] | None = None,
     backend: str = "numpy",
+    executor: object | None = None,
 ) -> SectionInspection:
     """Measure a section's nine parameters and their uncertainty.
 
@@ -353,6 +356,10 @@ def inspect_section(
         Trial kernels (``numpy``, ``numba`` or ``auto``; see
         :func:`~robocal_uncertainty.inspection.section_mc.section_uncertainty`): the same
         result to 1e-12 relative; recorded in ``result.backend``.
+    executor : object, optional
+        Worker pool the trial blocks run on instead of ``workers`` processes started for the
+        run (e.g. :class:`~robocal_uncertainty.montecarlo.executor.WorkerPool`'s, started
+        early); never changes the result.
 
     Returns
     -------
@@ -385,6 +392,7 @@ def inspect_section(
         method=method,
         repeats=repeats,
         backend=backend,
+        executor=executor,
     )
 
 
@@ -398,6 +406,7 @@ def section_demo(
     progress: ProgressCallback | None = None,
     method: str = "denoised",
     backend: str = "numpy",
+    executor: object | None = None,
 ) -> SectionInspection:
     """The demo: a simulated CMM scan of the shipped Rotor 37 section, measured with noise.
 
@@ -405,7 +414,7 @@ def section_demo(
     0.0512° and a 5 µm three-wave form error (:data:`DEMO_SCENARIO`); 1 836 points are
     scanned and one draw of the instrument errors (seeded by `seed`) is added, as a real scan
     would carry. ``truth`` holds the true parameters (those of the noise-free scan).
-    ``backend`` as for :func:`inspect_section`.
+    ``backend`` and ``executor`` as for :func:`inspect_section`.
     """
     from robocal_uncertainty.core.instruments.cmm import point_displacements
     from robocal_uncertainty.inspection.section_mc import section_sources
@@ -442,6 +451,7 @@ def section_demo(
         truth=clean.parameters.as_array(),
         method=method,
         backend=backend,
+        executor=executor,
     )
 
 

@@ -538,6 +538,7 @@ def section_uncertainty(
     method: str = "perturbed",
     denoise_half_width: float | None = None,
     backend: str = "numpy",
+    executor: object | None = None,
 ) -> SectionUncertainty:
     """Monte Carlo of the nine section parameters under the CMM model, with the GUM comparison.
 
@@ -557,8 +558,9 @@ def section_uncertainty(
         leading-edge extreme point).
     coverage, keep_samples, bins
         Coverage probability p; keep the (trials, 9) model values; histogram bins.
-    block_size, chunk_blocks, workers, progress
-        As for :func:`~robocal_uncertainty.montecarlo.engine.run_trials`.
+    block_size, chunk_blocks, workers, progress, executor
+        As for :func:`~robocal_uncertainty.montecarlo.engine.run_trials` (``executor``: where
+        the blocks run instead of ``workers`` processes of their own; never changes the result).
     batch : int
         Trials per vectorised step inside a block (memory ~ 60 kB × n_points × batch / 1836).
     repeat_parameters : array_like, shape (k, 9) [m, rad], optional
@@ -591,8 +593,9 @@ def section_uncertainty(
     engine: dict[str, Any] = {
         "block_size": block_size,
         "chunk_blocks": chunk_blocks,
-        "workers": workers,
+        "workers": 1 if executor is not None else workers,
         "progress": progress,
+        "executor": executor,
     }
     run = run_trials(block, seed=seed, n_trials=trials, adaptive=adaptive, **engine)
     p = coverage if adaptive is None else adaptive.coverage

@@ -264,7 +264,12 @@ class NumbaSectionKernel:
         out = np.empty((n, 9))
         if self.fused:
             padding = [np.random.default_rng(0)] * (_MAX_SOURCES - len(generators))
-            section_numba.fused_trials((*generators, *padding), self.packed, out)
+            states = _pcg64_states(generators, _MAX_SOURCES)
+            if states is None:
+                section_numba.fused_trials((*generators, *padding), self.packed, out)
+            else:
+                section_numba.fused_pcg64_trials(states, self.packed, out)
+                _set_pcg64_states(generators, states)
             return out
         for start in range(0, n, batch):
             size = min(batch, n - start)
@@ -286,6 +291,34 @@ class NumbaSectionKernel:
         return out
 
 
+_WORD = (1 << 64) - 1
+
+
+def _pcg64_states(generators: Sequence[np.random.Generator], rows: int) -> NDArray[np.uint64] | None:
+    """The generators' PCG64 states as (rows, 4) uint64 (state high, low, increment high, low).
+
+    None unless every generator's bit generator is exactly numpy's ``PCG64`` (what the engine's
+    streams use), whose step the compiled draw repeats; padding rows are zeros (never drawn).
+    """
+    states = np.zeros((rows, 4), dtype=np.uint64)
+    for row, generator in enumerate(generators):
+        if type(generator.bit_generator) is not np.random.PCG64:
+            return None
+        inner = generator.bit_generator.state["state"]
+        state, increment = int(inner["state"]), int(inner["inc"])
+        states[row] = (state >> 64, state & _WORD, increment >> 64, increment & _WORD)
+    return states
+
+
+def _set_pcg64_states(generators: Sequence[np.random.Generator], states: NDArray[np.uint64]) -> None:
+    """Write the advanced states back, so each generator continues where the kernel stopped."""
+    for row, generator in enumerate(generators):
+        full = dict(generator.bit_generator.state)
+        words = [int(w) for w in states[row]]
+        full["state"] = {"state": (words[0] << 64) | words[1], "inc": (words[2] << 64) | words[3]}
+        generator.bit_generator.state = full
+
+
 _READY = False
 
 
@@ -303,7 +336,7 @@ def warm_up() -> float:
     _READY = True
     _compile_once()
     misses = 0
-    for kernel in (section_numba.drawn_trials, section_numba.fused_trials):
+    for kernel in (section_numba.drawn_trials, section_numba.fused_trials, section_numba.fused_pcg64_trials):
         stats = getattr(kernel, "stats", None)  # cache statistics of the dispatcher
         misses += 0 if stats is None else int(sum(stats.cache_misses.values()))
     elapsed = time.perf_counter() - start
@@ -353,3 +386,4 @@ def _compile_once() -> None:
     if _generators_supported():
         rng = np.random.default_rng(0)
         section_numba.fused_trials((rng, rng, rng, rng), model, out)
+        section_numba.fused_pcg64_trials(np.zeros((4, 4), dtype=np.uint64), model, out)

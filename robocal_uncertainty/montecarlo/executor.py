@@ -293,9 +293,16 @@ def _start_method(mp_context: str | None) -> str | None:
 
 
 def _import_modules(modules: tuple[str, ...]) -> None:
-    """Worker initializer: import what the trial blocks need once, at the worker's start."""
-    for name in modules:
-        importlib.import_module(name)
+    """Worker initializer: import what the trial blocks need once, at the worker's start.
+
+    An entry ``module:function`` also calls ``function()`` of that module (e.g. loading
+    compiled kernels from numba's disk cache).
+    """
+    for entry in modules:
+        name, _, function = entry.partition(":")
+        module = importlib.import_module(name)
+        if function:
+            getattr(module, function)()
 
 
 def _ready() -> bool:
@@ -321,7 +328,7 @@ class WorkerPool:
         can deadlock the child, and the pool is started once, so the safer start costs once.
     preload : sequence of str
         Modules each worker imports when it starts (e.g. the trial block's module), so the
-        first run does not pay the imports.
+        first run does not pay the imports; ``module:function`` also calls that function.
 
     Raises
     ------
@@ -373,11 +380,16 @@ class WorkerPool:
             self.started += 1
         return self._pool
 
-    def start(self) -> None:
-        """Start every worker now and wait until each has imported `preload` (no-op for 1)."""
+    def start(self, *, wait: bool = True) -> None:
+        """Start every worker now (no-op for 1 worker).
+
+        ``wait``: until each has imported `preload`; False returns at once, the workers
+        starting while the caller prepares the run (a command's own start-up and preparation).
+        """
         pool = self.executor()
         if pool is not None:
-            for future in [pool.submit(_ready) for _ in range(self.workers)]:
+            futures = [pool.submit(_ready) for _ in range(self.workers)]
+            for future in futures if wait else ():
                 future.result()
 
     def close(self) -> None:

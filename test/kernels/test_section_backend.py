@@ -160,3 +160,32 @@ def test_section_uncertainty_records_the_backend_and_states_the_same(small: Poin
         assert abs(a.estimate - b.estimate) <= RTOL * scale
         assert a.standard_uncertainty == pytest.approx(b.standard_uncertainty, rel=1e-9)
     _close(runs["numba"].gum.sensitivities, runs["numpy"].gum.sensitivities)
+
+
+@needs_numba
+@pytest.mark.skipif(not section_kernels._generators_supported(), reason="numba < 0.56 compiles no Generator")
+def test_inline_pcg64_draws_equal_the_generators_bit_for_bit(twisted_setup: TrialSetup) -> None:
+    from robocal_uncertainty.kernels import section_numba
+
+    kernel = dataclasses.replace(twisted_setup.trials(), backend="numba").kernel
+    sources = len(kernel.sources)
+
+    def generators() -> list[np.random.Generator]:
+        return [np.random.default_rng(np.random.SeedSequence(11, spawn_key=(4, k))) for k in range(sources)]
+
+    through_generators = generators()
+    padding = [np.random.default_rng(0)] * (4 - sources)
+    expected = np.empty((57, 9))
+    section_numba.fused_trials((*through_generators, *padding), kernel.packed, expected)
+    inline = generators()
+    values = kernel.trials(inline, 57, 16)  # PCG64 streams: the kernel steps their states itself
+    assert np.array_equal(values, expected)
+    # Each generator continues where the kernel stopped, as after numba's own draws.
+    for a, b in zip(inline, through_generators):
+        assert a.bit_generator.state == b.bit_generator.state
+        assert np.array_equal(a.random(5), b.random(5))
+    # Another bit generator: the kernel draws through the Generator, the same values.
+    other = [np.random.Generator(np.random.Philox(k)) for k in range(sources)]
+    reference = [np.random.Generator(np.random.Philox(k)) for k in range(sources)]
+    section_numba.fused_trials((*reference, *padding), kernel.packed, expected)
+    assert np.array_equal(kernel.trials(other, 57, 16), expected)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
@@ -90,3 +91,18 @@ def test_adaptive_run_keeps_one_chunk_per_slot_in_flight() -> None:
     assert result.adaptive is not None and result.adaptive.converged
     # At the last block yielded, at most one more chunk (one per slot, less the one yielded) is out.
     assert result.n_blocks <= executor.submitted <= result.n_blocks + 1
+
+
+def test_started_without_waiting_and_preload_calls_a_function() -> None:
+    # The section command starts its workers before it prepares the run; a preload entry
+    # ``module:function`` calls the function in each worker (numba's kernels from the cache).
+    fixed = run_trials(TRIALS, seed=8, n_trials=2_001, block_size=500)
+    preload = ("robocal_uncertainty.montecarlo.engine", "robocal_uncertainty.montecarlo.executor:executor_slots")
+    # The function ran in the initializer (and failed there: it needs an argument).
+    with WorkerPool(2, mp_context="spawn", preload=preload) as pool, pytest.raises(BrokenProcessPool):
+        pool.start()
+    preload = ("robocal_uncertainty.kernels.registry:available_backends",)
+    with WorkerPool(2, mp_context="spawn", preload=preload) as pool:
+        pool.start(wait=False)
+        again = run_trials(TRIALS, seed=8, n_trials=2_001, block_size=500, executor=pool.executor())
+    assert np.array_equal(again.samples, fixed.samples)
