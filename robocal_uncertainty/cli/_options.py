@@ -187,7 +187,8 @@ def histogram_count(text: str) -> int | str:
 
 
 def add_model_error_arg(p: argparse.ArgumentParser) -> None:
-    """The model-error options (--model-error-field: the residual source's model error as a field)."""
+    """The model-error options (--independent-model-error: the residual source's model error independent
+    from pose to pose instead of the default field)."""
     add_source_args(p, "model")
 
 

@@ -190,6 +190,6 @@ def test_model_error_field_flag_reaches_the_settings() -> None:
         "min_poses": None,
         "subset_size": None,
     }
-    on = uncertainty_settings(argparse.Namespace(model_error_field=True, **base), None, ("residual",))
-    off = uncertainty_settings(argparse.Namespace(model_error_field=False, **base), None, ("residual",))
+    off = uncertainty_settings(argparse.Namespace(independent_model_error=True, **base), None, ("residual",))
+    on = uncertainty_settings(argparse.Namespace(independent_model_error=False, **base), None, ("residual",))
     assert (on.model_error, off.model_error) == ("field", "independent")
