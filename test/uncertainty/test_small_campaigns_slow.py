@@ -2,8 +2,9 @@
 region) or flags itself as not trustworthy, on the shipped UR10 series and on a simulated
 series with unmodelled joint errors (the rule is not tuned to either).
 
-Slow (the UR10 check about 1 minute of CPU, 47 s of it the twelve 53-pose draws; the simulated
-one about half that): ``python -m pytest -m slow test/uncertainty/test_small_campaigns_slow.py``.
+Slow (the UR10 check about 1 minute of CPU, 47 s of it the twelve 53-pose draws; under load the
+simulated one took a fifth of its wall time): ``python -m pytest -m slow
+test/uncertainty/test_small_campaigns_slow.py``.
 The README's table comes from ``python benchmarks/small_campaign_study.py`` (more draws).
 """
 
