@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -55,16 +56,20 @@ def study(
     trials: int,
     seed: int,
     model_error: str | None = None,
+    *,
     per_draw: bool = False,
+    first_draw: int = 0,
 ) -> list[dict[str, float]]:
     """One row per size: pooled inside fraction, normalised RMS, flagged draws (`model_error`:
-    ``field`` or ``independent``, None the default statement's; `per_draw`: print each draw's)."""
+    ``field`` or ``independent``, None the default statement's; `per_draw`: print each draw's;
+    `first_draw`: the first draw's index, so that a run can extend another's)."""
     settings = UncertaintySettings() if model_error is None else UncertaintySettings(model_error=model_error)  # type: ignore[arg-type]
     rows = []
     for n in sizes:
         inside, norm_sq, count, flagged = 0.0, 0.0, 0, 0
-        for d in range(draws):
+        for d in range(first_draw, first_draw + draws):
             split = split_campaign(campaign.n_poses, n_train=n, seed=seed + 1000 * n + d)
+            start = time.perf_counter()
             val = validate_holdout(
                 model, campaign, splits=split, settings=settings, trials=trials, seed=seed + d, workers=1
             )
@@ -74,7 +79,8 @@ def study(
                 axes = ", ".join(f"{a.inside_fraction * 100:.1f}" for a in val.axes)
                 print(
                     f"  {n} poses, draw {d}: region {val.region_inside_fraction * 100:.1f} %, per axis {axes} %, "
-                    f"normalised RMS {', '.join(f'{v:.3f}' for v in np.sqrt(np.mean(z**2, axis=0)))}",
+                    f"normalised RMS {', '.join(f'{v:.3f}' for v in np.sqrt(np.mean(z**2, axis=0)))}, "
+                    f"{time.perf_counter() - start:.1f} s",
                     flush=True,
                 )
             inside += val.region_inside_fraction * k
@@ -135,6 +141,9 @@ def main(argv: list[str] | None = None) -> int:
         help="model error drawn (default: the default's)",
     )
     parser.add_argument("--per-draw", action="store_true", help="print every draw's coverage too")
+    parser.add_argument(
+        "--first-draw", type=int, default=0, help="index of the first draw (extends a run of that many draws)"
+    )
     args = parser.parse_args(argv)
     model = load_robot_model(resolve_robot_config("ur10"))
     sizes = tuple(args.sizes)
@@ -142,7 +151,17 @@ def main(argv: list[str] | None = None) -> int:
         campaign = read_tracker_csv(UR10_CSV)
         _print(
             f"UR10 series ({campaign.n_poses} poses), {args.draws} draws per size",
-            study(model, campaign, sizes, args.draws, args.trials, args.seed, args.model_error, args.per_draw),
+            study(
+                model,
+                campaign,
+                sizes,
+                args.draws,
+                args.trials,
+                args.seed,
+                args.model_error,
+                per_draw=args.per_draw,
+                first_draw=args.first_draw,
+            ),
         )
     if args.series in ("simulated", "both"):
         for gear, sag in SIMULATED_ERRORS:
@@ -151,7 +170,17 @@ def main(argv: list[str] | None = None) -> int:
                 f"simulated UR10, 632 poses, gear error {gear * 1e6:.0f} urad, sag {sag * 1e6:.0f} urad "
                 f"(model error u = {', '.join(f'{v * 1e6:.0f}' for v in u)} um over all poses), "
                 f"{args.draws} draws per size",
-                study(model, campaign, sizes, args.draws, args.trials, args.seed, args.model_error, args.per_draw),
+                study(
+                    model,
+                    campaign,
+                    sizes,
+                    args.draws,
+                    args.trials,
+                    args.seed,
+                    args.model_error,
+                    per_draw=args.per_draw,
+                    first_draw=args.first_draw,
+                ),
             )
     return 0
 

@@ -5,7 +5,7 @@ For each series, training size (53, 200 poses) and measurement (points; 6-DOF po
 rest with the default sources, and pools what ``validate`` counts: per axis the fraction inside
 the 95 % interval and the normalised error RMS, and the fraction inside the JCGM 102 95 %
 region; for 6-DOF also the rotations. Once with the independent model error (the residual
-bootstrap, the default) and once with the field (``--model-error-field``). Nothing here is
+bootstrap, ``--independent-model-error``) and once with the field (the default). Nothing here is
 tuned: the field's hyperparameters come from restricted maximum likelihood on each training
 set's residuals.
 

@@ -74,7 +74,7 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("calibrate", ["calibrate", "sim.mcap", "--robot", "ur10", "--json", "cal.json"]),
     ("evaluate", ["evaluate", "sim.mcap", "--robot", "ur10", "--trials", "2000", "--out", "evaluate", *TEST_JOINTS]),
     (
-        "evaluate_field",
+        "evaluate_independent",
         [
             "evaluate",
             "sim.mcap",
@@ -82,9 +82,9 @@ COMMANDS: list[tuple[str, list[str]]] = [
             "ur10",
             "--trials",
             "1000",
-            "--model-error-field",
+            "--independent-model-error",
             "--out",
-            "evaluate_field",
+            "evaluate_independent",
             *TEST_JOINTS,
         ],
     ),

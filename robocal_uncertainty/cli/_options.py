@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import TYPE_CHECKING, Any
 
 from robocal_uncertainty.cli._common import DEFAULT_PAIRING_TOLERANCE_MS
@@ -186,9 +187,34 @@ def histogram_count(text: str) -> int | str:
     return count
 
 
+class _FieldIsTheDefault(argparse.Action):
+    """``--model-error-field``, the option that chose the field before it became the default:
+    accepted so that scripts keep running, with a one-line note on stderr (the statement is the
+    one the option asked for)."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs: Any) -> None:
+        kwargs.update(nargs=0, default=argparse.SUPPRESS)
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, *_: Any) -> None:
+        print(
+            f"{parser.prog}: note: --model-error-field is the default now and changes nothing (the model error is "
+            "a field over the joint configurations; --independent-model-error draws it from pose to pose)",
+            file=sys.stderr,
+        )
+
+
 def add_model_error_arg(p: argparse.ArgumentParser) -> None:
-    """The model-error options (--model-error-field: the residual source's model error as a field)."""
-    add_source_args(p, "model")
+    """The model-error options (--independent-model-error: the residual source's model error independent
+    from pose to pose instead of the default field; the former --model-error-field, a no-op with a note,
+    cannot be combined with it)."""
+    from robocal_uncertainty.uncertainty.sources import source_options
+
+    group = p.add_mutually_exclusive_group()
+    for option in source_options("model"):
+        kwargs: dict[str, Any] = option.argparse_kwargs()
+        group.add_argument(option.flag, **kwargs)
+    group.add_argument("--model-error-field", action=_FieldIsTheDefault, help=argparse.SUPPRESS)
 
 
 def add_frame_and_convergence_args(p: argparse.ArgumentParser) -> None:

@@ -248,6 +248,15 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         )
         for parameter in source_parameters()
     ),
+    # Before the field became the default; read only to say so (an old parameter file keeps working).
+    ParamSpec(
+        "model_error_field",
+        None,
+        "No longer read: the model error is a field over the joint configurations by default "
+        "(independent_model_error: true draws it from pose to pose)",
+        read_only=True,
+        dynamic_typing=True,
+    ),
     ParamSpec(
         "tracker_xyz_m",
         [2.0, 0.5, 0.3],
@@ -359,6 +368,12 @@ class UncertaintyNode(Node):
         super().__init__(node_name, **kwargs)
         self._rerun = False
         p = declare_parameters(self, PARAMETERS, on_change=self._note_change)
+        if p["model_error_field"] is not None:
+            self.get_logger().warning(
+                f"parameter model_error_field ({p['model_error_field']}) is no longer read: the model error is a "
+                "field over the joint configurations by default; independent_model_error: true draws it from pose "
+                "to pose"
+            )
         self.model = load_model(p["robot_config"], base_unknown=p["base_unknown"])
         n = self.model.n_joints
         degrees, radians = p["test_joints_deg"], p["test_joints_rad"]

@@ -116,8 +116,8 @@ def format_validation(validation: HoldoutValidation) -> str:
     if any(k != "none" for k in kinds):
         lines.append(
             f"model error: a field over the joint configurations in {kinds.count('field')} of {len(kinds)} fold(s), "
-            f"independent from pose to pose in {kinds.count('independent')} (the default, or the field not "
-            "identified by the training poses)"
+            f"independent from pose to pose in {kinds.count('independent')} (--independent-model-error, or the "
+            "field not identified by the training poses)"
         )
     rot_names = "".join(f", {a.axis}" for a in v.orientation_axes)
     lines.append(f"reliability: stated p / observed % (x, y, z, 3-D{rot_names})")

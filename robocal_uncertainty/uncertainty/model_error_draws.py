@@ -7,10 +7,11 @@ pose instead (the residual bootstrap) states the same calibration another way: a
 is smooth over the workspace is treated as one that averages out, and what the fit absorbed of
 it at its poses is counted again at every test configuration.
 
-With ``model_error="field"`` (``--model-error-field``; not the default, see the README's
-held-out study) the ``residual`` source draws the field **jointly** over the calibration poses
-and the test configurations: ``e_t`` is added to the measured values (the re-fit absorbs part of it, as
-the calibration did) and ``-e_c`` to the predictions, so a trial's deviation is
+With ``model_error="field"`` (the default; ``--independent-model-error`` for the residual
+bootstrap, see the README's held-out study) the ``residual`` source draws the field **jointly**
+over the calibration poses and the test configurations: ``e_t`` is added to the measured values
+(the re-fit absorbs part of it, as the calibration did) and ``-e_c`` to the predictions, so a
+trial's deviation is
 ``J G e_t - e_c``, whose covariance is that of the real prediction error ``e_c - J G e_t``
 (``G`` the fit's gain): the cross term ``J G K_tc`` that ``verify`` subtracts analytically, by
 construction. The GUM statement propagates the covariance of the same vector.

@@ -190,6 +190,27 @@ def test_model_error_field_flag_reaches_the_settings() -> None:
         "min_poses": None,
         "subset_size": None,
     }
-    on = uncertainty_settings(argparse.Namespace(model_error_field=True, **base), None, ("residual",))
-    off = uncertainty_settings(argparse.Namespace(model_error_field=False, **base), None, ("residual",))
+    off = uncertainty_settings(argparse.Namespace(independent_model_error=True, **base), None, ("residual",))
+    on = uncertainty_settings(argparse.Namespace(independent_model_error=False, **base), None, ("residual",))
     assert (on.model_error, off.model_error) == ("field", "independent")
+
+
+@pytest.mark.parametrize("verb", ["evaluate", "validate", "map", "suggest"])
+def test_the_former_model_error_field_option_is_a_noted_no_op(verb: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Scripts written when the field needed --model-error-field keep running and get the field,
+    with a one-line note; combined with --independent-model-error they are refused (usage error)."""
+    from robocal_uncertainty.cli._evaluation import uncertainty_settings
+    from robocal_uncertainty.cli._main import _build_parser
+
+    parser = _build_parser()
+    given = [verb, "c.mcap", "--robot", "ur10"]
+    args = parser.parse_args([*given, "--model-error-field"])
+    note = capsys.readouterr().err.strip().splitlines()
+    assert len(note) == 1 and f"{verb}: note: --model-error-field is the default now" in note[0]
+    assert uncertainty_settings(args, None, ("residual",)).model_error == "field"
+    assert uncertainty_settings(parser.parse_args(given), None, ("residual",)).model_error == "field"
+    assert capsys.readouterr().err == ""
+    with pytest.raises(SystemExit) as refused:
+        parser.parse_args([*given, "--model-error-field", "--independent-model-error"])
+    assert refused.value.code == 2
+    assert "not allowed with argument --model-error-field" in capsys.readouterr().err

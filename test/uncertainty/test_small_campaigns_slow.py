@@ -2,8 +2,9 @@
 region) or flags itself as not trustworthy, on the shipped UR10 series and on a simulated
 series with unmodelled joint errors (the rule is not tuned to either).
 
-Slow (about 2-3 minutes on 2 cores):
-``python -m pytest -m slow test/uncertainty/test_small_campaigns_slow.py``.
+Slow (the UR10 check about 1 minute of CPU, 47 s of it the twelve 53-pose draws; under load the
+simulated one took a fifth of its wall time): ``python -m pytest -m slow
+test/uncertainty/test_small_campaigns_slow.py``.
 The README's table comes from ``python benchmarks/small_campaign_study.py`` (more draws).
 """
 
@@ -39,13 +40,29 @@ def _check(rows: list[dict[str, float]]) -> None:
         assert 0.7 <= r["normalised_rms"] <= 1.15, r
 
 
+UR10_DRAWS_53 = 12
+"""53-pose draws of the UR10 series the check pools. Between draws (which poses train) the region's
+coverage scatters by 2.8 % (standard deviation over 20 draws of the default statement, 1 000
+trials each: ``python benchmarks/small_campaign_study.py --series ur10 --sizes 53 --draws 20
+--trials 1000 --per-draw``), far more than within a draw, so the draws, not the trials, set the
+check's own spread: 12 draws give 0.8 % (standard error) against the 1.6 % by which the 20 draws'
+92.6 % clears the band's lower end; 2 draws gave 2.0 % and failed on draw 0 alone. The trials stay
+at 1 000: at 300 every draw's region holds 0.8 % fewer held-out poses (a few hundred trials
+understate the region), a bias the draws do not average out."""
+
+
 @pytest.mark.slow
 def test_small_ur10_campaigns_hold_or_are_flagged() -> None:
     study = _study_module()
     model = load_robot_model(resolve_robot_config("ur10"))
-    rows = study.study(model, read_tracker_csv(study.UR10_CSV), (10, 20, 53), draws=2, trials=1000, seed=0)
-    assert [r["flagged"] for r in rows] == [2, 2, 0]  # 10 and 20 poses: below 96 residual dof
-    _check(rows)
+    campaign = read_tracker_csv(study.UR10_CSV)
+    # 10 and 20 poses: below 96 residual dof, flagged whatever their coverage (the flag does not
+    # depend on the trials: 200 do for it).
+    flagged = study.study(model, campaign, (10, 20), draws=2, trials=200, seed=0)
+    assert [r["flagged"] for r in flagged] == [2, 2]
+    rows = study.study(model, campaign, (53,), draws=UR10_DRAWS_53, trials=1000, seed=0)
+    assert rows[0]["flagged"] == 0
+    _check(flagged + rows)
 
 
 @pytest.mark.slow

@@ -87,12 +87,17 @@ def test_generated_options_parse_as_the_hand_written_ones_did() -> None:
     args = p.parse_args([])
     assert (args.tracker_noise_um, args.tracker_noise_um_per_m) == (5.0, 0.0)
     assert (args.encoder_noise_deg, args.linear_encoder_noise_um) == (0.005, 5.0)
-    assert (args.lambda_range, args.min_poses, args.subset_size, args.model_error_field) == (None, None, None, False)
+    assert (args.lambda_range, args.min_poses, args.subset_size, args.independent_model_error) == (
+        None,
+        None,
+        None,
+        False,
+    )
     args = p.parse_args(
-        ["--lambda-range", "1e-3", "2", "--min-poses", "20", "--subset-size", "30", "--model-error-field"]
+        ["--lambda-range", "1e-3", "2", "--min-poses", "20", "--subset-size", "30", "--independent-model-error"]
     )
     assert args.lambda_range == [1e-3, 2.0]
-    assert (args.min_poses, args.subset_size, args.model_error_field) == (20, 30, True)
+    assert (args.min_poses, args.subset_size, args.independent_model_error) == (20, 30, True)
     with pytest.raises(SystemExit):
         p.parse_args(["--min-poses", "2.5"])
 
@@ -108,11 +113,11 @@ def test_node_parameters_carry_units_and_ranges_from_the_sources() -> None:
         "lambda_range_high",
         "min_poses",
         "subset_size",
-        "model_error_field",
+        "independent_model_error",
     ]
     assert (by_name["encoder_noise_deg"].unit, by_name["encoder_noise_deg"].high) == ("deg", 10.0)
     assert (by_name["min_poses"].default, by_name["min_poses"].low) == (0, 0)
-    assert by_name["model_error_field"].default is False
+    assert by_name["independent_model_error"].default is False
 
 
 def _drift(settings: UncertaintySettings, ctx: TrialContext) -> AdditiveSource:
@@ -170,7 +175,7 @@ def test_node_parameters_give_the_settings_the_command_line_gives() -> None:
         lambda_range_high=2.0,
         min_poses=20,
         subset_size=30,
-        model_error_field=True,
+        independent_model_error=True,
     )
     built = build_source_settings(sources="all", values={o.dest: o.from_parameters(node) for o in _all_options()})
     expected = build_uncertainty_settings(
@@ -179,7 +184,7 @@ def test_node_parameters_give_the_settings_the_command_line_gives() -> None:
         tracker_noise_um_per_m=1.5,
         encoder_noise_deg=0.01,
         linear_encoder_noise_um=3.0,
-        model_error_field=True,
+        independent_model_error=True,
         lambda_range=(0.001, 2.0),
         min_poses=20,
         subset_size=30,
@@ -190,7 +195,7 @@ def test_node_parameters_give_the_settings_the_command_line_gives() -> None:
         (0.001, 2.0),
         20,
         30,
-        "field",
+        "independent",
     )
 
 

@@ -103,9 +103,10 @@ def test_each_source_draws_from_its_own_seed_sequence(tracker_campaign) -> None:
 def test_gum_from_source_distributions_equals_a_dense_first_order_propagation(tracker_campaign) -> None:
     """Independent reference: the covariance of every measured coordinate built densely
     (tracker a^2/3, encoder J_q J_q^T h^2/3, model error Sigma_m) pushed through the
-    linearised Tikhonov solution and the kinematics, in the robot base frame."""
+    linearised Tikhonov solution and the kinematics, in the robot base frame. The model error
+    drawn independently from pose to pose (the field's GUM: test_model_error_field_draws)."""
     model, campaign, calibration = tracker_campaign
-    settings = UncertaintySettings(sources=("tracker", "encoder", "residual"))
+    settings = UncertaintySettings(sources=("tracker", "encoder", "residual"), model_error="independent")
     result = evaluate_uncertainty(
         model, campaign, TEST_JOINTS, uncertainty=settings, calibration=calibration, trials=200, seed=1, frame="base"
     )

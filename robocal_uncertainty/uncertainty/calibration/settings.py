@@ -154,7 +154,7 @@ def build_uncertainty_settings(
     tracker_noise_um_per_m: float,
     encoder_noise_deg: float,
     linear_encoder_noise_um: float,
-    model_error_field: bool = False,
+    independent_model_error: bool = False,
     lambda_range: tuple[float, float] | None = None,
     min_poses: int | None = None,
     subset_size: int | None = None,
@@ -172,8 +172,9 @@ def build_uncertainty_settings(
         Tracker MPE a [µm] and b [µm/m] of a + b L (uniform half-width per coordinate).
     encoder_noise_deg, linear_encoder_noise_um : float
         Reading half-width of a revolute joint [deg] and of a prismatic one [µm].
-    model_error_field : bool
-        Draw the model error as a field over the joint configurations (else independent).
+    independent_model_error : bool
+        Draw the model error independently from pose to pose (else as a field over the joint
+        configurations).
     lambda_range : (float, float) or None
         Range of the ``lambda`` source (scaled units); None: around the optimum.
     min_poses, subset_size : int or None
@@ -193,7 +194,7 @@ def build_uncertainty_settings(
         "tracker_noise_um_per_m": tracker_noise_um_per_m,
         "encoder_noise_deg": encoder_noise_deg,
         "linear_encoder_noise_um": linear_encoder_noise_um,
-        "model_error_field": model_error_field,
+        "independent_model_error": independent_model_error,
         "lambda_range": lambda_range,
         "min_poses": min_poses,
         "subset_size": subset_size,

@@ -1,8 +1,9 @@
 """The model-error source: what the kinematic model cannot explain, at the poses and the predictions.
 
-A residual bootstrap independent from pose to pose by default; with a model-error field
-(:mod:`~robocal_uncertainty.uncertainty.model_error_draws`) one draw correlated over the
-calibration poses and the test configurations.
+By default a model-error field (:mod:`~robocal_uncertainty.uncertainty.model_error_draws`): one
+draw correlated over the calibration poses and the test configurations; with
+``--independent-model-error`` (or where the field is not identified) a residual bootstrap
+independent from pose to pose.
 """
 
 from __future__ import annotations
@@ -39,28 +40,28 @@ def _residual(settings: UncertaintySettings, ctx: TrialContext) -> Source:
 
 RESIDUAL = SourceSpec(
     "residual",
-    "model error left after calibration (model inadequacy): a Gaussian field over the joint "
-    "configurations (restricted maximum likelihood on the residuals), drawn jointly on the data and "
-    "the predictions with --model-error-field; else a residual bootstrap, independent from pose to pose",
+    "model error left after calibration (model inadequacy): a field over the joint configurations "
+    "(restricted maximum likelihood on the residuals), drawn jointly on the data and the predictions; "
+    "with --independent-model-error a residual bootstrap, independent from pose to pose",
     True,
     _residual,
     role="model_error",
     in_sweeps=True,
-    to_settings=lambda values: {"model_error": "field" if values["model_error_field"] else "independent"},
+    to_settings=lambda values: {"model_error": "independent" if values["independent_model_error"] else "field"},
     options=(
         SourceOption(
-            "--model-error-field",
-            "draw the model error as a Gaussian field over the joint configurations, jointly over the "
-            "calibration poses and the test configurations, instead of the default residual bootstrap, "
-            "independent from pose to pose (the field states 53-pose UR10 campaigns too narrow; see README)",
+            "--independent-model-error",
+            "draw the model error independently from pose to pose (a residual bootstrap) instead of the "
+            "default field over the joint configurations, drawn jointly over the calibration poses and the "
+            "test configurations (for comparison; see README)",
             "model",
             flag_only=True,
             parameters=(
                 NodeParameter(
-                    "model_error_field",
+                    "independent_model_error",
                     False,
-                    "Draw the residual source's model error as a field over the joint configurations instead of "
-                    "independently from pose to pose",
+                    "Draw the residual source's model error independently from pose to pose instead of as a "
+                    "field over the joint configurations",
                     "",
                 ),
             ),

@@ -58,13 +58,13 @@ class UncertaintySettings:
     jacobian : {"frozen", "exact"}
         ``frozen``: chord iterations with the calibration's Jacobian (fast, default);
         ``exact``: Gauss-Newton with each trial's own Jacobian (reference).
-    model_error : {"independent", "field"}
-        How the ``residual`` source draws the model error: ``independent`` (default), a residual
-        bootstrap independent from pose to pose; ``field``, a Gaussian field correlated over the
-        joint configurations, drawn jointly over the calibration poses and the test
-        configurations (:mod:`~robocal_uncertainty.uncertainty.model_error_draws`). Not the
-        default: on the UR10 series D with 53 training poses it states held-out poses too
-        narrow (``benchmarks/study_model_error_field.py``).
+    model_error : {"field", "independent"}
+        How the ``residual`` source draws the model error: ``field`` (default), a field
+        correlated over the joint configurations, drawn jointly over the calibration poses and
+        the test configurations (:mod:`~robocal_uncertainty.uncertainty.model_error_draws`; its
+        held-out evidence on two UR10 series: ``benchmarks/study_model_error_field.py``);
+        ``independent``, a residual bootstrap independent from pose to pose (the field's
+        ``c = 0`` case, kept for comparison).
     """
 
     sources: tuple[str, ...] = field(default_factory=default_sources)
@@ -77,7 +77,7 @@ class UncertaintySettings:
     gauss_newton_iterations: int = 4
     jacobian: Literal["frozen", "exact"] = "frozen"
     between_session: BetweenSessions | None = None
-    model_error: Literal["field", "independent"] = "independent"
+    model_error: Literal["field", "independent"] = "field"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sources", parse_sources(self.sources))
