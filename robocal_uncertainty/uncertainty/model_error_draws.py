@@ -66,6 +66,7 @@ components' scale factors share the common local scale the leave-one-out errors 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -87,6 +88,7 @@ __all__ = [
     "FieldNormal",
     "central_hessian",
     "estimate_field",
+    "rescaled_field",
     "standardised_innovations",
 ]
 
@@ -422,6 +424,68 @@ def estimate_field(
     )
 
 
+def rescaled_field(
+    held: FieldEstimate,
+    calibration: IdentificationResult,
+    joint_positions: Array,
+    noise: Array,
+    shape: Array,
+    *,
+    max_equations: int = FIELD_MAX_EQUATIONS,
+    seed: int = 0,
+) -> FieldEstimate:
+    """The field of `calibration` with the correlation and shape hyperparameters of `held` (another
+    calibration's :func:`estimate_field` of the same robot and poses), its scale re-estimated.
+
+    For a sensitivity sweep (a calibration re-identified at another lambda): the correlation
+    ``(c, l)``, its posterior's hypotheses and weights, the shape's variation over the workspace and
+    the components' scale correlation are what the robot's model error is, which a setting of the
+    fit does not change; the per-component scale and its degrees of freedom are what this
+    calibration's leave-one-out prediction errors show (the fit's regularisation changes what it
+    absorbs), as :func:`estimate_field` takes them, per hypothesis. The restricted likelihood and
+    its posterior grid are not evaluated again (most of the cost of an estimate).
+
+    Parameters
+    ----------
+    held : FieldEstimate
+        With leave-one-out scales (:attr:`FieldEstimate.scale_dof` not None).
+    calibration, joint_positions, noise, shape, max_equations, seed
+        As for :func:`estimate_field`.
+    """
+    system = _field_system(calibration, joint_positions, noise, shape, max_equations=max_equations, seed=seed)
+    r, fit, n_cov, d = system.residuals, system.fit, system.noise, system.dimension
+    _, lo_s, hi_s = _scale_start_and_bounds(system)
+    bounds = (float(np.exp(lo_s)), float(np.exp(hi_s)))
+    held_scale = float(
+        np.trace(
+            held.likelihood_per_pose_covariance
+            if held.likelihood_per_pose_covariance is not None
+            else held.per_pose_covariance
+        )
+    ) / max(float(np.trace(system.shape)), np.finfo(float).tiny)
+    local_variance = 0.0 if held.shape_weights is None else 2.0 * float(np.asarray(held.shape_weights) @ SHAPE_TAU) / d
+
+    def scaled(c: float, ell: float) -> tuple[Array, Array]:
+        unit = system.unit_covariance(c, ell)
+        scale = _leave_one_out_scale(r, fit, n_cov, unit, d, bounds)
+        factors = _leave_one_out_components(r, fit, n_cov, unit, d, held_scale if scale is None else scale)
+        dof = _leave_one_out_dof(r, fit, n_cov, unit, d, factors, local_variance=local_variance)[0]
+        return system.shape * np.outer(factors, factors), np.asarray(dof, dtype=np.float64)
+
+    per_pose, scale_dof = scaled(float(held.correlated_fraction), float(held.length_scale))
+    hypotheses = None
+    if held.hypotheses is not None:
+        hypotheses = tuple(
+            FieldHypothesis(
+                h.weight, h.correlated_fraction, h.length_scale, *scaled(h.correlated_fraction, h.length_scale)
+            )
+            for h in held.hypotheses
+        )
+    return dataclasses.replace(
+        held, per_pose_covariance=per_pose, scale_dof=scale_dof, hypotheses=hypotheses, poses_used=int(system.poses)
+    )
+
+
 def _scale_correlation(white: Array) -> float:
     """Correlation of the components' scale estimates: the mean correlation between components
     of the squared whitened leave-one-out prediction errors `white` (n, d), clipped to [0, 0.95].
@@ -623,18 +687,24 @@ def _field_system(
     )
 
 
-def _reml_optimum(system: _FieldSystem) -> tuple[float, float, float, float, float, tuple[float, float]]:
-    """Maximum of the restricted likelihood: ``(nll, log s, c, log l)``, the best ``c = 0`` model's
-    ``nll``, and the bounds of ``log s`` searched."""
-    from scipy import optimize
-
-    r, nll = system.residuals, system.nll
+def _scale_start_and_bounds(system: _FieldSystem) -> tuple[float, float, float]:
+    """The restricted likelihood's starting scale and the bounds of ``log s`` it searches."""
+    r = system.residuals
     m = r.size - system.fit.shape[1]
     noise_level = float(np.trace(system.noise)) / r.size
     mean_square = float(r @ r) / max(m, 1)
     s0 = max(mean_square - noise_level, 1e-3 * max(noise_level, 1e-30))
     floor = max(noise_level, 1e-30)
-    lo_s, hi_s = np.log(1e-6 * floor), np.log(1e4 * max(mean_square, floor))
+    return s0, float(np.log(1e-6 * floor)), float(np.log(1e4 * max(mean_square, floor)))
+
+
+def _reml_optimum(system: _FieldSystem) -> tuple[float, float, float, float, float, tuple[float, float]]:
+    """Maximum of the restricted likelihood: ``(nll, log s, c, log l)``, the best ``c = 0`` model's
+    ``nll``, and the bounds of ``log s`` searched."""
+    from scipy import optimize
+
+    nll = system.nll
+    s0, lo_s, hi_s = _scale_start_and_bounds(system)
     lo_l, hi_l = np.log(FIELD_LENGTH_BOUNDS[0]), np.log(FIELD_LENGTH_BOUNDS[1])
     independent = optimize.minimize_scalar(lambda a: nll(a, 0.0, 0.0), bounds=(lo_s, hi_s), method="bounded")
     best = (float(independent.fun), float(independent.x), 0.0, float(np.log(0.5)))
@@ -670,6 +740,50 @@ def _hyper_covariance(system: _FieldSystem, log_s: float, c: float, log_l: float
     return hyper, dof
 
 
+def _leverage_inverse(fit: Array, d: int) -> Array:
+    """``(I - H_ii)^+`` per pose, shape (n, d, d): ``H = U U^T`` the hat matrix of the orthonormal
+    fit basis `fit` (n d, k), its diagonal blocks from the basis's rows (never ``H`` itself)."""
+    rows = fit.reshape(fit.shape[0] // d, d, fit.shape[1])
+    lever = np.einsum("pik,pjk->pij", rows, rows)
+    return np.asarray(np.linalg.pinv(np.eye(d)[None] - lever), dtype=np.float64)
+
+
+def _projected(matrix: Array, fit: Array) -> Array:
+    """``P X P`` for ``P = I - U U^T`` (`fit` = ``U``, orthonormal, (N, k)) at ``O(N^2 k)``:
+    ``X - U (U^T X) - (X U) U^T + U (U^T X U) U^T`` (`matrix` = ``X`` symmetric)."""
+    xu = matrix @ fit
+    inner = fit @ (fit.T @ xu)
+    out = matrix - fit @ xu.T - xu @ fit.T + inner @ fit.T
+    return np.asarray(out, dtype=np.float64)
+
+
+def _projected_blocks(matrix: Array, fit: Array, d: int, factors: Array | None = None) -> Array:
+    """The per-pose diagonal blocks of ``P D X D P`` (``P`` as in :func:`_projected`, ``D`` the
+    per-component `factors` repeated over the poses, the identity without them), shape (n, d, d),
+    at ``O(N^2 k)``: ``X_ii - U_i (X U)_i^T - (X U)_i U_i^T + U_i (U^T X U) U_i^T``."""
+    n_eq = matrix.shape[0]
+    n = n_eq // d
+    idx = np.arange(n)
+    if factors is None:
+        scaled_fit, tiled = fit, None
+    else:
+        tiled = np.tile(np.asarray(factors, dtype=np.float64), n)
+        scaled_fit = fit * tiled[:, None]
+    xu = matrix @ scaled_fit  # (N, k): X D U
+    if tiled is not None:
+        xu = xu * tiled[:, None]  # D X D U
+    blocks = matrix.reshape(n, d, n, d)[idx, :, idx, :]
+    if tiled is not None:
+        f = np.asarray(factors, dtype=np.float64)
+        blocks = blocks * np.outer(f, f)[None]
+    rows = fit.reshape(n, d, -1)
+    xu_rows = xu.reshape(n, d, -1)
+    inner = fit.T @ xu  # U^T D X D U, (k, k)
+    cross = np.einsum("pik,pjk->pij", rows, xu_rows)
+    out = blocks - cross - np.swapaxes(cross, 1, 2) + np.einsum("pik,kl,pjl->pij", rows, inner, rows)
+    return np.asarray(out, dtype=np.float64)
+
+
 def _leave_one_out_scale(
     r: Array, fit: Array, noise: Array, unit: Array, d: int, bounds: tuple[float, float]
 ) -> float | None:
@@ -687,14 +801,12 @@ def _leave_one_out_scale(
     larger scale, not as an over-confident statement (cross-validated variance estimation is the
     robust one under a misspecified kernel: Bachoc 2013, Comput. Stat. Data Anal. 66).
     """
-    proj = np.eye(r.size) - fit @ fit.T
     n = r.size // d
-    idx = np.arange(n)
-    pnp = (proj @ noise @ proj).reshape(n, d, n, d)[idx, :, idx, :]
-    pkp = (proj @ unit @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+    pnp = _projected_blocks(noise, fit, d)
+    pkp = _projected_blocks(unit, fit, d)
     # The residual's part in the fit space (a regularised fit leaves some) is no prediction error:
     # the model's residual is P (e + eps), as in the restricted likelihood's contrasts.
-    r_pose = (proj @ r).reshape(n, d)
+    r_pose = (r - fit @ (fit.T @ r)).reshape(n, d)
 
     def excess(log_s: float) -> float:
         blocks = pnp + float(np.exp(log_s)) * pkp
@@ -729,18 +841,14 @@ def _leave_one_out_components(
     ``f_j <- f_j sqrt(mean)``; starting from ``f = sqrt(s)``. Returns ``f``, shape (d,).
     """
     n = r.size // d
-    proj = np.eye(r.size) - fit @ fit.T
-    idx = np.arange(n)
-    lever = (fit @ fit.T).reshape(n, d, n, d)[idx, :, idx, :]
-    inv = np.linalg.pinv(np.eye(d)[None] - lever)
-    pnp = (proj @ noise @ proj).reshape(n, d, n, d)[idx, :, idx, :]
-    err = np.einsum("pij,pj->pi", inv, (proj @ r).reshape(n, d))
+    inv = _leverage_inverse(fit, d)
+    pnp = _projected_blocks(noise, fit, d)
+    err = np.einsum("pij,pj->pi", inv, (r - fit @ (fit.T @ r)).reshape(n, d))
     factors = np.full(d, np.sqrt(max(scale, 0.0)))
     if not np.all(factors > 0.0):
         return factors
     for _ in range(iterations):
-        scaled = unit * np.outer(np.tile(factors, n), np.tile(factors, n))
-        pkp = (proj @ scaled @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+        pkp = _projected_blocks(unit, fit, d, factors)
         stated = np.einsum("pij,pjk,plk->pil", inv, pnp + pkp, inv)
         ratio = np.mean(err**2 / np.maximum(np.diagonal(stated, axis1=1, axis2=2), np.finfo(float).tiny), axis=0)
         if np.max(np.abs(ratio - 1.0)) < 1e-3:
@@ -783,20 +891,17 @@ def _leave_one_out_dof(
     that (a normal field's).
     """
     n = r.size // d
-    proj = np.eye(r.size) - fit @ fit.T
-    idx = np.arange(n)
-    lever = (fit @ fit.T).reshape(n, d, n, d)[idx, :, idx, :]
-    inv = np.linalg.pinv(np.eye(d)[None] - lever)
-    scaled = unit * np.outer(np.tile(factors, n), np.tile(factors, n))
-    cov_r = proj @ (noise + scaled) @ proj
-    # G: (I - H_ii)^-1 per pose, then every component divided by its stated standard deviation.
-    block_inv = np.zeros((r.size, r.size))
-    for i in range(n):
-        block_inv[i * d : (i + 1) * d, i * d : (i + 1) * d] = inv[i]
-    cov_e = block_inv @ cov_r @ block_inv.T
+    inv = _leverage_inverse(fit, d)
+    tiled = np.tile(np.asarray(factors, dtype=np.float64), n)
+    cov_r = _projected(noise + unit * np.outer(tiled, tiled), fit)
+    # G: (I - H_ii)^-1 per pose (block diagonal, applied block by block), then every component
+    # divided by its stated standard deviation.
+    cov_e = np.einsum("iac,icjb->iajb", inv, cov_r.reshape(n, d, n, d), optimize=True)
+    cov_e = np.einsum("iajc,jbc->iajb", cov_e, inv, optimize=True).reshape(r.size, r.size)
+    e = np.einsum("iab,ib->ia", inv, (r - fit @ (fit.T @ r)).reshape(n, d))
     sd = np.sqrt(np.maximum(np.diag(cov_e), np.finfo(float).tiny))
     cov_z = cov_e / np.outer(sd, sd)
-    z = (block_inv @ (proj @ r)) / sd
+    z = e.reshape(-1) / sd
     out = np.empty(d)
     gaussian = np.empty(d)
     for j in range(d):
@@ -815,12 +920,11 @@ def _leave_one_out_dof(
             mixed = 2.0 * float(np.trace(cj)) ** 2 / max(2.0 * tr2 + var_v * spatial, np.finfo(float).tiny)
             independent = gaussian[j] * min(1.0, 2.0 / max(kurtosis - 1.0, np.finfo(float).tiny))
             out[j] = min(independent, mixed)
-    e = (block_inv @ (proj @ r)).reshape(n, d)
-    white = np.empty((n, d))
-    for i in range(n):
-        evals, evecs = np.linalg.eigh(cov_e[i * d : (i + 1) * d, i * d : (i + 1) * d])
-        root_inv = evecs / np.sqrt(np.maximum(evals, np.finfo(float).tiny * max(float(evals[-1]), 1.0)))
-        white[i] = root_inv.T @ e[i]
+    idx = np.arange(n)
+    evals, evecs = np.linalg.eigh(cov_e.reshape(n, d, n, d)[idx, :, idx, :])
+    floor = np.finfo(float).tiny * np.maximum(evals[:, -1:], 1.0)
+    root_inv = evecs / np.sqrt(np.maximum(evals, floor))[:, None, :]
+    white = np.einsum("pji,pj->pi", root_inv, e)
     return np.asarray(out, dtype=np.float64), white, float(min(float(np.mean(gaussian)), n))
 
 
