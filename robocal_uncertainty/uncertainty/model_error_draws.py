@@ -1043,6 +1043,11 @@ def _scale_moments(dof: Array, rho: float = 0.0) -> Array:
     return np.asarray(moments, dtype=np.float64)
 
 
+def _is_lower(matrix: Array) -> bool:
+    """Whether `matrix` (square) is lower triangular (a Cholesky factor, not an eigen-factor)."""
+    return not bool(np.any(np.triu(matrix, 1)))
+
+
 def _psd_factor(matrix: Array) -> Array:
     """A factor ``F`` with ``F F^T = matrix`` (Cholesky; symmetric eigen-factor when singular)."""
     sym = 0.5 * (matrix + matrix.T)
@@ -1102,16 +1107,28 @@ class _Correlation:
         return np.asarray(np.vstack((top, bottom)), dtype=np.float64)
 
     def instances(self, values: Array) -> Array:
-        """``F_s`` applied over the instance axis 1 of `values` (..., n_t + n_c, m), as drawn."""
+        """``F_s`` applied over the instance axis 2 of `values` (n, d, n_t + n_c), component-major
+        (a row per draw and component, the configurations along it): ``(L z_t, -(B z_t + L_cc z_c))``.
+
+        ``L`` is lower triangular (a Cholesky factor): its product is a triangular one (half the
+        operations of a general product; the same sums in another order, equal to rounding)."""
+        n, d, n_all = values.shape
         n_t = self.tt.shape[0]
-        head, tail = values[:, :n_t], values[:, n_t:]
-        e_t = np.einsum("ts,nsm->ntm", self.tt, head, optimize=True)
-        e_c = np.einsum("ct,ntm->ncm", self.ct, head, optimize=True)
-        if self.cc.ndim == 2:
-            e_c = e_c + np.einsum("cs,nsm->ncm", self.cc, tail, optimize=True)
+        head = np.ascontiguousarray(values[:, :, :n_t]).reshape(n * d, n_t)
+        out = np.empty((n * d, n_all))
+        if _is_lower(self.tt):
+            from scipy.linalg import blas
+
+            # (L Z^T)^T = Z L^T: Z^T is Fortran-ordered as `head` is C-ordered.
+            out[:, :n_t] = blas.dtrmm(1.0, self.tt, head.T, side=0, lower=1).T
         else:
-            e_c = e_c + self.cc[None, :, None] * tail
-        return np.asarray(np.concatenate((e_t, -e_c), axis=1), dtype=np.float64)
+            out[:, :n_t] = head @ self.tt.T
+        if n_all > n_t:
+            tail = values[:, :, n_t:].reshape(n * d, n_all - n_t)
+            e_c = head @ self.ct.T
+            e_c += tail @ self.cc.T if self.cc.ndim == 2 else tail * self.cc[None, :]
+            np.negative(e_c, out=out[:, n_t:])
+        return out.reshape(n, d, n_all)
 
     def whitened(self, sensitivities: Array, n_inst: int, d: int) -> Array:
         n_out = sensitivities.shape[0]
@@ -1250,13 +1267,24 @@ class FieldNormal:
             z = rng.standard_normal((n, n_inst, d))
         else:
             z = self.innovations[rng.integers(0, self.innovations.shape[0], size=(n, n_inst))]
+        # Component-major (n, d, n_inst): the correlation's products run along the configurations,
+        # the per-draw d x d factors below along the components; one pass each.
+        zt = np.ascontiguousarray(np.swapaxes(z, 1, 2))
+        del z
         if many:
-            values = np.empty((n, n_inst, d))
+            values = np.empty((n, d, n_inst))
             for k, part in enumerate(self._parts):
                 mask = which == k
-                values[mask] = part.instances(z[mask])
+                values[mask] = part.instances(zt[mask])
         else:
-            values = self._parts[0].instances(z)
+            values = self._parts[0].instances(zt)
+        del zt
+        # Per draw one d x d factor, diag(g) Sigma_m^(1/2) B: the scale factors g, the root of the
+        # per-pose covariance and the Wishart factor B of the local covariance (drawn in this order).
+        if many:
+            mix = np.stack([p.root for p in self._parts])[which]
+        else:
+            mix = np.broadcast_to(self._parts[0].root, (n, d, d))
         if varying:
             tau = SHAPE_TAU[rng.choice(SHAPE_TAU.size, size=n, p=np.asarray(weights, dtype=np.float64))]
             k_w = d / np.where(tau > 0.0, tau, 1.0)  # tau = 0 (W = I) is replaced below
@@ -1264,25 +1292,22 @@ class FieldNormal:
             chi2 = rng.chisquare(k_w[:, None] - np.arange(d))
             factor[:, np.arange(d), np.arange(d)] = np.sqrt(chi2)
             factor = np.where((tau > 0.0)[:, None, None], factor / np.sqrt(k_w)[:, None, None], np.eye(d))
-            values = np.einsum("nij,nsj->nsi", factor, values, optimize=True)
+            mix = mix @ factor
         if many:
-            for k, part in enumerate(self._parts):
-                mask = which == k
-                values[mask] = values[mask] @ part.root.T
             dofs = np.stack([np.full(d, _T_DOF_MAX) if p.dof is None else p.dof for p in self._parts])[which]
             if any(p.dof is not None for p in self._parts):
                 finite = dofs < _T_DOF_MAX
                 dof = np.where(finite, dofs, 3.0)
-                values = values * np.where(finite, np.sqrt(dof / self._chi2(rng, dof)), 1.0)[:, None, :]
+                mix = mix * np.where(finite, np.sqrt(dof / self._chi2(rng, dof)), 1.0)[:, :, None]
         else:
             part = self._parts[0]
-            values = values @ part.root.T
             if part.dof is not None:
                 finite = part.dof < _T_DOF_MAX
                 dof = np.where(finite, part.dof, 3.0)
                 factor_g = np.where(finite, np.sqrt(dof / self._chi2(rng, np.broadcast_to(dof, (n, d)))), 1.0)
-                values = values * factor_g[:, None, :]
-        return np.asarray(values.reshape(n, self.size), dtype=np.float64)
+                mix = mix * factor_g[:, :, None]
+        values = mix @ values  # (n, d, d) @ (n, d, n_inst)
+        return np.asarray(np.swapaxes(values, 1, 2).reshape(n, self.size), dtype=np.float64)
 
     def _chi2(self, rng: np.random.Generator, dof: Array) -> Array:
         """Chi-square variates of degrees of freedom `dof` (n, d), the components of a row
