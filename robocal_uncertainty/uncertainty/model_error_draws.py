@@ -531,8 +531,14 @@ def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tupl
     grid = [(float(c), float(ell)) for ell in HYPER_LENGTHS for c in HYPER_FRACTIONS]
     log_post = np.empty(len(grid))
     log_scales = np.empty(len(grid))
+    # The contrast matrix is linear in c: (1 - c) G (I (x) S) G^T + c G (R_l (x) S) G^T, so one
+    # product per length (not per grid point); the same matrices to rounding.
+    independent = g_mat @ system.unit_covariance(0.0, 1.0) @ g_mat.T
+    correlated: dict[float, Array] = {}
     for g, (c, ell) in enumerate(grid):
-        lam, vecs = np.linalg.eigh(g_mat @ system.unit_covariance(c, ell) @ g_mat.T)
+        if ell not in correlated:
+            correlated[ell] = g_mat @ (system.unit_covariance(1.0, ell)) @ g_mat.T
+        lam, vecs = np.linalg.eigh((1.0 - c) * independent + c * correlated[ell])
         lam = np.clip(lam, 0.0, None)
         u2 = (vecs.T @ y) ** 2
 
@@ -621,14 +627,19 @@ class _FieldSystem:
         # r^T Q (Q^T V Q)^-1 Q^T r = r^T (V^-1 - V^-1 U (U^T V^-1 U)^-1 U^T V^-1) r.
         d, fit, r = self.dimension, self.fit, self.residuals
         s = float(np.exp(log_s))
-        cov = self.noise + s * (1.0 - c) * self.white
+        # In place, the operations (and roundings) of noise + s (1 - c) white + s c R (x) 1 1^T S.
+        cov = self.white * (s * (1.0 - c))
+        cov += self.noise
         if c > 0.0:
             rho = kernel_correlation(self.distance, float(np.exp(log_l)))
-            cov = cov + s * c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * self.kron_ones
+            correlated = np.repeat(np.repeat(rho, d, axis=0), d, axis=1)
+            correlated *= s * c
+            correlated *= self.kron_ones
+            cov += correlated
         try:
-            chol = linalg.cholesky(cov, lower=True)
-            vi_u = linalg.cho_solve((chol, True), fit)
-            vi_r = linalg.cho_solve((chol, True), r)
+            chol = linalg.cholesky(cov, lower=True, overwrite_a=True)
+            vi_u = linalg.cho_solve((chol, True), fit, check_finite=False)
+            vi_r = linalg.cho_solve((chol, True), r, check_finite=False)
             chol_u = linalg.cholesky(fit.T @ vi_u, lower=True)
         except (linalg.LinAlgError, ValueError):
             return float("inf")
