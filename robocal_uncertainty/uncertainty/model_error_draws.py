@@ -1117,29 +1117,30 @@ class _Correlation:
         bottom = np.hstack((-(b @ l_tt.T), b @ b.T + cc))
         return np.asarray(np.vstack((top, bottom)), dtype=np.float64)
 
-    def instances(self, values: Array) -> Array:
-        """``F_s`` applied over the instance axis 2 of `values` (n, d, n_t + n_c), component-major
-        (a row per draw and component, the configurations along it): ``(L z_t, -(B z_t + L_cc z_c))``.
+    def instances(self, z: Array) -> tuple[Array, Array]:
+        """``F_s`` applied to standard vectors `z` (n, n_t + n_c, d): ``L z_t`` and ``-(B z_t + L_cc
+        z_c)``, component-major (shapes (n, d, n_t) and (n, d, n_c): the configurations along the
+        last axis, where the per-draw d x d factors of :meth:`FieldNormal.sample` act on the
+        middle one).
 
         ``L`` is lower triangular (a Cholesky factor): its product is a triangular one (half the
         operations of a general product; the same sums in another order, equal to rounding)."""
-        n, d, n_all = values.shape
+        n, n_all, d = z.shape
         n_t = self.tt.shape[0]
-        head = np.ascontiguousarray(values[:, :, :n_t]).reshape(n * d, n_t)
-        out = np.empty((n * d, n_all))
+        head = np.ascontiguousarray(np.swapaxes(z[:, :n_t], 1, 2)).reshape(n * d, n_t)
+        e_c = head @ self.ct.T
+        if n_all > n_t:
+            tail = np.swapaxes(z[:, n_t:], 1, 2).reshape(n * d, n_all - n_t)
+            e_c += tail @ self.cc.T if self.cc.ndim == 2 else tail * self.cc[None, :]
+        np.negative(e_c, out=e_c)
         if _is_lower(self.tt):
             from scipy.linalg import blas
 
-            # (L Z^T)^T = Z L^T: Z^T is Fortran-ordered as `head` is C-ordered.
-            out[:, :n_t] = blas.dtrmm(1.0, self.tt, head.T, side=0, lower=1).T
+            # (L Z^T)^T = Z L^T, Z^T Fortran-ordered as `head` is C-ordered (overwritten in place).
+            e_t = blas.dtrmm(1.0, self.tt, head.T, side=0, lower=1, overwrite_b=1).T
         else:
-            out[:, :n_t] = head @ self.tt.T
-        if n_all > n_t:
-            tail = values[:, :, n_t:].reshape(n * d, n_all - n_t)
-            e_c = head @ self.ct.T
-            e_c += tail @ self.cc.T if self.cc.ndim == 2 else tail * self.cc[None, :]
-            np.negative(e_c, out=out[:, n_t:])
-        return out.reshape(n, d, n_all)
+            e_t = head @ self.tt.T
+        return e_t.reshape(n, d, n_t), e_c.reshape(n, d, n_all - n_t)
 
     def whitened(self, sensitivities: Array, n_inst: int, d: int) -> Array:
         n_out = sensitivities.shape[0]
@@ -1278,18 +1279,6 @@ class FieldNormal:
             z = rng.standard_normal((n, n_inst, d))
         else:
             z = self.innovations[rng.integers(0, self.innovations.shape[0], size=(n, n_inst))]
-        # Component-major (n, d, n_inst): the correlation's products run along the configurations,
-        # the per-draw d x d factors below along the components; one pass each.
-        zt = np.ascontiguousarray(np.swapaxes(z, 1, 2))
-        del z
-        if many:
-            values = np.empty((n, d, n_inst))
-            for k, part in enumerate(self._parts):
-                mask = which == k
-                values[mask] = part.instances(zt[mask])
-        else:
-            values = self._parts[0].instances(zt)
-        del zt
         # Per draw one d x d factor, diag(g) Sigma_m^(1/2) B: the scale factors g, the root of the
         # per-pose covariance and the Wishart factor B of the local covariance (drawn in this order).
         if many:
@@ -1317,8 +1306,23 @@ class FieldNormal:
                 dof = np.where(finite, part.dof, 3.0)
                 factor_g = np.where(finite, np.sqrt(dof / self._chi2(rng, np.broadcast_to(dof, (n, d)))), 1.0)
                 mix = mix * factor_g[:, :, None]
-        values = mix @ values  # (n, d, d) @ (n, d, n_inst)
-        return np.asarray(np.swapaxes(values, 1, 2).reshape(n, self.size), dtype=np.float64)
+        # The correlation's products run along the configurations (component-major), the d x d
+        # factors along the components; written back pose-major.
+        out = np.empty((n, n_inst, d))
+        if many:
+            for k, part in enumerate(self._parts):
+                mask = which == k
+                e_t, e_c = part.instances(z[mask])
+                n_t = e_t.shape[2]
+                out[mask, :n_t] = np.swapaxes(mix[mask] @ e_t, 1, 2)
+                out[mask, n_t:] = np.swapaxes(mix[mask] @ e_c, 1, 2)
+        else:
+            e_t, e_c = self._parts[0].instances(z)
+            del z
+            n_t = e_t.shape[2]
+            out[:, :n_t] = np.swapaxes(mix @ e_t, 1, 2)
+            out[:, n_t:] = np.swapaxes(mix @ e_c, 1, 2)
+        return out.reshape(n, self.size)
 
     def _chi2(self, rng: np.random.Generator, dof: Array) -> Array:
         """Chi-square variates of degrees of freedom `dof` (n, d), the components of a row

@@ -211,13 +211,31 @@ def _model_error_field(
     field_estimate = _field_estimate(settings, calibration, campaign, noise, adequacy.residual_covariance, distances)
     if not field_estimate.identified:
         return field_estimate, None
-    field_draw = FieldNormal(
-        campaign.joint_positions,
+    return field_estimate, _field_draw(field_estimate, campaign.joint_positions, test_q, calibration)
+
+
+_DRAW_CACHE: list[tuple[FieldEstimate, Array, Array, IdentificationResult, FieldNormal]] = []
+
+
+def _field_draw(
+    estimate: FieldEstimate, joint_positions: Array, test_q: Array, calibration: IdentificationResult
+) -> FieldNormal:
+    """The draws of `estimate` (their factors cost a few factorisations of the calibration poses'
+    correlation): the same object for the same estimate, poses and test configurations (the
+    budget's and the equations sweep's runs; it holds no state between draws)."""
+    q = np.asarray(joint_positions, dtype=np.float64)
+    for est, q_c, test_c, cal, draw in _DRAW_CACHE:
+        if est is estimate and cal is calibration and np.array_equal(q_c, q) and np.array_equal(test_c, test_q):
+            return draw
+    draw = FieldNormal(
+        q,
         test_q,
-        field_estimate,
+        estimate,
         innovations=standardised_innovations(np.asarray(calibration.residuals, dtype=np.float64)),
     )
-    return field_estimate, field_draw
+    _DRAW_CACHE.insert(0, (estimate, q.copy(), np.array(test_q, dtype=np.float64), calibration, draw))
+    del _DRAW_CACHE[_FIELD_CACHE_SIZE:]
+    return draw
 
 
 @dataclass(frozen=True, eq=False)
