@@ -511,6 +511,72 @@ def _scale_correlation(white: Array) -> float:
     return float(np.clip(mean_off, 0.0, 0.95))
 
 
+@dataclass(frozen=True, eq=False)
+class _ScaleProfile:
+    """``f(a) = (sum log(1 + s lambda) + sum u^2 / (1 + s lambda)) / 2`` (``s = e^a``, ``lambda``
+    and ``u = W^T y`` from ``M = W diag(lambda) W^T``) without the eigenvectors ``W``.
+
+    A reflection ``H`` takes ``y`` to ``|y| e_1``; LAPACK's tridiagonal reduction of ``H M H``
+    (lower form) keeps ``e_1`` fixed, so with ``T`` its tridiagonal matrix ``sum u^2 g(lambda) =
+    |y|^2 [g(T)]_11``: ``f`` and its second derivative in ``a`` cost a tridiagonal solve or two
+    and a sum over the eigenvalues (``T``'s, no vectors), ``O(m)`` per value of ``s``, after one
+    reduction (the reduction is the first part, and a third of the cost, of a full symmetric
+    eigendecomposition)."""
+
+    lam: Array
+    diag: Array
+    off: Array
+    norm2: float
+
+    @classmethod
+    def of(cls, matrix: Array, y: Array) -> _ScaleProfile:
+        from scipy.linalg import eigvalsh_tridiagonal, lapack
+
+        norm = float(np.linalg.norm(y))
+        sym = matrix
+        if norm > 0.0:
+            v = np.array(y, dtype=np.float64)
+            v[0] += np.copysign(norm, v[0])
+            v /= np.linalg.norm(v)
+            w = matrix @ v
+            # H M H with H = I - 2 v v^T.
+            sym = matrix - 2.0 * np.outer(v, w) - 2.0 * np.outer(w, v) + 4.0 * float(v @ w) * np.outer(v, v)
+        _, diag, off, _, info = lapack.dsytrd(sym, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError("tridiagonal reduction failed")
+        lam = np.clip(eigvalsh_tridiagonal(diag, off), 0.0, None)
+        return cls(np.asarray(lam, dtype=np.float64), np.asarray(diag), np.asarray(off), norm * norm)
+
+    def _solve(self, s: float, rhs: Array) -> Array:
+        """``(I + s T)^-1 rhs`` (symmetric positive definite tridiagonal)."""
+        from scipy.linalg import solveh_banded
+
+        band = np.empty((2, self.diag.size))
+        band[0, 0] = 0.0
+        band[0, 1:] = s * self.off
+        band[1] = 1.0 + s * self.diag
+        return np.asarray(solveh_banded(band, rhs, check_finite=False), dtype=np.float64)
+
+    def half_nll(self, a: float) -> float:
+        s = float(np.exp(a))
+        first = np.zeros(self.diag.size)
+        first[0] = 1.0
+        quad = self.norm2 * float(self._solve(s, first)[0])
+        return 0.5 * float(np.sum(np.log(1.0 + s * self.lam)) + quad)
+
+    def curvature(self, a: float) -> float:
+        """``f''(a)``: ``(sum t (1 - t) + sum u^2 h t (2 t - 1)) / 2`` with ``h = 1 / (1 + s lambda)``,
+        ``t = 1 - h``; the second sum is ``y^T (h - 3 h^2 + 2 h^3) y`` from two solves."""
+        s = float(np.exp(a))
+        t = s * self.lam / (1.0 + s * self.lam)
+        first = np.zeros(self.diag.size)
+        first[0] = np.sqrt(self.norm2)
+        v1 = self._solve(s, first)
+        v2 = self._solve(s, v1)
+        quad = float(first @ v1) - 3.0 * float(v1 @ v1) + 2.0 * float(v1 @ v2)
+        return 0.5 * float(np.sum(t * (1.0 - t)) + quad)
+
+
 def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tuple[float, float]], Array, Array]:
     """The grid ``(c, l)`` of :func:`_hyper_posterior`, its posterior probabilities (the restricted
     likelihood with ``log s`` integrated out by Laplace's method, uniform priors in ``c`` and
@@ -520,7 +586,8 @@ def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tupl
     # In the contrasts Q^T r (Q an orthonormal basis orthogonal to the fit) the restricted
     # likelihood is that of N(0, A + s B_cl), A = Q^T N Q, B_cl = Q^T K_cl Q. With A = L L^T and
     # L^-1 B_cl L^-T = W diag(lambda) W^T: 2 nll = log|A| + sum log(1 + s lambda) + sum u^2 / (1 +
-    # s lambda), u = W^T L^-1 Q^T r; one eigendecomposition per (c, l), any s at O(m).
+    # s lambda), u = W^T L^-1 Q^T r; one tridiagonal reduction per (c, l), any s at O(m)
+    # (:class:`_ScaleProfile`).
     del log_s  # the profile maximum is found per point on the eigenvalues
     fit, r = system.fit, system.residuals
     basis = np.linalg.qr(fit, mode="complete")[0][:, fit.shape[1] :]
@@ -538,20 +605,13 @@ def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tupl
     for g, (c, ell) in enumerate(grid):
         if ell not in correlated:
             correlated[ell] = g_mat @ (system.unit_covariance(1.0, ell)) @ g_mat.T
-        lam, vecs = np.linalg.eigh((1.0 - c) * independent + c * correlated[ell])
-        lam = np.clip(lam, 0.0, None)
-        u2 = (vecs.T @ y) ** 2
-
-        def half_nll(a: float, lam: Array = lam, u2: Array = u2) -> float:
-            den = 1.0 + np.exp(a) * lam
-            return 0.5 * float(np.sum(np.log(den)) + np.sum(u2 / den))
-
-        hi = float(np.log(1e8 / max(float(lam.max()), 1e-300)))
-        res = optimize.minimize_scalar(half_nll, bounds=(hi - 30.0, hi), method="bounded", options={"xatol": 1e-3})
+        profile = _ScaleProfile.of((1.0 - c) * independent + c * correlated[ell], y)
+        hi = float(np.log(1e8 / max(float(profile.lam.max()), 1e-300)))
+        res = optimize.minimize_scalar(
+            profile.half_nll, bounds=(hi - 30.0, hi), method="bounded", options={"xatol": 1e-3}
+        )
         a0 = float(res.x)
-        # d^2 nll / d a^2 at a0, analytically: t = s lambda / (1 + s lambda).
-        t = np.exp(a0) * lam / (1.0 + np.exp(a0) * lam)
-        curvature = 0.5 * float(np.sum(t * (1.0 - t)) + np.sum(u2 / (1.0 + np.exp(a0) * lam) * t * (2.0 * t - 1.0)))
+        curvature = profile.curvature(a0)
         log_scales[g] = a0
         ok = bool(np.isfinite(res.fun) and np.isfinite(curvature))
         log_post[g] = -float(res.fun) - 0.5 * np.log(max(curvature, 1e-12)) if ok else -np.inf

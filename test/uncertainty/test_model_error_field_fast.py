@@ -230,3 +230,23 @@ def test_rescaled_field_with_its_own_hyperparameters_is_the_estimate() -> None:
     for h_again, h in zip(again.hypotheses, estimate.hypotheses):
         np.testing.assert_allclose(h_again.per_pose_covariance, h.per_pose_covariance, rtol=1e-9)
         np.testing.assert_allclose(h_again.scale_dof, h.scale_dof, rtol=1e-9)
+
+
+def test_scale_profile_equals_the_eigendecomposition() -> None:
+    rng = np.random.default_rng(5)
+    m = 40
+    root = rng.normal(size=(m, m)) * np.linspace(0.01, 1.0, m)
+    matrix = root @ root.T
+    y = rng.normal(size=m) * 3.0
+    lam, vecs = np.linalg.eigh(matrix)
+    u2 = (vecs.T @ y) ** 2
+    profile = med._ScaleProfile.of(matrix, y)
+    np.testing.assert_allclose(np.sort(profile.lam), np.clip(lam, 0.0, None), rtol=1e-10, atol=1e-13 * lam.max())
+    for a in (-6.0, -1.0, 0.0, 2.5, 7.0):
+        s = np.exp(a)
+        den = 1.0 + s * lam
+        t = s * lam / den
+        half = 0.5 * (np.sum(np.log(den)) + np.sum(u2 / den))
+        curv = 0.5 * (np.sum(t * (1.0 - t)) + np.sum(u2 / den * t * (2.0 * t - 1.0)))
+        assert abs(profile.half_nll(a) - half) < 1e-12 * abs(half)
+        assert abs(profile.curvature(a) - curv) < 1e-10 * abs(curv)
