@@ -435,7 +435,7 @@ def rescaled_field(
     seed: int = 0,
 ) -> FieldEstimate:
     """The field of `calibration` with the correlation and shape hyperparameters of `held` (another
-    calibration's :func:`estimate_field` of the same robot and poses), its scale re-estimated.
+    calibration's :func:`estimate_field` of the same robot and poses), its per-pose covariance re-estimated.
 
     For a sensitivity sweep (a calibration re-identified at another lambda): the correlation
     ``(c, l)``, its posterior's hypotheses and weights, the shape's variation over the workspace and

@@ -120,7 +120,7 @@ def sweep_lambda(
     lambda_=value)`` and that calibration is passed to ``evaluate_uncertainty``. The
     ``lambda`` source is dropped from `settings` (lambda is the swept, fixed value). A
     model-error field (``model_error="field"``) keeps `calibration`'s correlation and shape at
-    every point, its scale re-estimated from the point's residuals
+    every point, its per-pose covariance re-estimated from the point's residuals
     (:func:`~robocal_uncertainty.uncertainty.model_error_draws.rescaled_field`): the curve shows
     the effect of lambda, not a re-estimate of the field's hyperparameters (in full per point
     when `calibration` is None).
@@ -168,7 +168,7 @@ def sweep_lambda(
     fixed = dataclasses.replace(settings, sources=sources)
     out = np.empty((lams.size, 3))
     # A model-error field keeps the reference calibration's correlation and shape at every point,
-    # its scale re-estimated from that point's residuals (see held_field_correlation).
+    # its per-pose covariance re-estimated from that point's residuals (see held_field_correlation).
     with held_field_correlation(calibration):
         for i, lam in enumerate(lams):
             if calibration is not None and float(lam) == calibration.lambda_:

@@ -15,6 +15,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy import linalg
 
 from robocal_uncertainty.core.model_error_field import chordal_distance, kernel_correlation
@@ -250,3 +251,49 @@ def test_scale_profile_equals_the_eigendecomposition() -> None:
         curv = 0.5 * (np.sum(t * (1.0 - t)) + np.sum(u2 / den * t * (2.0 * t - 1.0)))
         assert abs(profile.half_nll(a) - half) < 1e-12 * abs(half)
         assert abs(profile.curvature(a) - curv) < 1e-10 * abs(curv)
+
+
+def test_a_calibration_estimates_its_field_once_and_the_lambda_sweep_holds_its_correlation(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from robocal_uncertainty.core.identification import identify
+    from robocal_uncertainty.core.robot_formats.robot_yaml import load_robot_model, resolve_robot_config
+    from robocal_uncertainty.importers.tracker_csv import read_tracker_csv
+    from robocal_uncertainty.uncertainty import UncertaintySettings, default_sources
+    from robocal_uncertainty.uncertainty.calibration import preparation
+    from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
+    from robocal_uncertainty.uncertainty.sweeps import sweep_lambda
+
+    model = load_robot_model(resolve_robot_config("ur10"))
+    campaign = read_tracker_csv(SERIES_D).subset(np.arange(3, 632, 12))
+    calibration = identify(model, campaign)
+    settings = UncertaintySettings(sources=default_sources(False), model_error="field")
+    full, rescaled = [], []
+    real_full, real_rescaled = preparation.estimate_field, preparation.rescaled_field
+
+    def count_full(*args, **kwargs):  # type: ignore[no-untyped-def]
+        full.append(real_full(*args, **kwargs))
+        return full[-1]
+
+    def count_rescaled(held, *args, **kwargs):  # type: ignore[no-untyped-def]
+        rescaled.append((held, real_rescaled(held, *args, **kwargs)))
+        return rescaled[-1][1]
+
+    monkeypatch.setattr(preparation, "estimate_field", count_full)
+    monkeypatch.setattr(preparation, "rescaled_field", count_rescaled)
+    q = campaign.joint_positions[0]
+    first = evaluate_uncertainty(model, campaign, q, trials=50, uncertainty=settings, calibration=calibration)
+    again = evaluate_uncertainty(model, campaign, q, trials=50, uncertainty=settings, calibration=calibration)
+    assert len(full) == 1  # the same calibration: the same estimate, the same statement
+    np.testing.assert_array_equal(first.samples, again.samples)
+    lam = calibration.lambda_
+    sweep_lambda(model, campaign, calibration, q, [lam, 3.0 * lam], trials=30, settings=settings)
+    assert len(full) == 1 and len(rescaled) == 1
+    held, other = rescaled[0]
+    assert held is full[0]
+    assert (other.correlated_fraction, other.length_scale) == (held.correlated_fraction, held.length_scale)
+    assert other.hypotheses is not None and held.hypotheses is not None
+    same = [(h.weight, h.length_scale) for h in held.hypotheses]
+    assert [(h.weight, h.length_scale) for h in other.hypotheses] == same
+    # Its own residuals' scale and shape ([m^2]: no absolute tolerance).
+    assert not np.allclose(other.per_pose_covariance, held.per_pose_covariance, rtol=1e-3, atol=0.0)

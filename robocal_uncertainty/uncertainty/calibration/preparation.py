@@ -318,7 +318,7 @@ def _field_estimate(
     distances: Array,
 ) -> FieldEstimate:
     """The field of `calibration`: in full, or under :func:`held_field_correlation` with the
-    reference calibration's correlation and shape held (its scale re-estimated)."""
+    reference calibration's correlation and shape held (its per-pose covariance re-estimated)."""
     q = np.asarray(campaign.joint_positions, dtype=np.float64)
     noise = np.asarray(noise, dtype=np.float64)
     shape = np.asarray(shape, dtype=np.float64)
