@@ -202,6 +202,9 @@ def test_draws_equal_the_straightforward_formulation() -> None:
         dataclasses.replace(base, hypotheses=hyps[:1], shape_weights=np.eye(SHAPE_TAU.size)[0]),
     ):
         fn = FieldNormal(qt, qc, estimate, innovations=innovations)
+        for part, h in zip(fn._parts, estimate.hypotheses or ()):
+            r_ct = h.correlated_fraction * kernel_correlation(chordal_distance(qc, qt), h.length_scale)
+            np.testing.assert_allclose(part.ct, np.linalg.lstsq(part.tt, r_ct.T, rcond=None)[0].T, atol=1e-13)
         fast = fn.sample(np.random.default_rng(11), 500)
         slow = _straightforward_sample(fn, np.random.default_rng(11), 500)
         np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12 * np.abs(slow).max())
