@@ -101,7 +101,9 @@ def _evaluate(code: Path, mcap: Path, trials: int, field: bool, work: Path) -> f
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--baseline", type=Path, help="another checkout of the package to compare with (e.g. main's)")
-    ap.add_argument("--trials", type=int, nargs="+", default=[20_000])
+    ap.add_argument(
+        "--trials", type=int, nargs="*", default=[20_000], help="evaluate trial counts (none: only the pieces)"
+    )
     ap.add_argument("--skip-pieces", action="store_true", help="time only evaluate")
     ap.add_argument("--repeats", type=int, default=3, help="runs of the pieces per checkout (the fastest is printed)")
     args = ap.parse_args()
