@@ -67,6 +67,7 @@ components' scale factors share the common local scale the leave-one-out errors 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -88,6 +89,7 @@ __all__ = [
     "FieldNormal",
     "central_hessian",
     "estimate_field",
+    "rescaled_field",
     "standardised_innovations",
 ]
 
@@ -423,6 +425,68 @@ def estimate_field(
     )
 
 
+def rescaled_field(
+    held: FieldEstimate,
+    calibration: IdentificationResult,
+    joint_positions: Array,
+    noise: Array,
+    shape: Array,
+    *,
+    max_equations: int = FIELD_MAX_EQUATIONS,
+    seed: int = 0,
+) -> FieldEstimate:
+    """The field of `calibration` with the correlation and shape hyperparameters of `held` (another
+    calibration's :func:`estimate_field` of the same robot and poses), its per-pose covariance re-estimated.
+
+    For a sensitivity sweep (a calibration re-identified at another lambda): the correlation
+    ``(c, l)``, its posterior's hypotheses and weights, the shape's variation over the workspace and
+    the components' scale correlation are what the robot's model error is, which a setting of the
+    fit does not change; the per-component scale and its degrees of freedom are what this
+    calibration's leave-one-out prediction errors show (the fit's regularisation changes what it
+    absorbs), as :func:`estimate_field` takes them, per hypothesis. The restricted likelihood and
+    its posterior grid are not evaluated again (most of the cost of an estimate).
+
+    Parameters
+    ----------
+    held : FieldEstimate
+        With leave-one-out scales (:attr:`FieldEstimate.scale_dof` not None).
+    calibration, joint_positions, noise, shape, max_equations, seed
+        As for :func:`estimate_field`.
+    """
+    system = _field_system(calibration, joint_positions, noise, shape, max_equations=max_equations, seed=seed)
+    r, fit, n_cov, d = system.residuals, system.fit, system.noise, system.dimension
+    _, lo_s, hi_s = _scale_start_and_bounds(system)
+    bounds = (float(np.exp(lo_s)), float(np.exp(hi_s)))
+    held_scale = float(
+        np.trace(
+            held.likelihood_per_pose_covariance
+            if held.likelihood_per_pose_covariance is not None
+            else held.per_pose_covariance
+        )
+    ) / max(float(np.trace(system.shape)), np.finfo(float).tiny)
+    local_variance = 0.0 if held.shape_weights is None else 2.0 * float(np.asarray(held.shape_weights) @ SHAPE_TAU) / d
+
+    def scaled(c: float, ell: float) -> tuple[Array, Array]:
+        unit = system.unit_covariance(c, ell)
+        scale = _leave_one_out_scale(r, fit, n_cov, unit, d, bounds)
+        factors = _leave_one_out_components(r, fit, n_cov, unit, d, held_scale if scale is None else scale)
+        dof = _leave_one_out_dof(r, fit, n_cov, unit, d, factors, local_variance=local_variance)[0]
+        return system.shape * np.outer(factors, factors), np.asarray(dof, dtype=np.float64)
+
+    per_pose, scale_dof = scaled(float(held.correlated_fraction), float(held.length_scale))
+    hypotheses = None
+    if held.hypotheses is not None:
+        hypotheses = tuple(
+            FieldHypothesis(
+                h.weight, h.correlated_fraction, h.length_scale, *scaled(h.correlated_fraction, h.length_scale)
+            )
+            for h in held.hypotheses
+        )
+    return dataclasses.replace(
+        held, per_pose_covariance=per_pose, scale_dof=scale_dof, hypotheses=hypotheses, poses_used=int(system.poses)
+    )
+
+
 def _scale_correlation(white: Array) -> float:
     """Correlation of the components' scale estimates: the mean correlation between components
     of the squared whitened leave-one-out prediction errors `white` (n, d), clipped to [0, 0.95].
@@ -448,6 +512,72 @@ def _scale_correlation(white: Array) -> float:
     return float(np.clip(mean_off, 0.0, 0.95))
 
 
+@dataclass(frozen=True, eq=False)
+class _ScaleProfile:
+    """``f(a) = (sum log(1 + s lambda) + sum u^2 / (1 + s lambda)) / 2`` (``s = e^a``, ``lambda``
+    and ``u = W^T y`` from ``M = W diag(lambda) W^T``) without the eigenvectors ``W``.
+
+    A reflection ``H`` takes ``y`` to ``|y| e_1``; LAPACK's tridiagonal reduction of ``H M H``
+    (lower form) keeps ``e_1`` fixed, so with ``T`` its tridiagonal matrix ``sum u^2 g(lambda) =
+    |y|^2 [g(T)]_11``: ``f`` and its second derivative in ``a`` cost a tridiagonal solve or two
+    and a sum over the eigenvalues (``T``'s, no vectors), ``O(m)`` per value of ``s``, after one
+    reduction (the reduction is the first part, and a third of the cost, of a full symmetric
+    eigendecomposition)."""
+
+    lam: Array
+    diag: Array
+    off: Array
+    norm2: float
+
+    @classmethod
+    def of(cls, matrix: Array, y: Array) -> _ScaleProfile:
+        from scipy.linalg import eigvalsh_tridiagonal, lapack
+
+        norm = float(np.linalg.norm(y))
+        sym = matrix
+        if norm > 0.0:
+            v = np.array(y, dtype=np.float64)
+            v[0] += np.copysign(norm, v[0])
+            v /= np.linalg.norm(v)
+            w = matrix @ v
+            # H M H with H = I - 2 v v^T.
+            sym = matrix - 2.0 * np.outer(v, w) - 2.0 * np.outer(w, v) + 4.0 * float(v @ w) * np.outer(v, v)
+        _, diag, off, _, info = lapack.dsytrd(sym, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError("tridiagonal reduction failed")
+        lam = np.clip(eigvalsh_tridiagonal(diag, off), 0.0, None)
+        return cls(np.asarray(lam, dtype=np.float64), np.asarray(diag), np.asarray(off), norm * norm)
+
+    def _solve(self, s: float, rhs: Array) -> Array:
+        """``(I + s T)^-1 rhs`` (symmetric positive definite tridiagonal)."""
+        from scipy.linalg import solveh_banded
+
+        band = np.empty((2, self.diag.size))
+        band[0, 0] = 0.0
+        band[0, 1:] = s * self.off
+        band[1] = 1.0 + s * self.diag
+        return np.asarray(solveh_banded(band, rhs, check_finite=False), dtype=np.float64)
+
+    def half_nll(self, a: float) -> float:
+        s = float(np.exp(a))
+        first = np.zeros(self.diag.size)
+        first[0] = 1.0
+        quad = self.norm2 * float(self._solve(s, first)[0])
+        return 0.5 * float(np.sum(np.log(1.0 + s * self.lam)) + quad)
+
+    def curvature(self, a: float) -> float:
+        """``f''(a)``: ``(sum t (1 - t) + sum u^2 h t (2 t - 1)) / 2`` with ``h = 1 / (1 + s lambda)``,
+        ``t = 1 - h``; the second sum is ``y^T (h - 3 h^2 + 2 h^3) y`` from two solves."""
+        s = float(np.exp(a))
+        t = s * self.lam / (1.0 + s * self.lam)
+        first = np.zeros(self.diag.size)
+        first[0] = np.sqrt(self.norm2)
+        v1 = self._solve(s, first)
+        v2 = self._solve(s, v1)
+        quad = float(first @ v1) - 3.0 * float(v1 @ v1) + 2.0 * float(v1 @ v2)
+        return 0.5 * float(np.sum(t * (1.0 - t)) + quad)
+
+
 def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tuple[float, float]], Array, Array]:
     """The grid ``(c, l)`` of :func:`_hyper_posterior`, its posterior probabilities (the restricted
     likelihood with ``log s`` integrated out by Laplace's method, uniform priors in ``c`` and
@@ -457,7 +587,8 @@ def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tupl
     # In the contrasts Q^T r (Q an orthonormal basis orthogonal to the fit) the restricted
     # likelihood is that of N(0, A + s B_cl), A = Q^T N Q, B_cl = Q^T K_cl Q. With A = L L^T and
     # L^-1 B_cl L^-T = W diag(lambda) W^T: 2 nll = log|A| + sum log(1 + s lambda) + sum u^2 / (1 +
-    # s lambda), u = W^T L^-1 Q^T r; one eigendecomposition per (c, l), any s at O(m).
+    # s lambda), u = W^T L^-1 Q^T r; one tridiagonal reduction per (c, l), any s at O(m)
+    # (:class:`_ScaleProfile`).
     del log_s  # the profile maximum is found per point on the eigenvalues
     fit, r = system.fit, system.residuals
     basis = np.linalg.qr(fit, mode="complete")[0][:, fit.shape[1] :]
@@ -468,21 +599,20 @@ def _hyper_grid_posterior(system: _FieldSystem, log_s: float) -> tuple[list[tupl
     grid = [(float(c), float(ell)) for ell in HYPER_LENGTHS for c in HYPER_FRACTIONS]
     log_post = np.empty(len(grid))
     log_scales = np.empty(len(grid))
+    # The contrast matrix is linear in c: (1 - c) G (I (x) S) G^T + c G (R_l (x) S) G^T, so one
+    # product per length (not per grid point); the same matrices to rounding.
+    independent = g_mat @ system.unit_covariance(0.0, 1.0) @ g_mat.T
+    correlated: dict[float, Array] = {}
     for g, (c, ell) in enumerate(grid):
-        lam, vecs = np.linalg.eigh(g_mat @ system.unit_covariance(c, ell) @ g_mat.T)
-        lam = np.clip(lam, 0.0, None)
-        u2 = (vecs.T @ y) ** 2
-
-        def half_nll(a: float, lam: Array = lam, u2: Array = u2) -> float:
-            den = 1.0 + np.exp(a) * lam
-            return 0.5 * float(np.sum(np.log(den)) + np.sum(u2 / den))
-
-        hi = float(np.log(1e8 / max(float(lam.max()), 1e-300)))
-        res = optimize.minimize_scalar(half_nll, bounds=(hi - 30.0, hi), method="bounded", options={"xatol": 1e-3})
+        if ell not in correlated:
+            correlated[ell] = g_mat @ (system.unit_covariance(1.0, ell)) @ g_mat.T
+        profile = _ScaleProfile.of((1.0 - c) * independent + c * correlated[ell], y)
+        hi = float(np.log(1e8 / max(float(profile.lam.max()), 1e-300)))
+        res = optimize.minimize_scalar(
+            profile.half_nll, bounds=(hi - 30.0, hi), method="bounded", options={"xatol": 1e-3}
+        )
         a0 = float(res.x)
-        # d^2 nll / d a^2 at a0, analytically: t = s lambda / (1 + s lambda).
-        t = np.exp(a0) * lam / (1.0 + np.exp(a0) * lam)
-        curvature = 0.5 * float(np.sum(t * (1.0 - t)) + np.sum(u2 / (1.0 + np.exp(a0) * lam) * t * (2.0 * t - 1.0)))
+        curvature = profile.curvature(a0)
         log_scales[g] = a0
         ok = bool(np.isfinite(res.fun) and np.isfinite(curvature))
         log_post[g] = -float(res.fun) - 0.5 * np.log(max(curvature, 1e-12)) if ok else -np.inf
@@ -558,14 +688,19 @@ class _FieldSystem:
         # r^T Q (Q^T V Q)^-1 Q^T r = r^T (V^-1 - V^-1 U (U^T V^-1 U)^-1 U^T V^-1) r.
         d, fit, r = self.dimension, self.fit, self.residuals
         s = float(np.exp(log_s))
-        cov = self.noise + s * (1.0 - c) * self.white
+        # In place, the operations (and roundings) of noise + s (1 - c) white + s c R (x) 1 1^T S.
+        cov = self.white * (s * (1.0 - c))
+        cov += self.noise
         if c > 0.0:
             rho = kernel_correlation(self.distance, float(np.exp(log_l)))
-            cov = cov + s * c * np.repeat(np.repeat(rho, d, axis=0), d, axis=1) * self.kron_ones
+            correlated = np.repeat(np.repeat(rho, d, axis=0), d, axis=1)
+            correlated *= s * c
+            correlated *= self.kron_ones
+            cov += correlated
         try:
-            chol = linalg.cholesky(cov, lower=True)
-            vi_u = linalg.cho_solve((chol, True), fit)
-            vi_r = linalg.cho_solve((chol, True), r)
+            chol = linalg.cholesky(cov, lower=True, overwrite_a=True)
+            vi_u = linalg.cho_solve((chol, True), fit, check_finite=False)
+            vi_r = linalg.cho_solve((chol, True), r, check_finite=False)
             chol_u = linalg.cholesky(fit.T @ vi_u, lower=True)
         except (linalg.LinAlgError, ValueError):
             return float("inf")
@@ -624,18 +759,24 @@ def _field_system(
     )
 
 
-def _reml_optimum(system: _FieldSystem) -> tuple[float, float, float, float, float, tuple[float, float]]:
-    """Maximum of the restricted likelihood: ``(nll, log s, c, log l)``, the best ``c = 0`` model's
-    ``nll``, and the bounds of ``log s`` searched."""
-    from scipy import optimize
-
-    r, nll = system.residuals, system.nll
+def _scale_start_and_bounds(system: _FieldSystem) -> tuple[float, float, float]:
+    """The restricted likelihood's starting scale and the bounds of ``log s`` it searches."""
+    r = system.residuals
     m = r.size - system.fit.shape[1]
     noise_level = float(np.trace(system.noise)) / r.size
     mean_square = float(r @ r) / max(m, 1)
     s0 = max(mean_square - noise_level, 1e-3 * max(noise_level, 1e-30))
     floor = max(noise_level, 1e-30)
-    lo_s, hi_s = np.log(1e-6 * floor), np.log(1e4 * max(mean_square, floor))
+    return s0, float(np.log(1e-6 * floor)), float(np.log(1e4 * max(mean_square, floor)))
+
+
+def _reml_optimum(system: _FieldSystem) -> tuple[float, float, float, float, float, tuple[float, float]]:
+    """Maximum of the restricted likelihood: ``(nll, log s, c, log l)``, the best ``c = 0`` model's
+    ``nll``, and the bounds of ``log s`` searched."""
+    from scipy import optimize
+
+    nll = system.nll
+    s0, lo_s, hi_s = _scale_start_and_bounds(system)
     lo_l, hi_l = np.log(FIELD_LENGTH_BOUNDS[0]), np.log(FIELD_LENGTH_BOUNDS[1])
     independent = optimize.minimize_scalar(lambda a: nll(a, 0.0, 0.0), bounds=(lo_s, hi_s), method="bounded")
     best = (float(independent.fun), float(independent.x), 0.0, float(np.log(0.5)))
@@ -671,6 +812,50 @@ def _hyper_covariance(system: _FieldSystem, log_s: float, c: float, log_l: float
     return hyper, dof
 
 
+def _leverage_inverse(fit: Array, d: int) -> Array:
+    """``(I - H_ii)^+`` per pose, shape (n, d, d): ``H = U U^T`` the hat matrix of the orthonormal
+    fit basis `fit` (n d, k), its diagonal blocks from the basis's rows (never ``H`` itself)."""
+    rows = fit.reshape(fit.shape[0] // d, d, fit.shape[1])
+    lever = np.einsum("pik,pjk->pij", rows, rows)
+    return np.asarray(np.linalg.pinv(np.eye(d)[None] - lever), dtype=np.float64)
+
+
+def _projected(matrix: Array, fit: Array) -> Array:
+    """``P X P`` for ``P = I - U U^T`` (`fit` = ``U``, orthonormal, (N, k)) at ``O(N^2 k)``:
+    ``X - U (U^T X) - (X U) U^T + U (U^T X U) U^T`` (`matrix` = ``X`` symmetric)."""
+    xu = matrix @ fit
+    inner = fit @ (fit.T @ xu)
+    out = matrix - fit @ xu.T - xu @ fit.T + inner @ fit.T
+    return np.asarray(out, dtype=np.float64)
+
+
+def _projected_blocks(matrix: Array, fit: Array, d: int, factors: Array | None = None) -> Array:
+    """The per-pose diagonal blocks of ``P D X D P`` (``P`` as in :func:`_projected`, ``D`` the
+    per-component `factors` repeated over the poses, the identity without them), shape (n, d, d),
+    at ``O(N^2 k)``: ``X_ii - U_i (X U)_i^T - (X U)_i U_i^T + U_i (U^T X U) U_i^T``."""
+    n_eq = matrix.shape[0]
+    n = n_eq // d
+    idx = np.arange(n)
+    if factors is None:
+        scaled_fit, tiled = fit, None
+    else:
+        tiled = np.tile(np.asarray(factors, dtype=np.float64), n)
+        scaled_fit = fit * tiled[:, None]
+    xu = matrix @ scaled_fit  # (N, k): X D U
+    if tiled is not None:
+        xu = xu * tiled[:, None]  # D X D U
+    blocks = matrix.reshape(n, d, n, d)[idx, :, idx, :]
+    if tiled is not None:
+        f = np.asarray(factors, dtype=np.float64)
+        blocks = blocks * np.outer(f, f)[None]
+    rows = fit.reshape(n, d, -1)
+    xu_rows = xu.reshape(n, d, -1)
+    inner = fit.T @ xu  # U^T D X D U, (k, k)
+    cross = np.einsum("pik,pjk->pij", rows, xu_rows)
+    out = blocks - cross - np.swapaxes(cross, 1, 2) + np.einsum("pik,kl,pjl->pij", rows, inner, rows)
+    return np.asarray(out, dtype=np.float64)
+
+
 def _leave_one_out_scale(
     r: Array, fit: Array, noise: Array, unit: Array, d: int, bounds: tuple[float, float]
 ) -> float | None:
@@ -688,14 +873,12 @@ def _leave_one_out_scale(
     larger scale, not as an over-confident statement (cross-validated variance estimation is the
     robust one under a misspecified kernel: Bachoc 2013, Comput. Stat. Data Anal. 66).
     """
-    proj = np.eye(r.size) - fit @ fit.T
     n = r.size // d
-    idx = np.arange(n)
-    pnp = (proj @ noise @ proj).reshape(n, d, n, d)[idx, :, idx, :]
-    pkp = (proj @ unit @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+    pnp = _projected_blocks(noise, fit, d)
+    pkp = _projected_blocks(unit, fit, d)
     # The residual's part in the fit space (a regularised fit leaves some) is no prediction error:
     # the model's residual is P (e + eps), as in the restricted likelihood's contrasts.
-    r_pose = (proj @ r).reshape(n, d)
+    r_pose = (r - fit @ (fit.T @ r)).reshape(n, d)
 
     def excess(log_s: float) -> float:
         blocks = pnp + float(np.exp(log_s)) * pkp
@@ -730,18 +913,14 @@ def _leave_one_out_components(
     ``f_j <- f_j sqrt(mean)``; starting from ``f = sqrt(s)``. Returns ``f``, shape (d,).
     """
     n = r.size // d
-    proj = np.eye(r.size) - fit @ fit.T
-    idx = np.arange(n)
-    lever = (fit @ fit.T).reshape(n, d, n, d)[idx, :, idx, :]
-    inv = np.linalg.pinv(np.eye(d)[None] - lever)
-    pnp = (proj @ noise @ proj).reshape(n, d, n, d)[idx, :, idx, :]
-    err = np.einsum("pij,pj->pi", inv, (proj @ r).reshape(n, d))
+    inv = _leverage_inverse(fit, d)
+    pnp = _projected_blocks(noise, fit, d)
+    err = np.einsum("pij,pj->pi", inv, (r - fit @ (fit.T @ r)).reshape(n, d))
     factors = np.full(d, np.sqrt(max(scale, 0.0)))
     if not np.all(factors > 0.0):
         return factors
     for _ in range(iterations):
-        scaled = unit * np.outer(np.tile(factors, n), np.tile(factors, n))
-        pkp = (proj @ scaled @ proj).reshape(n, d, n, d)[idx, :, idx, :]
+        pkp = _projected_blocks(unit, fit, d, factors)
         stated = np.einsum("pij,pjk,plk->pil", inv, pnp + pkp, inv)
         ratio = np.mean(err**2 / np.maximum(np.diagonal(stated, axis1=1, axis2=2), np.finfo(float).tiny), axis=0)
         if np.max(np.abs(ratio - 1.0)) < 1e-3:
@@ -784,20 +963,17 @@ def _leave_one_out_dof(
     that (a normal field's).
     """
     n = r.size // d
-    proj = np.eye(r.size) - fit @ fit.T
-    idx = np.arange(n)
-    lever = (fit @ fit.T).reshape(n, d, n, d)[idx, :, idx, :]
-    inv = np.linalg.pinv(np.eye(d)[None] - lever)
-    scaled = unit * np.outer(np.tile(factors, n), np.tile(factors, n))
-    cov_r = proj @ (noise + scaled) @ proj
-    # G: (I - H_ii)^-1 per pose, then every component divided by its stated standard deviation.
-    block_inv = np.zeros((r.size, r.size))
-    for i in range(n):
-        block_inv[i * d : (i + 1) * d, i * d : (i + 1) * d] = inv[i]
-    cov_e = block_inv @ cov_r @ block_inv.T
+    inv = _leverage_inverse(fit, d)
+    tiled = np.tile(np.asarray(factors, dtype=np.float64), n)
+    cov_r = _projected(noise + unit * np.outer(tiled, tiled), fit)
+    # G: (I - H_ii)^-1 per pose (block diagonal, applied block by block), then every component
+    # divided by its stated standard deviation.
+    cov_e = np.einsum("iac,icjb->iajb", inv, cov_r.reshape(n, d, n, d), optimize=True)
+    cov_e = np.einsum("iajc,jbc->iajb", cov_e, inv, optimize=True).reshape(r.size, r.size)
+    e = np.einsum("iab,ib->ia", inv, (r - fit @ (fit.T @ r)).reshape(n, d))
     sd = np.sqrt(np.maximum(np.diag(cov_e), np.finfo(float).tiny))
     cov_z = cov_e / np.outer(sd, sd)
-    z = (block_inv @ (proj @ r)) / sd
+    z = e.reshape(-1) / sd
     out = np.empty(d)
     gaussian = np.empty(d)
     for j in range(d):
@@ -816,12 +992,11 @@ def _leave_one_out_dof(
             mixed = 2.0 * float(np.trace(cj)) ** 2 / max(2.0 * tr2 + var_v * spatial, np.finfo(float).tiny)
             independent = gaussian[j] * min(1.0, 2.0 / max(kurtosis - 1.0, np.finfo(float).tiny))
             out[j] = min(independent, mixed)
-    e = (block_inv @ (proj @ r)).reshape(n, d)
-    white = np.empty((n, d))
-    for i in range(n):
-        evals, evecs = np.linalg.eigh(cov_e[i * d : (i + 1) * d, i * d : (i + 1) * d])
-        root_inv = evecs / np.sqrt(np.maximum(evals, np.finfo(float).tiny * max(float(evals[-1]), 1.0)))
-        white[i] = root_inv.T @ e[i]
+    idx = np.arange(n)
+    evals, evecs = np.linalg.eigh(cov_e.reshape(n, d, n, d)[idx, :, idx, :])
+    floor = np.finfo(float).tiny * np.maximum(evals[:, -1:], 1.0)
+    root_inv = evecs / np.sqrt(np.maximum(evals, floor))[:, None, :]
+    white = np.einsum("pji,pj->pi", root_inv, e)
     return np.asarray(out, dtype=np.float64), white, float(min(float(np.mean(gaussian)), n))
 
 
@@ -940,6 +1115,11 @@ def _scale_moments(dof: Array, rho: float = 0.0) -> Array:
     return np.asarray(moments, dtype=np.float64)
 
 
+def _is_lower(matrix: Array) -> bool:
+    """Whether `matrix` (square) is lower triangular (a Cholesky factor, not an eigen-factor)."""
+    return not bool(np.any(np.triu(matrix, 1)))
+
+
 def _psd_factor(matrix: Array) -> Array:
     """A factor ``F`` with ``F F^T = matrix`` (Cholesky; symmetric eigen-factor when singular)."""
     sym = 0.5 * (matrix + matrix.T)
@@ -972,8 +1152,15 @@ class _Correlation:
         c_tt = c * kernel_correlation(chordal_distance(qt, qt), ell) + (1.0 - c) * np.eye(n_t)
         l_tt = _psd_factor(c_tt + _JITTER * np.eye(n_t))
         r_ct = c * kernel_correlation(chordal_distance(qc, qt), ell)
-        # B = c R_ct L^-T: Cov(B z_t, L z_t) = c R_ct.
-        b = np.linalg.lstsq(l_tt, r_ct.T, rcond=None)[0].T
+        # B = c R_ct L^-T: Cov(B z_t, L z_t) = c R_ct. A Cholesky factor well away from singular
+        # (every grid hypothesis: c <= 0.9) by substitution, the same solution as least squares.
+        diag = np.abs(np.diag(l_tt))
+        if _is_lower(l_tt) and float(diag.min()) > 1e-6 * float(diag.max()):
+            from scipy.linalg import solve_triangular
+
+            b = solve_triangular(l_tt, r_ct.T, lower=True, check_finite=False).T
+        else:
+            b = np.linalg.lstsq(l_tt, r_ct.T, rcond=None)[0].T
         if qc.shape[0] <= JOINT_TEST_MAX:
             c_cc = c * kernel_correlation(chordal_distance(qc, qc), ell) + (1.0 - c) * np.eye(qc.shape[0])
             cc = _psd_factor(c_cc - b @ b.T + _JITTER * np.eye(qc.shape[0]))
@@ -998,17 +1185,30 @@ class _Correlation:
         bottom = np.hstack((-(b @ l_tt.T), b @ b.T + cc))
         return np.asarray(np.vstack((top, bottom)), dtype=np.float64)
 
-    def instances(self, values: Array) -> Array:
-        """``F_s`` applied over the instance axis 1 of `values` (..., n_t + n_c, m), as drawn."""
+    def instances(self, z: Array) -> tuple[Array, Array]:
+        """``F_s`` applied to standard vectors `z` (n, n_t + n_c, d): ``L z_t`` and ``-(B z_t + L_cc
+        z_c)``, component-major (shapes (n, d, n_t) and (n, d, n_c): the configurations along the
+        last axis, where the per-draw d x d factors of :meth:`FieldNormal.sample` act on the
+        middle one).
+
+        ``L`` is lower triangular (a Cholesky factor): its product is a triangular one (half the
+        operations of a general product; the same sums in another order, equal to rounding)."""
+        n, n_all, d = z.shape
         n_t = self.tt.shape[0]
-        head, tail = values[:, :n_t], values[:, n_t:]
-        e_t = np.einsum("ts,nsm->ntm", self.tt, head, optimize=True)
-        e_c = np.einsum("ct,ntm->ncm", self.ct, head, optimize=True)
-        if self.cc.ndim == 2:
-            e_c = e_c + np.einsum("cs,nsm->ncm", self.cc, tail, optimize=True)
+        head = np.ascontiguousarray(np.swapaxes(z[:, :n_t], 1, 2)).reshape(n * d, n_t)
+        e_c = head @ self.ct.T
+        if n_all > n_t:
+            tail = np.swapaxes(z[:, n_t:], 1, 2).reshape(n * d, n_all - n_t)
+            e_c += tail @ self.cc.T if self.cc.ndim == 2 else tail * self.cc[None, :]
+        np.negative(e_c, out=e_c)
+        if _is_lower(self.tt):
+            from scipy.linalg import blas
+
+            # (L Z^T)^T = Z L^T, Z^T Fortran-ordered as `head` is C-ordered (overwritten in place).
+            e_t = blas.dtrmm(1.0, self.tt, head.T, side=0, lower=1, overwrite_b=1).T
         else:
-            e_c = e_c + self.cc[None, :, None] * tail
-        return np.asarray(np.concatenate((e_t, -e_c), axis=1), dtype=np.float64)
+            e_t = head @ self.tt.T
+        return e_t.reshape(n, d, n_t), e_c.reshape(n, d, n_all - n_t)
 
     def whitened(self, sensitivities: Array, n_inst: int, d: int) -> Array:
         n_out = sensitivities.shape[0]
@@ -1147,13 +1347,12 @@ class FieldNormal:
             z = rng.standard_normal((n, n_inst, d))
         else:
             z = self.innovations[rng.integers(0, self.innovations.shape[0], size=(n, n_inst))]
+        # Per draw one d x d factor, diag(g) Sigma_m^(1/2) B: the scale factors g, the root of the
+        # per-pose covariance and the Wishart factor B of the local covariance (drawn in this order).
         if many:
-            values = np.empty((n, n_inst, d))
-            for k, part in enumerate(self._parts):
-                mask = which == k
-                values[mask] = part.instances(z[mask])
+            mix = np.stack([p.root for p in self._parts])[which]
         else:
-            values = self._parts[0].instances(z)
+            mix = np.broadcast_to(self._parts[0].root, (n, d, d))
         if varying:
             tau = SHAPE_TAU[rng.choice(SHAPE_TAU.size, size=n, p=np.asarray(weights, dtype=np.float64))]
             k_w = d / np.where(tau > 0.0, tau, 1.0)  # tau = 0 (W = I) is replaced below
@@ -1161,25 +1360,37 @@ class FieldNormal:
             chi2 = rng.chisquare(k_w[:, None] - np.arange(d))
             factor[:, np.arange(d), np.arange(d)] = np.sqrt(chi2)
             factor = np.where((tau > 0.0)[:, None, None], factor / np.sqrt(k_w)[:, None, None], np.eye(d))
-            values = np.einsum("nij,nsj->nsi", factor, values, optimize=True)
+            mix = mix @ factor
         if many:
-            for k, part in enumerate(self._parts):
-                mask = which == k
-                values[mask] = values[mask] @ part.root.T
             dofs = np.stack([np.full(d, _T_DOF_MAX) if p.dof is None else p.dof for p in self._parts])[which]
             if any(p.dof is not None for p in self._parts):
                 finite = dofs < _T_DOF_MAX
                 dof = np.where(finite, dofs, 3.0)
-                values = values * np.where(finite, np.sqrt(dof / self._chi2(rng, dof)), 1.0)[:, None, :]
+                mix = mix * np.where(finite, np.sqrt(dof / self._chi2(rng, dof)), 1.0)[:, :, None]
         else:
             part = self._parts[0]
-            values = values @ part.root.T
             if part.dof is not None:
                 finite = part.dof < _T_DOF_MAX
                 dof = np.where(finite, part.dof, 3.0)
                 factor_g = np.where(finite, np.sqrt(dof / self._chi2(rng, np.broadcast_to(dof, (n, d)))), 1.0)
-                values = values * factor_g[:, None, :]
-        return np.asarray(values.reshape(n, self.size), dtype=np.float64)
+                mix = mix * factor_g[:, :, None]
+        # The correlation's products run along the configurations (component-major), the d x d
+        # factors along the components; written back pose-major.
+        out = np.empty((n, n_inst, d))
+        if many:
+            for k, part in enumerate(self._parts):
+                mask = which == k
+                e_t, e_c = part.instances(z[mask])
+                n_t = e_t.shape[2]
+                out[mask, :n_t] = np.swapaxes(mix[mask] @ e_t, 1, 2)
+                out[mask, n_t:] = np.swapaxes(mix[mask] @ e_c, 1, 2)
+        else:
+            e_t, e_c = self._parts[0].instances(z)
+            del z
+            n_t = e_t.shape[2]
+            out[:, :n_t] = np.swapaxes(mix @ e_t, 1, 2)
+            out[:, n_t:] = np.swapaxes(mix @ e_c, 1, 2)
+        return out.reshape(n, self.size)
 
     def _chi2(self, rng: np.random.Generator, dof: Array) -> Array:
         """Chi-square variates of degrees of freedom `dof` (n, d), the components of a row

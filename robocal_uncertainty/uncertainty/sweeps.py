@@ -25,6 +25,7 @@ from robocal_uncertainty.core.robot_model import RobotModel
 from robocal_uncertainty.errors import ConfigError
 from robocal_uncertainty.montecarlo.executor import RunContext
 from robocal_uncertainty.uncertainty.calibration.evaluation import evaluate_uncertainty
+from robocal_uncertainty.uncertainty.calibration.preparation import held_field_correlation
 from robocal_uncertainty.uncertainty.calibration.settings import EvaluationSettings
 from robocal_uncertainty.uncertainty.sources import (
     UncertaintySettings,
@@ -117,7 +118,12 @@ def sweep_lambda(
 
     At each lambda the campaign is re-identified with ``identify(model, campaign,
     lambda_=value)`` and that calibration is passed to ``evaluate_uncertainty``. The
-    ``lambda`` source is dropped from `settings` (lambda is the swept, fixed value).
+    ``lambda`` source is dropped from `settings` (lambda is the swept, fixed value). A
+    model-error field (``model_error="field"``) keeps `calibration`'s correlation and shape at
+    every point, its per-pose covariance re-estimated from the point's residuals
+    (:func:`~robocal_uncertainty.uncertainty.model_error_draws.rescaled_field`): the curve shows
+    the effect of lambda, not a re-estimate of the field's hyperparameters (in full per point
+    when `calibration` is None).
 
     Parameters
     ----------
@@ -161,26 +167,29 @@ def sweep_lambda(
     sources = tuple(s for s in settings.sources if s not in swept) or (TRACKER.name,)
     fixed = dataclasses.replace(settings, sources=sources)
     out = np.empty((lams.size, 3))
-    for i, lam in enumerate(lams):
-        if calibration is not None and float(lam) == calibration.lambda_:
-            cal = calibration
-        else:
-            cal = identify(model, campaign, lambda_=float(lam))
-        out[i] = _point_u(
-            model,
-            campaign,
-            test_joints,
-            fixed,
-            cal,
-            trials=trials,
-            seed=seed,
-            frame=frame,
-            run=run,
-            pose=pose,
-            backend=backend,
-        )
-        if run is not None and run.progress is not None:
-            run.progress((i + 1) * trials, lams.size * trials)
+    # A model-error field keeps the reference calibration's correlation and shape at every point,
+    # its per-pose covariance re-estimated from that point's residuals (see held_field_correlation).
+    with held_field_correlation(calibration):
+        for i, lam in enumerate(lams):
+            if calibration is not None and float(lam) == calibration.lambda_:
+                cal = calibration
+            else:
+                cal = identify(model, campaign, lambda_=float(lam))
+            out[i] = _point_u(
+                model,
+                campaign,
+                test_joints,
+                fixed,
+                cal,
+                trials=trials,
+                seed=seed,
+                frame=frame,
+                run=run,
+                pose=pose,
+                backend=backend,
+            )
+            if run is not None and run.progress is not None:
+                run.progress((i + 1) * trials, lams.size * trials)
     return out
 
 

@@ -8,8 +8,11 @@ bad setting stops with one line before the work.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,12 +38,20 @@ from robocal_uncertainty.uncertainty.model_error_draws import (
     FieldEstimate,
     FieldNormal,
     estimate_field,
+    rescaled_field,
     standardised_innovations,
 )
 from robocal_uncertainty.uncertainty.reidentification import BatchProblem, ChordSolver
 from robocal_uncertainty.uncertainty.sources import TrialContext, UncertaintySettings, build_sources, sources_with_role
 
-__all__ = ["Prepared", "prepare", "prepare_calibration_trials", "test_effect_jacobian", "validate_inputs"]
+__all__ = [
+    "Prepared",
+    "held_field_correlation",
+    "prepare",
+    "prepare_calibration_trials",
+    "test_effect_jacobian",
+    "validate_inputs",
+]
 
 Array = NDArray[np.float64]
 
@@ -197,16 +208,141 @@ def _model_error_field(
     )
     # The shape of the residuals' own covariance: the model error dominates it, and unlike the
     # moment estimate (clipped to be PSD) it has variance in every direction the data have.
-    field_estimate = estimate_field(calibration, campaign.joint_positions, noise, adequacy.residual_covariance)
+    field_estimate = _field_estimate(settings, calibration, campaign, noise, adequacy.residual_covariance, distances)
     if not field_estimate.identified:
         return field_estimate, None
-    field_draw = FieldNormal(
-        campaign.joint_positions,
+    return field_estimate, _field_draw(field_estimate, campaign.joint_positions, test_q, calibration)
+
+
+_DRAW_CACHE: list[tuple[FieldEstimate, Array, Array, IdentificationResult, FieldNormal]] = []
+
+
+def _field_draw(
+    estimate: FieldEstimate, joint_positions: Array, test_q: Array, calibration: IdentificationResult
+) -> FieldNormal:
+    """The draws of `estimate` (their factors cost a few factorisations of the calibration poses'
+    correlation): the same object for the same estimate, poses and test configurations (the
+    budget's and the equations sweep's runs; it holds no state between draws)."""
+    q = np.asarray(joint_positions, dtype=np.float64)
+    for est, q_c, test_c, cal, draw in _DRAW_CACHE:
+        if est is estimate and cal is calibration and np.array_equal(q_c, q) and np.array_equal(test_c, test_q):
+            return draw
+    draw = FieldNormal(
+        q,
         test_q,
-        field_estimate,
+        estimate,
         innovations=standardised_innovations(np.asarray(calibration.residuals, dtype=np.float64)),
     )
-    return field_estimate, field_draw
+    _DRAW_CACHE.insert(0, (estimate, q.copy(), np.array(test_q, dtype=np.float64), calibration, draw))
+    del _DRAW_CACHE[_FIELD_CACHE_SIZE:]
+    return draw
+
+
+@dataclass(frozen=True, eq=False)
+class _FieldEntry:
+    """One estimate of :func:`_field_estimate`'s cache, with everything it was computed from."""
+
+    calibration: IdentificationResult
+    joint_positions: Array
+    noise: Array
+    shape: Array
+    estimate: FieldEstimate
+
+    def matches(self, calibration: IdentificationResult, joint_positions: Array, noise: Array, shape: Array) -> bool:
+        return (
+            self.calibration is calibration
+            and np.array_equal(self.joint_positions, joint_positions)
+            and np.array_equal(self.noise, noise)
+            and np.array_equal(self.shape, shape)
+        )
+
+
+_FIELD_CACHE: list[_FieldEntry] = []
+_FIELD_CACHE_SIZE = 4
+_HELD_CORRELATION: contextvars.ContextVar[IdentificationResult | None] = contextvars.ContextVar(
+    "held_field_correlation", default=None
+)
+
+
+@contextlib.contextmanager
+def held_field_correlation(reference: IdentificationResult | None) -> Iterator[None]:
+    """Within it, the model-error field of every calibration other than `reference` keeps the
+    correlation and shape hyperparameters of `reference`'s field and re-estimates only its scale
+    from its own residuals (:func:`~robocal_uncertainty.uncertainty.model_error_draws.rescaled_field`):
+    a sensitivity sweep shows the effect of its setting, not a re-sampling of the hyperparameters.
+    None: every calibration's field estimated in full."""
+    token = _HELD_CORRELATION.set(reference)
+    try:
+        yield
+    finally:
+        _HELD_CORRELATION.reset(token)
+
+
+def _cached(
+    calibration: IdentificationResult, joint_positions: Array, noise: Array, shape: Array
+) -> FieldEstimate | None:
+    for entry in _FIELD_CACHE:
+        if entry.matches(calibration, joint_positions, noise, shape):
+            return entry.estimate
+    return None
+
+
+def _remember(
+    calibration: IdentificationResult, joint_positions: Array, noise: Array, shape: Array, estimate: FieldEstimate
+) -> FieldEstimate:
+    _FIELD_CACHE.insert(0, _FieldEntry(calibration, joint_positions.copy(), noise.copy(), shape.copy(), estimate))
+    del _FIELD_CACHE[_FIELD_CACHE_SIZE:]
+    return estimate
+
+
+def _full_estimate(
+    calibration: IdentificationResult, joint_positions: Array, noise: Array, shape: Array
+) -> FieldEstimate:
+    """The field of `calibration` estimated in full, once per calibration and inputs: the budget's
+    and the sweeps' runs of the same calibration take the statement's estimate (a deterministic
+    function of these inputs) instead of repeating it."""
+    cached = _cached(calibration, joint_positions, noise, shape)
+    if cached is not None:
+        return cached
+    return _remember(
+        calibration, joint_positions, noise, shape, estimate_field(calibration, joint_positions, noise, shape)
+    )
+
+
+def _field_estimate(
+    settings: UncertaintySettings,
+    calibration: IdentificationResult,
+    campaign: Campaign,
+    noise: Array,
+    shape: Array,
+    distances: Array,
+) -> FieldEstimate:
+    """The field of `calibration`: in full, or under :func:`held_field_correlation` with the
+    reference calibration's correlation and shape held (its per-pose covariance re-estimated)."""
+    q = np.asarray(campaign.joint_positions, dtype=np.float64)
+    noise = np.asarray(noise, dtype=np.float64)
+    shape = np.asarray(shape, dtype=np.float64)
+    reference = _HELD_CORRELATION.get()
+    if reference is None or reference is calibration:
+        return _full_estimate(calibration, q, noise, shape)
+    ref_noise = pose_noise_covariances(reference, q, settings.tracker_noise, settings.encoder_noise, distances)
+    held = next(
+        (
+            e.estimate
+            for e in _FIELD_CACHE
+            if e.calibration is reference
+            and np.array_equal(e.joint_positions, q)
+            and np.array_equal(e.noise, ref_noise)
+        ),
+        None,
+    )
+    if held is None:
+        ref_shape = assess_model_adequacy(
+            reference, q, settings.tracker_noise, settings.encoder_noise, distances
+        ).residual_covariance
+        held = _full_estimate(reference, q, ref_noise, np.asarray(ref_shape, dtype=np.float64))
+    # Not remembered: a sweep point's calibration is its own (the cache keeps the full estimates).
+    return rescaled_field(held, calibration, q, noise, shape)
 
 
 def _tracker_distances(settings: UncertaintySettings, campaign: Campaign) -> Array:
