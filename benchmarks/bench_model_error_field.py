@@ -3,8 +3,10 @@
 Times, in one run on one machine, (1) ``estimate_field`` of the UR10 series D (points, 632
 poses) and of a 53-pose subset, (2) 20 000 of the field's draws (``FieldNormal.sample``, 632
 calibration poses and one test configuration), and (3) the wall time of the README's
-``evaluate`` of series D (20 000 trials by default; numba backend) with the default model error
-and with ``--model-error-field``; as ratios: the field's ``evaluate`` over the default's, and,
+``evaluate`` of series D (20 000 trials by default; numba backend) with the model-error field
+(the default) and with the independent model (``--independent-model-error``; in a checkout from
+before the switch, the default and ``--model-error-field``); as ratios: the field's ``evaluate``
+over the independent model's, and,
 with ``--baseline PATH`` (another checkout of the package, e.g. main's), each time of this
 checkout over that checkout's, measured alternately in the same run. Every number is printed with
 the machine's load average (2 shared cores: compare ratios, not seconds).
@@ -91,7 +93,12 @@ def _evaluate(code: Path, mcap: Path, trials: int, field: bool, work: Path) -> f
     out = work / f"report_{time.monotonic_ns()}"
     cmd = [sys.executable, "-m", "robocal_uncertainty", "evaluate", str(mcap), "--robot", "ur10"]
     cmd += ["--trials", str(trials), "--backend", "numba", "--out", str(out), "--test-joints", *TEST_JOINTS]
-    if field:
+    # Since the field became the default, `--independent-model-error` gives the per-pose model;
+    # a checkout from before has only `--model-error-field` (the field) and the independent default.
+    if "--independent-model-error" in (code / "robocal_uncertainty" / "uncertainty" / "sources" / "model_error.py").read_text():
+        if not field:
+            cmd.append("--independent-model-error")
+    elif field:
         cmd.append("--model-error-field")
     t0 = time.perf_counter()
     subprocess.run(cmd, env=_env(code), capture_output=True, check=True, cwd=work)
@@ -145,14 +152,14 @@ def main() -> int:
             for name in codes:
                 d, f = times[name, False], times[name, True]
                 print(
-                    f"evaluate {trials} trials, {name:<8}: default {d:6.1f} s, --model-error-field {f:6.1f} s, "
-                    f"field / default {f / d:.2f} (load average {load:.2f})",
+                    f"evaluate {trials} trials, {name:<8}: independent {d:6.1f} s, field {f:6.1f} s, "
+                    f"field / independent {f / d:.2f} (load average {load:.2f})",
                     flush=True,
                 )
             if "baseline" in codes:
                 print(
-                    f"evaluate {trials} trials --model-error-field: this / baseline "
-                    f"{times['this', True] / times['baseline', True]:.3f}; default: this / baseline "
+                    f"evaluate {trials} trials, field: this / baseline "
+                    f"{times['this', True] / times['baseline', True]:.3f}; independent: this / baseline "
                     f"{times['this', False] / times['baseline', False]:.3f}"
                 )
     return 0
