@@ -95,7 +95,8 @@ def _evaluate(code: Path, mcap: Path, trials: int, field: bool, work: Path) -> f
     cmd += ["--trials", str(trials), "--backend", "numba", "--out", str(out), "--test-joints", *TEST_JOINTS]
     # Since the field became the default, `--independent-model-error` gives the per-pose model;
     # a checkout from before has only `--model-error-field` (the field) and the independent default.
-    if "--independent-model-error" in (code / "robocal_uncertainty" / "uncertainty" / "sources" / "model_error.py").read_text():
+    source = code / "robocal_uncertainty" / "uncertainty" / "sources" / "model_error.py"
+    if "--independent-model-error" in source.read_text():
         if not field:
             cmd.append("--independent-model-error")
     elif field:
