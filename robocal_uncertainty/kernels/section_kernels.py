@@ -223,8 +223,11 @@ def pack_section_model(model: Any, sources: Sequence[ErrorSource]) -> tuple[Any,
 
 
 def _generators_supported() -> bool:
-    """Whether numba compiles numpy ``Generator`` arguments (numba >= 0.56)."""
-    import numba
+    """Whether numba is installed and compiles numpy ``Generator`` arguments (numba >= 0.56)."""
+    try:
+        import numba
+    except ImportError:  # the optional extra is absent (callers also ask before choosing numba)
+        return False
 
     major, minor = (int(part) for part in numba.__version__.split(".")[:2])
     return (major, minor) >= (0, 56)
