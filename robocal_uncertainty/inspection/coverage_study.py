@@ -467,16 +467,18 @@ def run_study(
     executor: object | None = None,
     dask: str | None = None,
     progress: StudyProgress | None = None,
+    backend: str = "numpy",
 ) -> list[ScanOutcome]:
     """Scans ``first .. first + scans - 1`` of every family on ``scenario`` (default the stored one).
 
     Every scan draws from its own stream (:func:`study_scan`): the outcomes are the same
     whatever ``workers``, ``executor`` or ``dask`` (as for
     :func:`~robocal_uncertainty.montecarlo.executor.open_executor`) runs them on, and come back
-    in family, then scan order.
+    in family, then scan order. ``backend`` (a resolved name, ``numpy`` or ``numba``) runs the
+    denoising and the trials; the backends agree to 1e-12 with the same draws.
     """
     jobs = [(f, k) for f in families for k in range(first, first + scans)]
-    return _run_jobs(jobs, trials, root_seed, scenario, workers, executor, dask, progress)
+    return _run_jobs(jobs, trials, root_seed, scenario, workers, executor, dask, progress, backend=backend)
 
 
 def _run_jobs(
