@@ -502,6 +502,26 @@ class Empirical:
         return np.take(self.samples, index, axis=0)
 
 
+def _drawn_components(widths: NDArray[np.float64]) -> NDArray[np.intp] | None:
+    """Indices of the components with a non-zero width, or None where every one has one (the
+    vector is then drawn whole, as before constant components were skipped)."""
+    drawn = np.flatnonzero(widths > 0.0)
+    if drawn.size == widths.size:
+        return None
+    drawn.setflags(write=False)
+    return drawn
+
+
+def _scatter(
+    values: NDArray[np.float64], drawn: NDArray[np.intp], constants: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Vectors of ``constants`` with the drawn components' ``values`` put in, shape (n, k)."""
+    out = np.empty((values.shape[0], constants.size))
+    out[...] = constants
+    out[:, drawn] = values
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class IndependentRectangular:
     """Independent rectangular components R(centre_i - a_i, centre_i + a_i), as a vector.
@@ -519,6 +539,7 @@ class IndependentRectangular:
 
     half_widths: NDArray[np.float64]
     centres: NDArray[np.float64]
+    _drawn: NDArray[np.intp] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __init__(self, half_widths: ArrayLike, centres: ArrayLike | None = None) -> None:
         a = np.array(half_widths, dtype=np.float64).reshape(-1)
@@ -531,6 +552,7 @@ class IndependentRectangular:
             raise ConfigError(msg)
         object.__setattr__(self, "half_widths", _readonly(a))
         object.__setattr__(self, "centres", _readonly(c))
+        object.__setattr__(self, "_drawn", _drawn_components(a))
 
     @property
     def size(self) -> int:
@@ -550,12 +572,22 @@ class IndependentRectangular:
         """Draw ``n`` vectors, shape (n, k)."""
         # In place: the same operations (u a + c) without two temporaries of the draw's size.
         # uniform(-1, 1) is -1 + 2 u: the fill of u, then 2 u - 1 (the same values, see Rectangular).
-        values = rng.random(size=(_check_n(n), self.size))
-        values *= 2.0
-        values -= 1.0
-        values *= self.half_widths
-        values += self.centres
-        return values
+        drawn = self._drawn
+        if drawn is None:
+            values = rng.random(size=(_check_n(n), self.size))
+            values *= 2.0
+            values -= 1.0
+            values *= self.half_widths
+            values += self.centres
+            return values
+        # Constant components (half-width 0) take no draw: a 6-DOF measurement's position noise
+        # is zero in its rotation coordinates, half of the vector.
+        u = rng.random(size=(_check_n(n), drawn.size))
+        u *= 2.0
+        u -= 1.0
+        u *= self.half_widths[drawn]
+        u += self.centres[drawn]
+        return _scatter(u, drawn, self.centres)
 
 
 @dataclass(frozen=True, eq=False)
@@ -577,6 +609,7 @@ class IndependentNormal:
 
     std: NDArray[np.float64]
     mean: NDArray[np.float64]
+    _drawn: NDArray[np.intp] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __init__(self, std: ArrayLike, mean: ArrayLike | None = None) -> None:
         s = np.array(std, dtype=np.float64).reshape(-1)
@@ -589,6 +622,7 @@ class IndependentNormal:
             raise ConfigError(msg)
         object.__setattr__(self, "std", _readonly(s))
         object.__setattr__(self, "mean", _readonly(m))
+        object.__setattr__(self, "_drawn", _drawn_components(s))
 
     @property
     def size(self) -> int:
@@ -607,10 +641,18 @@ class IndependentNormal:
     def sample(self, rng: np.random.Generator, n: int) -> NDArray[np.float64]:
         """Draw ``n`` vectors, shape (n, k)."""
         # In place: the same operations (z s + m) without two temporaries of the draw's size.
-        values = rng.standard_normal((_check_n(n), self.size))
-        values *= self.std
-        values += self.mean
-        return values
+        drawn = self._drawn
+        if drawn is None:
+            values = rng.standard_normal((_check_n(n), self.size))
+            values *= self.std
+            values += self.mean
+            return values
+        # Constant components (std 0) take no draw: a 6-DOF measurement's orientation noise is
+        # zero in its position coordinates, half of the vector.
+        z = rng.standard_normal((_check_n(n), drawn.size))
+        z *= self.std[drawn]
+        z += self.mean[drawn]
+        return _scatter(z, drawn, self.mean)
 
 
 @dataclass(frozen=True, eq=False)
