@@ -3,10 +3,10 @@ right (tracker position and orientation noise, encoder noise), the 95 % interval
 rotation axis contain the true tool orientation ~95 % of the time.
 
 Measured (200 campaigns x 3 test configurations, 400 trials each, sources tracker,
-tracker_orientation, encoder; orientation noise 0.1 mrad): paper arm (base frame) rx 94.3 %,
-ry 94.7 %, rz 96.3 %, positions x 95.3 %, y 95.2 %, z 96.0 %, region 95.2 %; UR10 (tracker
-frame, identified base) rx 95.5 %, ry 94.3 %, rz 94.3 %, x 95.2 %, y 93.3 %, z 96.0 %, region
-92.5 %. Points only, tool point 80 mm off joint 6's axis (the rotation about it undetermined):
+tracker_orientation, encoder; orientation noise 0.1 mrad): paper arm (base frame) rx 94.2 %,
+ry 94.3 %, rz 96.0 %, positions x 95.3 %, y 95.2 %, z 95.8 %, region 95.2 %; UR10 (tracker
+frame, identified base) rx 95.7 %, ry 94.0 %, rz 94.5 %, x 95.2 %, y 93.2 %, z 95.8 %, region
+92.7 %. Points only, tool point 80 mm off joint 6's axis (the rotation about it undetermined):
 the tilt perpendicular to it 93.2 % and 94.8 %. Points only with the shipped tool points (on
 the axis): the "determined" tilt holds the truth in only 2-8 %, see
 ``test_point_orientation_truth.py``. Run times here (shared 2-core machine): 89 s, 44 s, 10 s.
