@@ -394,9 +394,9 @@ def test_coverage_over_200_simulated_scans() -> None:
 def test_coverage_over_scenario_families() -> None:
     """Issue 23: 10 scans of each scenario family (smooth forms of 2-13 waves; bumps and dents of
     1-10 µm over 1-20 mm on the sides and at the edges; edge erosion), truth from the noise-free
-    part, method ``denoised`` with 2 000 trials and the residual check; 40 s on two
-    cores. The study the report quotes (``FAMILY_STUDY``) is 600 scans per family of the same
-    seeds (``benchmarks/bench_section_coverage.py --scans 600``); with 10 scans per family one
+    part, method ``denoised`` with 2 000 trials and the residual check; 23 s on two idle cores
+    with numba (40 s with numpy). The study the report quotes (``FAMILY_STUDY``) is 600 scans per
+    family of the same seeds (``benchmarks/bench_section_coverage.py --scans 600``); with 10 scans per family one
     miss is 10 % and the binomial standard uncertainty at 95 % is 7 %.
     """
     workers = min(2, os.cpu_count() or 1)
