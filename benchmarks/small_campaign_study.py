@@ -147,22 +147,24 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     model = load_robot_model(resolve_robot_config("ur10"))
     sizes = tuple(args.sizes)
+
+    def study_of(campaign: Campaign) -> list[dict[str, float]]:
+        """The study of one series with the command line's settings."""
+        return study(
+            model,
+            campaign,
+            sizes,
+            args.draws,
+            args.trials,
+            args.seed,
+            args.model_error,
+            per_draw=args.per_draw,
+            first_draw=args.first_draw,
+        )
+
     if args.series in ("ur10", "both"):
         campaign = read_tracker_csv(UR10_CSV)
-        _print(
-            f"UR10 series ({campaign.n_poses} poses), {args.draws} draws per size",
-            study(
-                model,
-                campaign,
-                sizes,
-                args.draws,
-                args.trials,
-                args.seed,
-                args.model_error,
-                per_draw=args.per_draw,
-                first_draw=args.first_draw,
-            ),
-        )
+        _print(f"UR10 series ({campaign.n_poses} poses), {args.draws} draws per size", study_of(campaign))
     if args.series in ("simulated", "both"):
         for gear, sag in SIMULATED_ERRORS:
             campaign, u = simulated_series(model, gear, sag, args.seed + 7)
@@ -170,17 +172,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"simulated UR10, 632 poses, gear error {gear * 1e6:.0f} urad, sag {sag * 1e6:.0f} urad "
                 f"(model error u = {', '.join(f'{v * 1e6:.0f}' for v in u)} um over all poses), "
                 f"{args.draws} draws per size",
-                study(
-                    model,
-                    campaign,
-                    sizes,
-                    args.draws,
-                    args.trials,
-                    args.seed,
-                    args.model_error,
-                    per_draw=args.per_draw,
-                    first_draw=args.first_draw,
-                ),
+                study_of(campaign),
             )
     return 0
 
