@@ -217,6 +217,30 @@ def test_numba_results_do_not_depend_on_chunking_and_survive_pickling() -> None:
     np.testing.assert_array_equal(run_trials(shipped, seed=8, n_trials=900, block_size=300).samples, one)
 
 
+@needs_numba
+@pytest.mark.parametrize(("name", "model"), MODELS, ids=[n for n, _ in MODELS])
+def test_numba_test_configurations_walk_and_values(name: str, model: object) -> None:
+    """The numba backend's tool at the test configurations: numpy's nearby-point walk for up to
+    four configurations where that walk supports the layout, the compiled walk otherwise; either
+    way, points and poses equal to ``predict`` to 1e-12 (values ~1 m and ~1)."""
+    from robocal_uncertainty.core.kinematics import NearbyPoints
+
+    _ = name
+    layout = model.layout  # type: ignore[attr-defined]
+    rng = np.random.default_rng(23)
+    p0 = model.parameter_vector() + rng.normal(0.0, 1e-3, layout.size)  # type: ignore[attr-defined]
+    for n_test in (1, 4, 5, 40):
+        q0 = rng.uniform(-2.0, 2.0, (n_test, layout.n_joints))
+        predictor = NumbaBackend().tool_predictor(layout, p0, q0)
+        small = n_test <= 4 and NearbyPoints.supports(layout)
+        assert isinstance(predictor, NearbyPoints if small else CompiledPredictor)
+        p = p0 + rng.normal(0.0, 1e-6, (6, layout.size))
+        q = q0 + rng.normal(0.0, 1e-6, (6, *q0.shape))
+        for measurement, f in ((POINT, predictor), (PoseMeasurement((1e-5,) * 3, (1e-4,) * 3), predictor.poses)):  # type: ignore[attr-defined]
+            want = measurement.predict(layout, p, q)
+            np.testing.assert_allclose(f(p, q), want, rtol=0.0, atol=RTOL)  # type: ignore[operator]
+
+
 def test_registry_names_auto_and_errors() -> None:
     assert set(backend_names()) >= {"numpy", "numba", "cupy"}
     assert "numpy" in available_backends()
