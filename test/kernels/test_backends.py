@@ -224,21 +224,23 @@ def test_numba_test_configurations_walk_and_values(name: str, model: object) -> 
     four configurations where that walk supports the layout, the compiled walk otherwise; either
     way, points and poses equal to ``predict`` to 1e-12 (values ~1 m and ~1)."""
     from robocal_uncertainty.core.kinematics import NearbyPoints
+    from robocal_uncertainty.kernels.registry import NUMPY_WALK_UP_TO
 
     _ = name
     layout = model.layout  # type: ignore[attr-defined]
     rng = np.random.default_rng(23)
     p0 = model.parameter_vector() + rng.normal(0.0, 1e-3, layout.size)  # type: ignore[attr-defined]
-    for n_test in (1, 4, 5, 40):
+    for n_test in (1, NUMPY_WALK_UP_TO, NUMPY_WALK_UP_TO + 1, 40):
         q0 = rng.uniform(-2.0, 2.0, (n_test, layout.n_joints))
         predictor = NumbaBackend().tool_predictor(layout, p0, q0)
-        small = n_test <= 4 and NearbyPoints.supports(layout)
+        small = n_test <= NUMPY_WALK_UP_TO and NearbyPoints.supports(layout)
         assert isinstance(predictor, NearbyPoints if small else CompiledPredictor)
-        p = p0 + rng.normal(0.0, 1e-6, (6, layout.size))
-        q = q0 + rng.normal(0.0, 1e-6, (6, *q0.shape))
-        for measurement, f in ((POINT, predictor), (PoseMeasurement((1e-5,) * 3, (1e-4,) * 3), predictor.poses)):  # type: ignore[attr-defined]
-            want = measurement.predict(layout, p, q)
-            np.testing.assert_allclose(f(p, q), want, rtol=0.0, atol=RTOL)  # type: ignore[operator]
+        for scale in (1e-6, 1e-2):  # the series, and the direct cosine and sine
+            p = p0 + rng.normal(0.0, scale, (6, layout.size))
+            q = q0 + rng.normal(0.0, scale, (6, *q0.shape))
+            for measurement, f in ((POINT, predictor), (PoseMeasurement((1e-5,) * 3, (1e-4,) * 3), predictor.poses)):  # type: ignore[attr-defined]
+                want = measurement.predict(layout, p, q)
+                np.testing.assert_allclose(f(p, q), want, rtol=0.0, atol=RTOL)  # type: ignore[operator]
 
 
 def test_registry_names_auto_and_errors() -> None:
